@@ -1,0 +1,45 @@
+# darkread — one Makefile for set-up, tests, benchmarks and the demo.
+# Everything runs from a local virtual environment (.venv) that the targets create on demand.
+
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip
+STAMP  := $(VENV)/.installed
+EXTRAS ?= edge,cloud,dev,train
+
+.PHONY: help venv test test-fast bench demo train clean system-deps
+
+help:  ## list the targets
+	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
+
+$(STAMP): pyproject.toml setup.py
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade pip "setuptools>=69" wheel
+	$(PIP) install -q -e ".[$(EXTRAS)]"
+	touch $(STAMP)
+
+venv: $(STAMP)  ## create .venv and install darkread with all extras
+
+system-deps:  ## optional Debian packages (Tesseract OCR, extra fonts) when run as root
+	@if [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
+		command -v tesseract >/dev/null || (apt-get update -qq && apt-get install -y -qq tesseract-ocr tesseract-ocr-eng >/dev/null) || true; \
+	else echo "system-deps: not root or no apt-get; Tesseract stays optional"; fi
+
+test: $(STAMP)  ## run the whole test suite
+	$(PY) -m pytest -q
+
+test-fast: $(STAMP)  ## unit tests only (no integration tests)
+	$(PY) -m pytest -q -m "not slow"
+
+bench: $(STAMP)  ## benchmarks; prints a table and writes bench.json
+	$(PY) -m darkread.bench
+
+demo: $(STAMP)  ## read the shipped sample recording and compare with its printed text
+	$(VENV)/bin/darkread read --demo
+
+train: $(STAMP)  ## reproduce the shipped model from scratch
+	$(VENV)/bin/darkread train all
+
+clean:  ## remove build artefacts (keeps .venv)
+	rm -rf build dist *.egg-info .pytest_cache bench.json

@@ -1,0 +1,5 @@
+import sys
+
+from darkread.cli import main
+
+sys.exit(main())

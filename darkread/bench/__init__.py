@@ -1,0 +1,43 @@
+"""``make bench``: every benchmark measures darkread next to a reference measured in the same run.
+
+Each module in this package defines ``run(ctx: BenchContext) -> list[Figure]``. The runner prints
+one table and writes ``bench.json`` (one key per figure, the unit in the key).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+# Benchmark modules, in the order of the data flow.
+BENCH_MODULES: tuple[str, ...] = (
+    "darkread.bench.decode",
+    "darkread.bench.fovea",
+    "darkread.bench.synth",
+    "darkread.bench.inference",
+    "darkread.bench.edge",
+    "darkread.bench.cloud",
+    "darkread.bench.stitch",
+    "darkread.bench.ocr",
+)
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One measured figure. ``key`` carries the unit (e.g. ``decode_mev_per_s``)."""
+
+    key: str
+    value: float
+    label: str
+    reference: str = ""  # what it is compared with, e.g. "evt3 0.4.1: 58.1 Mev/s"
+    goal: str = ""  # the stated goal, e.g. ">= 0.5x"
+
+
+@dataclass
+class BenchContext:
+    """What a benchmark may use: where the shared data lives (if any) and a scratch folder."""
+
+    shared_data: Path | None
+    scratch: Path
+    quick: bool = False
+    notes: list[str] = field(default_factory=list)

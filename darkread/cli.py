@@ -1,0 +1,85 @@
+"""The single ``darkread`` command.
+
+Each component adds its own sub-commands through a ``register(subparsers)`` function in a light
+module (heavy imports happen inside the handlers), so ``darkread edge ...`` never imports the web
+stack and ``darkread cloud ...`` never imports the USB stack.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+
+from darkread import __version__
+
+# Modules that contribute sub-commands, in the order they appear in --help.
+COMMAND_MODULES: tuple[str, ...] = (
+    "darkread.edge.cli",
+    "darkread.cloud.cli",
+    "darkread.read",
+    "darkread.models.synth.cli",
+    "darkread.models.train.cli",
+    "darkread.edge.calibrate.cli",
+    "darkread.eval.cli",
+)
+
+DESCRIPTION = """\
+darkread reads text in the dark with an event camera on eye-tracking glasses.
+
+  source -> ring buffer -> fovea -> voxel grid -> U-Net -> uplink -> ingest -> stitch -> OCR
+
+Start with `darkread read --demo` (the shipped sample recording, end to end), or
+`darkread inspect RECORDING` to look at a recording.
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="darkread", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--version", action="version", version=f"darkread {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name and name.startswith(exc.name):
+                continue  # component not present in this installation
+            raise
+        module.register(subparsers)
+    return parser
+
+
+def configure_logging(verbose: int, quiet: bool) -> None:
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose > 1 else logging.INFO)
+    logging.basicConfig(level=level, format="%(asctime)s %(levelname)-7s %(name)s: %(message)s", stream=sys.stderr)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    configure_logging(args.verbose, args.quiet)
+    handler = getattr(args, "func", None)
+    if handler is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(handler(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except Exception as exc:  # a clear one-line message for users; tracebacks with -vv
+        from darkread.edge.errors import DarkreadError
+
+        if isinstance(exc, (DarkreadError, FileNotFoundError, ValueError)) and args.verbose < 2:
+            print(f"darkread: error: {exc}", file=sys.stderr)
+            return 1
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())
