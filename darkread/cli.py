@@ -17,6 +17,7 @@ from darkread import __version__
 
 # Modules that contribute sub-commands, in the order they appear in --help.
 COMMAND_MODULES: tuple[str, ...] = (
+    "darkread.edge.inspect",
     "darkread.edge.cli",
     "darkread.cloud.cli",
     "darkread.read",
