@@ -1,0 +1,181 @@
+"""Edge configuration: a TOML file, then ``DARKREAD_EDGE_<SECTION>_<KEY>`` environment overrides,
+then command-line overrides (highest precedence).
+
+Every setting lives in one small frozen dataclass per section; ``edge/systemd/edge.toml`` is the
+documented example.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+ENV_PREFIX = "DARKREAD_EDGE_"
+
+
+@dataclass(frozen=True)
+class SourceConfig:
+    kind: str = "replay"  # "replay" (a recording) or "evk4" (the USB camera)
+    path: str = ""  # recording directory or .raw file (replay)
+    gaze_csv: str = ""  # gaze CSV when ``path`` is a bare .raw file
+    calibration: str = ""  # calibration.json when ``path`` is a bare .raw file (or for evk4)
+    speed: float = 1.0  # replay pacing: 1 = wall clock, 2 = twice as fast, 0 = as fast as possible
+    serial: str = ""  # evk4: device serial (empty: the first one)
+
+
+@dataclass(frozen=True)
+class GazeConfig:
+    kind: str = "recording"  # "recording" (MPS CSV of the replay), "csv", "udp", "aria"
+    path: str = ""  # csv: MPS general_eye_gaze.csv
+    udp_host: str = "127.0.0.1"
+    udp_port: int = 7007
+    clock_offset_us: int | None = None  # gaze → event clock; None: from calibration.json
+    max_age_ms: float = 100.0  # live feeds: older samples count as "no gaze"
+    depth_prior_m: float = 0.45
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    n_events: int = 1600  # foveated events per voxel grid (and new ones that trigger a frame)
+    period_ms: float = 50.0  # also make a frame after this long if any new foveated events arrived
+    fovea_height: int = 100
+    fovea_width: int = 200
+    bins: int = 4
+    model: str = ""  # ONNX path; empty: the shipped model
+    threads: int = 1
+    ring_capacity: int = 1 << 21
+    lossless: bool = False  # True: the reader waits for inference instead of skipping windows
+
+
+@dataclass(frozen=True)
+class UplinkConfig:
+    url: str = "ws://127.0.0.1:8000/v1/stream"
+    api_key: str = ""
+    device_id: str = ""  # empty: the host name
+    session_id: str = ""  # empty: resume the spool's session, or start a new one
+    mode: str = "frames"  # "frames" (binary frames) or "pages" (stitched on the glasses)
+    spool_dir: str = ""  # empty: in memory (lost on restart)
+    spool_max_mb: float = 256.0
+    drain_timeout_s: float = 30.0
+    backoff_initial_s: float = 0.2
+    backoff_max_s: float = 10.0
+    max_in_flight: int = 512
+    page_every_s: float = 5.0  # pages mode: send the page this often
+
+
+@dataclass(frozen=True)
+class MetricsConfig:
+    host: str = "127.0.0.1"
+    port: int = 0  # 0: no HTTP endpoint
+    log_every_s: float = 10.0
+
+
+@dataclass(frozen=True)
+class EdgeConfig:
+    source: SourceConfig = field(default_factory=SourceConfig)
+    gaze: GazeConfig = field(default_factory=GazeConfig)
+    pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+    uplink: UplinkConfig = field(default_factory=UplinkConfig)
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
+
+
+_SECTION_TYPES = {
+    "source": SourceConfig,
+    "gaze": GazeConfig,
+    "pipeline": PipelineConfig,
+    "uplink": UplinkConfig,
+    "metrics": MetricsConfig,
+}
+
+
+def _coerce(raw: Any, default: Any, where: str) -> Any:
+    """Convert a TOML or environment value to the type of the field's default."""
+    try:
+        if isinstance(default, bool):
+            if isinstance(raw, str):
+                if raw.lower() not in {"1", "0", "true", "false", "yes", "no", "on", "off"}:
+                    raise ValueError(raw)
+                return raw.lower() in {"1", "true", "yes", "on"}
+            return bool(raw)
+        if isinstance(default, int) or (default is None and where.endswith("clock_offset_us")):
+            if isinstance(raw, str) and raw.strip() == "":
+                return None if default is None else default
+            return int(raw)
+        if isinstance(default, float):
+            return float(raw)
+        return str(raw)
+    except ValueError:
+        raise ValueError(f"config {where}: cannot use {raw!r} (expected {type(default).__name__})") from None
+
+
+def _section(name: str, values: Mapping[str, Any], base: Any) -> Any:
+    cls = _SECTION_TYPES[name]
+    known = {f.name for f in dataclasses.fields(cls)}
+    updates = {}
+    for key, raw in values.items():
+        if key not in known:
+            raise ValueError(f"config: unknown key [{name}] {key} (known: {', '.join(sorted(known))})")
+        updates[key] = _coerce(raw, getattr(base, key), f"[{name}] {key}")
+    return dataclasses.replace(base, **updates)
+
+
+def apply(config: EdgeConfig, values: Mapping[str, Mapping[str, Any]]) -> EdgeConfig:
+    """Overlay ``{section: {key: value}}`` on ``config`` (unknown keys are errors)."""
+    sections = {}
+    for name, section_values in values.items():
+        if name not in _SECTION_TYPES:
+            raise ValueError(f"config: unknown section [{name}] (known: {', '.join(_SECTION_TYPES)})")
+        sections[name] = _section(name, section_values, getattr(config, name))
+    return dataclasses.replace(config, **sections)
+
+
+def env_overrides(environ: Mapping[str, str]) -> dict[str, dict[str, str]]:
+    """``DARKREAD_EDGE_UPLINK_API_KEY=k`` → ``{"uplink": {"api_key": "k"}}``."""
+    out: dict[str, dict[str, str]] = {}
+    for name, value in environ.items():
+        if not name.startswith(ENV_PREFIX):
+            continue
+        rest = name[len(ENV_PREFIX) :].lower()
+        section, _, key = rest.partition("_")
+        if section not in _SECTION_TYPES or not key:
+            raise ValueError(f"environment {name}: expected {ENV_PREFIX}<SECTION>_<KEY> with a section in {list(_SECTION_TYPES)}")
+        out.setdefault(section, {})[key] = value
+    return out
+
+
+def load_config(
+    path: Path | str | None = None,
+    environ: Mapping[str, str] | None = None,
+    overrides: Mapping[str, Mapping[str, Any]] | None = None,
+) -> EdgeConfig:
+    config = EdgeConfig()
+    if path is not None:
+        try:
+            with open(path, "rb") as fh:
+                data = tomllib.load(fh)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{path}: not valid TOML: {exc}") from None
+        config = apply(config, data)
+    config = apply(config, env_overrides(os.environ if environ is None else environ))
+    if overrides:
+        config = apply(config, overrides)
+    return validate(config)
+
+
+def validate(config: EdgeConfig) -> EdgeConfig:
+    if config.uplink.mode not in {"frames", "pages"}:
+        raise ValueError(f"config [uplink] mode must be 'frames' or 'pages', not {config.uplink.mode!r}")
+    if config.source.kind not in {"replay", "evk4"}:
+        raise ValueError(f"config [source] kind must be 'replay' or 'evk4', not {config.source.kind!r}")
+    if config.gaze.kind not in {"recording", "csv", "udp", "aria"}:
+        raise ValueError(f"config [gaze] kind must be recording, csv, udp or aria, not {config.gaze.kind!r}")
+    if config.source.speed < 0:
+        raise ValueError("config [source] speed must be >= 0 (0 = as fast as possible)")
+    if config.pipeline.n_events <= 0 or config.pipeline.period_ms <= 0:
+        raise ValueError("config [pipeline] n_events and period_ms must be positive")
+    return config
