@@ -1,0 +1,61 @@
+"""Errors of the wire protocol and the websocket close codes they map to, in one place.
+
+    ProtocolError                  any message that cannot be accepted (close code 4400)
+     ├── MessageTooLargeError      more bytes than the receiver allows (1009)
+     ├── MalformedMessageError     not msgpack, trailing bytes, or not a map (4400)
+     ├── UnknownMessageTypeError   ``type`` missing or not one we know (4400)
+     ├── InvalidFieldError         a field missing, of the wrong type or out of range (4400)
+     │    └── BadMaskError         mask ``shape``/``bits`` inconsistent (4422)
+     └── VersionMismatchError      ``hello.v`` is not our PROTOCOL_VERSION (4409)
+
+Every error carries ``close_code`` so the server can close the websocket with the right code
+and the error's message as the reason.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+
+class CloseCode(IntEnum):
+    """Websocket close codes used by ``/v1/stream`` (RFC 6455 range plus 4000-4999 private)."""
+
+    NORMAL = 1000  # the client said goodbye, or the server shuts down
+    GOING_AWAY = 1001  # server shutting down; reconnect later and resume
+    POLICY_VIOLATION = 1008  # missing or wrong API key
+    MESSAGE_TOO_BIG = 1009  # a message larger than welcome.max_message_bytes
+    INTERNAL_ERROR = 1011  # the server could not store a message; reconnect and resume
+    MALFORMED = 4400  # undecodable or invalid message
+    UNEXPECTED = 4401  # a valid message that is not allowed now (e.g. frame before hello)
+    VERSION_MISMATCH = 4409  # hello.v differs from the server's protocol version
+    BAD_MASK = 4422  # mask shape/bit length wrong, or frame shape differs from hello.fovea
+
+
+class ProtocolError(Exception):
+    """A message that cannot be accepted; ``close_code`` tells the server how to close."""
+
+    close_code: CloseCode = CloseCode.MALFORMED
+
+
+class MessageTooLargeError(ProtocolError):
+    close_code = CloseCode.MESSAGE_TOO_BIG
+
+
+class MalformedMessageError(ProtocolError):
+    close_code = CloseCode.MALFORMED
+
+
+class UnknownMessageTypeError(ProtocolError):
+    close_code = CloseCode.MALFORMED
+
+
+class InvalidFieldError(ProtocolError):
+    close_code = CloseCode.MALFORMED
+
+
+class BadMaskError(InvalidFieldError):
+    close_code = CloseCode.BAD_MASK
+
+
+class VersionMismatchError(ProtocolError):
+    close_code = CloseCode.VERSION_MISMATCH

@@ -1,0 +1,416 @@
+"""The darkread wire protocol: versioned msgpack messages between the glasses and the cloud.
+
+Every message is one msgpack map with a ``type`` string; each type is a frozen dataclass here.
+``encode`` and ``decode`` are pure (bytes in, bytes out) so both ends and the tests share them.
+``decode`` checks everything a hostile peer could get wrong and raises only ``ProtocolError``
+subclasses (see ``errors.py``). Unknown extra keys are ignored so a peer may add optional
+fields without a version bump; anything that changes meaning bumps ``PROTOCOL_VERSION``.
+The field list with units and limits is in ``README.md`` next to this file.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, ClassVar, Literal, TypeAlias
+
+import msgpack
+import numpy as np
+
+from .errors import (
+    BadMaskError,
+    InvalidFieldError,
+    MalformedMessageError,
+    MessageTooLargeError,
+    ProtocolError,
+    UnknownMessageTypeError,
+    VersionMismatchError,
+)
+
+PROTOCOL_VERSION = 1
+DEFAULT_MAX_MESSAGE_BYTES = 4 * 1024 * 1024
+MAX_MASK_PIXELS = 16 * 1024 * 1024  # 16 Mpx: a stitched page of 4096 x 4096 fits
+MAX_SIDE = 65_535
+MAX_LIST = 100_000  # lines per page, gaze samples per batch
+MAX_STATS = 64
+MAX_TEXT = 4096
+INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1
+ID_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
+
+Mode = Literal["frames", "pages"]
+
+
+# --- field checks: wire value -> Python value, raising InvalidFieldError ------------------------
+
+
+def _int(value: Any, name: str, lo: int = INT64_MIN, hi: int = INT64_MAX) -> int:
+    if type(value) is not int:  # bool is an int subclass; refuse it
+        raise InvalidFieldError(f"{name}: expected an integer, got {type(value).__name__}")
+    if not lo <= value <= hi:
+        raise InvalidFieldError(f"{name}: {value} outside [{lo}, {hi}]")
+    return value
+
+
+def _seq(value: Any, name: str) -> int:
+    return _int(value, name, 0, INT64_MAX)
+
+
+def _count(value: Any, name: str) -> int:
+    return _int(value, name, 0, 2**32 - 1)
+
+
+def _float(value: Any, name: str) -> float:
+    if type(value) not in (int, float):
+        raise InvalidFieldError(f"{name}: expected a number, got {type(value).__name__}")
+    if type(value) is int and not INT64_MIN <= value <= INT64_MAX:
+        raise InvalidFieldError(f"{name}: {value} out of range")
+    result = float(value)
+    if not math.isfinite(result):
+        raise InvalidFieldError(f"{name}: must be finite, got {result}")
+    return result
+
+
+def _bool(value: Any, name: str) -> bool:
+    if type(value) is not bool:
+        raise InvalidFieldError(f"{name}: expected a boolean, got {type(value).__name__}")
+    return value
+
+
+def _text(value: Any, name: str, limit: int = MAX_TEXT) -> str:
+    if type(value) is not str:
+        raise InvalidFieldError(f"{name}: expected a string, got {type(value).__name__}")
+    if len(value) > limit:
+        raise InvalidFieldError(f"{name}: longer than {limit} characters")
+    return value
+
+
+def _identifier(value: Any, name: str) -> str:
+    text = _text(value, name, 128)
+    if not ID_PATTERN.fullmatch(text):
+        raise InvalidFieldError(f"{name}: {text!r} must match {ID_PATTERN.pattern}")
+    return text
+
+
+def _mode(value: Any, name: str) -> str:
+    if value not in ("frames", "pages") or type(value) is not str:
+        raise InvalidFieldError(f"{name}: expected 'frames' or 'pages', got {value!r}")
+    return value
+
+
+def _bytes(value: Any, name: str) -> bytes:
+    if type(value) is not bytes:
+        raise InvalidFieldError(f"{name}: expected bytes (msgpack bin), got {type(value).__name__}")
+    return value
+
+
+def _list(value: Any, name: str, limit: int = MAX_LIST) -> list[Any]:
+    if type(value) not in (list, tuple):
+        raise InvalidFieldError(f"{name}: expected an array, got {type(value).__name__}")
+    if len(value) > limit:
+        raise InvalidFieldError(f"{name}: more than {limit} entries")
+    return list(value)
+
+
+def _tuple_of(check: Callable[[Any, str], Any], length: int) -> Callable[[Any, str], tuple[Any, ...]]:
+    def convert(value: Any, name: str) -> tuple[Any, ...]:
+        items = _list(value, name, length)
+        if len(items) != length:
+            raise InvalidFieldError(f"{name}: expected {length} entries, got {len(items)}")
+        return tuple(check(item, f"{name}[{i}]") for i, item in enumerate(items))
+
+    return convert
+
+
+def _list_of(check: Callable[[Any, str], Any]) -> Callable[[Any, str], tuple[Any, ...]]:
+    def convert(value: Any, name: str) -> tuple[Any, ...]:
+        return tuple(check(item, f"{name}[{i}]") for i, item in enumerate(_list(value, name)))
+
+    return convert
+
+
+def _side(value: Any, name: str) -> int:
+    return _int(value, name, 1, MAX_SIDE)
+
+
+def _stats(value: Any, name: str) -> dict[str, float]:
+    if type(value) is not dict:
+        raise InvalidFieldError(f"{name}: expected a map, got {type(value).__name__}")
+    if len(value) > MAX_STATS:
+        raise InvalidFieldError(f"{name}: more than {MAX_STATS} entries")
+    result: dict[str, float] = {}
+    for key, item in value.items():
+        key_text = _text(key, f"{name} key", 64)
+        result[key_text] = _float(item, f"{name}[{key_text!r}]")
+    return result
+
+
+_pair_int = _tuple_of(_int, 2)
+_pair_float = _tuple_of(_float, 2)
+_shape = _tuple_of(_side, 2)
+
+
+def _mask_shape(value: Any, name: str) -> tuple[int, int]:
+    try:
+        return _shape(value, name)
+    except InvalidFieldError as exc:
+        raise BadMaskError(str(exc)) from None
+
+_box = _tuple_of(_int, 4)
+
+
+def _optional(check: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
+    def convert(value: Any, name: str) -> Any:
+        return None if value is None else check(value, name)
+
+    return convert
+
+
+def _spec(check: Callable[[Any, str], Any], default: Any = MISSING, **kwargs: Any) -> Any:
+    """A dataclass field that carries its wire check in ``metadata``."""
+    return field(default=default, metadata={"check": check}, **kwargs)
+
+
+# --- masks --------------------------------------------------------------------------------------
+
+
+def packed_length(shape: tuple[int, int]) -> int:
+    """Bytes of ``np.packbits`` output for a mask of ``shape`` (rows, cols)."""
+    return (shape[0] * shape[1] + 7) // 8
+
+
+def pack_mask(mask: np.ndarray) -> tuple[tuple[int, int], bytes]:
+    """A 2-D ink mask (nonzero = ink) -> ``(shape, bits)``, row-major, MSB first, ink = 1."""
+    array = np.asarray(mask)
+    if array.ndim != 2 or array.shape[0] < 1 or array.shape[1] < 1:
+        raise BadMaskError(f"mask must be a non-empty 2-D array, got shape {array.shape}")
+    shape = (int(array.shape[0]), int(array.shape[1]))
+    check_mask(shape, b"\0" * packed_length(shape))
+    return shape, np.packbits(array != 0, axis=None).tobytes()
+
+
+def check_mask(shape: tuple[int, int], bits: bytes) -> None:
+    """Raise ``BadMaskError`` unless ``bits`` is exactly the packed form of a ``shape`` mask."""
+    height, width = shape
+    if height < 1 or width < 1 or height > MAX_SIDE or width > MAX_SIDE:
+        raise BadMaskError(f"mask shape {shape} must be positive and at most {MAX_SIDE} per side")
+    if height * width > MAX_MASK_PIXELS:
+        raise BadMaskError(f"mask shape {shape} exceeds {MAX_MASK_PIXELS} pixels")
+    expected = packed_length(shape)
+    if len(bits) != expected:
+        raise BadMaskError(f"mask of shape {shape} needs {expected} bytes of bits, got {len(bits)}")
+    spare = expected * 8 - height * width
+    if spare and bits[-1] & ((1 << spare) - 1):
+        raise BadMaskError("padding bits after the last pixel must be zero")
+
+
+def unpack_mask(shape: tuple[int, int], bits: bytes) -> np.ndarray:
+    """``(shape, bits)`` -> uint8 mask of ``shape`` with ink = 1, background = 0."""
+    check_mask(shape, bits)
+    flat = np.unpackbits(np.frombuffer(bits, dtype=np.uint8), count=shape[0] * shape[1])
+    return flat.reshape(shape)
+
+
+# --- messages -----------------------------------------------------------------------------------
+
+
+class _Checked:
+    """Validation at construction: an invalid message can neither be built nor decoded."""
+
+    TYPE: ClassVar[str]
+
+    def __post_init__(self) -> None:
+        values = {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
+        for name, value in _check_fields(type(self), values).items():  # type: ignore[arg-type]
+            object.__setattr__(self, name, value)
+
+
+@dataclass(frozen=True)
+class Hello(_Checked):
+    """client -> server, the first message of every connection."""
+
+    TYPE: ClassVar[str] = "hello"
+    device_id: str = _spec(_identifier)
+    session_id: str = _spec(_identifier)
+    mode: Mode = _spec(_mode)
+    sensor: tuple[int, int] = _spec(_shape)  # (width, height) in pixels
+    fovea: tuple[int, int] = _spec(_shape)  # (height, width) in pixels
+    token: str | None = _spec(_optional(lambda v, n: _text(v, n, 512)), None)
+    resume_from_seq: int | None = _spec(_optional(_seq), None)
+    v: int = _spec(_int, PROTOCOL_VERSION)
+
+
+@dataclass(frozen=True)
+class Welcome(_Checked):
+    """server -> client, answer to hello: resend every message with seq > last_acked_seq."""
+
+    TYPE: ClassVar[str] = "welcome"
+    session_id: str = _spec(_identifier)
+    last_acked_seq: int = _spec(lambda v, n: _int(v, n, -1, INT64_MAX))
+    max_message_bytes: int = _spec(lambda v, n: _int(v, n, 1, 2**31))
+    v: int = _spec(_int, PROTOCOL_VERSION)
+
+
+@dataclass(frozen=True)
+class Frame(_Checked):
+    """client -> server, one reconstructed foveal window."""
+
+    TYPE: ClassVar[str] = "frame"
+    seq: int = _spec(_seq)
+    frame_id: int = _spec(_seq)
+    t_us: int = _spec(_int)  # event clock of the window's last event, microseconds
+    origin: tuple[int, int] = _spec(_pair_int)  # window top-left (x0, y0), sensor pixels
+    gaze_px: tuple[float, float] = _spec(_pair_float)  # (u, v), sensor pixels
+    gaze_rad: tuple[float, float] = _spec(_pair_float)  # (yaw, pitch), radians
+    events_used: int = _spec(_count)
+    shape: tuple[int, int] = _spec(_mask_shape)  # (rows, cols)
+    bits: bytes = _spec(_bytes, repr=False)  # np.packbits(ink_mask, axis=None)
+
+    def mask(self) -> np.ndarray:
+        return unpack_mask(self.shape, self.bits)
+
+
+@dataclass(frozen=True)
+class Page(_Checked):
+    """client -> server, a page stitched on the glasses (mode "pages")."""
+
+    TYPE: ClassVar[str] = "page"
+    seq: int = _spec(_seq)
+    page_id: int = _spec(_seq)
+    t_us: int = _spec(_int)
+    shape: tuple[int, int] = _spec(_mask_shape)
+    bits: bytes = _spec(_bytes, repr=False)
+    lines: tuple[tuple[int, int, int, int], ...] = _spec(_list_of(_box), ())  # (x0, y0, x1, y1)
+
+    def mask(self) -> np.ndarray:
+        return unpack_mask(self.shape, self.bits)
+
+
+@dataclass(frozen=True)
+class Gaze(_Checked):
+    """client -> server, an optional batch of gaze samples (same length lists)."""
+
+    TYPE: ClassVar[str] = "gaze"
+    seq: int = _spec(_seq)
+    t_us: tuple[int, ...] = _spec(_list_of(_int))
+    px: tuple[tuple[float, float], ...] = _spec(_list_of(_pair_float))
+
+
+@dataclass(frozen=True)
+class Heartbeat(_Checked):
+    """client -> server, liveness plus a few numbers for the server's logs."""
+
+    TYPE: ClassVar[str] = "heartbeat"
+    t_us: int = _spec(_int)
+    stats: dict[str, float] = _spec(_stats, default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Ack(_Checked):
+    """server -> client, cumulative: every seq <= ``seq`` is durably stored."""
+
+    TYPE: ClassVar[str] = "ack"
+    seq: int = _spec(_seq)
+
+
+@dataclass(frozen=True)
+class Error(_Checked):
+    """server -> client, sent before the server closes (``fatal``) or to report a dropped message."""
+
+    TYPE: ClassVar[str] = "error"
+    code: int = _spec(lambda v, n: _int(v, n, 0, 65_535))
+    message: str = _spec(_text)
+    fatal: bool = _spec(_bool)
+
+
+Message: TypeAlias = Hello | Welcome | Frame | Page | Gaze | Heartbeat | Ack | Error
+MESSAGE_TYPES: dict[str, type[Message]] = {
+    cls.TYPE: cls for cls in (Hello, Welcome, Frame, Page, Gaze, Heartbeat, Ack, Error)
+}
+
+
+def _check_fields(cls: type[Message], values: Mapping[str, Any]) -> dict[str, Any]:
+    checked: dict[str, Any] = {}
+    for spec in fields(cls):
+        name = f"{cls.TYPE}.{spec.name}"
+        if spec.name not in values:
+            raise InvalidFieldError(f"{name}: missing")
+        checked[spec.name] = spec.metadata["check"](values[spec.name], name)
+    if "shape" in checked and "bits" in checked:
+        check_mask(checked["shape"], checked["bits"])
+    if cls is Gaze and len(checked["t_us"]) != len(checked["px"]):
+        raise InvalidFieldError("gaze.t_us and gaze.px must have the same length")
+    return checked
+
+
+def encode(message: Message) -> bytes:
+    """A message -> msgpack bytes (a map; ``type`` first, then fields in declaration order)."""
+    payload: dict[str, Any] = {"type": message.TYPE}
+    for spec in fields(message):
+        value = getattr(message, spec.name)
+        if value is not None:  # optional fields are omitted rather than sent as nil
+            payload[spec.name] = value
+    return msgpack.packb(payload, use_bin_type=True)
+
+
+def decode(data: bytes, *, max_bytes: int) -> Message:
+    """msgpack bytes -> a message; raises only ``ProtocolError`` subclasses on bad input."""
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise MalformedMessageError(f"expected a binary message, got {type(data).__name__}")
+    if len(data) > max_bytes:
+        raise MessageTooLargeError(f"message of {len(data)} bytes exceeds the limit of {max_bytes}")
+    try:
+        payload = msgpack.unpackb(data, raw=False, strict_map_key=True, timestamp=0)
+    except (ValueError, TypeError, OverflowError, msgpack.UnpackException) as exc:
+        raise MalformedMessageError(f"not valid msgpack: {type(exc).__name__}: {exc}"[:300]) from None
+    if type(payload) is not dict:
+        raise MalformedMessageError(f"a message must be a msgpack map, got {type(payload).__name__}")
+    kind = payload.get("type")
+    cls = MESSAGE_TYPES.get(kind) if type(kind) is str else None
+    if cls is None:
+        shown = kind if type(kind) is str else type(kind).__name__
+        raise UnknownMessageTypeError(f"unknown message type {str(shown)[:64]!r}")
+    if cls in (Hello, Welcome) and "v" not in payload:
+        raise InvalidFieldError(f"{cls.TYPE}.v: missing (the protocol version, {PROTOCOL_VERSION})")
+    if cls in (Hello, Welcome) and payload["v"] != PROTOCOL_VERSION:
+        version = payload["v"]
+        raise VersionMismatchError(
+            f"protocol version {str(version)[:16]} is not supported; this end speaks {PROTOCOL_VERSION}"
+        )
+    values = {spec.name: payload[spec.name] for spec in fields(cls) if spec.name in payload}
+    for spec in fields(cls):  # absent optional fields take their defaults
+        if spec.name not in values and spec.default is not MISSING:
+            values[spec.name] = spec.default
+        elif spec.name not in values and spec.default_factory is not MISSING:
+            values[spec.name] = spec.default_factory()
+    try:
+        return cls(**values)
+    except ProtocolError:
+        raise
+    except TypeError as exc:  # a required field is missing
+        raise InvalidFieldError(f"{cls.TYPE}: {exc}") from None
+
+
+__all__ = [
+    "DEFAULT_MAX_MESSAGE_BYTES",
+    "MAX_MASK_PIXELS",
+    "MESSAGE_TYPES",
+    "PROTOCOL_VERSION",
+    "Ack",
+    "Error",
+    "Frame",
+    "Gaze",
+    "Heartbeat",
+    "Hello",
+    "Message",
+    "Mode",
+    "Page",
+    "Welcome",
+    "check_mask",
+    "decode",
+    "encode",
+    "pack_mask",
+    "packed_length",
+    "unpack_mask",
+]
