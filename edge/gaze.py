@@ -1,0 +1,103 @@
+"""Gaze (Aria device clock, CPF angles) -> event-camera pixel (event clock).
+
+The gaze point is ``depth`` metres along the gaze direction in CPF, moved into the event camera
+with ``T_event_cpf`` and projected with the camera's radtan model. Depth matters: the camera sits a
+few centimetres from the eyes, so a wrong depth shifts the pixel by parallax. Rows without a depth
+use a reading-distance prior (0.45 m), not Aria's 1 m default, which is too far for a page.
+
+Gaze samples are interpolated linearly (angles and depth) to each event time. Any event time
+without a usable gaze gives NaN: before the first / after the last valid sample, between two valid
+samples more than ``max_gap_us`` apart (blink rows are invalid, so a blink opens such a gap), or a
+gaze point that projects off the sensor or behind the camera.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from darkread.edge.io.calibration import Calibration
+from darkread.edge.io.gaze_csv import GazeTrack
+
+READING_DEPTH_PRIOR_M = 0.45
+
+
+def gaze_point_cpf(yaw_rad: np.ndarray, pitch_rad: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
+    """(N, 3) CPF points ``depth`` along normalise(tan yaw, tan pitch, 1); negative depth -> origin."""
+    yaw, pitch, depth = np.broadcast_arrays(
+        np.asarray(yaw_rad, dtype=np.float64), np.asarray(pitch_rad, dtype=np.float64), np.asarray(depth_m, dtype=np.float64)
+    )
+    direction = np.stack([np.tan(yaw), np.tan(pitch), np.ones(yaw.shape)], axis=-1)
+    direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
+    return direction * np.where(depth < 0, 0.0, depth)[..., None]
+
+
+class GazeMapper:
+    """Where the wearer looks, in event pixels, at any event timestamp (vectorised)."""
+
+    def __init__(
+        self,
+        calibration: Calibration,
+        track: GazeTrack,
+        *,
+        depth_prior_m: float = READING_DEPTH_PRIOR_M,
+        max_gap_us: int = 50_000,
+        clock_offset_us: int | None = None,
+    ) -> None:
+        if depth_prior_m <= 0:
+            raise ValueError(f"depth_prior_m must be positive, got {depth_prior_m}")
+        self.calibration = calibration
+        self.track = track
+        self.depth_prior_m = float(depth_prior_m)
+        self.max_gap_us = int(max_gap_us)
+        self.clock_offset_us = int(
+            calibration.gaze_to_event_time_offset_us if clock_offset_us is None else clock_offset_us
+        )
+        keep = track.valid
+        self._t = track.t_us[keep].astype(np.int64)
+        self._yaw = track.yaw_rad[keep]
+        self._pitch = track.pitch_rad[keep]
+        depth = track.depth_m[keep]
+        self._depth = np.where(np.isfinite(depth) & (depth > 0), depth, self.depth_prior_m)
+
+    def angles_and_depth_at(self, t_event_us: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Interpolated (yaw, pitch, depth) per event time; NaN where no usable gaze."""
+        t_device = np.asarray(t_event_us, dtype=np.int64).reshape(-1) - self.clock_offset_us
+        n_samples = self._t.shape[0]
+        if n_samples == 0:
+            nan = np.full(t_device.shape[0], np.nan)
+            return nan, nan.copy(), nan.copy()
+        after = np.searchsorted(self._t, t_device, side="right")
+        left = np.clip(after - 1, 0, n_samples - 1)
+        right = np.clip(after, 0, n_samples - 1)
+        t_left, t_right = self._t[left], self._t[right]
+        gap = t_right - t_left
+        usable = (t_device >= self._t[0]) & (t_device <= self._t[-1]) & (gap <= self.max_gap_us)
+        weight = np.where(gap > 0, (t_device - t_left) / np.maximum(gap, 1), 0.0)
+
+        def lerp(values: np.ndarray) -> np.ndarray:
+            out = values[left] + weight * (values[right] - values[left])
+            return np.where(usable, out, np.nan)
+
+        return lerp(self._yaw), lerp(self._pitch), lerp(self._depth)
+
+    def pixels_at(self, t_event_us: np.ndarray) -> np.ndarray:
+        """(N, 2) float64 event pixels (x, y); NaN rows where no valid gaze or off the sensor."""
+        yaw, pitch, depth = self.angles_and_depth_at(t_event_us)
+        uv = self.calibration.project(self.calibration.cpf_to_event(gaze_point_cpf(yaw, pitch, depth)))
+        uv[~self.calibration.on_sensor(uv)] = np.nan
+        return uv
+
+    def pixel_at(self, t_event_us: int) -> tuple[float, float] | None:
+        uv = self.pixels_at(np.array([t_event_us]))[0]
+        return None if np.isnan(uv).any() else (float(uv[0]), float(uv[1]))
+
+    def angles_at(self, t_event_us: int) -> tuple[float, float] | None:
+        """(yaw, pitch) in radians, projection convention, or None without a usable gaze."""
+        yaw, pitch, _ = self.angles_and_depth_at(np.array([t_event_us]))
+        return None if np.isnan(yaw[0]) else (float(yaw[0]), float(pitch[0]))
+
+    def event_time_range(self) -> tuple[int, int] | None:
+        """First and last valid gaze sample on the event clock."""
+        if self._t.shape[0] == 0:
+            return None
+        return int(self._t[0] + self.clock_offset_us), int(self._t[-1] + self.clock_offset_us)
