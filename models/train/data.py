@@ -1,0 +1,163 @@
+"""Training data: synthetic shards -> shuffled, augmented torch batches.
+
+A shard ``shard-NNNNN.npz`` holds ``voxels`` float16 [n,4,100,200], ``targets`` packed bits
+(``np.packbits`` on the last axis, [n,100,25]), ``target_shape`` and per-sample metadata
+(``lux``, ``xheight_px``, ``motion``, ``font``, ``kind``, ``seed``). Shards are streamed a few
+at a time so a 30 k-sample set (~5 GB as float16) never has to sit in memory at once.
+
+Augmentation (all exact for the physics of the voxel grid, none changes glyph shapes):
+
+* **time reversal**: reverse the bin order and negate. The E2VID voxel grid maps t -> B-1-t* under
+  reversal and a reversed scene swaps ON/OFF, and both commute with the non-zero normalisation,
+  so this is exactly the same page seen moving the other way: same target.
+* **small shifts** (a few pixels, zero fill): the fovea is centred on noisy gaze, so text sits
+  anywhere in the window.
+* **no mirror flips**: mirrored glyphs never occur on a page, and at 5 lux the network has to
+  fill in strokes from a prior over real letter shapes; mirrored samples would blur that prior.
+  Neither a polarity-only flip (that is white ink on black paper, the opposite of the target).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+METADATA_KEYS: tuple[str, ...] = ("lux", "xheight_px", "motion", "font", "kind", "seed")
+
+
+@dataclass
+class Shard:
+    """One shard in memory: voxels float16 [n,4,H,W], targets uint8 [n,H,W] (1 = ink), metadata."""
+
+    voxels: np.ndarray
+    targets: np.ndarray
+    meta: dict[str, np.ndarray]
+
+    def __len__(self) -> int:
+        return int(self.voxels.shape[0])
+
+    def select(self, index: np.ndarray) -> Shard:
+        return Shard(self.voxels[index], self.targets[index], {k: v[index] for k, v in self.meta.items()})
+
+
+def shard_paths(root: str | Path) -> list[Path]:
+    """Shards of a dataset directory (sorted), or a single shard file."""
+    path = Path(root)
+    if path.is_file():
+        return [path]
+    paths = sorted(path.glob("shard-*.npz"))
+    if not paths:
+        raise FileNotFoundError(f"no shard-*.npz files in {path}; make a dataset with `darkread synth ...`")
+    return paths
+
+
+def unpack_targets(packed: np.ndarray, target_shape: Sequence[int]) -> np.ndarray:
+    """Packed bits [n,H,ceil(W/8)] -> uint8 [n,H,W] with 1 = ink."""
+    width = int(target_shape[-1])
+    return np.unpackbits(packed, axis=-1, count=width).astype(np.uint8)
+
+
+def pack_targets(targets: np.ndarray) -> np.ndarray:
+    return np.packbits(targets.astype(bool), axis=-1)
+
+
+def load_shard(path: str | Path) -> Shard:
+    with np.load(path, allow_pickle=False) as data:
+        voxels = data["voxels"]
+        packed = data["targets"]
+        target_shape = tuple(int(v) for v in data["target_shape"]) if "target_shape" in data else voxels.shape[-2:]
+        targets = unpack_targets(packed, target_shape) if packed.shape[-1] != target_shape[-1] else packed
+        meta = {key: data[key] for key in METADATA_KEYS if key in data}
+    return Shard(voxels=voxels, targets=targets.astype(np.uint8), meta=meta)
+
+
+def load_dataset(root: str | Path, limit: int | None = None) -> Shard:
+    """Every shard of a dataset concatenated (for evaluation-sized sets), at most ``limit`` samples."""
+    parts: list[Shard] = []
+    total = 0
+    for path in shard_paths(root):
+        shard = load_shard(path)
+        parts.append(shard)
+        total += len(shard)
+        if limit is not None and total >= limit:
+            break
+    keys = set.intersection(*(set(p.meta) for p in parts)) if parts else set()
+    merged = Shard(
+        voxels=np.concatenate([p.voxels for p in parts]),
+        targets=np.concatenate([p.targets for p in parts]),
+        meta={k: np.concatenate([p.meta[k] for p in parts]) for k in sorted(keys)},
+    )
+    return merged if limit is None else merged.select(np.arange(min(limit, len(merged))))
+
+
+def is_validation_seed(seeds: np.ndarray, every: int = 20) -> np.ndarray:
+    """The held-out split by seed: deterministic, independent of shard order and size."""
+    mixed = (seeds.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)
+    return (mixed % np.uint64(every)) == 0
+
+
+def split_mask(shard: Shard, validation: bool, every: int = 20) -> np.ndarray:
+    seeds = shard.meta.get("seed")
+    if seeds is None:
+        seeds = np.arange(len(shard))
+    held_out = is_validation_seed(np.asarray(seeds), every)
+    return held_out if validation else ~held_out
+
+
+def augment(voxels: np.ndarray, targets: np.ndarray, rng: np.random.Generator, max_shift: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """Time reversal and small shifts for a batch (float32 [n,4,H,W], uint8 [n,H,W]); returns new arrays."""
+    voxels = voxels.copy()
+    targets = targets.copy()
+    reverse = rng.random(len(voxels)) < 0.5
+    voxels[reverse] = -voxels[reverse][:, ::-1]
+    if max_shift > 0:
+        for i in range(len(voxels)):
+            dy, dx = rng.integers(-max_shift, max_shift + 1, size=2)
+            voxels[i] = _shift(voxels[i], int(dy), int(dx))
+            targets[i] = _shift(targets[i], int(dy), int(dx))
+    return voxels, targets
+
+
+def _shift(array: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """Shift the last two axes with zero fill (not wrap: text must not reappear on the other side)."""
+    out = np.zeros_like(array)
+    h, w = array.shape[-2:]
+    ys, yd = (slice(0, h - dy), slice(dy, h)) if dy >= 0 else (slice(-dy, h), slice(0, h + dy))
+    xs, xd = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
+    out[..., yd, xd] = array[..., ys, xs]
+    return out
+
+
+def iterate_batches(
+    paths: Sequence[Path],
+    batch_size: int,
+    rng: np.random.Generator,
+    *,
+    validation: bool = False,
+    shards_in_memory: int = 2,
+    augmentation: bool = True,
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """One pass over the training (or held-out) part of ``paths``: float32 voxels, uint8 targets.
+
+    Shards are visited in random order, ``shards_in_memory`` at a time, and samples are shuffled
+    across the shards in memory.
+    """
+    order = list(rng.permutation(len(paths)))
+    for start in range(0, len(order), shards_in_memory):
+        group = [load_shard(paths[i]) for i in order[start : start + shards_in_memory]]
+        voxels = np.concatenate([g.voxels[split_mask(g, validation)] for g in group])
+        targets = np.concatenate([g.targets[split_mask(g, validation)] for g in group])
+        index = rng.permutation(len(voxels)) if not validation else np.arange(len(voxels))
+        for b in range(0, len(index), batch_size):
+            take = index[b : b + batch_size]
+            x = voxels[take].astype(np.float32)
+            y = targets[take]
+            if augmentation and not validation:
+                x, y = augment(x, y, rng)
+            yield x, y

@@ -1,0 +1,105 @@
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from darkread.edge.errors import ModelError
+from darkread.edge.reconstruct import Reconstructor, default_model_path
+
+
+@pytest.fixture(scope="module")
+def random_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    torch = pytest.importorskip("torch")
+    from darkread.models.train.export import export_onnx
+    from darkread.models.train.net import BinaryUNet
+
+    torch.manual_seed(0)
+    return export_onnx(BinaryUNet(), tmp_path_factory.mktemp("model") / "net.onnx")
+
+
+def _voxel(seed: int, batch: int | None = None) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    shape = (4, 100, 200) if batch is None else (batch, 4, 100, 200)
+    return (rng.normal(size=shape) * (rng.random(shape) < 0.05)).astype(np.float32)
+
+
+def test_single_window_gives_a_binary_uint8_mask(random_model: Path) -> None:
+    rec = Reconstructor(random_model, warmup=1)
+    mask = rec(_voxel(0))
+    assert rec.input_shape == (4, 100, 200)
+    assert mask.shape == (100, 200) and mask.dtype == np.uint8
+    assert set(np.unique(mask)) <= {0, 1}
+
+
+def test_batch_equals_windows_one_by_one(random_model: Path) -> None:
+    rec = Reconstructor(random_model, warmup=0)
+    batch = _voxel(1, batch=3)
+    logits = rec.logits(batch)
+    assert logits.shape == (3, 100, 200) and logits.dtype == np.float32
+    for i in range(3):
+        np.testing.assert_allclose(rec.logits(batch[i]), logits[i], rtol=1e-5, atol=1e-5)
+    assert rec.logits(np.zeros((0, 4, 100, 200), np.float32)).shape == (0, 100, 200)
+
+
+def test_wrong_input_shape_is_a_value_error(random_model: Path) -> None:
+    with pytest.raises(ValueError, match=r"\[4,100,200\]"):
+        Reconstructor(random_model, warmup=0).logits(np.zeros((4, 100, 100), np.float32))
+
+
+def test_missing_model_is_a_model_error(tmp_path: Path) -> None:
+    with pytest.raises(ModelError, match="not found"):
+        Reconstructor(tmp_path / "absent.onnx")
+
+
+def test_model_of_the_wrong_shape_is_a_model_error(tmp_path: Path) -> None:
+    torch = pytest.importorskip("torch")
+    path = tmp_path / "wrong.onnx"
+    torch.onnx.export(torch.nn.Conv2d(3, 1, 1), (torch.zeros(1, 3, 64, 64),), str(path), opset_version=17, dynamo=False)
+    with pytest.raises(ModelError, match="input shape"):
+        Reconstructor(path)
+
+
+def test_garbage_file_is_a_model_error(tmp_path: Path) -> None:
+    path = tmp_path / "garbage.onnx"
+    path.write_bytes(b"not an onnx model")
+    with pytest.raises(ModelError, match="cannot load"):
+        Reconstructor(path)
+
+
+shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in this checkout yet")
+
+
+@shipped
+def test_shipped_model_is_found_and_is_deterministic() -> None:
+    rec = Reconstructor()
+    assert rec.path == default_model_path()
+    voxel = _voxel(2)
+    first = rec(voxel)
+    assert first.shape == (100, 200) and set(np.unique(first)) <= {0, 1}
+    assert np.array_equal(rec(voxel), first)
+    assert np.array_equal(rec.logits(voxel), rec.logits(voxel))
+
+
+@shipped
+def test_shipped_model_runs_without_torch() -> None:
+    script = textwrap.dedent(
+        """
+        import sys
+        sys.modules["torch"] = None  # any `import torch` now raises ImportError
+        import numpy as np
+        import darkread.edge.reconstruct as reconstruct
+        mask = reconstruct.Reconstructor()(np.zeros((4, 100, 200), np.float32))
+        assert mask.shape == (100, 200) and mask.dtype == np.uint8
+        loaded = [name for name, mod in sys.modules.items() if name.split(".")[0] == "torch" and mod is not None]
+        assert not loaded, loaded
+        print("ok")
+        """
+    )
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "ok"
