@@ -59,7 +59,8 @@ class Spool:
         self._db.executescript(_SCHEMA)
         row = self._db.execute("SELECT COUNT(*), COALESCE(SUM(LENGTH(payload)), 0), MAX(seq) FROM messages").fetchone()
         self._depth, self._bytes = int(row[0]), int(row[1])
-        last_seq = max(int(self._meta("last_seq") or 0), int(row[2] or 0))
+        # seqs start at 0 (the protocol's first seq); -1 means "none yet"
+        last_seq = max(int(self._meta("last_seq") or -1), -1 if row[2] is None else int(row[2]))
         self._next_seq = last_seq + 1
         self.dropped = 0
         if self._depth:
@@ -114,13 +115,22 @@ class Spool:
                 self._set_meta("last_seq", str(upto_seq))
             return int(row[0])
 
-    def pending(self, after_seq: int = 0, limit: int = 256) -> list[tuple[int, bytes]]:
+    def pending(self, after_seq: int = -1, limit: int = 256) -> list[tuple[int, bytes]]:
         """Up to ``limit`` stored messages with ``seq > after_seq``, oldest first."""
         with self._lock:
             rows = self._db.execute(
                 "SELECT seq, payload FROM messages WHERE seq > ? ORDER BY seq LIMIT ?", (after_seq, limit)
             ).fetchall()
         return [(int(seq), bytes(payload)) for seq, payload in rows]
+
+    def discard(self, seq: int) -> None:
+        """Remove one message the cloud will never accept (e.g. larger than its limit)."""
+        with self._lock:
+            row = self._db.execute("SELECT LENGTH(payload) FROM messages WHERE seq = ?", (seq,)).fetchone()
+            if row is not None:
+                self._db.execute("DELETE FROM messages WHERE seq = ?", (seq,))
+                self._depth -= 1
+                self._bytes -= int(row[0])
 
     @property
     def depth(self) -> int:

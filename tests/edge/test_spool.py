@@ -20,36 +20,41 @@ def fill(spool: Spool, n: int, size: int = 10) -> list[int]:
 def test_append_ack_pending_in_order() -> None:
     spool = Spool(None)
     seqs = fill(spool, 5)
-    assert seqs == [1, 2, 3, 4, 5]
+    assert seqs == [0, 1, 2, 3, 4]
     assert spool.depth == 5 and spool.bytes_pending == 50
-    assert spool.ack(2) == 2
-    assert [seq for seq, _ in spool.pending()] == [3, 4, 5]
-    assert [seq for seq, _ in spool.pending(after_seq=3, limit=1)] == [4]
-    assert spool.pending()[0][1] == bytes([3]) * 10
-    assert spool.depth == 3 and spool.bytes_pending == 30
+    assert spool.ack(1) == 2
+    assert [seq for seq, _ in spool.pending()] == [2, 3, 4]
+    assert [seq for seq, _ in spool.pending(after_seq=2, limit=1)] == [3]
+    assert spool.pending()[0][1] == bytes([2]) * 10
+    spool.discard(3)
+    assert [seq for seq, _ in spool.pending()] == [2, 4]
+    spool.discard(3)  # absent: nothing happens
+    assert spool.depth == 2 and spool.bytes_pending == 20
+    spool.ack(4)
+    assert spool.depth == 0 and spool.bytes_pending == 0
 
 
 def test_survives_restart_with_seq_and_session(tmp_path: Path) -> None:
     spool = Spool(tmp_path)
     fill(spool, 4)
     spool.set_session_id("s-1")
-    spool.ack(1)
+    spool.ack(0)
     spool.close()
 
     reopened = Spool(tmp_path)
-    assert [seq for seq, _ in reopened.pending()] == [2, 3, 4]
+    assert [seq for seq, _ in reopened.pending()] == [1, 2, 3]
     assert reopened.session_id() == "s-1"
-    assert reopened.allocate_seq() == 5
+    assert reopened.allocate_seq() == 4
 
 
 def test_seq_never_reused_after_everything_was_acked(tmp_path: Path) -> None:
     spool = Spool(tmp_path)
     fill(spool, 3)
-    spool.ack(3)
+    spool.ack(2)
     spool.close()
     reopened = Spool(tmp_path)
     assert reopened.depth == 0
-    assert reopened.allocate_seq() == 4
+    assert reopened.allocate_seq() == 3
 
 
 def test_ack_beyond_local_counter_moves_counter_forward() -> None:
@@ -64,7 +69,7 @@ def test_bounded_by_messages_drops_oldest() -> None:
     assert spool.depth <= 10
     assert spool.dropped == 25 - spool.depth
     remaining = [seq for seq, _ in spool.pending(limit=100)]
-    assert remaining == list(range(26 - len(remaining), 26))  # newest kept, contiguous
+    assert remaining == list(range(25 - len(remaining), 25))  # newest kept, contiguous
 
 
 def test_bounded_by_bytes() -> None:
@@ -87,4 +92,4 @@ def test_concurrent_appends_keep_unique_seqs() -> None:
     for t in threads:
         t.join()
     seqs = [seq for seq, _ in spool.pending(limit=1000)]
-    assert seqs == list(range(1, 201))
+    assert seqs == list(range(200))

@@ -1,0 +1,176 @@
+"""Edge metrics: counters, rates and latency percentiles, logged and served as Prometheus text.
+
+The hot paths only add to counters and append to bounded reservoirs (``deque(maxlen=...)``), so
+memory stays flat. The HTTP endpoint is a tiny stdlib server: prometheus-client is not needed on
+the glasses for a dozen gauges.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+RESERVOIR = 4096
+RAW_EVT3_BYTES_PER_EVENT = 2.0  # EVT3 packs most events in about one 16-bit word; a conservative 2 bytes
+RGB_FRAME_BYTES_ESTIMATE = 2880 * 2880 * 3 // 2  # a 2880x2880 RGB capture as PNG, about 1.5 bytes/pixel
+
+COUNTERS = (
+    "events_in",
+    "events_foveated",
+    "frames",
+    "frames_skipped",
+    "frames_no_gaze",
+    "events_dropped",
+    "messages_sent",
+    "bytes_sent",
+    "messages_acked",
+    "reconnects",
+    "pages",
+)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """Rates over the interval since the previous snapshot, totals since start."""
+
+    interval_s: float
+    totals: dict[str, int]
+    rates: dict[str, float]
+    inference_ms_p50: float
+    inference_ms_p99: float
+    latency_ms_p50: float
+    latency_ms_p99: float
+    spool_depth: int
+
+    def log_line(self) -> str:
+        r = self.rates
+        return (
+            f"events {r['events_in']/1e3:.1f}k/s fovea {r['events_foveated']/1e3:.1f}k/s "
+            f"frames {r['frames']:.1f}/s infer p50 {self.inference_ms_p50:.1f} p99 {self.inference_ms_p99:.1f} ms "
+            f"wire p50 {self.latency_ms_p50:.1f} p99 {self.latency_ms_p99:.1f} ms "
+            f"skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
+            f"drops {self.totals['events_dropped']} spool {self.spool_depth} "
+            f"sent {r['bytes_sent']/1e3:.1f} kB/s ({self.bandwidth_vs_raw():.1%} of raw events, "
+            f"{self.bandwidth_vs_rgb():.1%} of one RGB frame per second)"
+        )
+
+    def bandwidth_vs_rgb(self) -> float:
+        return self.rates["bytes_sent"] / RGB_FRAME_BYTES_ESTIMATE
+
+    def bandwidth_vs_raw(self) -> float:
+        raw = self.rates["events_in"] * RAW_EVT3_BYTES_PER_EVENT
+        return self.rates["bytes_sent"] / raw if raw > 0 else 0.0
+
+
+def percentile(values: deque[float] | list[float], q: float) -> float:
+    return float(np.percentile(np.fromiter(values, float), q)) if values else 0.0
+
+
+class EdgeMetrics:
+    """Thread-safe counters and reservoirs shared by the pipeline and the uplink."""
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
+        self._lock = threading.Lock()
+        self.totals = dict.fromkeys(COUNTERS, 0)
+        self.inference_ms: deque[float] = deque(maxlen=RESERVOIR)
+        self.latency_ms: deque[float] = deque(maxlen=RESERVOIR)
+        self.spool_depth: Callable[[], int] = lambda: 0
+        self._started = clock()
+        self._last_time = self._started
+        self._last_totals = dict(self.totals)
+
+    def add(self, name: str, n: int = 1) -> None:
+        with self._lock:
+            self.totals[name] += n
+
+    def observe_inference(self, ms: float) -> None:
+        self.inference_ms.append(ms)  # deque.append is atomic
+
+    def observe_latency(self, ms: float) -> None:
+        self.latency_ms.append(ms)
+
+    def snapshot(self) -> Snapshot:
+        with self._lock:
+            now = self._clock()
+            totals = dict(self.totals)
+            interval = max(now - self._last_time, 1e-9)
+            rates = {k: (totals[k] - self._last_totals[k]) / interval for k in COUNTERS}
+            self._last_time, self._last_totals = now, totals
+        inference, latency = list(self.inference_ms), list(self.latency_ms)
+        return Snapshot(
+            interval_s=interval,
+            totals=totals,
+            rates=rates,
+            inference_ms_p50=percentile(inference, 50),
+            inference_ms_p99=percentile(inference, 99),
+            latency_ms_p50=percentile(latency, 50),
+            latency_ms_p99=percentile(latency, 99),
+            spool_depth=self.spool_depth(),
+        )
+
+    def prometheus_text(self) -> str:
+        """Prometheus exposition format (text 0.0.4): totals as counters, the rest as gauges."""
+        with self._lock:
+            totals = dict(self.totals)
+            uptime = self._clock() - self._started
+        inference, latency = list(self.inference_ms), list(self.latency_ms)
+        lines: list[str] = []
+
+        def metric(name: str, kind: str, help_text: str, samples: list[tuple[str, float]]) -> None:
+            lines.append(f"# HELP darkread_edge_{name} {help_text}")
+            lines.append(f"# TYPE darkread_edge_{name} {kind}")
+            lines.extend(f"darkread_edge_{name}{labels} {value:.6g}" for labels, value in samples)
+
+        for key in COUNTERS:
+            metric(f"{key}_total", "counter", key.replace("_", " "), [("", totals[key])])
+        for name, values in (("inference_ms", inference), ("event_to_wire_ms", latency)):
+            quantiles = [(f'{{quantile="{q}"}}', percentile(values, q * 100)) for q in (0.5, 0.99)]
+            metric(name, "gauge", f"{name.replace('_', ' ')} over the last {RESERVOIR} frames", quantiles)
+        metric("spool_depth", "gauge", "messages waiting for an ack", [("", self.spool_depth())])
+        metric("uptime_seconds", "gauge", "seconds since start", [("", uptime)])
+        return "\n".join(lines) + "\n"
+
+
+class MetricsServer:
+    """``GET /metrics`` on a local port, served from a daemon thread."""
+
+    def __init__(self, metrics: EdgeMetrics, host: str = "127.0.0.1", port: int = 0) -> None:
+        metrics_ref = metrics
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_GET(self) -> None:  # noqa: N802 (http.server naming)
+                if self.path.rstrip("/") != "/metrics":
+                    self.send_error(404, "try /metrics")
+                    return
+                body = metrics_ref.prometheus_text().encode()
+                self.send_response(200)
+                self.send_header("Content-Type", "text/plain; version=0.0.4; charset=utf-8")
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                self.wfile.write(body)
+
+            def log_message(self, format: str, *args: object) -> None:  # scrapes stay out of the journal
+                pass
+
+        self._server = ThreadingHTTPServer((host, port), Handler)
+        self._server.daemon_threads = True
+        self.port = int(self._server.server_address[1])
+        self._thread = threading.Thread(target=self._server.serve_forever, name="edge-metrics", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+        logger.info("metrics at http://%s:%d/metrics", self._server.server_address[0], self.port)
+
+    def stop(self) -> None:
+        self._server.shutdown()
+        self._server.server_close()

@@ -1,0 +1,319 @@
+"""Websocket uplink to the cloud: sequence numbers, resume, cumulative acks, zero-loss spool.
+
+The pipeline thread calls :meth:`Uplink.submit`; it assigns the next ``seq``, encodes the message
+and writes it to the :class:`~darkread.edge.spool.Spool` *before* anything is sent, then wakes the
+uplink's asyncio loop (its own thread). The loop connects, says ``hello`` with the session id,
+drops from the spool whatever ``welcome.last_acked_seq`` covers, sends the rest in seq order
+(at most ``max_in_flight`` unacknowledged) and deletes messages as cumulative acks arrive. Any
+failure reconnects with exponential backoff and jitter and resends from the spool; the cloud drops
+duplicates by seq. Nothing is lost unless the bounded spool overflows (counted as drops).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import logging
+import random
+import socket
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
+
+from darkread.edge.metrics import EdgeMetrics
+from darkread.edge.spool import Spool
+from darkread.proto.errors import ProtocolError
+from darkread.proto.messages import (
+    DEFAULT_MAX_MESSAGE_BYTES,
+    Ack,
+    Error,
+    Frame,
+    Gaze,
+    Heartbeat,
+    Hello,
+    Page,
+    Welcome,
+    decode,
+    encode,
+)
+
+logger = logging.getLogger(__name__)
+
+Sequenced = Frame | Page | Gaze
+LATENCY_TRACKED = 8192  # seqs whose submit time is remembered for the event-to-wire latency
+
+
+@dataclass(frozen=True)
+class UplinkSettings:
+    url: str
+    api_key: str = ""
+    device_id: str = ""
+    session_id: str = ""  # empty: the spool's session, else a new one
+    mode: str = "frames"
+    sensor_wh: tuple[int, int] = (1280, 720)
+    fovea_hw: tuple[int, int] = (100, 200)
+    backoff_initial_s: float = 0.2
+    backoff_max_s: float = 10.0
+    max_in_flight: int = 512
+    heartbeat_s: float = 5.0
+    open_timeout_s: float = 5.0
+
+
+def backoff_delays(initial_s: float, max_s: float, rng: random.Random) -> Iterator[float]:
+    """Exponential backoff with full jitter: uniform in [d/2, d], d doubling up to ``max_s``."""
+    delay = initial_s
+    while True:
+        yield rng.uniform(delay / 2, delay)
+        delay = min(max_s, delay * 2)
+
+
+def default_device_id() -> str:
+    name = "".join(c if c.isalnum() or c in "._-" else "-" for c in socket.gethostname())
+    return (name if name[:1].isalnum() else "edge-" + name)[:128] or "edge"
+
+
+class Uplink:
+    """Owns the websocket client thread; thread-safe :meth:`submit`, graceful :meth:`stop`."""
+
+    def __init__(self, settings: UplinkSettings, spool: Spool, metrics: EdgeMetrics | None = None) -> None:
+        self.settings = settings
+        self.spool = spool
+        self.metrics = metrics or EdgeMetrics()
+        self.metrics.spool_depth = lambda: spool.depth
+        self.device_id = settings.device_id or default_device_id()
+        self.session_id = settings.session_id or spool.session_id() or f"{self.device_id}-{uuid.uuid4().hex[:12]}"
+        spool.set_session_id(self.session_id)
+        self.acked_seq = -1
+        self.connected = threading.Event()
+        self.last_error = ""
+        self._submit_lock = threading.Lock()
+        self._latency_lock = threading.Lock()
+        self._submitted_at: dict[int, float] = {}
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._wake: asyncio.Event | None = None
+        self._acked: asyncio.Event | None = None
+        self._stopping = False
+        self._drained = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._rng = random.Random()
+
+    # -- called from other threads ---------------------------------------------------------
+    def start(self) -> None:
+        if self._thread is not None:
+            raise RuntimeError("uplink already started")
+        ready = threading.Event()
+        self._thread = threading.Thread(target=self._thread_main, args=(ready,), name="edge-uplink", daemon=True)
+        self._thread.start()
+        ready.wait()
+
+    def submit(self, message: Sequenced, submitted_at: float | None = None) -> int:
+        """Spool ``message`` under the next seq and schedule it for sending; returns the seq.
+
+        ``submitted_at`` (``time.monotonic()``) is when the data behind the message arrived; the
+        time from it until the message is handed to the socket is the event-to-wire latency.
+        """
+        with self._submit_lock:
+            seq = self.spool.allocate_seq()
+            payload = encode(dataclasses.replace(message, seq=seq))
+            if submitted_at is not None:
+                with self._latency_lock:
+                    if len(self._submitted_at) >= LATENCY_TRACKED:
+                        self._submitted_at.pop(next(iter(self._submitted_at)))
+                    self._submitted_at[seq] = submitted_at
+            self.spool.append(seq, payload)
+        self._drained.clear()
+        self._notify()
+        return seq
+
+    def wait_drained(self, timeout_s: float) -> bool:
+        """Block until every spooled message is acknowledged (or the timeout)."""
+        deadline = time.monotonic() + timeout_s
+        while self.spool.depth > 0:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            self._drained.wait(min(remaining, 0.05))
+        return True
+
+    def stop(self, drain_timeout_s: float = 10.0) -> bool:
+        """Flush (wait for acks up to the timeout), then close; True when the spool is empty."""
+        drained = self.wait_drained(drain_timeout_s) if self._thread else self.spool.depth == 0
+        self._stopping = True
+        self._notify()
+        if self._thread is not None:
+            self._thread.join(timeout=max(2.0, self.settings.open_timeout_s + 1))
+        if not drained:
+            logger.warning("uplink stopped with %d messages in the spool (sent after the next start)", self.spool.depth)
+        return drained
+
+    # -- the asyncio thread ------------------------------------------------------------------
+    def _notify(self) -> None:
+        loop, wake = self._loop, self._wake
+        if loop is not None and wake is not None and not loop.is_closed():
+            try:
+                loop.call_soon_threadsafe(wake.set)
+            except RuntimeError:  # loop closed between the check and the call
+                pass
+
+    def _thread_main(self, ready: threading.Event) -> None:
+        loop = asyncio.new_event_loop()
+        self._loop = loop
+        try:
+            loop.run_until_complete(self._main(ready))
+        finally:
+            loop.close()
+
+    async def _main(self, ready: threading.Event) -> None:
+        self._wake, self._acked = asyncio.Event(), asyncio.Event()
+        ready.set()
+        delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
+        first = True
+        while not self._stopping:
+            if not first:
+                self.metrics.add("reconnects")
+            first = False
+            try:
+                await self._connection()
+                delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
+            except InvalidStatus as exc:
+                self.last_error = f"cloud refused the connection: HTTP {exc.response.status_code}"
+                logger.error("%s (check the API key and URL)", self.last_error)
+            except (OSError, ConnectionClosed, InvalidHandshake, TimeoutError, ProtocolError) as exc:
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                logger.warning("uplink to %s lost: %s", self.settings.url, self.last_error)
+            except InvalidURI as exc:
+                self.last_error = str(exc)
+                logger.error("uplink URL is not valid: %s", exc)
+            finally:
+                self.connected.clear()
+            if self._stopping:
+                break
+            await self._sleep_or_stop(next(delays))
+
+    async def _sleep_or_stop(self, delay_s: float) -> None:
+        assert self._wake is not None
+        deadline = time.monotonic() + delay_s
+        while not self._stopping and (remaining := deadline - time.monotonic()) > 0:
+            self._wake.clear()
+            try:
+                await asyncio.wait_for(self._wake.wait(), remaining)
+            except TimeoutError:
+                return
+
+    async def _connection(self) -> None:
+        s = self.settings
+        headers = {"X-API-Key": s.api_key} if s.api_key else None
+        async with connect(
+            s.url, additional_headers=headers, open_timeout=s.open_timeout_s, max_size=DEFAULT_MAX_MESSAGE_BYTES
+        ) as ws:
+            hello = Hello(
+                device_id=self.device_id,
+                session_id=self.session_id,
+                mode=s.mode,  # type: ignore[arg-type]
+                sensor=s.sensor_wh,
+                fovea=s.fovea_hw,
+                resume_from_seq=self.acked_seq if self.acked_seq >= 0 else None,
+            )
+            await ws.send(encode(hello))
+            welcome = decode(await asyncio.wait_for(ws.recv(), s.open_timeout_s), max_bytes=DEFAULT_MAX_MESSAGE_BYTES)
+            if isinstance(welcome, Error):
+                raise ConnectionError(f"cloud error {welcome.code}: {welcome.message}")
+            if not isinstance(welcome, Welcome):
+                raise ConnectionError(f"expected welcome, got {welcome.TYPE}")
+            self._on_ack(welcome.last_acked_seq)
+            self.connected.set()
+            self.last_error = ""
+            logger.info(
+                "uplink connected to %s, session %s, cloud has up to seq %d, %d to send",
+                s.url, self.session_id, welcome.last_acked_seq, self.spool.depth,
+            )
+            await self._stream(ws, welcome)
+
+    async def _stream(self, ws: ClientConnection, welcome: Welcome) -> None:
+        assert self._wake is not None and self._acked is not None
+        receiver = asyncio.create_task(self._receive(ws))
+        cursor = max(welcome.last_acked_seq, self.acked_seq)
+        last_heartbeat = time.monotonic()
+        try:
+            while True:
+                if receiver.done():
+                    receiver.result()  # re-raises the connection error
+                    return
+                if self._stopping:
+                    await ws.close()
+                    return
+                if cursor - self.acked_seq >= self.settings.max_in_flight:
+                    self._acked.clear()
+                    await self._wait_any(receiver, self._acked.wait(), 1.0)
+                    continue
+                self._wake.clear()
+                limit = min(64, self.settings.max_in_flight - (cursor - self.acked_seq))
+                batch = self.spool.pending(after_seq=cursor, limit=limit)
+                for seq, payload in batch:
+                    if len(payload) > welcome.max_message_bytes:
+                        logger.error("message seq %d (%d bytes) exceeds the cloud's limit; dropped", seq, len(payload))
+                        self.spool.discard(seq)
+                        continue
+                    await ws.send(payload)
+                    cursor = seq
+                    self._sent(seq, len(payload))
+                if not batch:
+                    if time.monotonic() - last_heartbeat >= self.settings.heartbeat_s:
+                        await ws.send(encode(self._heartbeat()))
+                        last_heartbeat = time.monotonic()
+                    await self._wait_any(receiver, self._wake.wait(), self.settings.heartbeat_s)
+        finally:
+            receiver.cancel()
+
+    async def _wait_any(self, receiver: asyncio.Task[None], awaitable: object, timeout_s: float) -> None:
+        waiter = asyncio.ensure_future(awaitable)  # type: ignore[arg-type]
+        try:
+            await asyncio.wait({receiver, waiter}, timeout=timeout_s, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            waiter.cancel()
+
+    async def _receive(self, ws: ClientConnection) -> None:
+        async for data in ws:
+            if isinstance(data, str):
+                raise ConnectionError("cloud sent a text message; expected binary msgpack")
+            message = decode(data, max_bytes=DEFAULT_MAX_MESSAGE_BYTES)
+            if isinstance(message, Ack):
+                self._on_ack(message.seq)
+            elif isinstance(message, Error):
+                log = logger.error if message.fatal else logger.warning
+                log("cloud error %d: %s", message.code, message.message)
+                self.last_error = f"cloud error {message.code}: {message.message}"
+        raise ConnectionError("cloud closed the connection")
+
+    def _on_ack(self, seq: int) -> None:
+        if seq > self.acked_seq:
+            removed = self.spool.ack(seq)
+            self.metrics.add("messages_acked", removed)
+            self.acked_seq = seq
+        if self._acked is not None:
+            self._acked.set()
+        if self.spool.depth == 0:
+            self._drained.set()
+
+    def _sent(self, seq: int, n_bytes: int) -> None:
+        self.metrics.add("messages_sent")
+        self.metrics.add("bytes_sent", n_bytes)
+        with self._latency_lock:
+            submitted = self._submitted_at.pop(seq, None)
+        if submitted is not None:
+            self.metrics.observe_latency((time.monotonic() - submitted) * 1e3)
+
+    def _heartbeat(self) -> Heartbeat:
+        snap = self.metrics.totals
+        return Heartbeat(
+            t_us=time.time_ns() // 1000,
+            stats={"spool_depth": float(self.spool.depth), "frames": float(snap["frames"]), "acked_seq": float(self.acked_seq)},
+        )
+
+
+__all__ = ["Uplink", "UplinkSettings", "backoff_delays"]

@@ -1,0 +1,210 @@
+"""The uplink against a small websockets server that speaks the proto and can be killed."""
+
+from __future__ import annotations
+
+import asyncio
+import random
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from websockets.asyncio.server import ServerConnection, serve
+from websockets.datastructures import Headers
+from websockets.http11 import Request, Response
+
+from darkread.edge.metrics import EdgeMetrics
+from darkread.edge.spool import Spool
+from darkread.edge.uplink import Uplink, UplinkSettings, backoff_delays
+from darkread.proto.messages import Ack, Frame, Hello, Welcome, decode, encode, pack_mask
+
+KEY = "test-key"
+
+
+class ProtoServer:
+    """A cloud stand-in: durable per-session storage (survives restarts), cumulative acks.
+
+    ``drop_after`` closes each connection abruptly after that many stored messages, before
+    acknowledging the last one (its ack is lost, as on a network drop).
+    """
+
+    def __init__(self, drop_after: int | None = None) -> None:
+        self.stored: dict[str, list[int]] = {}
+        self.received = 0
+        self.hellos: list[Hello] = []
+        self.drop_after = drop_after
+        self.port = 0
+        self._loop = asyncio.new_event_loop()
+        self._thread = threading.Thread(target=self._loop.run_forever, daemon=True)
+        self._thread.start()
+        self._server = None
+
+    @property
+    def url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}/v1/stream"
+
+    def start(self) -> None:
+        async def start() -> None:
+            self._server = await serve(self._handler, "127.0.0.1", self.port, process_request=self._auth)
+            self.port = self._server.sockets[0].getsockname()[1]
+
+        asyncio.run_coroutine_threadsafe(start(), self._loop).result(5)
+
+    def kill(self) -> None:
+        async def kill() -> None:
+            self._server.close(close_connections=True)
+            await self._server.wait_closed()
+
+        asyncio.run_coroutine_threadsafe(kill(), self._loop).result(5)
+
+    def close(self) -> None:
+        if self._server is not None and self._server.is_serving():
+            self.kill()
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(5)
+        self._loop.close()
+
+    def _auth(self, connection: ServerConnection, request: Request) -> Response | None:
+        if request.headers.get("X-API-Key") != KEY:
+            return Response(403, "Forbidden", Headers(), b"bad key")
+        return None
+
+    async def _handler(self, ws: ServerConnection) -> None:
+        hello = decode(await ws.recv(), max_bytes=1 << 22)
+        assert isinstance(hello, Hello)
+        self.hellos.append(hello)
+        seqs = self.stored.setdefault(hello.session_id, [])
+        last = seqs[-1] if seqs else -1
+        await ws.send(encode(Welcome(session_id=hello.session_id, last_acked_seq=last, max_message_bytes=1 << 22)))
+        count = 0
+        async for data in ws:
+            message = decode(data, max_bytes=1 << 22)
+            self.received += 1
+            if not isinstance(message, Frame):
+                continue
+            if not seqs or message.seq > seqs[-1]:
+                seqs.append(message.seq)
+                count += 1
+            if self.drop_after is not None and count >= self.drop_after:
+                ws.transport.abort()  # network drop: the last ack never leaves
+                return
+            await ws.send(encode(Ack(seq=seqs[-1])))
+
+
+def frame(frame_id: int) -> Frame:
+    mask = np.zeros((100, 200), np.uint8)
+    mask[frame_id % 100, :] = 1
+    shape, bits = pack_mask(mask)
+    return Frame(
+        seq=0, frame_id=frame_id, t_us=frame_id * 1000, origin=(10, 20), gaze_px=(110.0, 70.0),
+        gaze_rad=(0.01, -0.02), events_used=1600, shape=shape, bits=bits,
+    )
+
+
+def settings(url: str, **kwargs: object) -> UplinkSettings:
+    base = dict(url=url, api_key=KEY, device_id="glasses-1", backoff_initial_s=0.02, backoff_max_s=0.1)
+    base.update(kwargs)
+    return UplinkSettings(**base)  # type: ignore[arg-type]
+
+
+@pytest.fixture
+def server():
+    srv = ProtoServer()
+    srv.start()
+    yield srv
+    srv.close()
+
+
+def test_frames_delivered_in_order_and_acked(server: ProtoServer) -> None:
+    metrics = EdgeMetrics()
+    uplink = Uplink(settings(server.url), Spool(None), metrics)
+    uplink.start()
+    seqs = [uplink.submit(frame(i), submitted_at=time.monotonic()) for i in range(30)]
+    assert uplink.stop(drain_timeout_s=5)
+    assert seqs == list(range(30))
+    assert server.stored[uplink.session_id] == seqs
+    assert uplink.spool.depth == 0
+    assert metrics.totals["messages_sent"] == 30 and metrics.totals["bytes_sent"] > 30 * 2500
+    assert len(metrics.latency_ms) == 30
+    hello = server.hellos[0]
+    assert hello.device_id == "glasses-1" and hello.fovea == (100, 200) and hello.sensor == (1280, 720)
+
+
+def test_network_drops_lose_nothing_and_duplicate_nothing() -> None:
+    server = ProtoServer(drop_after=7)
+    server.start()
+    try:
+        uplink = Uplink(settings(server.url), Spool(None))
+        uplink.start()
+        for i in range(40):
+            uplink.submit(frame(i))
+        assert uplink.stop(drain_timeout_s=10)
+        assert server.stored[uplink.session_id] == list(range(40))
+        assert uplink.metrics.totals["reconnects"] >= 5
+        assert len(server.hellos) >= 6  # one per connection, same session every time
+        assert {h.session_id for h in server.hellos} == {uplink.session_id}
+    finally:
+        server.close()
+
+
+def test_cloud_restart_mid_stream_resends_spooled_frames(server: ProtoServer) -> None:
+    uplink = Uplink(settings(server.url), Spool(None))
+    uplink.start()
+    for i in range(10):
+        uplink.submit(frame(i))
+    assert uplink.wait_drained(5)
+    server.kill()
+    for i in range(10, 25):  # produced while the cloud is down: spooled
+        uplink.submit(frame(i))
+    time.sleep(0.1)
+    assert uplink.spool.depth == 15 and not uplink.connected.is_set()
+    server.start()  # same port, same storage
+    assert uplink.stop(drain_timeout_s=5)
+    assert server.stored[uplink.session_id] == list(range(25))
+
+
+def test_edge_restart_resends_from_disk_spool(tmp_path: Path, server: ProtoServer) -> None:
+    server.kill()
+    first = Uplink(settings(server.url), Spool(tmp_path))
+    first.start()
+    for i in range(12):
+        first.submit(frame(i))
+    assert not first.stop(drain_timeout_s=0.1)  # cloud down: stays on disk
+    first.spool.close()
+
+    server.start()
+    second = Uplink(settings(server.url), Spool(tmp_path))
+    assert second.session_id == first.session_id
+    second.start()
+    for i in range(12, 15):
+        second.submit(frame(i))
+    assert second.stop(drain_timeout_s=5)
+    assert server.stored[first.session_id] == list(range(15))
+
+
+def test_wrong_key_is_refused_and_kept_in_spool(server: ProtoServer) -> None:
+    uplink = Uplink(settings(server.url, api_key="wrong"), Spool(None))
+    uplink.start()
+    uplink.submit(frame(0))
+    assert not uplink.stop(drain_timeout_s=0.3)
+    assert "403" in uplink.last_error
+    assert uplink.spool.depth == 1 and server.stored == {}
+
+
+def test_in_flight_window_is_respected(server: ProtoServer) -> None:
+    uplink = Uplink(settings(server.url, max_in_flight=4), Spool(None))
+    uplink.start()
+    for i in range(20):
+        uplink.submit(frame(i))
+    assert uplink.stop(drain_timeout_s=5)
+    assert server.stored[uplink.session_id] == list(range(20))
+
+
+def test_backoff_grows_with_jitter_and_caps() -> None:
+    delays = backoff_delays(0.1, 1.0, random.Random(1))
+    values = [next(delays) for _ in range(8)]
+    assert 0.05 <= values[0] <= 0.1
+    assert 0.1 <= values[1] <= 0.2
+    assert all(0.5 <= v <= 1.0 for v in values[4:])
+    assert len(set(values)) == len(values)  # jittered
