@@ -1,0 +1,1 @@
+"""Event sources: the live camera and recordings, all behind ``EventSource`` (see ``base``)."""
