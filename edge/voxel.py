@@ -48,7 +48,8 @@ def voxel_grid(events: Events, x0: int = 0, y0: int = 0, cfg: VoxelConfig = Voxe
     polarity = np.where(events["p"] > 0, 1.0, -1.0)
     pixel = y * width + x
     if bins == 1:
-        grid = np.bincount(pixel, weights=polarity, minlength=plane)
+        touched, weights = pixel, polarity
+        grid = np.bincount(touched, weights=weights, minlength=plane)
     else:
         t = events["t"]
         span = float(t[-1] - t[0]) or 1.0
@@ -57,20 +58,25 @@ def voxel_grid(events: Events, x0: int = 0, y0: int = 0, cfg: VoxelConfig = Voxe
         lower = np.minimum(t_star.astype(np.intp), bins - 2)
         frac = t_star - lower
         index = lower * plane + pixel
-        grid = np.bincount(
-            np.concatenate([index, index + plane]),
-            weights=np.concatenate([polarity * (1.0 - frac), polarity * frac]),
-            minlength=bins * plane,
-        )
+        touched = np.concatenate([index, index + plane])
+        weights = np.concatenate([polarity * (1.0 - frac), polarity * frac])
+        grid = np.bincount(touched, weights=weights, minlength=bins * plane)
     if cfg.normalize:
-        grid = _normalize_nonzero(grid)
+        _normalize_nonzero(grid, touched, float(weights.sum()))
     return grid.astype(np.float32).reshape(bins, height, width)
 
 
-def _normalize_nonzero(grid: np.ndarray) -> np.ndarray:
-    nonzero = np.flatnonzero(grid)
-    if nonzero.size:
-        values = grid[nonzero]
-        std = values.std()
-        grid[nonzero] = (values - values.mean()) / (std if std > 0 else 1.0)
-    return grid
+def _normalize_nonzero(grid: np.ndarray, touched: np.ndarray, total: float) -> None:
+    """(v - mean) / std over the non-zero voxels, in place; zeros stay zero.
+
+    Statistics come from whole-array reductions and the update touches only the voxels the events
+    hit (``touched``, duplicates allowed; ``total`` = sum of all weights = sum of the grid): gathering
+    the non-zero voxels of an 80 000-voxel grid costs several times the accumulation itself.
+    """
+    count = np.count_nonzero(grid != 0)  # faster than count_nonzero on floats
+    if count == 0:
+        return
+    mean = total / count
+    std = np.sqrt(max(float(np.dot(grid, grid)) / count - mean * mean, 0.0))
+    values = grid[touched]
+    grid[touched] = np.where(values != 0, (values - mean) / (std if std > 0 else 1.0), 0.0)
