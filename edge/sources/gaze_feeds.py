@@ -1,0 +1,216 @@
+"""Gaze sources: MPS CSV replay, a UDP datagram feed for any eye tracker, Aria Gen2 live gaze.
+
+All of them answer the pipeline's two questions, ``pixel_at(t_event_us)`` and
+``angles_at(t_event_us)``, on the **event clock**. Gaze arrives on its own device clock;
+``clock_offset_us`` (``t_event = t_device + offset``, from ``calibration.json``) maps it and can
+be changed while running (e.g. after re-synchronising the clocks).
+
+UDP datagram (one sample per datagram, JSON object or msgpack map, UTF-8, <= 1 KiB)::
+
+    {"t_us": 123456789, "yaw": 0.05, "pitch": -0.10, "depth_m": 0.42}
+
+``t_us`` integer microseconds on the tracker's device clock; ``yaw`` and ``pitch`` radians in CPF,
+projection convention (direction proportional to (tan yaw, tan pitch, 1), x to the wearer's left,
+y up); ``depth_m`` optional metres to the gaze point (absent or null: the reading-depth prior).
+Invalid datagrams are counted and ignored.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import socket
+import threading
+from collections import deque
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import numpy as np
+
+from darkread.edge.errors import DeviceError
+from darkread.edge.gaze import READING_DEPTH_PRIOR_M, GazeMapper, gaze_point_cpf
+from darkread.edge.io.calibration import Calibration
+from darkread.edge.io.gaze_csv import read_gaze_csv
+
+logger = logging.getLogger(__name__)
+
+MAX_DATAGRAM_BYTES = 1024
+ARIA_SDK_HINT = (
+    "live Aria Gen2 gaze needs the Project Aria client SDK: `pip install projectaria-client-sdk` "
+    "(Python 3.10-3.12, x86_64 or aarch64); or stream gaze to the UDP feed instead (--gaze udp)"
+)
+
+
+def csv_gaze(path: str | Path, calibration: Calibration, *, clock_offset_us: int | None = None,
+             depth_prior_m: float = READING_DEPTH_PRIOR_M) -> GazeMapper:
+    """MPS ``general_eye_gaze.csv`` replay: the whole track is known, so interpolate exactly."""
+    return GazeMapper(calibration, read_gaze_csv(path), clock_offset_us=clock_offset_us, depth_prior_m=depth_prior_m)
+
+
+class LiveGaze:
+    """The newest gaze samples of a live feed (bounded), looked up on the event clock.
+
+    Between two samples the angles are interpolated; after the newest sample it is held for
+    ``max_age_us``; older than that (or before the first sample) there is no gaze.
+    """
+
+    def __init__(
+        self,
+        calibration: Calibration,
+        *,
+        clock_offset_us: int | None = None,
+        max_age_us: int = 100_000,
+        depth_prior_m: float = READING_DEPTH_PRIOR_M,
+        capacity: int = 256,
+    ) -> None:
+        self.calibration = calibration
+        self.clock_offset_us = int(calibration.gaze_to_event_time_offset_us if clock_offset_us is None else clock_offset_us)
+        self.max_age_us = int(max_age_us)
+        self.depth_prior_m = float(depth_prior_m)
+        self._samples: deque[tuple[int, float, float, float]] = deque(maxlen=capacity)
+        self._lock = threading.Lock()
+        self.received = 0
+
+    def push(self, t_device_us: int, yaw_rad: float, pitch_rad: float, depth_m: float | None = None) -> None:
+        depth = depth_m if depth_m is not None and math.isfinite(depth_m) and depth_m > 0 else self.depth_prior_m
+        with self._lock:
+            if self._samples and t_device_us <= self._samples[-1][0]:
+                return  # out of order or repeated: keep the track monotonic
+            self._samples.append((int(t_device_us), float(yaw_rad), float(pitch_rad), float(depth)))
+            self.received += 1
+
+    def _sample_at(self, t_event_us: int) -> tuple[float, float, float] | None:
+        t = int(t_event_us) - self.clock_offset_us
+        with self._lock:
+            if not self._samples:
+                return None
+            track = np.array(self._samples, dtype=np.float64)
+        times = track[:, 0]
+        if t < times[0] or t > times[-1] + self.max_age_us:
+            return None
+        if t >= times[-1]:
+            return float(track[-1, 1]), float(track[-1, 2]), float(track[-1, 3])
+        yaw, pitch, depth = (float(np.interp(t, times, track[:, i])) for i in (1, 2, 3))
+        return yaw, pitch, depth
+
+    def angles_at(self, t_event_us: int) -> tuple[float, float] | None:
+        sample = self._sample_at(t_event_us)
+        return None if sample is None else (sample[0], sample[1])
+
+    def pixel_at(self, t_event_us: int) -> tuple[float, float] | None:
+        sample = self._sample_at(t_event_us)
+        if sample is None:
+            return None
+        point = gaze_point_cpf(np.array([sample[0]]), np.array([sample[1]]), np.array([sample[2]]))
+        uv = self.calibration.project(self.calibration.cpf_to_event(point))
+        if not bool(self.calibration.on_sensor(uv)[0]) or np.isnan(uv).any():
+            return None
+        return float(uv[0, 0]), float(uv[0, 1])
+
+
+def _finite(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def parse_gaze_datagram(data: bytes) -> tuple[int, float, float, float | None]:
+    """One UDP datagram (JSON object or msgpack map) -> (t_us, yaw, pitch, depth_m or None)."""
+    if len(data) > MAX_DATAGRAM_BYTES:
+        raise ValueError(f"datagram of {len(data)} bytes exceeds {MAX_DATAGRAM_BYTES}")
+    try:
+        if data[:1] in (b"{", b" ", b"\n"):
+            payload = json.loads(data.decode("utf-8"))
+        else:
+            payload = msgpack.unpackb(data, raw=False, strict_map_key=True)
+    except (ValueError, UnicodeDecodeError, msgpack.UnpackException) as exc:
+        raise ValueError(f"not JSON or msgpack: {exc}") from None
+    if not isinstance(payload, Mapping):
+        raise ValueError("a gaze datagram must be a JSON object or msgpack map")
+    t_us = payload.get("t_us")
+    if isinstance(t_us, bool) or not isinstance(t_us, int):
+        raise ValueError(f"t_us must be an integer (microseconds), got {t_us!r}")
+    yaw = _finite(payload.get("yaw"), "yaw")
+    pitch = _finite(payload.get("pitch"), "pitch")
+    depth = payload.get("depth_m")
+    return t_us, yaw, pitch, None if depth is None else _finite(depth, "depth_m")
+
+
+class UdpGazeFeed:
+    """Receives gaze datagrams on a UDP port into a :class:`LiveGaze` (its own thread)."""
+
+    def __init__(self, live: LiveGaze, host: str = "127.0.0.1", port: int = 7007) -> None:
+        self.live = live
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind((host, port))
+        except OSError as exc:
+            self._sock.close()
+            raise DeviceError(f"cannot listen for gaze on udp://{host}:{port}: {exc}") from exc
+        self._sock.settimeout(0.2)
+        self.port = int(self._sock.getsockname()[1])
+        self.rejected = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="gaze-udp", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+        logger.info("gaze feed listening on udp port %d", self.port)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
+        self._sock.close()
+
+    @property
+    def stats(self) -> dict[str, float]:
+        return {"gaze_received": float(self.live.received), "gaze_rejected": float(self.rejected)}
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self._sock.recv(MAX_DATAGRAM_BYTES + 1)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            try:
+                self.live.push(*parse_gaze_datagram(data))
+            except ValueError as exc:
+                self.rejected += 1
+                if logger.isEnabledFor(logging.DEBUG):
+                    logger.debug("gaze datagram rejected: %s", exc)
+
+
+class AriaGen2GazeFeed:
+    """Live gaze from Aria Gen2 glasses through the client SDK's stream receiver (optional).
+
+    The SDK's eye-gaze callback delivers ``EyeGaze`` records (yaw, pitch, depth, device time);
+    they go into the same :class:`LiveGaze` as the UDP feed.
+    """
+
+    def __init__(self, live: LiveGaze, port: int = 6768) -> None:
+        try:
+            from aria import stream_receiver  # type: ignore[import-not-found]
+        except ImportError as exc:
+            raise DeviceError(ARIA_SDK_HINT) from exc
+        self.live = live
+        self._receiver = stream_receiver.StreamReceiver(server_port=port)  # pragma: no cover (hardware)
+        self._receiver.register_eye_gaze_callback(self._on_gaze)  # pragma: no cover
+
+    def _on_gaze(self, gaze: Any) -> None:  # pragma: no cover (hardware)
+        t_us = int(gaze.tracking_timestamp.total_seconds() * 1e6)
+        depth = getattr(gaze, "depth", None)
+        self.live.push(t_us, float(gaze.yaw), float(gaze.pitch), float(depth) if depth else None)
+
+    def start(self) -> None:  # pragma: no cover (hardware)
+        self._receiver.start_server()
+
+    def stop(self) -> None:  # pragma: no cover (hardware)
+        stop = getattr(self._receiver, "stop_server", None)
+        if stop is not None:
+            stop()
