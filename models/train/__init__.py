@@ -1,0 +1,1 @@
+"""Training, export and evaluation of the binary reconstruction network (needs the `train` extra: torch)."""

@@ -1,0 +1,127 @@
+"""``darkread train ...``: fit, export, evaluate, fine-tune and reproduce the shipped network.
+
+Light module: torch and the training code are imported inside the handlers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+MODELS_DIR = Path(__file__).resolve().parent.parent  # the darkread.models package: the shipped .onnx files
+FIGURE_PATH = MODELS_DIR.parent / "docs" / "model_samples.png"
+DEFAULT_TRAIN = Path("/work/data/train_v1")
+DEFAULT_VAL = Path("/work/data/val_v1")
+
+
+def _fit_config(args: argparse.Namespace):  # -> FitConfig
+    from darkread.models.train.fit import FitConfig
+
+    return FitConfig(
+        batch_size=args.batch_size, lr=args.lr, time_budget_s=args.minutes * 60, max_epochs=args.epochs,
+        threads=args.threads, seed=args.seed,
+    )
+
+
+def _add_fit_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--run-dir", type=Path, default=Path("runs/binary_unet"), help="checkpoints and history (default runs/binary_unet)")
+    p.add_argument("--minutes", type=float, default=45.0, help="wall-time budget for training (default 45)")
+    p.add_argument("--epochs", type=int, default=30, help="at most this many epochs (default 30)")
+    p.add_argument("--batch-size", type=int, default=32)
+    p.add_argument("--lr", type=float, default=3e-3, help="peak learning rate (AdamW, cosine decay)")
+    p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
+    p.add_argument("--seed", type=int, default=0)
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    from darkread.models.train.fit import fit
+
+    summary = fit(args.train_dir, args.run_dir, _fit_config(args), resume=not args.restart)
+    print(json.dumps(summary, indent=1, default=float))
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from darkread.models.train.pipeline import export_models
+
+    checkpoint = args.checkpoint or args.run_dir / "best.pt"
+    print(json.dumps(export_models(checkpoint, args.train_dir, args.models_dir, args.calibration_windows), indent=1))
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from darkread.models.train.pipeline import evaluate_and_card
+
+    timings = {k: float(v) for k, v in (t.split("=", 1) for t in args.timing)}
+    info = evaluate_and_card(args.run_dir, args.train_dir, args.val_dir, models_dir=args.models_dir,
+                             timings=timings, eval_limit=args.limit, figure=args.figure)
+    print(json.dumps({"overall": info["report"]["overall"], "by_lux": info["report"].get("by_lux"), "latency": info["latency"]}, indent=1))
+    return 0
+
+
+def _cmd_finetune(args: argparse.Namespace) -> int:
+    from darkread.models.train.finetune import finetune_recordings
+
+    summary = finetune_recordings(args.recordings, args.checkpoint, args.run_dir, lr_scale=args.lr_scale,
+                                  steps=args.steps, threads=args.threads, export_to=args.export)
+    print(json.dumps(summary, indent=1, default=float))
+    return 0
+
+
+def _cmd_all(args: argparse.Namespace) -> int:
+    from darkread.models.train.pipeline import reproduce
+
+    info = reproduce(args.train_dir, args.val_dir, args.run_dir, config=_fit_config(args),
+                     train_samples=args.train_samples, val_samples=args.val_samples, workers=args.threads)
+    print(json.dumps({"overall": info["report"]["overall"], "timings_s": info["timings_s"]}, indent=1))
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    train = subparsers.add_parser("train", help="train, export and evaluate the reconstruction network",
+                                  description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = train.add_subparsers(dest="train_command", metavar="STEP")
+    train.set_defaults(func=lambda _args: (train.print_help(), 2)[1])
+
+    p = sub.add_parser("fit", help="train on synthetic shards (time-budgeted, resumes from RUN_DIR/last.pt)")
+    p.add_argument("train_dir", type=Path, nargs="?", default=DEFAULT_TRAIN, help=f"dataset of shard-*.npz (default {DEFAULT_TRAIN})")
+    _add_fit_options(p)
+    p.add_argument("--restart", action="store_true", help="ignore an existing last.pt and start fresh")
+    p.set_defaults(func=_cmd_fit)
+
+    p = sub.add_parser("export", help="ONNX fp32 + static int8 QDQ from a checkpoint")
+    p.add_argument("--run-dir", type=Path, default=Path("runs/binary_unet"))
+    p.add_argument("--checkpoint", type=Path, help="default RUN_DIR/best.pt")
+    p.add_argument("--train-dir", type=Path, default=DEFAULT_TRAIN, help="int8 calibration windows come from here")
+    p.add_argument("--calibration-windows", type=int, default=256)
+    p.add_argument("--models-dir", type=Path, default=MODELS_DIR, help=f"where the .onnx files go (default {MODELS_DIR})")
+    p.set_defaults(func=_cmd_export)
+
+    p = sub.add_parser("evaluate", help="held-out scores by lux/motion vs the naive baseline, latency, figure, MODEL_CARD.md")
+    p.add_argument("--run-dir", type=Path, default=Path("runs/binary_unet"), help="training run (history.json)")
+    p.add_argument("--train-dir", type=Path, default=DEFAULT_TRAIN, help="baseline tuning windows come from here")
+    p.add_argument("--val-dir", type=Path, default=DEFAULT_VAL)
+    p.add_argument("--models-dir", type=Path, default=MODELS_DIR)
+    p.add_argument("--limit", type=int, help="evaluate at most this many validation windows")
+    p.add_argument("--figure", type=Path, default=FIGURE_PATH)
+    p.add_argument("--timing", action="append", default=[], metavar="STEP=SECONDS", help="extra rows for the card's reproduction-time table")
+    p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("finetune", help="fine-tune on real recordings of known pages (targets made automatically)")
+    p.add_argument("recordings", type=Path, nargs="+", help="recording directories (events.raw, gaze CSV, calibration.json, text.txt)")
+    p.add_argument("--checkpoint", type=Path, default=Path("runs/binary_unet/best.pt"), help="starting weights")
+    p.add_argument("--run-dir", type=Path, default=Path("runs/finetune"))
+    p.add_argument("--lr-scale", type=float, default=1e-3, help="learning rate as a fraction of the training rate (default 1e-3)")
+    p.add_argument("--steps", type=int, default=200)
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--export", type=Path, help="also write the fine-tuned network to this .onnx")
+    p.set_defaults(func=_cmd_finetune)
+
+    p = sub.add_parser("all", help="reproduce the shipped model from scratch: synth -> fit -> export -> int8 -> evaluate -> card")
+    p.add_argument("--train-dir", type=Path, default=DEFAULT_TRAIN)
+    p.add_argument("--val-dir", type=Path, default=DEFAULT_VAL)
+    p.add_argument("--train-samples", type=int, default=30000)
+    p.add_argument("--val-samples", type=int, default=3000)
+    _add_fit_options(p)
+    p.set_defaults(func=_cmd_all)

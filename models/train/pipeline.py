@@ -1,0 +1,171 @@
+"""The steps that turn a training run into the shipped model: export, int8, evaluate, card.
+
+``reproduce`` chains them after dataset generation and fitting (``darkread train all``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from darkread.models.train.fit import BEST_CHECKPOINT, FitConfig, fit, load_model
+
+log = logging.getLogger(__name__)
+
+MODELS_DIR = Path(__file__).resolve().parent.parent
+REPO_ROOT = MODELS_DIR.parent
+FP32_NAME = "binary_unet.onnx"
+INT8_NAME = "binary_unet_int8.onnx"
+CARD_NAME = "MODEL_CARD.md"
+FIGURE_PATH = REPO_ROOT / "docs" / "model_samples.png"
+DEFAULT_RUN_DIR = Path("runs/binary_unet")
+
+
+def export_models(checkpoint: str | Path, train_dir: str | Path, out_dir: str | Path = MODELS_DIR, calibration_windows: int = 256) -> dict[str, Any]:
+    """fp32 ONNX from ``checkpoint`` and its int8 twin calibrated on training windows."""
+    from darkread.models.train.evaluate import training_sample
+    from darkread.models.train.export import export_onnx, quantize_int8
+
+    out = Path(out_dir)
+    fp32 = export_onnx(load_model(checkpoint), out / FP32_NAME)
+    calib = training_sample(train_dir, calibration_windows, seed=1)
+    int8 = quantize_int8(fp32, out / INT8_NAME, calib.voxels.astype(np.float32))
+    info = {"fp32": str(fp32), "int8": str(int8), "checkpoint": str(checkpoint), "calibration_windows": len(calib)}
+    (Path(checkpoint).parent / "export.json").write_text(json.dumps(info, indent=1))
+    return info
+
+
+def measure_latency(models_dir: str | Path = MODELS_DIR, runs: int = 60) -> dict[str, Any]:
+    import onnxruntime
+
+    from darkread.bench.inference import _reference, onnx_latency_ms
+
+    ref_ms, ref = _reference(runs)
+    out = Path(models_dir)
+    return {
+        "fp32_ms": onnx_latency_ms(out / FP32_NAME, runs),
+        "int8_ms": onnx_latency_ms(out / INT8_NAME, runs),
+        "reference_ms": ref_ms,
+        "reference": ref.split(":")[0],
+        "ort_version": onnxruntime.__version__,
+    }
+
+
+def evaluate_models(
+    train_dir: str | Path, val_dir: str | Path, models_dir: str | Path = MODELS_DIR, *,
+    baseline_windows: int = 600, limit: int | None = None, figure: str | Path | None = FIGURE_PATH,
+) -> dict[str, Any]:
+    from darkread.models.train.baseline import tune
+    from darkread.models.train.evaluate import evaluate, sample_figure, training_sample
+
+    tuning = training_sample(train_dir, baseline_windows, seed=2)
+    params, train_f1 = tune(tuning.voxels, tuning.targets)
+    log.info("naive baseline tuned on %d training windows: %s (train F1 %.3f)", len(tuning), params, train_f1)
+    out = Path(models_dir)
+    report = evaluate({"fp32": out / FP32_NAME, "int8": out / INT8_NAME}, val_dir, params, limit=limit)
+    report["baseline_train_f1"] = train_f1
+    if figure is not None:
+        sample_figure(out / FP32_NAME, val_dir, figure, baseline=params)
+    return report
+
+
+def _manifest(root: str | Path) -> dict[str, Any] | None:
+    path = Path(root) / "dataset.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def write_model_card(info: dict[str, Any], models_dir: str | Path = MODELS_DIR) -> Path:
+    from darkread.models.train.card import write_card
+
+    return write_card(info, Path(models_dir) / CARD_NAME)
+
+
+def finish(
+    run_dir: str | Path, train_dir: str | Path, val_dir: str | Path, *, models_dir: str | Path = MODELS_DIR,
+    timings: dict[str, float] | None = None, eval_limit: int | None = None, figure: str | Path | None = FIGURE_PATH,
+) -> dict[str, Any]:
+    """export -> int8 -> evaluate -> latency -> card, from the best checkpoint of ``run_dir``."""
+    timings = dict(timings or {})
+    started = time.monotonic()
+    export_models(Path(run_dir) / BEST_CHECKPOINT, train_dir, models_dir)
+    timings["export + int8"] = time.monotonic() - started
+    return evaluate_and_card(run_dir, train_dir, val_dir, models_dir=models_dir, timings=timings, eval_limit=eval_limit, figure=figure)
+
+
+def evaluate_and_card(
+    run_dir: str | Path, train_dir: str | Path, val_dir: str | Path, *, models_dir: str | Path = MODELS_DIR,
+    timings: dict[str, float] | None = None, eval_limit: int | None = None, figure: str | Path | None = FIGURE_PATH,
+) -> dict[str, Any]:
+    """Evaluate the exported models, measure latency, draw the figure, write the card and evaluation.json."""
+    timings = dict(timings or {})
+    run = Path(run_dir)
+    out = Path(models_dir)
+    exported = {
+        "size_fp32_kb": (out / FP32_NAME).stat().st_size / 1024,
+        "size_int8_kb": (out / INT8_NAME).stat().st_size / 1024,
+    }
+    export_info = run / "export.json"
+    if export_info.is_file():
+        exported["calibration_windows"] = json.loads(export_info.read_text()).get("calibration_windows", "?")
+    started = time.monotonic()
+    report = evaluate_models(train_dir, val_dir, models_dir, limit=eval_limit, figure=figure)
+    timings["evaluate"] = time.monotonic() - started
+    latency = measure_latency(models_dir)
+    history = json.loads((run / "history.json").read_text())
+    timings.setdefault("fit", float(history["elapsed_s"]))
+    fit_info = {**history["fit_config"], "steps": history["step"], "epochs": history["epoch"],
+                "elapsed_s": history["elapsed_s"], "best_f1": history["best_f1"]}
+    from darkread.models.train.net import BinaryUNet, NetConfig, count_parameters
+
+    fit_info["parameters"] = count_parameters(BinaryUNet(NetConfig.from_dict(fit_info["net"])))
+    train_manifest = _manifest(train_dir)
+    info = {
+        **exported, "report": report, "fit": fit_info, "latency": latency, "timings_s": timings,
+        "train_manifest": train_manifest, "train_dir": str(train_dir), "val_dir": str(val_dir),
+        "train_fonts": (train_manifest or {}).get("fonts", []),
+    }
+    (run / "evaluation.json").write_text(json.dumps(info, indent=1, default=str))
+    write_model_card(info, models_dir)
+    return info
+
+
+def reproduce(
+    train_dir: str | Path, val_dir: str | Path, run_dir: str | Path = DEFAULT_RUN_DIR, *,
+    config: FitConfig | None = None, train_samples: int = 30000, val_samples: int = 3000, workers: int = 2,
+) -> dict[str, Any]:
+    """Synthetic dataset (if absent) -> fit -> export -> int8 -> evaluate -> model card."""
+    from darkread.models.train.data import shard_paths
+
+    timings: dict[str, float] = {}
+    for split, root, n in (("train", train_dir, train_samples), ("val", val_dir, val_samples)):
+        try:
+            shard_paths(root)
+            continue
+        except FileNotFoundError:
+            pass
+        started = time.monotonic()
+        generate_dataset(split, root, n, workers)
+        timings[f"synthesise {split} ({n} windows)"] = time.monotonic() - started
+    started = time.monotonic()
+    config = config or FitConfig()
+    fit(train_dir, run_dir, config)
+    timings["fit"] = time.monotonic() - started
+    log.info("fit config: %s", asdict(config))
+    return finish(run_dir, train_dir, val_dir, timings=timings)
+
+
+def generate_dataset(split: str, root: str | Path, samples: int, workers: int) -> None:
+    """Make a synthetic split with the synth component's own command."""
+    from darkread.cli import main as darkread_main
+
+    argv = ["synth", "generate", "--split", split, "--samples", str(samples), "--out", str(root), "--workers", str(workers)]
+    log.info("generating %s set: darkread %s", split, " ".join(argv))
+    code = darkread_main(argv)
+    if code:
+        raise RuntimeError(f"`darkread {' '.join(argv)}` failed with exit code {code}")

@@ -1,0 +1,49 @@
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from darkread.edge.reconstruct import Reconstructor
+from darkread.models.train.fit import FitConfig, fit
+from darkread.models.train.net import NetConfig
+from darkread.models.train.pipeline import finish
+
+
+@pytest.mark.slow
+def test_fit_export_evaluate_and_card_on_a_tiny_dataset(fake_dataset, tmp_path: Path) -> None:
+    train = fake_dataset(shards=1, per_shard=40, name="train")
+    val = fake_dataset(shards=1, per_shard=10, name="val")
+    run = tmp_path / "run"
+    config = FitConfig(batch_size=8, warmup_steps=1, max_epochs=1, threads=1, validation_samples=8,
+                       net=NetConfig(widths=(4, 8, 16, 16), blocks=(1, 1, 1)).to_dict())
+    fit(train, run, config, progress=False)
+    models = tmp_path / "models"
+    figure = tmp_path / "samples.png"
+    info = finish(run, train, val, models_dir=models, eval_limit=10, figure=figure)
+    assert (models / "binary_unet.onnx").is_file() and (models / "binary_unet_int8.onnx").is_file()
+    assert Reconstructor(models / "binary_unet_int8.onnx", warmup=0)(np.zeros((4, 100, 200), np.float32)).shape == (100, 200)
+    report = info["report"]
+    assert report["samples"] == 10
+    assert [row["group"] for row in report["by_lux"]] == ["1000", "100", "30", "10", "5"]
+    assert all(0 <= row["fp32_f1"] <= 1 and 0 <= row["baseline_f1"] <= 1 for row in report["by_lux"])
+    card = (models / "MODEL_CARD.md").read_text()
+    assert "| 30 | 2 |" in card and "naive baseline" in card
+    assert figure.stat().st_size > 1000
+    assert json.loads((run / "evaluation.json").read_text())["latency"]["fp32_ms"] > 0
+
+
+def test_cli_registers_train_steps_without_importing_torch() -> None:
+    script = (
+        "import sys; sys.modules['torch'] = None\n"
+        "from darkread.cli import build_parser\n"
+        "args = build_parser().parse_args(['train', 'fit', '--minutes', '1'])\n"
+        "assert args.minutes == 1.0 and callable(args.func)\n"
+        "print('ok')\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
