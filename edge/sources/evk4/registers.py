@@ -393,10 +393,11 @@ def roi_window_sequence(x0: int, y0: int, width: int, height: int) -> RegisterSe
 # Applied after the window is latched: ROI mode, filtering on, shadow registers transferred.
 ROI_ENABLE: RegisterSequence = (Field(REG_ROI_CTRL, ROI_ENABLE_BITS, ROI_ENABLE_BITS),)
 
-# Full frame again: window disarmed, ROI filtering off (pixel reset bit untouched).
+# Full frame again: window disarmed; ROI filtering stays on as INIT leaves it (0xF0005042 has
+# roi_td_en set) with every line enabled by ROI_LINES_RESET, so nothing is masked.
 ROI_DISABLE: RegisterSequence = (
     Field(REG_ROI_WIN_CTRL, ROI_MASTER_EN | ROI_WIN_DONE, 0),
-    Field(REG_ROI_CTRL, ROI_TD_EN | ROI_TD_SHADOW_TRIGGER, ROI_TD_SHADOW_TRIGGER),
+    Field(REG_ROI_CTRL, ROI_TD_EN | ROI_TD_SHADOW_TRIGGER, ROI_TD_EN | ROI_TD_SHADOW_TRIGGER),
 )
 
 # Register reset values the fake device starts from (only those the sequences read back).
