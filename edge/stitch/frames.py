@@ -1,0 +1,132 @@
+"""Types of the stitcher: what goes in (frames), how it behaves (config), what comes out (page)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class StitchFrame:
+    """One reconstructed binary window and where it was taken.
+
+    ``origin_xy`` and ``gaze_px`` are sensor pixels; the page moves in the sensor with the head, so
+    they predict the frame's place on the page only roughly (the stitcher refines by correlation).
+    """
+
+    frame_id: int
+    t_us: int  # event clock
+    mask: np.ndarray  # uint8 [h, w] ink mask (1 = ink, 0 = paper); default 100x200
+    origin_xy: tuple[int, int]  # window top-left in sensor pixels
+    gaze_px: tuple[float, float]  # gaze pixel (u, v) in sensor pixels at t_us
+
+    def __post_init__(self) -> None:
+        mask = np.asarray(self.mask)
+        if mask.ndim != 2 or mask.shape[0] < 8 or mask.shape[1] < 8:
+            raise ValueError(f"frame {self.frame_id}: mask must be a 2-D image of at least 8x8, got shape {mask.shape}")
+        if mask.dtype != np.bool_ and not np.issubdtype(mask.dtype, np.integer):
+            raise ValueError(f"frame {self.frame_id}: mask must be uint8 (1 = ink), got {mask.dtype}")
+        if mask.dtype != np.uint8 or mask.max(initial=0) > 1:
+            mask = (mask > 0).astype(np.uint8)
+        object.__setattr__(self, "mask", mask)
+        object.__setattr__(self, "origin_xy", (int(self.origin_xy[0]), int(self.origin_xy[1])))
+        object.__setattr__(self, "gaze_px", (float(self.gaze_px[0]), float(self.gaze_px[1])))
+
+
+@dataclass(frozen=True)
+class StitchConfig:
+    """Thresholds of the stitcher. Pixel figures are sensor pixels of the IMX636 window (x-height ~10 px).
+
+    Line segmentation (return sweeps):
+      sweep_min_px          a return sweep moves the gaze left by at least this much (px); forward
+                            saccades (7-9 letters, ~70 px) and small regressions stay below it.
+      sweep_line_fraction   ... and by at least this fraction of the current line's gaze extent, so a
+                            long regression mid-line does not end it.
+      sweep_max_rise_px     a left jump that also moves the gaze *up* by more than this is a
+                            regression to an earlier line, not a return sweep.
+      sweep_context_frames  gaze samples before the jump whose median stands for "where the eye was"
+                            (noise ~25-50 px is averaged down).
+      sweep_confirm_frames  samples after the jump that must agree (median) before a break is
+                            declared; a single noisy sample does not start a line. Adds this many
+                            frames of latency to the incremental stitcher.
+      min_line_frames       no second break within this many frames of the last one (an undershooting
+                            sweep followed by its corrective saccade is one break).
+    Registration:
+      search_radius_px      correlation search around the predicted position (head tremor and the
+                            drift change between two frames stay well inside; half a line pitch
+                            would allow locking on the neighbouring line).
+      min_match_score       normalised correlation (TM_CCOEFF_NORMED) below which a frame is dropped.
+      min_overlap_fraction  share of the frame that must overlap what the page already shows for a
+                            correlation to be trusted; otherwise the frame goes to its predicted place.
+      blur_sigma_px         Gaussian blur before correlation: widens the peak, tames speckle.
+      min_ink_fraction      frames with less ink than this (blank reconstructions) are dropped.
+    Accumulation:
+      alpha                 smallest blending weight of a new frame in the running average (the
+                            alpha channel): the first frames average evenly (1/n), later ones blend
+                            with at least ``alpha`` so slow changes are followed.
+      improvement_tolerance a pixel takes the new frame only where the frame's match score is at
+                            least the best score saved for that pixel minus this (improvement mask).
+      taper_sigma_rows      vertical Gaussian (rows) weighting each frame's rows around its centre:
+                            the fixated line counts most, neighbouring lines less.
+    De-warp (KLT between a finished line and the page above it):
+      dewarp_degree         polynomial degree in x of the line's displacement (1 = offset + slope).
+      dewarp_max_shift_px   larger corrections are distrusted and skipped.
+      dewarp_min_points     tracked features needed to estimate a warp.
+    Page:
+      ink_threshold         alpha-averaged ink probability above which a page pixel is ink.
+      min_component_px      ink specks smaller than this many pixels are removed from the page.
+      line_gap_px           a line's box spans its ink columns; a gap wider than this cuts off stray ink.
+    """
+
+    sweep_min_px: float = 140.0
+    sweep_line_fraction: float = 0.5
+    sweep_max_rise_px: float = 45.0
+    sweep_context_frames: int = 3
+    sweep_confirm_frames: int = 2
+    min_line_frames: int = 4
+    search_radius_px: int = 14
+    min_match_score: float = 0.25
+    min_overlap_fraction: float = 0.25
+    blur_sigma_px: float = 1.2
+    min_ink_fraction: float = 0.003
+    alpha: float = 0.08
+    improvement_tolerance: float = 0.15
+    taper_sigma_rows: float = 22.0
+    dewarp_degree: int = 1
+    dewarp_max_shift_px: float = 8.0
+    dewarp_min_points: int = 12
+    ink_threshold: float = 0.45
+    min_component_px: int = 3
+    line_gap_px: int = 30
+
+    def __post_init__(self) -> None:
+        if self.sweep_confirm_frames < 0 or self.sweep_context_frames < 1 or self.min_line_frames < 1:
+            raise ValueError("sweep_confirm_frames must be >= 0, sweep_context_frames and min_line_frames >= 1")
+        if self.search_radius_px < 0:
+            raise ValueError(f"search_radius_px must be >= 0, got {self.search_radius_px}")
+        if not 0.0 <= self.alpha <= 1.0 or not 0.0 < self.ink_threshold < 1.0:
+            raise ValueError("alpha must be in [0, 1] and ink_threshold in (0, 1)")
+
+
+@dataclass
+class Page:
+    """A stitched page. Coordinates are page pixels, (0, 0) at the top-left of the covered area."""
+
+    image: np.ndarray  # uint8 ink mask of the whole page (1 = ink)
+    lines: list[tuple[int, int, int, int]]  # line boxes (x0, y0, x1, y1), top to bottom
+    line_images: list[np.ndarray]  # each line strip's ink mask, cut to its box
+    frames_used: int = 0
+    frames_dropped: int = 0
+    frame_positions: dict[int, tuple[int, int]] = field(default_factory=dict)  # frame_id -> top-left on the page
+
+    def to_png_bytes(self) -> bytes:
+        """Black ink on white, 8-bit grey PNG."""
+        grey = np.where(self.image > 0, 0, 255).astype(np.uint8)
+        if grey.size == 0:
+            grey = np.full((1, 1), 255, np.uint8)
+        ok, buf = cv2.imencode(".png", grey)
+        if not ok:
+            raise ValueError(f"cannot encode a page of shape {grey.shape} as PNG")
+        return buf.tobytes()

@@ -1,0 +1,150 @@
+"""Lines onto the page: weighted composition of the line strips, line boxes, final threshold."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from darkread.edge.stitch.canvas import Canvas
+from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
+from darkread.edge.stitch.strip import LineStrip
+
+_MIN_DEN = 1e-6
+
+
+class PageCanvas:
+    """Finished lines: sum of weight x ink and of weight, so any strip can be added or composed."""
+
+    def __init__(self) -> None:
+        self.canvas = Canvas(("num", "den"))
+
+    def add_strip(self, strip: LineStrip) -> None:
+        if strip.canvas.empty:
+            return
+        x0, y0, x1, y1 = strip.canvas.box
+        self.canvas.ensure(x0, y0, x1, y1)
+        weight = strip.weight()
+        self.canvas.view("num", x0, y0, x1, y1)[...] += weight * strip.canvas.layers["avg"]
+        self.canvas.view("den", x0, y0, x1, y1)[...] += weight
+
+    def reference(self, strip: LineStrip | None, box: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """Ink probability and 'seen' mask in ``box`` from the finished lines plus ``strip``."""
+        num, den = self.canvas.crop("num", *box), self.canvas.crop("den", *box)
+        if strip is not None and not strip.canvas.empty:
+            weight = strip.canvas.crop("conf", *box) ** 2
+            num += weight * strip.canvas.crop("avg", *box)
+            den += weight
+        seen = den > _MIN_DEN
+        return np.where(seen, num / np.maximum(den, _MIN_DEN), 0.0).astype(np.float32), seen
+
+
+def union_box(boxes: Sequence[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
+    return min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes), max(b[3] for b in boxes)
+
+
+def binarize(avg: np.ndarray, cfg: StitchConfig) -> np.ndarray:
+    """Threshold the alpha-averaged ink probability; drop specks below ``min_component_px``."""
+    ink = (avg > cfg.ink_threshold).astype(np.uint8)
+    if cfg.min_component_px > 1 and ink.any():
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(ink, connectivity=8)
+        small = stats[:, cv2.CC_STAT_AREA] < cfg.min_component_px
+        small[0] = False
+        if small.any():
+            ink[small[labels]] = 0
+    return ink
+
+
+def covered_box(seen: np.ndarray) -> tuple[int, int, int, int] | None:
+    rows, cols = np.flatnonzero(seen.any(axis=1)), np.flatnonzero(seen.any(axis=0))
+    if rows.size == 0:
+        return None
+    return int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1
+
+
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
+
+
+def text_bands(ink: np.ndarray) -> list[tuple[int, int, float]]:
+    """Text lines of an ink mask as row bands (top, bottom, centre), top to bottom.
+
+    A line's core is a run of rows whose smoothed ink profile is well above the page's typical
+    line (the x-height band); it extends up and down (ascenders, descenders) to the profile
+    valleys that separate it from its neighbours. Short lines (a paragraph's last words) are found
+    in a second pass among the rows left over, with a lower floor.
+    """
+    h = ink.shape[0]
+    profile = ink.sum(axis=1).astype(np.float32)
+    if profile.max(initial=0) <= 0:
+        return []
+    smooth = np.convolve(profile, np.ones(5, np.float32) / 5, mode="same")
+    typical = float(np.percentile(smooth[smooth > 0], 90))
+    taken = np.zeros(h, bool)
+    bands = []
+    for floor, min_rows in ((0.3 * typical, 1), (0.05 * typical, 4)):
+        core = (smooth >= floor) & ~taken
+        for c0, c1 in _runs(core):
+            if c1 - c0 < min_rows:
+                continue
+            top, bottom = c0, c1 - 1
+            while top > 0 and not taken[top - 1] and profile[top - 1] > 0 and smooth[top - 1] <= smooth[top] and not core[top - 1]:
+                top -= 1
+            while (
+                bottom < h - 1
+                and not taken[bottom + 1]
+                and profile[bottom + 1] > 0
+                and smooth[bottom + 1] <= smooth[bottom]
+                and not core[bottom + 1]
+            ):
+                bottom += 1
+            taken[top : bottom + 1] = True
+            centre = float(np.average(np.arange(c0, c1), weights=profile[c0:c1] + 1e-6))
+            bands.append((top, bottom + 1, centre))
+    return sorted(bands, key=lambda band: band[2])
+
+
+def main_column_span(columns_with_ink: np.ndarray, max_gap: int) -> tuple[int, int] | None:
+    """Longest run of ink columns whose gaps stay below ``max_gap`` (word gaps are a few px)."""
+    cols = np.flatnonzero(columns_with_ink)
+    if cols.size == 0:
+        return None
+    cuts = np.flatnonzero(np.diff(cols) > max_gap)
+    starts = np.concatenate([[0], cuts + 1])
+    ends = np.concatenate([cuts, [cols.size - 1]])
+    best = int(np.argmax(cols[ends] - cols[starts]))
+    return int(cols[starts[best]]), int(cols[ends[best]]) + 1
+
+
+def assign_lines(gaze_rows: Sequence[float], band_centres: Sequence[float]) -> list[int]:
+    """Band index of each read line, from its mean gaze row.
+
+    The gaze tracker's common vertical bias (calibration) is estimated first as the median offset
+    to the nearest band and removed; then each line takes the nearest band.
+    """
+    if not band_centres:
+        return [-1] * len(gaze_rows)
+    centres = np.asarray(band_centres, dtype=np.float64)
+    rows = np.asarray(gaze_rows, dtype=np.float64)
+    nearest = np.abs(rows[:, None] - centres[None, :]).argmin(axis=1)
+    bias = float(np.median(centres[nearest] - rows))
+    return np.abs(rows[:, None] + bias - centres[None, :]).argmin(axis=1).tolist()
+
+
+def naive_page(frames: Sequence[StitchFrame], cfg: StitchConfig = StitchConfig()) -> Page:
+    """Reference without registration: every frame averaged at its sensor position (origin_xy)."""
+    canvas = Canvas(("sum", "count"))
+    for f in frames:
+        x, y = f.origin_xy
+        h, w = f.mask.shape
+        canvas.ensure(x, y, x + w, y + h)
+        canvas.view("sum", x, y, x + w, y + h)[...] += f.mask
+        canvas.view("count", x, y, x + w, y + h)[...] += 1
+    if canvas.empty:
+        return Page(np.zeros((0, 0), np.uint8), [], [], 0, 0)
+    count = canvas.layers["count"]
+    avg = np.where(count > 0, canvas.layers["sum"] / np.maximum(count, 1), 0)
+    x0, y0, x1, y1 = covered_box(count > 0) or (0, 0, 0, 0)
+    return Page(binarize(avg[y0:y1, x0:x1], cfg), [], [], len(frames), 0)

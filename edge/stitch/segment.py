@@ -1,0 +1,90 @@
+"""Lines from the gaze track: a return sweep (a long jump left, not up) starts a new line.
+
+The rule works on medians of a few gaze samples on each side of a jump, so tracker noise of
+25-50 px neither starts nor hides a line; an undershooting sweep and its corrective saccade left
+count as one break (``min_line_frames``). The same streaming decision serves the batch
+``segment_lines`` and the incremental ``PageStitcher``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+
+import numpy as np
+
+from darkread.edge.stitch.frames import StitchConfig, StitchFrame
+
+
+class LineSegmenter:
+    """Streaming return-sweep detector.
+
+    ``push`` returns the frames it has decided, each with ``True`` when it starts a new line; a
+    frame is decided once ``sweep_confirm_frames`` later frames are known (``flush`` decides the
+    rest with what there is).
+    """
+
+    def __init__(self, cfg: StitchConfig = StitchConfig()) -> None:
+        self.cfg = cfg
+        self._pending: deque[StitchFrame] = deque()
+        self._recent: deque[tuple[float, float]] = deque(maxlen=cfg.sweep_context_frames)
+        self._line_x: list[float] = []
+        self._since_break = 0
+        self._started = False
+
+    def push(self, frame: StitchFrame) -> list[tuple[StitchFrame, bool]]:
+        self._pending.append(frame)
+        decided = []
+        while len(self._pending) > self.cfg.sweep_confirm_frames:
+            decided.append(self._decide())
+        return decided
+
+    def flush(self) -> list[tuple[StitchFrame, bool]]:
+        decided = []
+        while self._pending:
+            decided.append(self._decide())
+        return decided
+
+    def _line_extent(self) -> float:
+        if len(self._line_x) < 2:
+            return 0.0
+        lo, hi = np.percentile(self._line_x, [10, 90])
+        return float(hi - lo)
+
+    def _is_sweep(self) -> bool:
+        cfg = self.cfg
+        if not self._recent or self._since_break < cfg.min_line_frames:
+            return False
+        before = np.median(np.asarray(self._recent), axis=0)
+        after_samples = [f.gaze_px for f in list(self._pending)[: cfg.sweep_confirm_frames + 1]]
+        first = np.asarray(self._pending[0].gaze_px)
+        after = np.median(np.asarray(after_samples), axis=0)
+        needed = max(cfg.sweep_min_px, cfg.sweep_line_fraction * self._line_extent())
+        jumped_left = before[0] - first[0] > needed and before[0] - after[0] > needed
+        went_up = before[1] - after[1] > cfg.sweep_max_rise_px
+        return bool(jumped_left and not went_up)
+
+    def _decide(self) -> tuple[StitchFrame, bool]:
+        new_line = (not self._started) or self._is_sweep()
+        frame = self._pending.popleft()
+        self._started = True
+        if new_line:
+            self._recent.clear()
+            self._line_x = []
+            self._since_break = 0
+        self._recent.append(frame.gaze_px)
+        self._line_x.append(frame.gaze_px[0])
+        self._since_break += 1
+        return frame, new_line
+
+
+def segment_lines(frames: Sequence[StitchFrame], cfg: StitchConfig = StitchConfig()) -> list[list[StitchFrame]]:
+    """Split frames (in time order) into lines at return sweeps."""
+    segmenter = LineSegmenter(cfg)
+    decided = [d for f in frames for d in segmenter.push(f)] + segmenter.flush()
+    lines: list[list[StitchFrame]] = []
+    for frame, new_line in decided:
+        if new_line:
+            lines.append([])
+        lines[-1].append(frame)
+    return lines

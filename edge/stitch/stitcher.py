@@ -1,0 +1,177 @@
+"""The hierarchical stitcher: frames -> lines (return sweeps) -> registered strips -> de-warped lines
+-> page.
+
+Page coordinates are the sensor coordinates of the first frame, corrected for head motion: each
+frame is predicted at its sensor position plus the head-motion correction measured on the frames
+before it, then refined by correlation against the page and the growing strip.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from darkread.edge.stitch.dewarp import apply_line_warp, estimate_line_warp
+from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
+from darkread.edge.stitch.page import (
+    PageCanvas,
+    assign_lines,
+    binarize,
+    covered_box,
+    main_column_span,
+    text_bands,
+    union_box,
+)
+from darkread.edge.stitch.register import register_frame
+from darkread.edge.stitch.segment import LineSegmenter
+from darkread.edge.stitch.strip import LineStrip
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class _FinishedLine:
+    strip: LineStrip
+    gaze_row: float  # median gaze row in page coordinates
+
+
+class PageStitcher:
+    """Incremental stitcher: ``add`` frames in time order as they arrive, ask for ``page`` any time.
+
+    Frames are decided ``cfg.sweep_confirm_frames`` frames late (a return sweep must be confirmed);
+    ``flush`` integrates the undecided tail, ``page`` does not change the state.
+    """
+
+    def __init__(self, cfg: StitchConfig = StitchConfig()) -> None:
+        self.cfg = cfg
+        self._segmenter = LineSegmenter(cfg)
+        self._page = PageCanvas()
+        self._lines: list[_FinishedLine] = []
+        self._strip: LineStrip | None = None
+        self._correction = np.zeros(2, dtype=np.int64)  # page position - sensor position (head motion)
+        self._used = 0
+        self._dropped = 0
+        self._positions: dict[int, tuple[int, int]] = {}
+
+    def add(self, frame: StitchFrame) -> None:
+        for decided, new_line in self._segmenter.push(frame):
+            self._integrate(decided, new_line)
+
+    def flush(self) -> None:
+        for decided, new_line in self._segmenter.flush():
+            self._integrate(decided, new_line)
+
+    @property
+    def frames_used(self) -> int:
+        return self._used
+
+    @property
+    def frames_dropped(self) -> int:
+        return self._dropped
+
+    def _finish_line(self) -> None:
+        strip = self._strip
+        self._strip = None
+        if strip is None or strip.empty:
+            return
+        if not self._page.canvas.empty:
+            box = strip.canvas.box
+            reference, seen = self._page.reference(None, box)
+            warp = estimate_line_warp(
+                reference, seen, strip.canvas.layers["avg"], strip.canvas.layers["count"] > 0, box[0], self.cfg
+            )
+            if warp is not None and apply_line_warp(strip.canvas, warp):
+                log.debug("line %d de-warped with %d tracked points", len(self._lines), warp.points)
+        self._page.add_strip(strip)
+        self._lines.append(_FinishedLine(strip, float(np.median(strip.gaze_rows))))
+
+    def _integrate(self, frame: StitchFrame, new_line: bool) -> None:
+        cfg = self.cfg
+        mask = frame.mask
+        if mask.mean() < cfg.min_ink_fraction:
+            self._dropped += 1
+            return
+        if new_line:
+            self._finish_line()
+        if self._strip is None:
+            self._strip = LineStrip()
+        h, w = mask.shape
+        r = cfg.search_radius_px
+        px, py = (np.asarray(frame.origin_xy) + self._correction).tolist()
+        reference, seen = self._page.reference(self._strip, (px - r, py - r, px + w + r, py + h + r))
+        reg = register_frame(reference, seen, mask, r, cfg.blur_sigma_px, cfg.min_overlap_fraction)
+        if reg is None:
+            score = cfg.min_match_score  # nothing to compare with yet: trust the prediction, weakly
+        elif reg.score < cfg.min_match_score:
+            self._dropped += 1
+            log.debug("frame %d dropped: match score %.2f", frame.frame_id, reg.score)
+            return
+        else:
+            score = reg.score
+            px, py = px + reg.shift_xy[0], py + reg.shift_xy[1]
+            self._correction = np.array([px, py]) - np.asarray(frame.origin_xy)
+        gaze_row = frame.gaze_px[1] + float(self._correction[1])
+        self._strip.add(mask, px, py, score, gaze_row, frame.frame_id, cfg)
+        self._positions[frame.frame_id] = (px, py)
+        self._used += 1
+
+    def page(self) -> Page:
+        """The page so far: finished lines plus the line being read."""
+        cfg = self.cfg
+        lines = list(self._lines)
+        if self._strip is not None and not self._strip.empty:
+            lines.append(_FinishedLine(self._strip, float(np.median(self._strip.gaze_rows))))
+        if not lines:
+            return Page(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
+        box = union_box([ln.strip.canvas.box for ln in lines])
+        current = self._strip if self._strip is not None and not self._strip.empty else None
+        avg, seen = self._page.reference(current, box)
+        cover = covered_box(seen)
+        if cover is None:
+            return Page(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
+        cx0, cy0, cx1, cy1 = cover
+        image = binarize(avg[cy0:cy1, cx0:cx1], cfg)
+        ox, oy = box[0] + cx0, box[1] + cy0  # page-coordinate origin of ``image``
+        boxes, images = self._line_boxes(lines, image, (ox, oy))
+        positions = {fid: (x - ox, y - oy) for fid, (x, y) in self._positions.items()}
+        return Page(image, boxes, images, self._used, self._dropped, positions)
+
+
+    def _line_boxes(
+        self, lines: list[_FinishedLine], image: np.ndarray, origin: tuple[int, int]
+    ) -> tuple[list[tuple[int, int, int, int]], list[np.ndarray]]:
+        """One box per text line that was read: the page's text bands, each claimed by the strips
+        whose gaze ran along it; x extent from the claiming strip's own ink."""
+        ox, oy = origin
+        bands = text_bands(image)
+        claims = assign_lines([ln.gaze_row - oy for ln in lines], [c for _, _, c in bands])
+        owner: dict[int, _FinishedLine] = {}
+        for ln, band in zip(lines, claims):
+            if band >= 0 and (band not in owner or len(ln.strip.frame_ids) > len(owner[band].strip.frame_ids)):
+                owner[band] = ln
+        boxes, images = [], []
+        for band in sorted(owner):
+            top, bottom, _ = bands[band]
+            strip = owner[band].strip
+            sx0, sy0, _, _ = strip.canvas.box
+            ink = binarize(strip.canvas.layers["avg"], self.cfg)
+            r0, r1 = int(np.clip(top + oy - sy0, 0, ink.shape[0])), int(np.clip(bottom + oy - sy0, 0, ink.shape[0]))
+            span = main_column_span(ink[r0:r1].any(axis=0), self.cfg.line_gap_px)
+            if span is None:
+                continue
+            c0, c1 = span
+            boxes.append((c0 + sx0 - ox, top, c1 + sx0 - ox, bottom))
+            images.append(ink[r0:r1, c0:c1].copy())
+        return boxes, images
+
+
+def stitch_page(frames: Sequence[StitchFrame], cfg: StitchConfig = StitchConfig()) -> Page:
+    """Stitch a whole reading pass (frames are taken in time order)."""
+    stitcher = PageStitcher(cfg)
+    for frame in sorted(frames, key=lambda f: f.t_us):
+        stitcher.add(frame)
+    stitcher.flush()
+    return stitcher.page()
