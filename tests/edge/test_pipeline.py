@@ -1,0 +1,279 @@
+from __future__ import annotations
+
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+from factories import random_events
+
+from darkread.edge.events import EVENT_CD_DTYPE, Events, empty_events
+from darkread.edge.fovea import FoveaConfig
+from darkread.edge.metrics import EdgeMetrics, MetricsServer
+from darkread.edge.pipeline import (
+    FrameResult,
+    Pipeline,
+    PipelineSettings,
+    count_in_window,
+    make_frame,
+    window_events,
+)
+from darkread.edge.sources.base import EventSource
+from darkread.proto.messages import decode, encode
+
+SENSOR = (1280, 720)
+
+
+def ink_where_events(voxel: np.ndarray) -> np.ndarray:
+    """A stand-in model: ink wherever the voxel grid is non-zero."""
+    return (np.abs(voxel).sum(axis=0) > 0).astype(np.uint8)
+
+
+class FixedGaze:
+    def __init__(self, px: tuple[float, float] | None = (640.0, 360.0)) -> None:
+        self.px = px
+
+    def pixel_at(self, t_event_us: int) -> tuple[float, float] | None:
+        return self.px
+
+    def angles_at(self, t_event_us: int) -> tuple[float, float] | None:
+        return None if self.px is None else (0.01, -0.02)
+
+
+class ListSource:
+    """Delivers prepared chunks from a reader thread, like a replay at maximum speed."""
+
+    width, height = SENSOR
+
+    def __init__(self, chunks: list[Events], pause_s: float = 0.0) -> None:
+        self.chunks = chunks
+        self.pause_s = pause_s
+        self.done = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self, sink) -> None:  # noqa: ANN001
+        def run() -> None:
+            for chunk in self.chunks:
+                if self._stop.is_set():
+                    break
+                sink(chunk)
+                if self.pause_s:
+                    time.sleep(self.pause_s)
+            self.done.set()
+
+        self._thread = threading.Thread(target=run, daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+
+    def set_roi(self, x0: int, y0: int, width: int, height: int) -> None:
+        pass
+
+    @property
+    def stats(self) -> dict[str, float]:
+        return {}
+
+
+def events_in_box(n: int, x0: int, y0: int, w: int, h: int, t0: int = 0, seed: int = 0) -> Events:
+    ev = random_events(n, width=w, height=h, t0=t0, rate_hz=1e6, seed=seed)
+    ev["x"] += x0
+    ev["y"] += y0
+    return ev
+
+
+# -- the pure core ---------------------------------------------------------------------------
+
+
+def test_count_in_window_matches_bounds() -> None:
+    ev = random_events(5000, seed=1)
+    cfg = FoveaConfig()
+    expected = np.count_nonzero((ev["x"] >= 100) & (ev["x"] < 300) & (ev["y"] >= 50) & (ev["y"] < 150))
+    assert count_in_window(ev, (100, 50), cfg) == expected
+    assert count_in_window(ev, None, cfg) == 0
+    assert count_in_window(empty_events(), (0, 0), cfg) == 0
+
+
+def test_window_events_are_the_newest_inside() -> None:
+    settings = PipelineSettings(n_events=100)
+    ev = random_events(20000, seed=2)
+    window = window_events(ev, (500, 300), settings)
+    assert window.shape[0] == 100
+    assert np.all((window["x"] >= 500) & (window["x"] < 700) & (window["y"] >= 300) & (window["y"] < 400))
+    inside_all = ev[(ev["x"] >= 500) & (ev["x"] < 700) & (ev["y"] >= 300) & (ev["y"] < 400)]
+    assert np.array_equal(window, inside_all[-100:])
+
+
+def test_make_frame_carries_window_gaze_and_mask() -> None:
+    settings = PipelineSettings(n_events=1600)
+    ev = np.concatenate([random_events(3000, seed=3), events_in_box(2000, 540, 310, 200, 100, t0=10_000, seed=4)])
+    ev.sort(order="t", kind="stable")
+    frame = make_frame(ev, (640.2, 359.6), (0.1, -0.2), SENSOR, settings, ink_where_events, frame_id=7)
+    assert isinstance(frame, FrameResult)
+    assert frame.frame_id == 7
+    assert frame.origin == (540, 310)
+    assert frame.events_used == 1600
+    assert frame.mask.shape == (100, 200) and frame.mask.dtype == np.uint8
+    assert frame.t_us == int(window_events(ev, (540, 310), settings)["t"][-1])
+    assert frame.gaze_px == (640.2, 359.6) and frame.gaze_rad == (0.1, -0.2)
+    message = decode(encode(frame.to_message()), max_bytes=1 << 20)
+    assert np.array_equal(message.mask(), frame.mask)
+    assert message.origin == (540, 310) and message.events_used == 1600
+
+
+def test_make_frame_clamps_at_the_border_and_skips_empty_windows() -> None:
+    settings = PipelineSettings()
+    ev = events_in_box(500, 0, 0, 50, 50)
+    frame = make_frame(ev, (3.0, 2.0), (0.0, 0.0), SENSOR, settings, ink_where_events, 0)
+    assert frame is not None and frame.origin == (0, 0) and frame.events_used == 500
+    assert make_frame(ev, (1000.0, 600.0), (0.0, 0.0), SENSOR, settings, ink_where_events, 0) is None
+
+
+def test_make_frame_with_an_onnx_reconstructor(tmp_path: Path) -> None:
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper
+
+    from darkread.edge.reconstruct import Reconstructor
+
+    x = helper.make_tensor_value_info("voxel", TensorProto.FLOAT, ["batch", 4, 100, 200])
+    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["batch", 1, 100, 200])
+    axes = helper.make_tensor("axes", TensorProto.INT64, [1], [1])
+    node = helper.make_node("ReduceSum", ["voxel", "axes"], ["logits"], keepdims=1)
+    graph = helper.make_graph([node], "sum_bins", [x], [y], initializer=[axes])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    path = tmp_path / "tiny.onnx"
+    onnx.save(model, str(path))
+
+    reconstructor = Reconstructor(path, warmup=1)
+    ev = events_in_box(2000, 540, 310, 200, 100)
+    ev["p"] = 1
+    frame = make_frame(ev, (640.0, 360.0), (0.0, 0.0), SENSOR, PipelineSettings(), reconstructor, 0)
+    assert frame is not None and frame.mask.shape == (100, 200)
+    assert frame.mask.sum() > 0 and frame.inference_ms >= 0
+
+
+# -- the threaded loop -----------------------------------------------------------------------
+
+
+def chunked(events: Events, size: int) -> list[Events]:
+    return [events[i : i + size] for i in range(0, events.shape[0], size)]
+
+
+def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineSettings, infer=ink_where_events):
+    frames: list[tuple[FrameResult, float]] = []
+    metrics = EdgeMetrics()
+    pings = []
+    pipeline = Pipeline(
+        source, gaze, infer, lambda f, t: frames.append((f, t)), settings, metrics,
+        ring_capacity=1 << 16, watchdog=lambda: pings.append(1),
+    )
+    assert isinstance(source, EventSource)
+    pipeline.start()
+    assert source.done.wait(5)
+    pipeline.stop()
+    assert pipeline.error is None
+    return frames, metrics, pings
+
+
+def test_lossless_pipeline_makes_one_frame_per_window() -> None:
+    ev = events_in_box(16_000, 540, 310, 200, 100)  # all inside the window at the gaze
+    source = ListSource(chunked(ev, 200))
+    settings = PipelineSettings(n_events=1600, period_ms=1000.0, lossless=True)
+    frames, metrics, pings = run_pipeline(source, FixedGaze(), settings)
+    # the first window is placed on a timer tick, then every 1600 new foveated events make a frame
+    assert 9 <= len(frames) <= 11
+    assert [f.frame_id for f, _ in frames] == list(range(len(frames)))
+    assert all(f.events_used == 1600 for f, _ in frames)
+    assert metrics.totals["frames_skipped"] == 0
+    assert metrics.totals["events_in"] == 16_000
+    assert frames[-1][0].t_us == int(ev["t"][-1])  # the last frame reaches the end of the stream
+    assert pings and len(metrics.inference_ms) == len(frames)
+
+
+def test_slow_inference_skips_to_the_newest_window_and_counts() -> None:
+    ev = events_in_box(40_000, 540, 310, 200, 100)
+
+    def slow(voxel: np.ndarray) -> np.ndarray:
+        time.sleep(0.02)
+        return ink_where_events(voxel)
+
+    source = ListSource(chunked(ev, 1000), pause_s=0.002)
+    frames, metrics, _ = run_pipeline(source, FixedGaze(), PipelineSettings(period_ms=5.0), infer=slow)
+    windows = 40_000 // 1600
+    assert len(frames) < windows
+    assert metrics.totals["frames_skipped"] > 0
+    assert len(frames) + metrics.totals["frames_skipped"] <= windows + 2
+    assert frames[-1][0].t_us == int(ev["t"][-1])
+
+
+def test_no_gaze_means_no_frames_counted() -> None:
+    ev = events_in_box(5000, 540, 310, 200, 100)
+    source = ListSource(chunked(ev, 500), pause_s=0.002)
+    frames, metrics, _ = run_pipeline(source, FixedGaze(None), PipelineSettings(period_ms=2.0))
+    assert frames == []
+    assert metrics.totals["frames_no_gaze"] > 0
+
+
+def test_ring_bounds_memory_and_counts_drops() -> None:
+    ev = random_events(100_000, seed=5)
+    source = ListSource(chunked(ev, 50_000))
+    settings = PipelineSettings(period_ms=1.0)
+    frames: list = []
+    metrics = EdgeMetrics()
+    pipeline = Pipeline(source, FixedGaze(), ink_where_events, lambda f, t: frames.append(f), settings, metrics, ring_capacity=1 << 15)
+    pipeline.start()
+    source.done.wait(5)
+    pipeline.stop()
+    assert len(pipeline.ring) == 1 << 15
+    assert metrics.totals["events_dropped"] == 100_000 - (1 << 15)
+
+
+# -- metrics ---------------------------------------------------------------------------------
+
+
+def test_metrics_snapshot_rates_and_percentiles() -> None:
+    now = [0.0]
+    metrics = EdgeMetrics(clock=lambda: now[0])
+    metrics.add("events_in", 1000)
+    metrics.add("bytes_sent", 100)
+    for ms in range(1, 101):
+        metrics.observe_inference(float(ms))
+        metrics.observe_latency(float(ms) / 10)
+    now[0] = 2.0
+    snap = metrics.snapshot()
+    assert snap.rates["events_in"] == 500.0
+    assert snap.inference_ms_p50 == pytest.approx(50.5)
+    assert snap.latency_ms_p99 == pytest.approx(9.901)
+    assert snap.bandwidth_vs_raw() == pytest.approx(50 / (500 * 2.0))
+    assert "frames" in snap.log_line()
+    now[0] = 3.0
+    assert metrics.snapshot().rates["events_in"] == 0.0  # rates cover the last interval only
+
+
+def test_metrics_http_endpoint_serves_prometheus_text() -> None:
+    metrics = EdgeMetrics()
+    metrics.add("frames", 3)
+    metrics.observe_latency(4.0)
+    server = MetricsServer(metrics, port=0)
+    server.start()
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{server.port}/metrics", timeout=2) as response:
+            body = response.read().decode()
+            assert response.headers["Content-Type"].startswith("text/plain; version=0.0.4")
+    finally:
+        server.stop()
+    assert "# TYPE darkread_edge_frames_total counter" in body
+    assert "darkread_edge_frames_total 3" in body
+    assert 'darkread_edge_event_to_wire_ms{quantile="0.99"} 4' in body
+    for line in body.splitlines():
+        assert line.startswith("#") or len(line.split(" ")) == 2
+
+
+def test_event_dtype_is_the_shared_one() -> None:
+    assert ListSource([]).width == 1280 and EVENT_CD_DTYPE.itemsize == 16
