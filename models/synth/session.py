@@ -1,0 +1,125 @@
+"""A reading session: what is printed, where the page is, how the head moves, where the eyes go.
+
+Shared by training shards and recordings; everything is drawn from one random generator, so a
+session is reproducible from its seed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from darkread.edge.io.calibration import Calibration
+from darkread.models.synth.camera import random_calibration
+from darkread.models.synth.fonts import FontFace, face_by_name, faces_for
+from darkread.models.synth.gaze import Scanpath, TrackerModel, reading_scanpath
+from darkread.models.synth.motion import MOTION_LEVELS, random_motion
+from darkread.models.synth.page import Page, reflectance, render_page
+from darkread.models.synth.scene import Scene, base_pose
+from darkread.models.synth.sensor import SensorParams, random_sensor_params
+from darkread.models.synth.text import TEXT_KINDS, make_lines
+
+TEXTURE_OVERSAMPLING = 1.25  # texels per event pixel at the nominal pose
+
+
+@dataclass(frozen=True)
+class SessionSpec:
+    """What may be fixed by the caller; ``None`` fields are drawn at random."""
+
+    split: str = "train"  # "train" (training fonts and texts) or "val" (all fonts, validation texts)
+    held_out: bool = False  # only the held-out font families
+    lux: float | None = None
+    motion: str | None = None
+    kind: str | None = None
+    font: str | None = None
+    xheight_px: float | None = None
+    n_lines: int | None = None
+    line_chars: int | None = None
+    duration_s: float = 10.0
+
+
+@dataclass
+class Session:
+    spec: SessionSpec
+    seed: int
+    page: Page
+    scene: Scene
+    scanpath: Scanpath
+    tracker: TrackerModel
+    sensor: SensorParams
+    kind: str
+    xheight_px: float  # nominal x-height (pixels) the page was made for
+    deg_per_texel: float
+    extras: dict = field(default_factory=dict)
+
+    @property
+    def calib(self) -> Calibration:
+        return self.scene.calib
+
+    def with_lux(self, lux: float, rng: np.random.Generator) -> tuple[Scene, SensorParams]:
+        """The same scene under another light level, with freshly drawn sensor parameters."""
+        return replace(self.scene, lux=float(lux)), random_sensor_params(rng, lux)
+
+
+def random_lux(rng: np.random.Generator, lo: float = 4.0, hi: float = 1200.0) -> float:
+    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
+def _pick_face(spec: SessionSpec, rng: np.random.Generator) -> FontFace:
+    if spec.font is not None:
+        return face_by_name(spec.font)
+    split = "held_out" if spec.held_out else ("all" if spec.split == "val" else "train")
+    faces = faces_for(split)
+    return faces[int(rng.integers(len(faces)))]
+
+
+def make_session(spec: SessionSpec, seed: int) -> Session:
+    rng = np.random.default_rng(seed)
+    text_split = "val" if spec.split == "val" else "train"
+    kind = spec.kind or str(rng.choice(TEXT_KINDS, p=[0.15, 0.3, 0.15, 0.4]))
+    motion_level = spec.motion or str(rng.choice(MOTION_LEVELS, p=[0.3, 0.5, 0.2]))
+    face = _pick_face(spec, rng)
+    xh_px = float(spec.xheight_px if spec.xheight_px is not None else rng.uniform(5.0, 16.0))
+    n_lines = int(spec.n_lines or rng.integers(3, 11))
+    line_chars = int(spec.line_chars or rng.integers(20, 51))
+    lines = [" ".join(line.split()) for line in make_lines(kind, n_lines, line_chars, rng, split=text_split)]
+    lines = [line for line in lines if line] or ["x"]
+
+    calib = random_calibration(rng)
+    distance = float(rng.uniform(0.3, 0.7))
+    xh_m = xh_px * distance / calib.fx
+    xh_tex = xh_px * TEXTURE_OVERSAMPLING
+    page = render_page(lines, face, xh_tex, xh_m / xh_tex, line_spacing=float(rng.uniform(1.25, 1.7)))
+    texel_m = page.texel_m * xh_tex / page.xheight_tex  # keep the physical x-height exact after font rounding
+    page.texel_m = texel_m
+    paper = float(rng.uniform(0.7, 0.92))
+    contrast = float(rng.uniform(0.7, 0.95))
+    blur = float(rng.uniform(0.0, 0.6)) * TEXTURE_OVERSAMPLING
+    reflect = reflectance(page, paper=paper, contrast=contrast, blur_tex=blur)
+    rot, centre = base_pose(rng, distance)
+    lux = float(spec.lux) if spec.lux is not None else random_lux(rng)
+    scene = Scene(page, reflect, calib, rot, centre, random_motion(motion_level, rng), lux, float(rng.uniform(0.05, 0.4)))
+    deg_per_texel = math.degrees(texel_m / distance)
+    scanpath = reading_scanpath(page, spec.duration_s + 1.0, deg_per_texel, rng, start_line=0)
+    return Session(
+        spec=spec,
+        seed=int(seed),
+        page=page,
+        scene=scene,
+        scanpath=scanpath,
+        tracker=TrackerModel.random(rng),
+        sensor=random_sensor_params(rng, lux),
+        kind=kind,
+        xheight_px=xh_px,
+        deg_per_texel=deg_per_texel,
+        extras={"paper": paper, "contrast": contrast, "print_blur_tex": blur, "distance_m": distance},
+    )
+
+
+def choose_dt_us(scene: Scene, *, max_px_per_step: float = 0.5, lo_us: float = 125.0, hi_us: float = 500.0) -> float:
+    """Time step keeping image motion under ``max_px_per_step`` (at least 2 kHz)."""
+    ppd = scene.calib.fx * math.tan(math.radians(1.0))
+    speed_px_s = max(scene.motion.max_speed_deg_s() * ppd, 1e-6)
+    return float(np.clip(max_px_per_step / speed_px_s * 1e6, lo_us, hi_us))

@@ -1,0 +1,266 @@
+"""Training samples and shards: voxel grid of the last 1600 foveated events + ideal ink mask.
+
+Only the 100 x 200 window the fovea keeps is simulated (its pixels' events are all the voxel grid
+sees), so a sample costs a few dozen sensor steps. The window follows a noisy gaze estimate of a
+reading scanpath; tracker bias and noise put some windows partly off the text.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from darkread.edge.fovea import FoveaConfig, window_origin
+from darkread.edge.voxel import VoxelConfig, voxel_grid
+from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
+from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
+from darkread.models.synth.scene import Region, Scene
+from darkread.models.synth.sensor import EventSensor, SensorParams
+from darkread.models.synth.session import Session, SessionSpec, choose_dt_us, make_session, random_lux
+
+log = logging.getLogger(__name__)
+
+FOVEA = FoveaConfig()
+VOXEL = VoxelConfig()
+SAMPLES_PER_PAGE = 8
+SHARD_SIZE = 250
+MAX_WINDOW_S = 0.5  # give up collecting events after this much simulated time
+SHARD_FORMAT_VERSION = 1
+
+
+@dataclass
+class SampleMeta:
+    lux: float
+    motion: str
+    kind: str
+    font: str
+    xheight_px: float
+    seed: int
+    x0: int
+    y0: int
+    t_end_us: int
+    n_events: int
+
+
+def simulate_window(
+    scene: Scene,
+    params: SensorParams,
+    region: Region,
+    t_start_s: float,
+    rng: np.random.Generator,
+    *,
+    n_events: int = VOXEL.n_events,
+    max_s: float = MAX_WINDOW_S,
+) -> tuple[np.ndarray, float]:
+    """Events of ``region`` from ``t_start_s`` until ``n_events`` have fired; returns (events, t_end_s).
+
+    The photoreceptor filter is warmed up for ~30 ms first and the references start in their
+    steady state, so there is no start-up transient.
+    """
+    dt_us = choose_dt_us(scene)
+    sensor = EventSensor(params, (region.height, region.width), (region.x0, region.y0), rng)
+    warm_steps, warm_dt_us = 15, 2000.0
+    t = t_start_s - warm_steps * warm_dt_us * 1e-6
+    sensor.reset(scene.irradiance(region, t), t * 1e6)
+    for _ in range(warm_steps):
+        t += warm_dt_us * 1e-6
+        sensor.settle(scene.irradiance(region, t), warm_dt_us)
+    sensor.rebase()
+    chunks, count = [], 0
+    t_stop = t_start_s + max_s
+    while count < n_events and t < t_stop:
+        t += dt_us * 1e-6
+        ev = sensor.step(scene.irradiance(region, t), dt_us)
+        if ev.size:
+            chunks.append(ev)
+            count += ev.size
+    events = np.concatenate(chunks) if chunks else np.zeros(0, dtype=ev.dtype)
+    return events, t
+
+
+def gaze_window_origin(session: Session, scene: Scene, t_s: float, rng: np.random.Generator) -> tuple[int, int]:
+    """Window origin from a noisy, late gaze estimate (tracker bias + noise, sometimes far off)."""
+    tr = session.tracker
+    true_tex = session.scanpath.position(t_s - tr.latency_us * 1e-6)
+    uv = scene.project(true_tex[None, :], t_s)[0]
+    ppd = pixels_per_degree(scene.calib)
+    err_deg = np.degrees(np.asarray(tr.bias_rad)) + rng.normal(0.0, math.degrees(tr.fast_sd_rad + tr.slow_sd_rad), 2)
+    uv = uv + err_deg * ppd * np.array([-1.0, -1.0])  # CPF yaw/pitch errors flip into image x/y
+    if rng.random() < 0.1:  # some windows largely off the text
+        uv = uv + rng.uniform(-1, 1, 2) * np.array([FOVEA.width, FOVEA.height])
+    if not np.all(np.isfinite(uv)):
+        uv = np.array([SENSOR_WH[0] / 2, SENSOR_WH[1] / 2])
+    uv = np.clip(uv, 0, np.array(SENSOR_WH) - 1)
+    return window_origin((float(uv[0]), float(uv[1])), SENSOR_WH, FOVEA)
+
+
+def make_samples(
+    spec: SessionSpec, seed: int, n: int, *, lux: float | None = None
+) -> tuple[np.ndarray, np.ndarray, list[SampleMeta]]:
+    """``n`` samples from one page session: voxels float16 [n,4,100,200], targets uint8 [n,100,200]."""
+    session = make_session(spec, seed)
+    rng = np.random.default_rng([seed, 1])
+    voxels = np.zeros((n, VOXEL.bins, VOXEL.height, VOXEL.width), dtype=np.float16)
+    targets = np.zeros((n, FOVEA.height, FOVEA.width), dtype=np.uint8)
+    metas = []
+    duration = session.scanpath.t[-1]
+    for i in range(n):
+        sample_lux = lux if lux is not None else (spec.lux if spec.lux is not None else random_lux(rng))
+        scene, params = session.with_lux(sample_lux, rng)
+        t_s = float(rng.uniform(0.3, max(0.31, duration - MAX_WINDOW_S)))
+        x0, y0 = gaze_window_origin(session, scene, t_s, rng)
+        region = Region.of(scene.calib, x0, y0, FOVEA.width, FOVEA.height)
+        events, t_end = simulate_window(scene, params, region, t_s, rng)
+        voxels[i] = voxel_grid(events, x0, y0, VOXEL).astype(np.float16)
+        targets[i] = scene.ink_mask(region, t_end)
+        metas.append(
+            SampleMeta(
+                lux=float(sample_lux),
+                motion=scene.motion.level,
+                kind=session.kind,
+                font=session.page.font,
+                xheight_px=round(scene.xheight_px(t_end), 3),
+                seed=int(seed),
+                x0=int(x0),
+                y0=int(y0),
+                t_end_us=int(round(t_end * 1e6)),
+                n_events=int(events.size),
+            )
+        )
+    return voxels, targets, metas
+
+
+def pack_targets(targets: np.ndarray) -> np.ndarray:
+    return np.packbits(targets.astype(np.uint8), axis=-1)
+
+
+def unpack_targets(packed: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    return np.unpackbits(packed, axis=-1, count=shape[-1]).astype(np.uint8)
+
+
+def write_shard(path: Path, voxels: np.ndarray, targets: np.ndarray, metas: list[SampleMeta]) -> None:
+    cols = {k: [getattr(m, k) for m in metas] for k in SampleMeta.__dataclass_fields__}
+    np.savez_compressed(
+        path,
+        voxels=voxels.astype(np.float16),
+        targets=pack_targets(targets),
+        target_shape=np.array(targets.shape[1:], dtype=np.int32),
+        lux=np.array(cols["lux"], dtype=np.float32),
+        xheight_px=np.array(cols["xheight_px"], dtype=np.float32),
+        motion=np.array(cols["motion"], dtype=str),
+        font=np.array(cols["font"], dtype=str),
+        kind=np.array(cols["kind"], dtype=str),
+        seed=np.array(cols["seed"], dtype=np.int64),
+        window_origin=np.array([[m.x0, m.y0] for m in metas], dtype=np.int32).reshape(-1, 2),
+        t_end_us=np.array(cols["t_end_us"], dtype=np.int64),
+        n_events=np.array(cols["n_events"], dtype=np.int32),
+    )
+
+
+def shard_seed(base_seed: int, split: str, held_out: bool, shard_index: int, page_index: int) -> int:
+    """A page's seed: a pure function of the dataset seed and the page's place (worker-independent)."""
+    ss = np.random.SeedSequence([int(base_seed), {"train": 0, "val": 1}.get(split, 2), int(held_out), shard_index, page_index])
+    return int(ss.generate_state(1, dtype=np.uint32)[0])
+
+
+def build_shard(args: tuple[Path, int, int, int, str, bool]) -> dict:
+    """Make shard ``index`` with ``count`` samples (a multiprocessing task)."""
+    out_dir, index, count, base_seed, split, held_out = args
+    t0 = time.perf_counter()
+    spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0)
+    parts_v, parts_t, metas = [], [], []
+    page = 0
+    while len(metas) < count:
+        k = min(SAMPLES_PER_PAGE, count - len(metas))
+        v, t, m = make_samples(spec, shard_seed(base_seed, split, held_out, index, page), k)
+        parts_v.append(v)
+        parts_t.append(t)
+        metas.extend(m)
+        page += 1
+    path = Path(out_dir) / f"shard-{index:05d}.npz"
+    tmp = path.with_suffix(".tmp.npz")
+    write_shard(tmp, np.concatenate(parts_v), np.concatenate(parts_t), metas)
+    tmp.replace(path)
+    return {"index": index, "count": len(metas), "seconds": time.perf_counter() - t0, "path": path.name}
+
+
+def build_dataset(
+    out_dir: str | Path,
+    samples: int,
+    *,
+    workers: int = 2,
+    seed: int = 0,
+    split: str = "train",
+    held_out: bool = False,
+    shard_size: int = SHARD_SIZE,
+    progress: bool = True,
+) -> dict:
+    """Write ``samples`` samples as shards plus ``dataset.json``; deterministic for ``seed`` (any worker count)."""
+    if samples < 1:
+        raise ValueError("--samples must be at least 1")
+    if split not in ("train", "val"):
+        raise ValueError(f"unknown split {split!r}; use 'train' or 'val'")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    n_shards = math.ceil(samples / shard_size)
+    tasks = [
+        (out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out)) for i in range(n_shards)
+    ]
+    todo = [t for t in tasks if not (out / f"shard-{t[1]:05d}.npz").exists()]
+    t0 = time.perf_counter()
+    from tqdm import tqdm
+
+    bar = tqdm(total=samples, initial=samples - sum(t[2] for t in todo), unit="sample", disable=not progress)
+    results = []
+    if workers <= 1:
+        for task in todo:
+            results.append(build_shard(task))
+            bar.update(results[-1]["count"])
+    else:
+        import multiprocessing as mp
+
+        with mp.get_context("spawn").Pool(workers) as pool:
+            for res in pool.imap_unordered(build_shard, todo):
+                results.append(res)
+                bar.update(res["count"])
+    bar.close()
+    elapsed = time.perf_counter() - t0
+    font_split = {
+        "train_families": list(TRAIN_FAMILIES),
+        "held_out_families": list(HELD_OUT_FAMILIES),
+        "families_in_this_set": list(HELD_OUT_FAMILIES)
+        if held_out
+        else (list(TRAIN_FAMILIES + HELD_OUT_FAMILIES) if split == "val" else list(TRAIN_FAMILIES)),
+    }
+    manifest = {
+        "format_version": SHARD_FORMAT_VERSION,
+        "samples": samples,
+        "shards": [f"shard-{i:05d}.npz" for i in range(n_shards)],
+        "shard_size": shard_size,
+        "seed": int(seed),
+        "split": split,
+        "held_out": bool(held_out),
+        "fonts": font_split,
+        "text_split": "val" if split == "val" else "train",
+        "voxel": asdict(VOXEL),
+        "fovea": asdict(FOVEA),
+        "target": "uint8 1 = ink, 0 = paper; ideal ink mask warped into the window at t_end; np.packbits on axis -1",
+        "parameters": {
+            "lux": "log-uniform 4..1200",
+            "motion": {"still": 0.3, "normal": 0.5, "walking": 0.2},
+            "text_kind": {"letters": 0.15, "words": 0.3, "pangram": 0.15, "paragraph": 0.4},
+            "xheight_px": "uniform 5..16 (nominal)",
+            "samples_per_page": SAMPLES_PER_PAGE,
+            "sensor": "see darkread.models.synth.sensor.random_sensor_params",
+        },
+        "generation_seconds": round(elapsed, 1),
+        "samples_per_s": round(sum(r["count"] for r in results) / max(elapsed, 1e-9), 2),
+    }
+    (out / "dataset.json").write_text(json.dumps(manifest, indent=2))
+    return manifest
