@@ -98,7 +98,7 @@ class StitchConfig:
     dewarp_max_shift_px: float = 8.0
     dewarp_min_points: int = 12
     ink_threshold: float = 0.45
-    min_component_px: int = 3
+    min_component_px: int = 2
     line_gap_px: int = 30
 
     def __post_init__(self) -> None:

@@ -53,8 +53,8 @@ def register_frame(
     if reference.shape != (h + 2 * radius, w + 2 * radius) or known.shape != reference.shape:
         raise ValueError(f"reference {reference.shape} must be the template {template.shape} grown by {radius} px")
     at_prediction = known[radius : radius + h, radius : radius + w]
-    y0, y1 = _known_span(at_prediction.mean(axis=1))
     x0, x1 = _known_span(at_prediction.mean(axis=0))
+    y0, y1 = _known_span(at_prediction[:, x0:x1].mean(axis=1)) if x1 > x0 else (0, 0)
     overlap = (y1 - y0) * (x1 - x0) / float(h * w)
     if overlap < min_overlap_fraction:
         return None

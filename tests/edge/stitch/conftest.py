@@ -1,0 +1,32 @@
+"""Fixtures of the stitcher tests: the synthetic page and reading passes over it (``scan.py``)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+_spec = importlib.util.spec_from_file_location("stitch_scan", Path(__file__).with_name("scan.py"))
+assert _spec is not None and _spec.loader is not None
+scan = importlib.util.module_from_spec(_spec)
+sys.modules["stitch_scan"] = scan
+_spec.loader.exec_module(scan)
+
+
+@pytest.fixture(scope="session")
+def rendered_page():
+    return scan.render_page()
+
+
+@pytest.fixture(scope="session")
+def reading(rendered_page):
+    return scan.simulate_reading(rendered_page, seed=0)
+
+
+@pytest.fixture(scope="session")
+def stitched(reading):
+    from darkread.edge.stitch import stitch_page
+
+    return stitch_page(reading.frames)

@@ -1,0 +1,49 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from darkread.edge.stitch import register_frame
+
+
+def _crop(mask: np.ndarray, x: int, y: int, h: int = 100, w: int = 200) -> np.ndarray:
+    return mask[y : y + h, x : x + w].copy()
+
+
+@pytest.mark.parametrize("shift", [(0, 0), (5, -3), (-11, 7), (13, 12)])
+def test_recovers_the_offset_of_a_noisy_crop(rendered_page, shift: tuple[int, int]) -> None:
+    rng = np.random.default_rng(0)
+    r = 14
+    px, py = 200, 130  # predicted top-left; the frame truly sits at predicted + shift
+    reference = _crop(rendered_page.mask, px - r, py - r, 100 + 2 * r, 200 + 2 * r).astype(np.float32)
+    frame = _crop(rendered_page.mask, px + shift[0], py + shift[1])
+    frame = (frame.astype(bool) & (rng.random(frame.shape) > 0.15)) | (rng.random(frame.shape) < 0.01)
+    reg = register_frame(reference, np.ones_like(reference, bool), frame.astype(np.uint8), r)
+    assert reg is not None
+    assert reg.shift_xy == shift
+    assert reg.score > 0.5
+
+
+def test_only_the_part_overlapping_known_content_is_matched(rendered_page) -> None:
+    r = 10
+    reference = _crop(rendered_page.mask, 190, 120, 120, 220).astype(np.float32)
+    known = np.zeros_like(reference, bool)
+    known[:, :110] = True  # only the left half has been seen
+    reference[~known] = 0
+    frame = _crop(rendered_page.mask, 203, 128)  # true shift (+3, -2) from the predicted (200, 130)
+    reg = register_frame(reference, known, frame, r)
+    assert reg is not None and reg.shift_xy == (3, -2)
+    assert 0.4 < reg.overlap < 0.6
+
+
+def test_no_registration_without_overlap_or_ink(rendered_page) -> None:
+    r = 5
+    reference = np.zeros((110, 210), np.float32)
+    frame = _crop(rendered_page.mask, 200, 130)
+    assert register_frame(reference, np.zeros_like(reference, bool), frame, r) is None
+    assert register_frame(reference, np.ones_like(reference, bool), np.zeros_like(frame), r) is None
+
+
+def test_reference_of_the_wrong_size_is_refused(rendered_page) -> None:
+    with pytest.raises(ValueError, match="grown by"):
+        register_frame(np.zeros((100, 200), np.float32), np.ones((100, 200), bool), np.zeros((100, 200), np.uint8), 4)
