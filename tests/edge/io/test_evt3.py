@@ -150,3 +150,118 @@ def test_chunked_decode_equals_whole_decode_on_random_words(cuts: list[int], see
     decoder.finish()
     assert np.array_equal(np.concatenate([whole[:0]] + [p[0] for p in parts]), whole)
     assert np.array_equal(np.concatenate([whole_trig[:0]] + [p[1] for p in parts]), whole_trig)
+
+
+# --- encoder -------------------------------------------------------------------------------------
+
+from pathlib import Path  # noqa: E402
+
+from darkread.edge.events import TRIGGER_DTYPE, empty_events, make_events  # noqa: E402
+from darkread.edge.io.evt3 import encode_evt3  # noqa: E402
+from darkread.edge.io.raw import read_raw, write_raw  # noqa: E402
+
+
+def random_stream(seed: int, n: int, t0: int, max_gap: int, run_share: float, width: int = 1280) -> np.ndarray:
+    """Sorted events with bursts: runs on one row (vectors), repeated times, idle gaps."""
+    rng = np.random.default_rng(seed)
+    gaps = rng.integers(0, max_gap + 1, n) * (rng.random(n) < 0.3)
+    gaps[:1] = 0  # the stream starts at t0
+    t = t0 + np.cumsum(gaps)
+    x = rng.integers(0, width, n)
+    y = rng.integers(0, 720, n)
+    p = rng.integers(0, 2, n)
+    in_run = np.flatnonzero(rng.random(n) < run_share)[:-1]
+    in_run = in_run[in_run > 0]
+    t[in_run] = t[in_run - 1]  # same time, row, polarity, next column: the makings of a vector
+    for i in in_run:
+        y[i], p[i], x[i] = y[i - 1], p[i - 1], min(x[i - 1] + 1 + rng.integers(0, 3), width - 1)
+    t = np.maximum.accumulate(t)
+    return make_events(x, y, p, t)
+
+
+def random_triggers(seed: int, events: np.ndarray, n: int) -> np.ndarray:
+    rng = np.random.default_rng(seed + 1)
+    triggers = np.zeros(n, dtype=TRIGGER_DTYPE)
+    if len(events):
+        triggers["t"] = np.sort(rng.integers(int(events["t"][0]), int(events["t"][-1]) + 1, n))
+    triggers["p"], triggers["id"] = rng.integers(0, 2, n), rng.integers(0, 16, n)
+    return triggers
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(0, 400),
+    t0=st.one_of(st.integers(0, (1 << 24) - 1), st.integers((1 << 24) - 20_000, (1 << 24) - 1)),
+    max_gap=st.sampled_from([0, 3, 50, 2000, 30_000]),
+    run_share=st.floats(0, 0.95),
+    n_triggers=st.integers(0, 5),
+    cuts=st.lists(st.integers(0, 10_000), max_size=8),
+)
+def test_encode_then_decode_round_trips_in_any_chunking(
+    seed: int, n: int, t0: int, max_gap: int, run_share: float, n_triggers: int, cuts: list[int]
+) -> None:
+    events = random_stream(seed, n, t0, max_gap, run_share)
+    triggers = random_triggers(seed, events, n_triggers if n else 0)
+    data = encode_evt3(events, triggers)
+    decoded, decoded_triggers = decode_evt3(data)
+    np.testing.assert_array_equal(decoded, events)
+    np.testing.assert_array_equal(decoded_triggers, triggers)
+    decoder = Evt3Decoder()
+    bounds = sorted({min(c, len(data)) for c in cuts} | {0, len(data)})
+    parts = [decoder.decode(data[a:b]) for a, b in zip(bounds, bounds[1:])]
+    np.testing.assert_array_equal(np.concatenate([events[:0]] + [p[0] for p in parts]), events)
+
+
+def test_encoder_writes_the_stream_like_a_sensor() -> None:
+    events = make_events([64, 65, 95, 96, 100, 7], 3, 1, [10, 10, 10, 10, 10, 40])
+    words = np.frombuffer(encode_evt3(events, time_high_period_us=16), dtype="<u2")
+    kinds = list(words >> 12)
+    # TIME_HIGH at 0; TIME_LOW 10; ADDR_Y 3; group 64..95 with base; continuation 96..127 without base;
+    # TIME_HIGH at 16 and 32 (repeats); TIME_LOW 40; single ADDR_X
+    assert kinds == [TH, TL, Y, BASE, V12, V12, V8, V12, V12, V8, TH, TH, TL, X]
+    assert words[3] & 0x7FF == 64 and words[3] >> 11 & 1 == 1
+    assert list(words[4:7] & 0xFFF) == [0b11, 0, 0x80]
+    assert list(words[7:10] & 0xFFF) == [0b10001, 0, 0]
+
+
+def test_encoder_re_sends_time_high_while_idle_and_across_the_wrap() -> None:
+    start = (1 << 24) - 100
+    events = make_events([1, 2], 0, 0, [start, start + 200])
+    words = np.frombuffer(encode_evt3(events), dtype="<u2")
+    highs = words[(words >> 12) == TH] & 0xFFF
+    assert len(highs) == len(range(start // 16 * 16, start + 201, 16))
+    assert list(np.unique(highs)) == [0, 4095]
+    assert list(decode_evt3(encode_evt3(events))[0]["t"]) == [start, start + 200]
+
+
+@pytest.mark.parametrize(
+    ("events", "kw", "message"),
+    [
+        (make_events(0, 0, 0, [5, 4]), {}, "non-decreasing"),
+        (make_events(0, 0, 0, [-1]), {}, "non-negative"),
+        (make_events(640, 0, 0, [1]), {"width": 640}, "width"),
+        (make_events(0, 0, 2, [1]), {}, "polarity"),
+        (make_events(0, 0, 0, [1]), {"time_high_period_us": 3}, "divide 4096"),
+    ],
+)
+def test_encoder_rejects_what_evt3_cannot_carry(events: np.ndarray, kw: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        encode_evt3(events, **kw)
+
+
+def test_encoding_nothing_gives_no_bytes() -> None:
+    assert encode_evt3(empty_events()) == b""
+
+
+def test_write_raw_then_read_raw(tmp_path: Path) -> None:
+    events = random_stream(7, 3000, 5_000_000, 50, 0.5, width=640)
+    events["y"] %= 480
+    triggers = random_triggers(7, events, 3)
+    path = tmp_path / "out.raw"
+    size = write_raw(path, events, width=640, height=480, triggers=triggers, header_extra={"serial_number": "ab12"})
+    assert size == path.stat().st_size
+    raw = read_raw(path)
+    assert (raw.header.width, raw.header.height, raw.header.fields["serial_number"]) == (640, 480, "ab12")
+    np.testing.assert_array_equal(raw.events, events)
+    np.testing.assert_array_equal(raw.triggers, triggers)
