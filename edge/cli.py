@@ -1,0 +1,95 @@
+"""``darkread edge run``: the edge daemon (camera or replay -> foveated frames -> cloud).
+
+Light module: heavy imports happen inside the handler.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+RUN_HELP = """\
+Run the edge pipeline: read events (the EVK4 camera, or a recording replayed at wall-clock
+speed or faster), foveate around the gaze, reconstruct text frames with the ONNX U-Net and
+stream them to the cloud over a websocket. Frames are spooled to disk until the cloud
+acknowledges them, so network drops and restarts lose nothing.
+
+Settings come from --config (TOML, see edge/systemd/edge.toml), then the environment
+(DARKREAD_EDGE_<SECTION>_<KEY>, e.g. DARKREAD_EDGE_UPLINK_API_KEY), then these options.
+A replay exits when the recording ends and the spool is drained (or --drain-timeout passes);
+exit status 3 means frames were left in the spool.
+
+Example:
+  darkread edge run --replay darkread/data/sample_recording \\
+      --cloud ws://127.0.0.1:8000/v1/stream --api-key KEY --speed max --spool /tmp/spool
+"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    edge = subparsers.add_parser("edge", help="the glasses-side daemon", description="The glasses-side daemon.")
+    commands = edge.add_subparsers(dest="edge_command", metavar="COMMAND")
+    run = commands.add_parser(
+        "run", help="run the edge pipeline (camera or replay) and stream to the cloud",
+        description=RUN_HELP, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    run.add_argument("--config", metavar="TOML", help="configuration file (edge.toml)")
+    run.add_argument("--replay", metavar="RECORDING", help="replay a recording directory or .raw file instead of the camera")
+    run.add_argument("--gaze-csv", metavar="CSV", help="gaze CSV for a bare .raw replay")
+    run.add_argument("--calibration", metavar="JSON", help="calibration.json (bare .raw replay, or the camera)")
+    run.add_argument("--speed", metavar="N|max", help="replay pacing: 1 = wall clock (default), 2 = twice as fast, max")
+    run.add_argument("--gaze", choices=["recording", "csv", "udp", "aria"], help="gaze source (default: the recording's for a replay)")
+    run.add_argument("--gaze-port", type=int, metavar="PORT", help="UDP port of the gaze feed")
+    run.add_argument("--cloud", metavar="URL", help="websocket URL, e.g. ws://127.0.0.1:8000/v1/stream")
+    run.add_argument("--api-key", metavar="KEY", help="cloud API key (prefer DARKREAD_EDGE_UPLINK_API_KEY)")
+    run.add_argument("--mode", choices=["frames", "pages"], help="send frames (default) or pages stitched on the glasses")
+    run.add_argument("--spool", metavar="DIR", help="spool directory for unacknowledged frames (default: in memory)")
+    run.add_argument("--session", metavar="ID", help="session id (default: resume the spool's, else a new one)")
+    run.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
+    run.add_argument("--lossless", action="store_true", help="never skip windows: the reader waits for inference")
+    run.add_argument("--metrics-port", type=int, metavar="PORT", help="serve Prometheus metrics on 127.0.0.1:PORT")
+    run.add_argument("--drain-timeout", type=float, metavar="S", help="seconds to wait for acks at exit (default 30)")
+    run.set_defaults(func=_run)
+    edge.set_defaults(func=lambda args: edge.print_help() or 2)
+
+
+def overrides_from_args(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    """Command-line options as ``{section: {key: value}}`` config overrides."""
+    from darkread.edge.sources.replay import parse_speed
+
+    out: dict[str, dict[str, Any]] = {"source": {}, "gaze": {}, "pipeline": {}, "uplink": {}, "metrics": {}}
+    if args.replay:
+        out["source"].update(kind="replay", path=args.replay)
+        if not args.gaze:
+            out["gaze"]["kind"] = "recording"  # the replayed recording's own gaze (or --gaze-csv)
+    if args.gaze_csv:
+        out["source"]["gaze_csv"] = args.gaze_csv
+    if args.calibration:
+        out["source"]["calibration"] = args.calibration
+    if args.speed is not None:
+        speed = parse_speed(args.speed)
+        out["source"]["speed"] = 0.0 if speed is None else speed
+    if args.gaze:
+        out["gaze"]["kind"] = args.gaze
+    if args.gaze_port is not None:
+        out["gaze"]["udp_port"] = args.gaze_port
+    for option, key in (("cloud", "url"), ("api_key", "api_key"), ("mode", "mode"), ("spool", "spool_dir"),
+                        ("session", "session_id"), ("drain_timeout", "drain_timeout_s")):
+        value = getattr(args, option)
+        if value is not None:
+            out["uplink"][key] = value
+    if args.model:
+        out["pipeline"]["model"] = args.model
+    if args.lossless:
+        out["pipeline"]["lossless"] = True
+    if args.metrics_port is not None:
+        out["metrics"]["port"] = args.metrics_port
+    return {section: values for section, values in out.items() if values}
+
+
+def _run(args: argparse.Namespace) -> int:
+    from darkread.edge.config import load_config
+    from darkread.edge.daemon import Daemon, EdgeService
+
+    config = load_config(args.config, overrides=overrides_from_args(args))
+    service = EdgeService(config)
+    return Daemon(service, service.notifier, shutdown_timeout_s=config.uplink.drain_timeout_s).run()

@@ -1,0 +1,151 @@
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from factories import random_events
+
+from darkread.edge.events import Events, empty_events
+from darkread.edge.io.raw import read_raw, write_raw
+from darkread.edge.sources.base import EventSource
+from darkread.edge.sources.replay import ReplaySource, parse_speed, time_slices
+
+
+def unique_events(n: int, duration_us: int, seed: int = 0) -> Events:
+    """Time-sorted events with no pixel firing twice at one timestamp (as EVT3 requires)."""
+    ev = random_events(n, t0=5_000, rate_hz=n / (duration_us / 1e6), seed=seed)
+    _, keep = np.unique(np.stack([ev["t"], ev["y"].astype(np.int64), ev["x"].astype(np.int64)]), axis=1, return_index=True)
+    return ev[np.sort(keep)]
+
+
+@pytest.fixture
+def raw_file(tmp_path: Path) -> tuple[Path, Events]:
+    ev = unique_events(20_000, duration_us=200_000)
+    path = tmp_path / "events.raw"
+    write_raw(path, ev)
+    return path, read_raw(path).events
+
+
+class Collector:
+    def __init__(self) -> None:
+        self.chunks: list[Events] = []
+        self.times: list[float] = []
+        self.threads: set[str] = set()
+
+    def __call__(self, events: Events) -> None:
+        self.chunks.append(events.copy())
+        self.times.append(time.perf_counter())
+        self.threads.add(threading.current_thread().name)
+
+    def events(self) -> Events:
+        return np.concatenate(self.chunks) if self.chunks else empty_events()
+
+
+def test_time_slices_cut_on_the_grid_and_keep_every_event() -> None:
+    ev = random_events(10_000, rate_hz=1e6, seed=3)
+    chunks = [ev[i : i + 777] for i in range(0, len(ev), 777)]
+    slices = list(time_slices(chunks, 1000))
+    assert np.array_equal(np.concatenate(slices), ev)
+    for piece in slices:
+        assert piece.shape[0] > 0
+        assert piece["t"][0] // 1000 == piece["t"][-1] // 1000
+    keys = [int(p["t"][0]) // 1000 for p in slices]
+    assert keys == sorted(set(keys))
+
+
+def test_time_slices_of_nothing() -> None:
+    assert list(time_slices([], 1000)) == []
+    assert list(time_slices([empty_events()], 1000)) == []
+
+
+def test_replay_as_fast_as_possible_delivers_every_event(raw_file) -> None:
+    path, expected = raw_file
+    source = ReplaySource(path, speed=None)
+    assert isinstance(source, EventSource)
+    assert (source.width, source.height) == (1280, 720)
+    sink = Collector()
+    source.start(sink)
+    assert source.wait(5)
+    source.stop()
+    assert np.array_equal(sink.events(), expected)
+    assert sink.threads == {"replay-reader"}
+    assert source.stats["events_out"] == expected.shape[0]
+    assert source.stats["realtime_factor"] > 1
+
+
+def test_replay_is_paced_at_the_requested_speed(raw_file) -> None:
+    path, expected = raw_file  # 0.2 s of events
+    source = ReplaySource(path, speed=2.0)
+    sink = Collector()
+    started = time.perf_counter()
+    source.start(sink)
+    assert source.wait(5)
+    elapsed = time.perf_counter() - started
+    span_s = (expected["t"][-1] - expected["t"][0]) / 1e6
+    assert elapsed >= span_s / 2 * 0.9  # not faster than asked
+    # each slice is handed over no earlier than its last event's (scaled) time
+    t0, w0 = int(sink.chunks[0]["t"][0]), sink.times[0]
+    lateness = [(w - w0) - (int(c["t"][-1]) - t0) / 2e6 for c, w in zip(sink.chunks, sink.times)]
+    assert min(lateness) > -0.005
+    assert np.array_equal(sink.events(), expected)
+
+
+def test_stop_interrupts_a_slow_replay(raw_file) -> None:
+    path, _ = raw_file
+    source = ReplaySource(path, speed=0.05)  # 4 s of wall time
+    sink = Collector()
+    source.start(sink)
+    time.sleep(0.05)
+    started = time.perf_counter()
+    source.stop()
+    assert time.perf_counter() - started < 1.0
+    assert source.finished.is_set()
+
+
+def test_roi_crops_in_software(raw_file) -> None:
+    path, expected = raw_file
+    source = ReplaySource(path, speed=None)
+    source.set_roi(100, 50, 200, 100)
+    sink = Collector()
+    source.start(sink)
+    source.wait(5)
+    got = sink.events()
+    inside = expected[(expected["x"] >= 100) & (expected["x"] < 300) & (expected["y"] >= 50) & (expected["y"] < 150)]
+    assert np.array_equal(got, inside)
+    with pytest.raises(ValueError):
+        source.set_roi(0, 0, 0, 10)
+
+
+def test_bad_arguments(raw_file, tmp_path: Path) -> None:
+    path, _ = raw_file
+    with pytest.raises(ValueError):
+        ReplaySource(path, speed=-1)
+    with pytest.raises(FileNotFoundError):
+        ReplaySource(tmp_path / "missing.raw")
+    source = ReplaySource(path, speed=None)
+    source.start(Collector())
+    with pytest.raises(RuntimeError):
+        source.start(Collector())
+    source.stop()
+
+
+@pytest.mark.parametrize(("text", "expected"), [("max", None), ("0", None), ("2", 2.0), (None, None), ("0.5", 0.5)])
+def test_parse_speed(text, expected) -> None:
+    assert parse_speed(text) == expected
+
+
+def test_parse_speed_rejects_negative() -> None:
+    with pytest.raises(ValueError):
+        parse_speed("-2")
+
+
+def test_replay_of_the_sample_recording(shared_sample_recording: Path) -> None:
+    source = ReplaySource(shared_sample_recording / "events.raw", speed=None)
+    sink = Collector()
+    source.start(sink)
+    assert source.wait(20)
+    assert source.error is None
+    assert source.stats["events_out"] == 488_780
