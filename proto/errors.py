@@ -6,7 +6,9 @@
      ├── UnknownMessageTypeError   ``type`` missing or not one we know (4400)
      ├── InvalidFieldError         a field missing, of the wrong type or out of range (4400)
      │    └── BadMaskError         mask ``shape``/``bits`` inconsistent (4422)
-     └── VersionMismatchError      ``hello.v`` is not our PROTOCOL_VERSION (4409)
+     ├── VersionMismatchError      ``hello.v`` is not our PROTOCOL_VERSION (4409)
+     ├── UnexpectedMessageError    valid, but not allowed now, e.g. frame before hello (4401)
+     └── AuthenticationError       missing or wrong API key in ``hello.token`` (1008)
 
 Every error carries ``close_code`` so the server can close the websocket with the right code
 and the error's message as the reason.
@@ -59,3 +61,11 @@ class BadMaskError(InvalidFieldError):
 
 class VersionMismatchError(ProtocolError):
     close_code = CloseCode.VERSION_MISMATCH
+
+
+class UnexpectedMessageError(ProtocolError):
+    close_code = CloseCode.UNEXPECTED
+
+
+class AuthenticationError(ProtocolError):
+    close_code = CloseCode.POLICY_VIOLATION

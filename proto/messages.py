@@ -363,7 +363,8 @@ def decode(data: bytes, *, max_bytes: int) -> Message:
     try:
         payload = msgpack.unpackb(data, raw=False, strict_map_key=True, timestamp=0)
     except (ValueError, TypeError, OverflowError, msgpack.UnpackException) as exc:
-        raise MalformedMessageError(f"not valid msgpack: {type(exc).__name__}: {exc}"[:300]) from None
+        detail = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        raise MalformedMessageError(f"not valid msgpack ({detail})"[:300]) from None
     if type(payload) is not dict:
         raise MalformedMessageError(f"a message must be a msgpack map, got {type(payload).__name__}")
     kind = payload.get("type")

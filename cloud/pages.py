@@ -1,0 +1,86 @@
+"""The page a question is asked about: the glasses' own page, or the session's frames stitched."""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from .store import Store
+
+Box = tuple[int, int, int, int]
+
+
+class NoPageError(Exception):
+    """The session has nothing to read yet (no frames or pages stored)."""
+
+
+class StitchUnavailableError(Exception):
+    """The stitcher (``darkread.edge.stitch``) is not installed in this deployment."""
+
+
+@dataclass(frozen=True)
+class PageImage:
+    page_id: str  # "page-<page_id>" for glasses pages, "frames-<first seq>-<last seq>" for stitched ones
+    image: np.ndarray  # uint8 black text (0) on white (255)
+    lines: list[Box]
+
+
+def ink_to_paper(mask: np.ndarray) -> np.ndarray:
+    """Ink mask (nonzero = ink) -> uint8 black-on-white image, as OCR engines expect."""
+    return np.where(mask != 0, 0, 255).astype(np.uint8)
+
+
+def stitch_frames(frames: list, page_id: str) -> PageImage:  # type: ignore[type-arg]
+    """Stored frames -> the stitched page (the same stitcher the glasses run)."""
+    try:
+        from darkread.edge.stitch import StitchFrame, stitch_page
+    except ImportError as exc:
+        raise StitchUnavailableError(
+            "page stitching (darkread.edge.stitch) is not installed; install darkread with its core package"
+        ) from exc
+    stitch_frames_ = [StitchFrame(f.frame_id, f.t_us, f.mask, f.origin, f.gaze_px) for f in frames]
+    page = stitch_page(stitch_frames_)
+    if page.image.size == 0:
+        raise NoPageError("the frames stored so far did not stitch into a page (blank or unregistered)")
+    return PageImage(page_id, ink_to_paper(page.image), [tuple(int(v) for v in box) for box in page.lines])
+
+
+class PageAssembler:
+    """Builds the current page of a session, caching stitched pages by their last frame seq."""
+
+    def __init__(self, store: Store, max_frames: int, cache_size: int = 16) -> None:
+        self.store = store
+        self.max_frames = max_frames
+        self._cache: OrderedDict[tuple[str, int], PageImage] = OrderedDict()
+        self._cache_size = cache_size
+        self._lock = threading.Lock()
+
+    def current_page(self, session_id: str, mode: str, last_seq: int) -> PageImage:
+        """Blocking (stitching is CPU work): call from a worker thread."""
+        if mode == "pages":
+            stored = self.store.latest_page(session_id)
+            if stored is None:
+                raise NoPageError(f"session {session_id!r} has not sent a page yet")
+            return PageImage(f"page-{stored.page_id}", stored.image(), list(stored.lines))
+        key = (session_id, last_seq)
+        with self._lock:
+            if key in self._cache:
+                self._cache.move_to_end(key)
+                return self._cache[key]
+        frames = self.store.frames(session_id, self.max_frames)
+        if not frames:
+            raise NoPageError(f"session {session_id!r} has not sent any frames yet")
+        page = stitch_frames(frames, f"frames-{frames[0].seq}-{frames[-1].seq}")
+        with self._lock:
+            self._cache[key] = page
+            while len(self._cache) > self._cache_size:
+                self._cache.popitem(last=False)
+        return page
+
+    def forget(self, session_id: str) -> None:
+        with self._lock:
+            for key in [k for k in self._cache if k[0] == session_id]:
+                del self._cache[key]

@@ -1,0 +1,61 @@
+"""Cloud service settings, read from ``DARKREAD_*`` environment variables (or a ``.env`` file)."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, SecretStr
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from darkread.proto.messages import DEFAULT_MAX_MESSAGE_BYTES
+
+OcrBackendName = Literal["local", "rapidocr", "tesseract", "google", "openai"]
+
+OCR_PROMPT = (
+    "Transcribe all text in this image exactly, line by line, top to bottom. "
+    "Output only the text, with no commentary."
+)
+
+
+class Settings(BaseSettings):
+    """Every knob of the service. Secrets are ``SecretStr`` so they never appear in logs or reprs."""
+
+    model_config = SettingsConfigDict(env_prefix="DARKREAD_", env_file=".env", extra="ignore")
+
+    data_dir: Path = Field(Path("darkread-data"), description="SQLite database and page images live here")
+    api_key: SecretStr | None = Field(None, description="required on every request; unset = open service")
+
+    # Stream limits.
+    max_message_bytes: int = Field(DEFAULT_MAX_MESSAGE_BYTES, ge=1024, le=64 * 1024 * 1024)
+    max_in_flight: int = Field(64, ge=1, description="unacked messages per connection before reading pauses")
+    hello_timeout_s: float = Field(10.0, gt=0, description="time a client has to send hello")
+
+    # Page assembly.
+    max_frames_per_page: int = Field(4000, ge=1, description="most recent frames stitched into a page")
+
+    # OCR. "local" is the embedded rapidocr engine.
+    ocr_backend: OcrBackendName = "local"
+    ocr_timeout_s: float = Field(60.0, gt=0)
+
+    google_base_url: str = "https://vision.googleapis.com"
+    google_api_key: SecretStr | None = None
+    google_bearer_token: SecretStr | None = None
+
+    openai_base_url: str = "https://api.openai.com/v1"
+    openai_api_key: SecretStr | None = None
+    openai_model: str = "gpt-4o-mini"
+    openai_prompt: str = OCR_PROMPT
+    openai_token_param: Literal["max_tokens", "max_completion_tokens"] = "max_completion_tokens"
+    openai_max_output_tokens: int = Field(1024, ge=1)
+    openai_max_retries: int = Field(2, ge=0, description="retries after HTTP 429, honouring retry-after")
+
+    def database_path(self) -> Path:
+        return self.data_dir / "darkread.sqlite3"
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """The process-wide settings (tests pass their own ``Settings`` to ``create_app``)."""
+    return Settings()

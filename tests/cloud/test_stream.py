@@ -1,0 +1,239 @@
+"""WS /v1/stream against a real uvicorn server with the websockets client."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+import msgpack
+import numpy as np
+import pytest
+from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+
+from darkread.proto.errors import CloseCode
+from darkread.proto.messages import Ack, Error, Frame, Hello, Page, Welcome, decode, encode, pack_mask
+
+LIMIT = 1 << 22
+API_KEY = "test-key-7f3a"  # the key the conftest server requires
+LiveServer = Any
+
+
+def hello(session_id: str, **overrides: Any) -> Hello:
+    values: dict[str, Any] = dict(device_id="glasses-1", session_id=session_id, mode="frames", sensor=(1280, 720), fovea=(100, 200))
+    values.update(overrides)
+    return Hello(**values)
+
+
+def frame(seq: int, shape: tuple[int, int] = (100, 200)) -> Frame:
+    mask = np.zeros(shape, np.uint8)
+    mask[40:50, 10 + seq % 50 : 60 + seq % 50] = 1
+    packed_shape, bits = pack_mask(mask)
+    return Frame(seq, seq, 1000 * seq, (500, 300), (600.0, 350.0), (0.01, -0.02), 1600, packed_shape, bits)
+
+
+async def open_stream(
+    server: LiveServer, session_id: str, *, key: str | None = API_KEY, **hello_fields: Any
+) -> tuple[ClientConnection, Welcome]:
+    headers = {"X-API-Key": key} if key is not None else {}
+    ws = await connect(server.ws_url, additional_headers=headers, max_size=None)
+    await ws.send(encode(hello(session_id, **hello_fields)))
+    welcome = decode(await ws.recv(), max_bytes=LIMIT)
+    assert isinstance(welcome, Welcome)
+    return ws, welcome
+
+
+async def stream_frames(server: LiveServer, session_id: str, seqs: range, pause: float = 0.0) -> list[int]:
+    """Send frames one at a time and collect the acks; the healthy neighbour in the bad-input tests."""
+    ws, _ = await open_stream(server, session_id)
+    acks = []
+    async with ws:
+        for seq in seqs:
+            await ws.send(encode(frame(seq)))
+            ack = decode(await ws.recv(), max_bytes=LIMIT)
+            assert isinstance(ack, Ack)
+            acks.append(ack.seq)
+            await asyncio.sleep(pause)
+    return acks
+
+
+async def expect_error_close(ws: ClientConnection) -> tuple[Error, int | None, str | None]:
+    error = decode(await ws.recv(), max_bytes=LIMIT)
+    assert isinstance(error, Error) and error.fatal
+    with pytest.raises(ConnectionClosed):
+        await ws.recv()
+    return error, ws.close_code, ws.close_reason
+
+
+def test_frames_are_acked_after_they_are_stored(server: LiveServer) -> None:
+    async def scenario() -> None:
+        ws, welcome = await open_stream(server, "sess-a")
+        assert welcome.last_acked_seq == -1 and welcome.max_message_bytes == 65536
+        async with ws:
+            for seq in range(5):
+                await ws.send(encode(frame(seq)))
+                ack = decode(await ws.recv(), max_bytes=LIMIT)
+                assert ack == Ack(seq=seq)
+                stored = server.context.store.frames("sess-a", 100)  # stored before the ack arrived
+                assert [f.seq for f in stored] == list(range(seq + 1))
+
+    asyncio.run(scenario())
+    stored = server.context.store.frames("sess-a", 100)
+    np.testing.assert_array_equal(stored[3].mask, frame(3).mask())
+    assert stored[3].origin == (500, 300) and stored[3].gaze_px == (600.0, 350.0)
+
+
+def test_pipelined_frames_are_acked_in_order(server: LiveServer) -> None:
+    async def scenario() -> list[int]:
+        ws, _ = await open_stream(server, "sess-pipe")
+        async with ws:
+            for seq in range(100):
+                await ws.send(encode(frame(seq)))
+            return [decode(await ws.recv(), max_bytes=LIMIT).seq for _ in range(100)]  # type: ignore[union-attr]
+
+    assert asyncio.run(scenario()) == list(range(100))
+    assert server.context.store.session("sess-pipe").frames == 100  # type: ignore[union-attr]
+
+
+def test_resume_reports_last_stored_seq_and_duplicates_are_reacked_not_stored(server: LiveServer) -> None:
+    async def scenario() -> None:
+        await stream_frames(server, "sess-r", range(0, 4))
+        ws, welcome = await open_stream(server, "sess-r", resume_from_seq=1)
+        assert welcome.last_acked_seq == 3
+        async with ws:
+            for seq in (2, 3, 4):  # a client that resends what it has not seen acked
+                await ws.send(encode(frame(seq)))
+            acks = [decode(await ws.recv(), max_bytes=LIMIT) for _ in range(3)]
+        assert acks == [Ack(seq=3), Ack(seq=3), Ack(seq=4)]
+
+    asyncio.run(scenario())
+    assert [f.seq for f in server.context.store.frames("sess-r", 100)] == [0, 1, 2, 3, 4]
+
+
+def test_sessions_survive_a_restart(make_settings: Any, run_server: Any) -> None:
+    settings = make_settings()
+    with run_server(settings) as first:
+        asyncio.run(stream_frames(first, "sess-keep", range(7)))
+    with run_server(settings) as second:
+
+        async def reconnect() -> Welcome:
+            ws, welcome = await open_stream(second, "sess-keep")
+            await ws.close()
+            return welcome
+
+        assert asyncio.run(reconnect()).last_acked_seq == 6
+        assert len(second.context.store.frames("sess-keep", 100)) == 7
+
+
+def _raw_frame(**changes: Any) -> bytes:
+    payload = msgpack.unpackb(encode(frame(0)))
+    payload.update(changes)
+    return msgpack.packb(payload, use_bin_type=True)
+
+
+BAD_INPUTS = {
+    "malformed msgpack": ([b"\xc1\x00\x00"], CloseCode.MALFORMED),
+    "not a map": ([msgpack.packb([1, 2, 3])], CloseCode.MALFORMED),
+    "wrong protocol version": ([msgpack.packb({**msgpack.unpackb(encode(hello("x"))), "v": 2})], CloseCode.VERSION_MISMATCH),
+    "frame before hello": ([encode(frame(0))], CloseCode.UNEXPECTED),
+    "oversized message": (["hello", b"\x00" * 70_000], CloseCode.MESSAGE_TOO_BIG),
+    "frame of the wrong shape": (["hello", encode(frame(0, shape=(50, 200)))], CloseCode.BAD_MASK),
+    "frame with the wrong bit length": (["hello", _raw_frame(bits=b"\x00" * 2499)], CloseCode.BAD_MASK),
+    "text message": (["hello", "hello as text"], CloseCode.MALFORMED),
+    "second hello": (["hello", encode(hello("bad-client"))], CloseCode.UNEXPECTED),
+    "page in frames mode": (["hello", encode(Page(seq=0, page_id=0, t_us=0, shape=(8, 8), bits=b"\0" * 8))], CloseCode.UNEXPECTED),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_INPUTS))
+def test_bad_input_closes_only_its_own_connection(server: LiveServer, case: str) -> None:
+    sends, expected_code = BAD_INPUTS[case]
+
+    async def scenario() -> None:
+        healthy = asyncio.create_task(stream_frames(server, f"healthy-{len(case)}", range(40), pause=0.002))
+        await asyncio.sleep(0.02)
+        ws = await connect(server.ws_url, additional_headers={"X-API-Key": API_KEY}, max_size=None)
+        for item in sends:
+            if item == "hello":
+                await ws.send(encode(hello("bad-client")))
+                assert isinstance(decode(await ws.recv(), max_bytes=LIMIT), Welcome)
+            else:
+                await ws.send(item)
+        error, code, reason = await expect_error_close(ws)
+        assert error.code == expected_code == code
+        assert reason and reason in error.message
+        assert await healthy == list(range(40))
+
+    asyncio.run(scenario())
+    assert server.context.metrics.errors.labels(code=str(int(expected_code)))._value.get() == 1
+
+
+def test_wrong_key_in_header_is_denied_at_handshake(server: LiveServer) -> None:
+    async def scenario() -> None:
+        with pytest.raises(InvalidStatus) as denied:
+            await connect(server.ws_url, additional_headers={"X-API-Key": "wrong"})
+        assert denied.value.response.status_code == 403
+
+    asyncio.run(scenario())
+    assert server.context.metrics.denied._value.get() == 1
+
+
+def test_missing_key_closes_with_policy_violation(server: LiveServer) -> None:
+    async def scenario() -> None:
+        ws = await connect(server.ws_url)
+        await ws.send(encode(hello("no-key")))
+        error, code, _ = await expect_error_close(ws)
+        assert error.code == code == CloseCode.POLICY_VIOLATION
+
+    asyncio.run(scenario())
+    assert server.context.store.session("no-key") is None
+
+
+def test_key_in_query_or_hello_token_is_accepted(server: LiveServer) -> None:
+    async def scenario() -> None:
+        ws = await connect(f"{server.ws_url}?key={API_KEY}")
+        await ws.send(encode(hello("by-query")))
+        assert isinstance(decode(await ws.recv(), max_bytes=LIMIT), Welcome)
+        await ws.close()
+        ws, welcome = await open_stream(server, "by-token", key=None, token=API_KEY)
+        assert welcome.session_id == "by-token"
+        await ws.close()
+
+    asyncio.run(scenario())
+
+
+def test_client_without_hello_is_closed_after_the_timeout(make_settings: Any, run_server: Any) -> None:
+    with run_server(make_settings(hello_timeout_s=0.2)) as live:
+
+        async def scenario() -> None:
+            ws = await connect(live.ws_url, additional_headers={"X-API-Key": API_KEY})
+            error, code, _ = await expect_error_close(ws)
+            assert error.code == code == CloseCode.UNEXPECTED
+
+        asyncio.run(scenario())
+
+
+def test_pages_mode_stores_pages_as_png(server: LiveServer) -> None:
+    mask = np.zeros((60, 90), np.uint8)
+    mask[20:30, 5:80] = 1
+    shape, bits = pack_mask(mask)
+
+    async def scenario() -> None:
+        ws, _ = await open_stream(server, "sess-pages", mode="pages")
+        async with ws:
+            await ws.send(encode(Page(seq=0, page_id=7, t_us=5, shape=shape, bits=bits, lines=((5, 20, 80, 30),))))
+            assert decode(await ws.recv(), max_bytes=LIMIT) == Ack(seq=0)
+
+    asyncio.run(scenario())
+    page = server.context.store.latest_page("sess-pages")
+    assert page is not None and page.page_id == 7 and page.lines == [(5, 20, 80, 30)]
+    np.testing.assert_array_equal(page.image(), np.where(mask == 1, 0, 255))
+
+
+def test_metrics_count_connections_messages_and_bytes(server: LiveServer) -> None:
+    asyncio.run(stream_frames(server, "sess-m", range(3)))
+    metrics = server.context.metrics
+    assert metrics.connections._value.get() == 1
+    assert metrics.frames_stored._value.get() == 3
+    assert metrics.messages.labels(type="frame")._value.get() == 3
+    assert metrics.bytes_received._value.get() == len(encode(hello("sess-m"))) + sum(len(encode(frame(s))) for s in range(3))
