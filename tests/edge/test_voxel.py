@@ -80,3 +80,15 @@ def test_empty_and_single_event() -> None:
     assert not voxel_grid(random_events(0)).any()
     single = voxel_grid(make_events([3], [4], [0], [7]), cfg=VoxelConfig(normalize=False))
     assert single[0, 4, 3] == -1.0 and np.abs(single).sum() == 1.0
+
+
+def test_reused_output_buffer() -> None:
+    cfg = VoxelConfig()
+    out = np.full((4, 100, 200), 7.0, dtype=np.float32)
+    first = voxel_grid(random_events(1600, width=200, height=100, seed=1), out=out)
+    assert first is not None and np.shares_memory(first, out)
+    expected = voxel_grid(random_events(1600, width=200, height=100, seed=2))
+    assert np.array_equal(voxel_grid(random_events(1600, width=200, height=100, seed=2), out=out), expected)
+    assert not voxel_grid(random_events(0), out=out).any()  # cleared, not stale
+    with pytest.raises(ValueError):
+        voxel_grid(random_events(10), cfg=cfg, out=np.zeros((4, 100, 200)))
