@@ -1,0 +1,49 @@
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from darkread.edge.stitch import Page, StitchConfig
+from darkread.edge.stitch.page import assign_lines, binarize, main_column_span, text_bands
+
+
+def test_text_bands_find_every_line_including_a_short_last_one(rendered_page) -> None:
+    bands = text_bands(rendered_page.mask)
+    assert len(bands) == len(rendered_page.text_lines)
+    for (top, bottom, centre), (x0, y0, x1, y1), (_, _, yc) in zip(bands, rendered_page.line_boxes, rendered_page.line_centres):
+        assert abs(centre - yc) < 3
+        assert top <= y0 + 1 and bottom >= y1 - 1
+
+
+def test_lines_are_assigned_despite_a_common_gaze_bias() -> None:
+    centres = [100.0, 128.0, 156.0, 184.0]
+    gaze = [c + 11.0 + d for c, d in zip(centres, [2.0, -3.0, 1.0, 0.0])]  # biased by 11 px, ~ pitch / 2
+    assert assign_lines(gaze, centres) == [0, 1, 2, 3]
+    assert assign_lines(gaze, []) == [-1] * 4
+
+
+def test_binarize_thresholds_and_removes_single_pixel_specks() -> None:
+    avg = np.zeros((20, 20), np.float32)
+    avg[5:8, 5:8] = 0.9
+    avg[15, 15] = 0.9  # speck
+    avg[2, 2:5] = 0.3  # below threshold
+    ink = binarize(avg, StitchConfig(ink_threshold=0.45, min_component_px=2))
+    assert ink.sum() == 9 and ink[15, 15] == 0
+
+
+def test_main_column_span_skips_stray_ink() -> None:
+    cols = np.zeros(300, bool)
+    cols[[5]] = True
+    cols[60:250:3] = True
+    assert main_column_span(cols, 30) == (60, 250)
+    assert main_column_span(np.zeros(10, bool), 30) is None
+
+
+def test_png_is_black_ink_on_white() -> None:
+    image = np.zeros((30, 40), np.uint8)
+    image[10:20, 5:15] = 1
+    page = Page(image, [(5, 10, 15, 20)], [image[10:20, 5:15]], 3, 1)
+    decoded = cv2.imdecode(np.frombuffer(page.to_png_bytes(), np.uint8), cv2.IMREAD_UNCHANGED)
+    assert decoded.shape == (30, 40)
+    assert (decoded[image == 1] == 0).all() and (decoded[image == 0] == 255).all()
+    assert cv2.imdecode(np.frombuffer(Page(np.zeros((0, 0), np.uint8), [], []).to_png_bytes(), np.uint8), 0).shape == (1, 1)
