@@ -101,34 +101,6 @@ class EventSummary:
         self.counts += np.bincount(pixel, minlength=height * width)
 
 
-def _reader_chunks(reader: Any) -> Iterator[tuple[np.ndarray, int]]:
-    """(events, trigger count) per decoded chunk, whatever shape the reader yields."""
-    for item in reader:
-        if isinstance(item, np.ndarray):
-            yield item, 0
-        elif isinstance(item, tuple):
-            events, triggers = item[0], item[1] if len(item) > 1 else None
-            yield events, 0 if triggers is None else len(triggers)
-        else:
-            triggers = getattr(item, "triggers", None)
-            yield item.events, 0 if triggers is None else len(triggers)
-
-
-def _trigger_total(reader: Any, counted: int) -> int:
-    """Triggers counted per chunk, or the reader's own totals when it keeps them aside."""
-    if counted:
-        return counted
-    triggers = getattr(reader, "triggers", None)
-    if triggers is not None and not callable(triggers):
-        return len(triggers)
-    stats = getattr(reader, "stats", None)
-    for name in ("triggers", "ext_triggers", "n_triggers"):
-        value = getattr(stats, name, None)
-        if isinstance(value, (int, np.integer)):
-            return int(value)
-    return 0
-
-
 def summarize(
     chunks: Iterable[np.ndarray],
     *,
@@ -188,19 +160,15 @@ def inspect_path(
                 recording.calibration.width, recording.calibration.height, width, height,
             )
 
-    triggers_seen = 0
-
     def chunks() -> Iterator[np.ndarray]:
-        nonlocal triggers_seen
         size = raw_path.stat().st_size
-        with _progress(size, enabled=progress and size >= PROGRESS_MIN_BYTES, name=raw_path.name) as bar:
-            for events, n_triggers in _reader_chunks(reader):
-                triggers_seen += n_triggers
+        with _progress(enabled=progress and size >= PROGRESS_MIN_BYTES, name=raw_path.name) as bar:
+            for events in reader:
                 bar.update(events.shape[0])
                 yield events
 
     summary = summarize(chunks(), width=width, height=height, mapper=mapper, image=png is not None)
-    summary.triggers = _trigger_total(reader, triggers_seen)
+    summary.triggers = int(reader.triggers.shape[0])  # the reader keeps the (few) triggers aside
 
     report = _report(path, header, summary, width, height)
     if recording is not None and track is not None:
@@ -232,12 +200,11 @@ class _NoBar:
         pass
 
 
-def _progress(total_bytes: int, *, enabled: bool, name: str) -> Any:
+def _progress(*, enabled: bool, name: str) -> Any:
     if not enabled:
         return _NoBar()
     from tqdm import tqdm
 
-    # Events are ~2-4 bytes each in EVT3; the bar counts events, the total is only a hint.
     return tqdm(desc=f"inspect {name}", unit="ev", unit_scale=True, file=sys.stderr, leave=False)
 
 
