@@ -131,3 +131,22 @@ def test_bare_raw_with_explicit_gaze_and_calibration(shared_sample_recording: Pa
     assert RECORDING_KEYS <= report.keys()
     bare = _inspect_json(capsys, str(shared_sample_recording / "events.raw"))
     assert "fovea_event_fraction" not in bare and bare["events"] == report["events"]
+
+
+@pytest.mark.shared
+def test_progress_bar_on_stderr_for_long_files(shared_sample_recording: Path, capsys, monkeypatch) -> None:
+    pytest.importorskip("darkread.edge.io.raw")
+    import darkread.edge.inspect as inspect_module
+
+    monkeypatch.setattr(inspect_module, "PROGRESS_MIN_BYTES", 0)  # treat the sample as a long file
+    report = inspect_module.inspect_path(shared_sample_recording / "events.raw", chunk_bytes=1 << 18)
+    assert report["events"] > 0
+    assert "inspect events.raw" in capsys.readouterr().err
+
+
+@pytest.mark.shared
+def test_bare_raw_with_only_a_gaze_csv_names_the_missing_calibration(shared_sample_recording: Path, capsys) -> None:
+    pytest.importorskip("darkread.edge.io.raw")
+    code = main(["inspect", str(shared_sample_recording / "events.raw"), "--gaze", str(shared_sample_recording / "general_eye_gaze.csv")])
+    assert code == 1
+    assert "--calibration" in capsys.readouterr().err

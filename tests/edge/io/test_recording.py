@@ -74,3 +74,12 @@ def test_sample_recording(shared_sample_recording: Path) -> None:
     assert rec.rgb_path is not None and rec.rgb_path.name == "rgb.png"
     assert (rec.calibration.width, rec.calibration.height) == (1280, 720)
     assert len(rec.gaze()) == 211
+
+
+@pytest.mark.shared
+def test_recording_reader_streams_the_events(shared_sample_recording: Path) -> None:
+    pytest.importorskip("darkread.edge.io.raw")
+    rec = open_recording(shared_sample_recording)
+    reader = rec.reader(chunk_bytes=1 << 20)
+    assert (reader.header.width, reader.header.height) == (1280, 720)
+    assert sum(len(chunk) for chunk in reader) == rec.meta["event_count"]
