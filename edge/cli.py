@@ -36,7 +36,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--replay", metavar="RECORDING", help="replay a recording directory or .raw file instead of the camera")
     run.add_argument("--gaze-csv", metavar="CSV", help="gaze CSV for a bare .raw replay")
     run.add_argument("--calibration", metavar="JSON", help="calibration.json (bare .raw replay, or the camera)")
-    run.add_argument("--speed", metavar="N|max", help="replay pacing: 1 = wall clock (default), 2 = twice as fast, max")
+    run.add_argument(
+        "--speed", metavar="N|max",
+        help="replay pacing: 1 = wall clock (default), 2 = twice as fast, max = as fast as inference allows (no skips)",
+    )
     run.add_argument("--gaze", choices=["recording", "csv", "udp", "aria"], help="gaze source (default: the recording's for a replay)")
     run.add_argument("--gaze-port", type=int, metavar="PORT", help="UDP port of the gaze feed")
     run.add_argument("--cloud", metavar="URL", help="websocket URL, e.g. ws://127.0.0.1:8000/v1/stream")

@@ -204,7 +204,9 @@ class EdgeService:
             self._pages = PageStitcher()
         settings = PipelineSettings(
             n_events=cfg.pipeline.n_events, period_ms=cfg.pipeline.period_ms, fovea=fovea,
-            bins=cfg.pipeline.bins, lossless=cfg.pipeline.lossless,
+            bins=cfg.pipeline.bins,
+            # a replay as fast as possible has no clock to keep up with: make every window
+            lossless=cfg.pipeline.lossless or (cfg.source.kind == "replay" and cfg.source.speed == 0),
         )
         self.pipeline = Pipeline(
             self.source, gaze, reconstructor, self._on_frame, settings, self.metrics,

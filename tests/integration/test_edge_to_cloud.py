@@ -1,0 +1,146 @@
+"""A recording through a real edge into a real cloud that is killed and restarted mid-stream.
+
+The cloud runs as a subprocess (``darkread cloud serve``, uvicorn on 127.0.0.1, random port);
+the edge runs in this process so the test can read exactly which seqs it handed to the uplink.
+Every frame must be stored exactly once: the cloud's seqs equal the edge's, no gap, no extra.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import sqlite3
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from darkread.edge.config import load_config
+from darkread.edge.daemon import Daemon, EdgeService, Notifier
+from darkread.paths import SAMPLE_RECORDING
+
+pytestmark = pytest.mark.slow
+API_KEY = "integration-key"
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def tiny_model(path: Path) -> Path:
+    """A stand-in reconstructor with the shipped model's I/O (sum over the time bins)."""
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper
+
+    x = helper.make_tensor_value_info("voxel", TensorProto.FLOAT, ["batch", 4, 100, 200])
+    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["batch", 1, 100, 200])
+    axes = helper.make_tensor("axes", TensorProto.INT64, [1], [1])
+    node = helper.make_node("ReduceSum", ["voxel", "axes"], ["logits"], keepdims=1)
+    model = helper.make_model(
+        helper.make_graph([node], "sum_bins", [x], [y], initializer=[axes]),
+        opset_imports=[helper.make_opsetid("", 17)],
+    )
+    model.ir_version = 8
+    onnx.save(model, str(path))
+    return path
+
+
+class Cloud:
+    def __init__(self, data_dir: Path, port: int) -> None:
+        self.data_dir, self.port = data_dir, port
+        self.process: subprocess.Popen[bytes] | None = None
+
+    def start(self) -> None:
+        env = dict(os.environ, DARKREAD_API_KEY=API_KEY)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "darkread", "-q", "cloud", "serve", "--host", "127.0.0.1",
+             "--port", str(self.port), "--data-dir", str(self.data_dir)],
+            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            if self.process.poll() is not None:
+                raise RuntimeError(f"cloud exited with {self.process.returncode}")
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/healthz", timeout=0.5):
+                    return
+            except OSError:
+                time.sleep(0.1)
+        raise RuntimeError("cloud did not come up within 20 s")
+
+    def kill(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.process.send_signal(signal.SIGKILL)
+            self.process.wait(5)
+
+    def stop(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(10)
+            except subprocess.TimeoutExpired:
+                self.kill()
+
+    def stored_seqs(self, session_id: str) -> list[int]:
+        with sqlite3.connect(self.data_dir / "darkread.sqlite3") as db:
+            return [seq for (seq,) in db.execute("SELECT seq FROM frames WHERE session_id = ? ORDER BY seq", (session_id,))]
+
+
+@pytest.fixture
+def recording(request: pytest.FixtureRequest) -> Path:
+    if (SAMPLE_RECORDING / "events.raw").is_file():
+        return SAMPLE_RECORDING
+    return request.getfixturevalue("shared_sample_recording")
+
+
+def test_cloud_killed_mid_stream_every_frame_delivered_once(tmp_path: Path, recording: Path) -> None:
+    port = free_port()
+    cloud = Cloud(tmp_path / "cloud", port)
+    cloud.start()
+    try:
+        config = load_config(
+            environ={},
+            overrides={
+                "source": {"kind": "replay", "path": str(recording), "speed": 1.0},
+                "gaze": {"kind": "recording"},
+                "pipeline": {"model": str(tiny_model(tmp_path / "tiny.onnx"))},
+                "uplink": {
+                    "url": f"ws://127.0.0.1:{port}/v1/stream", "api_key": API_KEY,
+                    "spool_dir": str(tmp_path / "spool"), "backoff_initial_s": 0.05, "backoff_max_s": 0.3,
+                    "drain_timeout_s": 20.0,
+                },
+            },
+        )
+        service = EdgeService(config, Notifier({}))
+        result: list[int] = []
+        edge = threading.Thread(target=lambda: result.append(Daemon(service, service.notifier, tick_s=0.02).run()))
+        edge.start()
+
+        deadline = time.monotonic() + 10
+        while len(service.sent_seqs) < 10 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert len(service.sent_seqs) >= 10, "the edge made no frames"
+        cloud.kill()  # mid-stream: frames in flight and unacknowledged
+        killed_at = len(service.sent_seqs)
+        time.sleep(0.5)  # frames keep coming and go to the spool
+        assert len(service.sent_seqs) > killed_at
+        cloud.start()  # same data dir, same port
+
+        edge.join(timeout=40)
+        assert not edge.is_alive()
+        assert result == [0], "the edge did not drain its spool"
+        sent = list(service.sent_seqs)
+        stored = cloud.stored_seqs(service.uplink.session_id)
+        assert stored == sent  # every frame exactly once, in order
+        assert sent == list(range(len(sent)))
+        assert service.metrics.totals["reconnects"] >= 1
+        assert service.uplink.spool.depth == 0
+    finally:
+        cloud.stop()
