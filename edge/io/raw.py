@@ -88,7 +88,7 @@ class RawReader:
 
     @property
     def triggers(self) -> Triggers:
-        return np.concatenate(self._triggers) if self._triggers else np.zeros(0, TRIGGER_DTYPE)
+        return np.concatenate(self._triggers, dtype=TRIGGER_DTYPE) if self._triggers else np.zeros(0, TRIGGER_DTYPE)
 
     def get_size(self) -> tuple[int, int]:
         """(height, width), as OpenEB's readers report it."""

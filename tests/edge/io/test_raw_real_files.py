@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from darkread.edge.errors import RawFormatError
+from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
 from darkread.edge.io.raw import RawReader, make_decoder, read_raw
 from darkread.edge.io.raw_header import format_raw_header
 
@@ -128,6 +129,7 @@ def test_raw_reader_streams_the_same_events(real_events_dir: Path, chunk_bytes: 
     assert max(len(c) for c in chunks) < chunk_bytes  # bounded: at most one event per two bytes
     np.testing.assert_array_equal(np.concatenate(chunks), whole.events)
     np.testing.assert_array_equal(reader.triggers, whole.triggers)
+    assert reader.triggers.dtype == TRIGGER_DTYPE and all(c.dtype == EVENT_CD_DTYPE for c in chunks)
     assert reader.stats.events == len(whole.events)
     assert reader.get_size() == (480, 640)
 
