@@ -204,7 +204,19 @@ class _Table:
     def has(self, name: str) -> bool:
         return name in self.index
 
+    def _cells(self, name: str) -> list[str]:
+        col = self.index[name]
+        return [row[col].strip() for _, row in self.rows]
+
     def floats(self, name: str, *, empty: float = math.nan) -> np.ndarray:
+        cells = self._cells(name)
+        try:  # fast path; the loop below finds the offending line
+            values = np.array([cell or "nan" for cell in cells], dtype=np.float64)
+            if not math.isnan(empty):
+                values[[not cell for cell in cells]] = empty
+            return values
+        except ValueError:
+            pass
         col = self.index[name]
         out = np.empty(len(self.rows))
         for i, (line, row) in enumerate(self.rows):
@@ -219,6 +231,10 @@ class _Table:
         return out
 
     def integers(self, name: str) -> np.ndarray:
+        try:
+            return np.array(self._cells(name), dtype=np.int64)
+        except (ValueError, OverflowError):
+            pass
         col = self.index[name]
         out = np.empty(len(self.rows), dtype=np.int64)
         for i, (line, row) in enumerate(self.rows):
