@@ -77,6 +77,8 @@ class StitchConfig:
     Page:
       ink_threshold         alpha-averaged ink probability above which a page pixel is ink.
       min_component_px      ink specks smaller than this many pixels are removed from the page.
+      min_views             page pixels seen by fewer frames than this stay paper (window borders
+                            seen once would otherwise keep that frame's speckle).
       line_gap_px           a line's box spans its ink columns; a gap wider than this cuts off stray ink.
     """
 
@@ -99,6 +101,7 @@ class StitchConfig:
     dewarp_min_points: int = 12
     ink_threshold: float = 0.45
     min_component_px: int = 2
+    min_views: int = 2
     line_gap_px: int = 30
 
     def __post_init__(self) -> None:
@@ -116,7 +119,7 @@ class Page:
 
     image: np.ndarray  # uint8 ink mask of the whole page (1 = ink)
     lines: list[tuple[int, int, int, int]]  # line boxes (x0, y0, x1, y1), top to bottom
-    line_images: list[np.ndarray]  # each line strip's ink mask, cut to its box
+    line_images: list[np.ndarray]  # each line's ink mask (the page cut to its box; the line's own strip dominates it)
     frames_used: int = 0
     frames_dropped: int = 0
     frame_positions: dict[int, tuple[int, int]] = field(default_factory=dict)  # frame_id -> top-left on the page

@@ -18,7 +18,7 @@ class PageCanvas:
     """Finished lines: sum of weight x ink and of weight, so any strip can be added or composed."""
 
     def __init__(self) -> None:
-        self.canvas = Canvas(("num", "den"))
+        self.canvas = Canvas(("num", "den", "views"))
 
     def add_strip(self, strip: LineStrip) -> None:
         if strip.canvas.empty:
@@ -28,6 +28,14 @@ class PageCanvas:
         weight = strip.weight()
         self.canvas.view("num", x0, y0, x1, y1)[...] += weight * strip.canvas.layers["avg"]
         self.canvas.view("den", x0, y0, x1, y1)[...] += weight
+        self.canvas.view("views", x0, y0, x1, y1)[...] += strip.canvas.layers["count"]
+
+    def views(self, strip: LineStrip | None, box: tuple[int, int, int, int]) -> np.ndarray:
+        """How many frames saw each pixel of ``box`` (finished lines plus ``strip``)."""
+        views = self.canvas.crop("views", *box)
+        if strip is not None and not strip.canvas.empty:
+            views += strip.canvas.crop("count", *box)
+        return views
 
     def reference(self, strip: LineStrip | None, box: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
         """Ink probability and 'seen' mask in ``box`` from the finished lines plus ``strip``."""
@@ -44,9 +52,12 @@ def union_box(boxes: Sequence[tuple[int, int, int, int]]) -> tuple[int, int, int
     return min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes), max(b[3] for b in boxes)
 
 
-def binarize(avg: np.ndarray, cfg: StitchConfig) -> np.ndarray:
-    """Threshold the alpha-averaged ink probability; drop specks below ``min_component_px``."""
+def binarize(avg: np.ndarray, cfg: StitchConfig, views: np.ndarray | None = None) -> np.ndarray:
+    """Threshold the alpha-averaged ink probability; drop specks below ``min_component_px`` and,
+    given ``views``, ink that fewer than ``min_views`` frames saw (one noisy frame is no evidence)."""
     ink = (avg > cfg.ink_threshold).astype(np.uint8)
+    if views is not None and cfg.min_views > 1:
+        ink[views < cfg.min_views] = 0
     if cfg.min_component_px > 1 and ink.any():
         n, labels, stats, _ = cv2.connectedComponentsWithStats(ink, connectivity=8)
         small = stats[:, cv2.CC_STAT_AREA] < cfg.min_component_px
@@ -133,18 +144,26 @@ def assign_lines(gaze_rows: Sequence[float], band_centres: Sequence[float]) -> l
     return np.abs(rows[:, None] + bias - centres[None, :]).argmin(axis=1).tolist()
 
 
-def naive_page(frames: Sequence[StitchFrame], cfg: StitchConfig = StitchConfig()) -> Page:
-    """Reference without registration: every frame averaged at its sensor position (origin_xy)."""
+def naive_page(frames: Sequence[StitchFrame], average: bool = False, cfg: StitchConfig = StitchConfig()) -> Page:
+    """Reference without registration: every frame pasted at its sensor position (``origin_xy``),
+    later frames over earlier ones; with ``average``, averaged and thresholded instead."""
     canvas = Canvas(("sum", "count"))
     for f in frames:
         x, y = f.origin_xy
         h, w = f.mask.shape
         canvas.ensure(x, y, x + w, y + h)
-        canvas.view("sum", x, y, x + w, y + h)[...] += f.mask
+        if average:
+            canvas.view("sum", x, y, x + w, y + h)[...] += f.mask
+        else:
+            canvas.view("sum", x, y, x + w, y + h)[...] = f.mask
         canvas.view("count", x, y, x + w, y + h)[...] += 1
     if canvas.empty:
         return Page(np.zeros((0, 0), np.uint8), [], [], 0, 0)
     count = canvas.layers["count"]
-    avg = np.where(count > 0, canvas.layers["sum"] / np.maximum(count, 1), 0)
     x0, y0, x1, y1 = covered_box(count > 0) or (0, 0, 0, 0)
-    return Page(binarize(avg[y0:y1, x0:x1], cfg), [], [], len(frames), 0)
+    if average:
+        avg = np.where(count > 0, canvas.layers["sum"] / np.maximum(count, 1), 0)
+        image = binarize(avg[y0:y1, x0:x1], cfg)
+    else:
+        image = (canvas.layers["sum"][y0:y1, x0:x1] > 0).astype(np.uint8)
+    return Page(image, [], [], len(frames), 0)

@@ -133,7 +133,8 @@ class PageStitcher:
         if cover is None:
             return Page(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
         cx0, cy0, cx1, cy1 = cover
-        image = binarize(avg[cy0:cy1, cx0:cx1], cfg)
+        views = self._page.views(current, box)
+        image = binarize(avg[cy0:cy1, cx0:cx1], cfg, views[cy0:cy1, cx0:cx1])
         ox, oy = box[0] + cx0, box[1] + cy0  # page-coordinate origin of ``image``
         boxes, images = self._line_boxes(lines, image, (ox, oy))
         positions = {fid: (x - ox, y - oy) for fid, (x, y) in self._positions.items()}
@@ -143,28 +144,18 @@ class PageStitcher:
     def _line_boxes(
         self, lines: list[_FinishedLine], image: np.ndarray, origin: tuple[int, int]
     ) -> tuple[list[tuple[int, int, int, int]], list[np.ndarray]]:
-        """One box per text line that was read: the page's text bands, each claimed by the strips
-        whose gaze ran along it; x extent from the claiming strip's own ink."""
-        ox, oy = origin
+        """One box per text line that was read: the page's text bands that the strips' gaze ran
+        along, each spanning the band's main run of ink columns."""
         bands = text_bands(image)
-        claims = assign_lines([ln.gaze_row - oy for ln in lines], [c for _, _, c in bands])
-        owner: dict[int, _FinishedLine] = {}
-        for ln, band in zip(lines, claims):
-            if band >= 0 and (band not in owner or len(ln.strip.frame_ids) > len(owner[band].strip.frame_ids)):
-                owner[band] = ln
+        claims = assign_lines([ln.gaze_row - origin[1] for ln in lines], [c for _, _, c in bands])
         boxes, images = [], []
-        for band in sorted(owner):
+        for band in sorted({c for c in claims if c >= 0}):
             top, bottom, _ = bands[band]
-            strip = owner[band].strip
-            sx0, sy0, _, _ = strip.canvas.box
-            ink = binarize(strip.canvas.layers["avg"], self.cfg)
-            r0, r1 = int(np.clip(top + oy - sy0, 0, ink.shape[0])), int(np.clip(bottom + oy - sy0, 0, ink.shape[0]))
-            span = main_column_span(ink[r0:r1].any(axis=0), self.cfg.line_gap_px)
+            span = main_column_span(image[top:bottom].any(axis=0), self.cfg.line_gap_px)
             if span is None:
                 continue
-            c0, c1 = span
-            boxes.append((c0 + sx0 - ox, top, c1 + sx0 - ox, bottom))
-            images.append(ink[r0:r1, c0:c1].copy())
+            boxes.append((span[0], top, span[1], bottom))
+            images.append(image[top:bottom, span[0] : span[1]].copy())
         return boxes, images
 
 
