@@ -28,6 +28,7 @@ ROI_POLL_ATTEMPTS = 50
 ROI_FOLLOW_MARGIN_PX = 32  # slack around a gaze window so small eye movements need no rewrite
 DEFAULT_QUEUE_BYTES = 64 * 1024 * 1024
 USB_PACKET_BYTES = 1024  # SuperSpeed bulk packet; reads must be whole packets
+COALESCE_BYTES = 4 * 1024 * 1024  # largest buffer the decode thread builds from queued chunks
 
 
 class Decoder(Protocol):
@@ -214,7 +215,10 @@ class Evk4Camera:
             raise
 
     def stop(self) -> None:
-        """Stop the sensor, then the threads; no sink call happens after this returns."""
+        """Stop the sensor, then the threads.
+
+        Chunks already read from USB still reach the sink before this returns; none after.
+        """
         if not self._threads:
             return
         error: DeviceError | None = None
@@ -282,10 +286,37 @@ class Evk4Camera:
                 counts["queued_bytes"] += len(data)
             self._queue.put(data)
 
+    def _next_batch(self) -> tuple[bytes, bool]:
+        """Everything queued (up to ``COALESCE_BYTES``) as one buffer, and whether the stream ended.
+
+        Decoding a few large buffers costs far less than many small ones, which is what lets a
+        slow host catch up after a burst.
+        """
+        parts: list[bytes] = []
+        size, ended = 0, False
+        item = self._queue.get()
+        while True:
+            if item is None:
+                ended = True
+                break
+            parts.append(item)
+            size += len(item)
+            if size >= COALESCE_BYTES:
+                break
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                break
+        with self._counts_lock:
+            self._counts["queued_bytes"] -= size
+        return (parts[0] if len(parts) == 1 else b"".join(parts)), ended  # b"" when only the end came
+
     def _decode_loop(self, decoder: Decoder, sink: EventSink) -> None:
-        while (chunk := self._queue.get()) is not None:
-            with self._counts_lock:
-                self._counts["queued_bytes"] -= len(chunk)
+        ended = False
+        while not ended:
+            chunk, ended = self._next_batch()
+            if not chunk:
+                continue
             try:
                 events, triggers = decoder.decode(chunk)
             except DarkreadError as exc:

@@ -2,7 +2,8 @@
 
 ``FakeEvk4`` holds the board state: a register file seeded with IMX636 reset values, the log of
 every register write in order, and an EVT3 recording it serves on EP 0x81 in chunks, only while
-the sensor is started (time base on and pixel reset released). ``FakeUsbBackend`` implements
+the sensor is started (time base on and pixel reset released), optionally paced at
+``rate_bytes_s`` like a live sensor. ``FakeUsbBackend`` implements
 ``usb.backend.IBackend`` so the real transport code runs unchanged:
 
     fake = FakeEvk4(recording=encode_evt3(events))
@@ -53,7 +54,7 @@ class FakeEvk4:
         *,
         recording: bytes = b"",
         chunk_bytes: int = 16 * 1024,
-        loop: bool = False,
+        rate_bytes_s: float | None = None,
         vendor_id: int = regs.CYPRESS_VID,
         product_id: int = regs.EVK4_PID,
         bcd_device: int = 0x0309,
@@ -69,7 +70,7 @@ class FakeEvk4:
             raise ValueError(f"chunk_bytes must be positive, got {chunk_bytes}")
         self.recording = bytes(recording)
         self.chunk_bytes = chunk_bytes
-        self.loop = loop
+        self.rate_bytes_s = rate_bytes_s
         self.vendor_id = vendor_id
         self.product_id = product_id
         self.bcd_device = bcd_device
@@ -83,6 +84,7 @@ class FakeEvk4:
         self.writes: list[tuple[int, int]] = []
         self.reads: list[int] = []
         self.served_bytes = 0
+        self._streaming_since = (0.0, 0)  # (monotonic time, served bytes) when streaming began
         self.claimed = False
         self._replies: deque[bytes] = deque()
         self._lock = threading.Lock()
@@ -109,7 +111,7 @@ class FakeEvk4:
 
     @property
     def exhausted(self) -> bool:
-        return not self.loop and self.served_bytes >= len(self.recording)
+        return self.served_bytes >= len(self.recording)
 
     def register(self, addr: int) -> int:
         return self.registers.get(addr, 0)
@@ -160,6 +162,12 @@ class FakeEvk4:
         return tz.encode_words(prop, device, addr, *values)
 
     def _write_register(self, addr: int, value: int) -> None:
+        was_streaming = self.streaming
+        self._store_register(addr, value)
+        if self.streaming and not was_streaming:
+            self._streaming_since = (time.monotonic(), self.served_bytes)
+
+    def _store_register(self, addr: int, value: int) -> None:
         self.writes.append((addr, value))
         if addr == regs.REG_ROI_WIN_CTRL and self.roi_latches:
             # The sensor reports the window latched as soon as it is armed.
@@ -171,10 +179,15 @@ class FakeEvk4:
     def read_data(self, size: int) -> bytes:
         """Next chunk of the recording, or b"" when stopped or exhausted."""
         with self._lock:
-            if not self.streaming or not self.recording or self.exhausted:
+            if not self.streaming or self.exhausted:
                 return b""
-            start = self.served_bytes % len(self.recording) if self.loop else self.served_bytes
+            start = self.served_bytes
             count = min(size, self.chunk_bytes, len(self.recording) - start)
+            if self.rate_bytes_s is not None:
+                since, served_then = self._streaming_since
+                produced = served_then + int((time.monotonic() - since) * self.rate_bytes_s)
+                if produced - start < count:
+                    return b""  # the bridge sends full buffers; until one is filled the read times out
             self.served_bytes += count
             return self.recording[start : start + count]
 
