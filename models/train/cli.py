@@ -20,7 +20,7 @@ def _fit_config(args: argparse.Namespace):  # -> FitConfig
 
     return FitConfig(
         batch_size=args.batch_size, lr=args.lr, time_budget_s=args.minutes * 60, max_epochs=args.epochs,
-        threads=args.threads, seed=args.seed,
+        threads=args.threads, seed=args.seed, crop=tuple(args.crop) if args.crop[0] > 0 else None,
     )
 
 
@@ -32,6 +32,8 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lr", type=float, default=3e-3, help="peak learning rate (AdamW, cosine decay)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--crop", type=int, nargs=2, default=[64, 128], metavar=("H", "W"),
+                   help="train on random HxW crops (default 64 128; 0 0 = whole windows)")
 
 
 def _cmd_fit(args: argparse.Namespace) -> int:

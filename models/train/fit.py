@@ -19,7 +19,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from darkread.models.train.data import Shard, iterate_batches, load_shard, shard_paths, split_mask
+from darkread.models.train.data import Shard, iterate_batches, load_shard, random_crop, shard_paths, split_mask
 from darkread.models.train.metrics import ink_scores
 from darkread.models.train.net import BinaryUNet, NetConfig, count_parameters
 
@@ -45,6 +45,7 @@ class FitConfig:
     checkpoint_every_s: float = 120.0
     seed: int = 0
     augmentation: bool = True
+    crop: tuple[int, int] | None = (64, 128)  # train on random crops (validation uses whole windows)
     net: dict[str, object] = field(default_factory=lambda: NetConfig().to_dict())
 
 
@@ -124,6 +125,9 @@ def fit(
 ) -> dict[str, object]:
     """Train until the time budget or ``max_epochs`` is used; returns the final summary.
 
+    An epoch is one pass over the shards present when it starts, so training can begin while
+    the dataset is still being generated.
+
     ``out_dir`` receives ``last.pt`` (resumable), ``best.pt`` (best held-out F1) and ``history.json``.
     ``init_checkpoint`` starts from other weights (fine-tuning) instead of a fresh network.
     """
@@ -183,7 +187,10 @@ def fit(
         last_save = started
         bar = tqdm(desc=f"epoch {epoch + 1}", unit="batch", disable=not progress, leave=False)
         running = None
+        paths = shard_paths(train_dir)  # a dataset still being written grows between epochs
         for x_np, y_np in iterate_batches(paths, config.batch_size, rng, augmentation=config.augmentation):
+            if config.crop is not None:
+                x_np, y_np = random_crop(x_np, y_np, tuple(config.crop), rng)  # type: ignore[arg-type]
             state["elapsed_s"] = base_elapsed + time.monotonic() - started
             frac = progress_fraction(float(epoch))
             if frac >= 1.0:

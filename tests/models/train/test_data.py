@@ -71,3 +71,14 @@ def test_shift_moves_voxels_and_targets_together() -> None:
     out_v, out_t = augment(voxels, targets, np.random.default_rng(3), max_shift=4)
     vy, vx = np.argwhere(np.abs(out_v[0]).sum(0) > 0)[0]
     assert out_t[0, vy, vx] == 1 and out_t.sum() == 1
+
+
+def test_random_crop_cuts_voxels_and_targets_at_the_same_place() -> None:
+    from darkread.models.train.data import random_crop
+
+    rng = np.random.default_rng(0)
+    targets = (rng.random((5, 100, 200)) < 0.3).astype(np.uint8)
+    voxels = np.repeat(targets[:, None].astype(np.float32), 4, axis=1)
+    v, t = random_crop(voxels, targets, (64, 128), rng)
+    assert v.shape == (5, 4, 64, 128) and t.shape == (5, 64, 128)
+    assert np.array_equal(v[:, 2], t.astype(np.float32))

@@ -12,7 +12,7 @@ from darkread.models.train.net import NetConfig
 def _tiny_config(**overrides) -> FitConfig:
     base = dict(
         batch_size=4, lr=5e-3, warmup_steps=1, time_budget_s=60, max_epochs=2, threads=1,
-        validation_samples=8, checkpoint_every_s=1e9,
+        validation_samples=8, checkpoint_every_s=1e9, crop=None,
         net=NetConfig(widths=(4, 8, 16, 16), blocks=(1, 1, 1)).to_dict(),
     )
     base.update(overrides)
