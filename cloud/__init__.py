@@ -1,1 +1,1 @@
-"""cloud"""
+"""The darkread cloud service: websocket ingest, durable storage, stitching and OCR (FastAPI)."""
