@@ -6,7 +6,8 @@ foveal window. The reconstruction thread wakes when ``n_events`` new foveated ev
 every ``period_ms``), looks up the gaze at the newest event, and runs the pure core
 :func:`make_frame` (choose window -> crop -> voxel -> infer). If inference fell behind, it jumps to
 the newest window and counts the windows it skipped; the ring is fixed-size, so memory never grows
-with load. In ``lossless`` mode (offline replays) the reader waits for inference instead.
+with load. In ``lossless`` mode (offline replays) the reader thread reconstructs each window
+itself, so it waits for inference instead of skipping.
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ from darkread.edge.voxel import VoxelConfig, voxel_grid
 
 logger = logging.getLogger(__name__)
 
+MIN_HISTORY_EVENTS = 4096
+
 Infer = Callable[[np.ndarray], np.ndarray]
 """Voxel grid [bins, H, W] float32 -> ink mask [H, W] uint8 (a ``Reconstructor``)."""
 
@@ -46,8 +49,8 @@ class PipelineSettings:
     period_ms: float = 50.0  # a frame at least this often when some new foveated events arrived
     fovea: FoveaConfig = field(default_factory=FoveaConfig)
     bins: int = 4
-    history_events: int = 1 << 16  # newest ring events searched first for the window's events
-    lossless: bool = False  # the reader waits for inference instead of skipping windows
+    history_events: int = 1 << 16  # usual cap of the ring events searched for a window's events
+    lossless: bool = False  # the reader reconstructs (waits for inference) instead of skipping windows
 
     @property
     def voxel(self) -> VoxelConfig:
@@ -142,7 +145,7 @@ class Pipeline:
         on_frame: FrameHandler,
         settings: PipelineSettings = PipelineSettings(),
         metrics: EdgeMetrics | None = None,
-        ring_capacity: int = 1 << 21,
+        ring_capacity: int = 1 << 19,
         watchdog: Callable[[], object] | None = None,
     ) -> None:
         self.source = source
@@ -161,8 +164,9 @@ class Pipeline:
         self._new_events = 0
         self._last_arrival = 0.0
         self._ring_dropped = 0
+        self._history = MIN_HISTORY_EVENTS
         self._cond = threading.Condition()
-        self._stop = threading.Event()
+        self._step_lock = threading.Lock()
         self._source_done = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -182,13 +186,12 @@ class Pipeline:
             self._new_foveated += n_foveated if self._origin is not None else int(events.shape[0])
             self._new_events += int(events.shape[0])
             self._last_arrival = time.monotonic()
-            if self._new_foveated >= self.settings.n_events:
-                self._cond.notify_all()
-            if self.settings.lossless:
-                # backpressure: at most one window waits while inference runs
-                self._cond.wait_for(
-                    lambda: self._new_foveated < self.settings.n_events or self._stop.is_set(), timeout=5.0
-                )
+            due = self._new_foveated >= self.settings.n_events
+            if due and not self.settings.lossless:
+                self._cond.notify()
+        if due and self.settings.lossless:
+            # no clock to keep up with: reconstruct right here, so the reader waits for inference
+            self._process(self._take())
 
     # -- lifecycle ----------------------------------------------------------------------------
     def start(self) -> None:
@@ -206,7 +209,6 @@ class Pipeline:
             self._cond.notify_all()
         if self._thread is not None:
             self._thread.join(timeout=10.0)
-        self._stop.set()
 
     @property
     def running(self) -> bool:
@@ -219,32 +221,38 @@ class Pipeline:
         except BaseException as exc:  # surfaced to the daemon, which exits non-zero
             self.error = exc
             logger.exception("reconstruction loop failed")
-        finally:
-            self._stop.set()
-            with self._cond:
-                self._cond.notify_all()
 
     def _loop(self) -> None:
         period_s = self.settings.period_ms / 1e3
         k = self.settings.n_events
+        lossless = self.settings.lossless  # then the reader reconstructs; this loop only ticks
         while True:
             with self._cond:
                 self._cond.wait_for(
-                    lambda: self._new_foveated >= k or self._source_done.is_set(), timeout=period_s
+                    lambda: (self._new_foveated >= k and not lossless) or self._source_done.is_set(), timeout=period_s
                 )
-                had_window = self._origin is not None
-                new, arrival, new_events = self._new_foveated, self._last_arrival, self._new_events
-                self._new_foveated = self._new_events = 0
                 final = self._source_done.is_set()
-                self._cond.notify_all()  # releases a lossless reader
             if self.watchdog is not None:
                 self.watchdog()
+            self._process(self._take())
+            if final:
+                return
+
+    def _take(self) -> tuple[int, int, float, bool]:
+        """Claim the pending counts: (new foveated, new events, newest arrival, window placed)."""
+        with self._cond:
+            taken = (self._new_foveated, self._new_events, self._last_arrival, self._origin is not None)
+            self._new_foveated = self._new_events = 0
+        return taken
+
+    def _process(self, taken: tuple[int, int, float, bool]) -> None:
+        new, new_events, arrival, had_window = taken
+        k = self.settings.n_events
+        with self._step_lock:
             if new > k and had_window and not self.settings.lossless:
                 self.metrics.add("frames_skipped", new // k - 1)
             if new > 0 or (self._origin is None and new_events > 0):
                 self._step(new, arrival)
-            if final:
-                return
 
     def _step(self, new_foveated: int, arrival: float) -> None:
         t_newest = self.ring.newest_t
@@ -271,10 +279,23 @@ class Pipeline:
         self.on_frame(frame, arrival)
 
     def _recent_events(self, origin: tuple[int, int]) -> Events:
-        """Newest ring events, enough to hold ``n_events`` inside the window (doubling search)."""
-        n = self.settings.history_events
+        """The newest ``n_events`` inside the window, searching back through the ring as needed.
+
+        The search starts from twice the depth the previous window needed, so a frame copies a
+        few thousand ring events, not the whole history.
+        """
+        k, cfg = self.settings.n_events, self.settings.fovea
+        n = self._history
         while True:
             recent = self.ring.last(n)
-            if n >= len(self.ring) or count_in_window(recent, origin, self.settings.fovea) >= self.settings.n_events:
-                return recent
-            n *= 4
+            dx = recent["x"] - np.uint16(origin[0])
+            dy = recent["y"] - np.uint16(origin[1])
+            inside = np.flatnonzero((dx < cfg.width) & (dy < cfg.height))
+            if inside.shape[0] >= k or n >= len(self.ring):
+                break
+            n *= 2
+        used = inside[-k:]
+        if used.shape[0]:
+            depth = recent.shape[0] - int(used[0])
+            self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), self.settings.history_events))
+        return recent[used]

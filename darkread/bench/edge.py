@@ -1,0 +1,212 @@
+"""The edge loop end to end on the sample recording.
+
+* Real-time factor (recording seconds per CPU second of the process): the whole edge (replay as fast as possible -> ring -> fovea at the gaze ->
+  voxel -> U-Net -> frame message encoded) on one core (CPU affinity pinned when the OS allows),
+  lossless (every window reconstructed). CPU time rather than wall time because the benchmark host
+  is shared; the wall-clock factor is printed beside it. Reference: decoding
+  the same file alone (``RawReader``), the ceiling of any replay.
+* Event-to-wire latency: replay paced at wall-clock speed through the real uplink to a local
+  websocket server that acknowledges every frame; from the arrival of a window's newest event to
+  the frame handed to the socket. Reference: inference alone in the same run.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from darkread.bench import BenchContext, Figure
+from darkread.paths import SAMPLE_RECORDING
+
+
+def _recording(ctx: BenchContext) -> Path | None:
+    if (SAMPLE_RECORDING / "events.raw").is_file():
+        return SAMPLE_RECORDING
+    if ctx.shared_data is not None and (ctx.shared_data / "sample_recording" / "events.raw").is_file():
+        return ctx.shared_data / "sample_recording"
+    return None
+
+
+def _model(ctx: BenchContext) -> Path | None:
+    """The shipped model, else a stand-in with its I/O (noted), else None."""
+    from darkread.edge.reconstruct import default_model_path
+
+    if default_model_path().is_file():
+        return None
+    try:
+        import onnx
+        from onnx import TensorProto, helper
+    except ImportError:
+        raise RuntimeError("no shipped model and no `onnx` package to build a stand-in") from None
+    x = helper.make_tensor_value_info("voxel", TensorProto.FLOAT, ["batch", 4, 100, 200])
+    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["batch", 1, 100, 200])
+    weight = helper.make_tensor("w", TensorProto.FLOAT, [1, 4, 3, 3], np.full(36, 0.1, np.float32).tolist())
+    node = helper.make_node("Conv", ["voxel", "w"], ["logits"], pads=[1, 1, 1, 1])
+    model = helper.make_model(
+        helper.make_graph([node], "standin", [x], [y], initializer=[weight]),
+        opset_imports=[helper.make_opsetid("", 17)],
+    )
+    model.ir_version = 8
+    path = ctx.scratch / "standin.onnx"
+    onnx.save(model, str(path))
+    ctx.notes.append("edge: the shipped binary_unet.onnx is missing; timed with a one-conv stand-in model")
+    return path
+
+
+@contextlib.contextmanager
+def _one_core() -> Iterator[bool]:
+    getter = getattr(os, "sched_getaffinity", None)
+    if getter is None:
+        yield False
+        return
+    before = getter(0)
+    try:
+        os.sched_setaffinity(0, {min(before)})
+    except OSError:
+        yield False
+        return
+    try:
+        yield True
+    finally:
+        os.sched_setaffinity(0, before)
+
+
+def _decode_only_cpu_s(raw_path: Path) -> float:
+    from darkread.edge.io.raw import RawReader
+
+    started = time.process_time()
+    for _ in RawReader(raw_path, chunk_bytes=1 << 18):
+        pass
+    return time.process_time() - started
+
+
+def _run_edge(recording: Path, model: Path | None, speed: float | None, on_frame_factory) -> tuple[float, float, object, object]:  # noqa: ANN001
+    """(wall s, process CPU s, source, metrics) of one replay through the loop."""
+    from darkread.edge.gaze import GazeMapper
+    from darkread.edge.io.recording import open_recording
+    from darkread.edge.metrics import EdgeMetrics
+    from darkread.edge.pipeline import Pipeline, PipelineSettings
+    from darkread.edge.reconstruct import Reconstructor
+    from darkread.edge.sources.replay import ReplaySource
+
+    rec = open_recording(recording)
+    source = ReplaySource(rec.raw_path, speed=speed)
+    gaze = GazeMapper(rec.calibration, rec.gaze())
+    reconstructor = Reconstructor(model, threads=1)
+    metrics = EdgeMetrics()
+    on_frame = on_frame_factory(metrics)
+    pipeline = Pipeline(source, gaze, reconstructor, on_frame, PipelineSettings(lossless=speed is None), metrics)
+    started, cpu_started = time.perf_counter(), time.process_time()
+    pipeline.start()
+    source.wait()
+    pipeline.stop()
+    wall, cpu = time.perf_counter() - started, time.process_time() - cpu_started
+    if pipeline.error is not None:
+        raise RuntimeError(f"edge loop failed: {pipeline.error}")
+    return wall, cpu, source, metrics
+
+
+class _AckServer:
+    """A local websocket endpoint that speaks just enough of the protocol to ack every message."""
+
+    def __init__(self) -> None:
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self.thread.start()
+        self.port = asyncio.run_coroutine_threadsafe(self._start(), self.loop).result(10)
+
+    async def _start(self) -> int:
+        from websockets.asyncio.server import serve
+
+        self.server = await serve(self._handle, "127.0.0.1", 0)
+        return int(self.server.sockets[0].getsockname()[1])
+
+    async def _handle(self, ws) -> None:  # noqa: ANN001
+        from darkread.proto.messages import Ack, Welcome, decode, encode
+
+        hello = decode(await ws.recv(), max_bytes=1 << 22)
+        await ws.send(encode(Welcome(session_id=hello.session_id, last_acked_seq=-1, max_message_bytes=1 << 22)))
+        async for data in ws:
+            seq = getattr(decode(data, max_bytes=1 << 22), "seq", None)
+            if seq is not None:
+                await ws.send(encode(Ack(seq=seq)))
+
+    def close(self) -> None:
+        async def stop() -> None:
+            self.server.close()
+            await self.server.wait_closed()
+
+        asyncio.run_coroutine_threadsafe(stop(), self.loop).result(10)
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(10)
+        self.loop.close()
+
+
+def run(ctx: BenchContext) -> list[Figure]:
+    from darkread.edge.io.recording import open_recording
+    from darkread.edge.spool import Spool
+    from darkread.edge.uplink import Uplink, UplinkSettings
+    from darkread.proto.messages import encode
+
+    recording = _recording(ctx)
+    if recording is None:
+        ctx.notes.append("edge: no sample recording (darkread/data or ../shared); skipped")
+        return []
+    model = _model(ctx)
+    meta = open_recording(recording).meta
+    repeats = 1 if ctx.quick else 3
+
+    def encode_only(metrics):  # noqa: ANN001, ANN202
+        return lambda frame, arrival: encode(frame.to_message())
+
+    with _one_core() as pinned:
+        decode_s = min(_decode_only_cpu_s(recording / "events.raw") for _ in range(repeats))
+        runs = [_run_edge(recording, model, None, encode_only) for _ in range(repeats)]
+    wall, cpu, source, metrics = min(runs, key=lambda r: r[1])
+    span_s = source.stats["recording_s"]
+    rtf = span_s / cpu  # CPU seconds: on a shared host the wall clock also counts other processes
+    frames = metrics.totals["frames"]
+    if not pinned:
+        ctx.notes.append("edge: could not pin to one core; the real-time factor used all cores")
+
+    server = _AckServer()
+    try:
+        uplinks: list[Uplink] = []
+
+        def to_uplink(metrics):  # noqa: ANN001, ANN202
+            uplink = Uplink(UplinkSettings(url=f"ws://127.0.0.1:{server.port}/v1/stream", device_id="bench"), Spool(None), metrics)
+            uplink.start()
+            uplink.connected.wait(5)
+            uplinks.append(uplink)
+            return lambda frame, arrival: uplink.submit(frame.to_message(), submitted_at=arrival)
+
+        _, _, _, paced = _run_edge(recording, model, 1.0, to_uplink)
+        uplinks[0].stop(drain_timeout_s=5)
+    finally:
+        server.close()
+    latency = np.fromiter(paced.latency_ms, float)
+    inference = np.fromiter(paced.inference_ms, float)
+    rate = meta.get("event_rate_hz", source.stats["events_out"] / max(span_s, 1e-9))
+    decode_ref = f"decode only {span_s / decode_s:.0f}x"
+    infer_ref = f"inference alone p50 {np.percentile(inference, 50):.2f} ms, p99 {np.percentile(inference, 99):.2f} ms"
+    return [
+        Figure(
+            "edge_realtime_factor", rtf,
+            f"edge real-time factor, 1 core CPU time, lossless ({frames} frames, {rate / 1e3:.0f} kev/s)",
+            reference=f"{decode_ref}; wall clock {span_s / wall:.1f}x", goal=">= 20x",
+        ),
+        Figure("edge_decode_realtime_factor", span_s / decode_s, "RAW decode alone, real-time factor", reference="(reference)"),
+        Figure(
+            "edge_latency_p50_ms", float(np.percentile(latency, 50)),
+            f"event-to-wire latency p50, paced at 1x ({latency.size} frames)", reference=infer_ref,
+        ),
+        Figure("edge_latency_p99_ms", float(np.percentile(latency, 99)), "event-to-wire latency p99, paced at 1x",
+               reference=infer_ref, goal="<= 20 ms"),
+    ]
