@@ -3,7 +3,8 @@
 Two threads keep the sensor drained even on slow ARM hosts: the drain thread does nothing but
 read EP 0x81 into a bounded byte queue (a stalled endpoint overflows the sensor FIFO), and the
 decode thread turns those bytes into event arrays and hands them to the sink. When the sink
-falls behind, whole USB chunks are dropped and counted rather than stalling the endpoint.
+falls behind, whole USB chunks are dropped and counted rather than stalling the endpoint; the
+decoder then resumes at the next point where the EVT3 state is fully known (``resync``).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from darkread.edge.events import Events
 from darkread.edge.sources.base import EventSink
 from darkread.edge.sources.evk4 import registers as regs
 from darkread.edge.sources.evk4.device import Evk4Device, Sleep
+from darkread.edge.sources.evk4.resync import ChunkAligner
 from darkread.edge.sources.evk4.treuzell import format_version
 
 log = logging.getLogger(__name__)
@@ -118,13 +120,13 @@ class Evk4Camera:
         self._device: Evk4Device | None = None
         self._config_lock = threading.RLock()
         self._stop_event = threading.Event()
-        self._queue: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+        self._queue: queue.SimpleQueue[tuple[int, bytes] | None] = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
         self._reader_error: DarkreadError | None = None
         self._counts_lock = threading.Lock()
         self._counts = dict.fromkeys(
             ("bytes_read", "usb_reads", "usb_timeouts", "events", "triggers", "dropped_bytes",
-             "queued_bytes", "decode_errors", "sink_errors", "roi_writes"), 0,
+             "queued_bytes", "stream_gaps", "skipped_bytes", "decode_errors", "sink_errors", "roi_writes"), 0,
         )  # fmt: skip
         self._started_at: float | None = None
         self._stopped_at: float | None = None
@@ -266,6 +268,7 @@ class Evk4Camera:
     # --- threads ------------------------------------------------------------------------------
 
     def _drain_loop(self, device: Evk4Device) -> None:
+        offset = 0  # position of the next byte in the sensor's stream, dropped bytes included
         while not self._stop_event.is_set():
             try:
                 data = device.read_data(self.transfer_bytes)
@@ -280,19 +283,20 @@ class Evk4Camera:
                     counts["usb_timeouts"] += 1
                     continue
                 counts["bytes_read"] += len(data)
+                offset += len(data)
                 if counts["queued_bytes"] + len(data) > self._max_queue_bytes:
                     counts["dropped_bytes"] += len(data)
                     continue
                 counts["queued_bytes"] += len(data)
-            self._queue.put(data)
+            self._queue.put((offset - len(data), data))
 
-    def _next_batch(self) -> tuple[bytes, bool]:
-        """Everything queued (up to ``COALESCE_BYTES``) as one buffer, and whether the stream ended.
+    def _next_batch(self) -> tuple[list[tuple[int, bytes]], bool]:
+        """Everything queued (up to ``COALESCE_BYTES``), and whether the stream ended.
 
         Decoding a few large buffers costs far less than many small ones, which is what lets a
         slow host catch up after a burst.
         """
-        parts: list[bytes] = []
+        parts: list[tuple[int, bytes]] = []
         size, ended = 0, False
         item = self._queue.get()
         while True:
@@ -300,7 +304,7 @@ class Evk4Camera:
                 ended = True
                 break
             parts.append(item)
-            size += len(item)
+            size += len(item[1])
             if size >= COALESCE_BYTES:
                 break
             try:
@@ -309,12 +313,18 @@ class Evk4Camera:
                 break
         with self._counts_lock:
             self._counts["queued_bytes"] -= size
-        return (parts[0] if len(parts) == 1 else b"".join(parts)), ended  # b"" when only the end came
+        return parts, ended
 
     def _decode_loop(self, decoder: Decoder, sink: EventSink) -> None:
+        aligner = ChunkAligner()
         ended = False
         while not ended:
-            chunk, ended = self._next_batch()
+            parts, ended = self._next_batch()
+            pieces = [aligner.push(offset, data) for offset, data in parts]
+            chunk = pieces[0] if len(pieces) == 1 else b"".join(pieces)
+            with self._counts_lock:
+                self._counts["stream_gaps"] = aligner.gaps
+                self._counts["skipped_bytes"] = aligner.skipped_bytes
             if not chunk:
                 continue
             try:
