@@ -1,0 +1,1 @@
+"""Evaluation: error rates, the RGB baseline, bandwidth accounting, suites and reports."""
