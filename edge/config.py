@@ -50,6 +50,7 @@ class PipelineConfig:
     threads: int = 1
     ring_capacity: int = 1 << 19  # 8 MB: 0.5 s at 1 Mev/s, far more than a window needs
     lossless: bool = False  # True: the reader waits for inference instead of skipping windows
+    stall_s: float = 5.0  # no events for this long: the watchdog is no longer fed (systemd restarts us)
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,7 @@ class PipelineSettings:
     bins: int = 4
     history_events: int = 1 << 16  # usual cap of the ring events searched for a window's events
     lossless: bool = False  # the reader reconstructs (waits for inference) instead of skipping windows
+    stall_s: float = 5.0  # no events for this long: stop feeding the watchdog (a sensor always has noise)
 
     @property
     def voxel(self) -> VoxelConfig:
@@ -163,6 +164,7 @@ class Pipeline:
         self._new_foveated = 0
         self._new_events = 0
         self._last_arrival = 0.0
+        self._started_at = 0.0
         self._ring_dropped = 0
         self._history = MIN_HISTORY_EVENTS
         self._cond = threading.Condition()
@@ -197,6 +199,7 @@ class Pipeline:
     def start(self) -> None:
         if self._thread is not None:
             raise RuntimeError("pipeline already started")
+        self._started_at = time.monotonic()
         self._thread = threading.Thread(target=self._run, name="edge-reconstruct", daemon=True)
         self._thread.start()
         self.source.start(self.sink)
@@ -232,11 +235,16 @@ class Pipeline:
                     lambda: (self._new_foveated >= k and not lossless) or self._source_done.is_set(), timeout=period_s
                 )
                 final = self._source_done.is_set()
-            if self.watchdog is not None:
+            if self.watchdog is not None and self._alive():
                 self.watchdog()
             self._process(self._take())
             if final:
                 return
+
+    def _alive(self) -> bool:
+        """Events arrived recently (or the source is still starting): the pipeline is not stalled."""
+        last = self._last_arrival or self._started_at
+        return time.monotonic() - last < self.settings.stall_s
 
     def _take(self) -> tuple[int, int, float, bool]:
         """Claim the pending counts: (new foveated, new events, newest arrival, window placed)."""

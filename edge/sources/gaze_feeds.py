@@ -13,6 +13,9 @@ UDP datagram (one sample per datagram, JSON object or msgpack map, UTF-8, <= 1 K
 projection convention (direction proportional to (tan yaw, tan pitch, 1), x to the wearer's left,
 y up); ``depth_m`` optional metres to the gaze point (absent or null: the reading-depth prior).
 Invalid datagrams are counted and ignored.
+
+A control datagram ``{"clock_offset_us": -1234}`` (integer) sets the gaze -> event clock offset
+while running, e.g. after the tracker re-synchronised its clock.
 """
 
 from __future__ import annotations
@@ -119,6 +122,10 @@ def _finite(value: Any, name: str) -> float:
 
 def parse_gaze_datagram(data: bytes) -> tuple[int, float, float, float | None]:
     """One UDP datagram (JSON object or msgpack map) -> (t_us, yaw, pitch, depth_m or None)."""
+    return _gaze_sample(_datagram_payload(data))
+
+
+def _datagram_payload(data: bytes) -> Mapping[str, Any]:
     if len(data) > MAX_DATAGRAM_BYTES:
         raise ValueError(f"datagram of {len(data)} bytes exceeds {MAX_DATAGRAM_BYTES}")
     try:
@@ -130,6 +137,10 @@ def parse_gaze_datagram(data: bytes) -> tuple[int, float, float, float | None]:
         raise ValueError(f"not JSON or msgpack: {exc}") from None
     if not isinstance(payload, Mapping):
         raise ValueError("a gaze datagram must be a JSON object or msgpack map")
+    return payload
+
+
+def _gaze_sample(payload: Mapping[str, Any]) -> tuple[int, float, float, float | None]:
     t_us = payload.get("t_us")
     if isinstance(t_us, bool) or not isinstance(t_us, int):
         raise ValueError(f"t_us must be an integer (microseconds), got {t_us!r}")
@@ -170,6 +181,12 @@ class UdpGazeFeed:
     def stats(self) -> dict[str, float]:
         return {"gaze_received": float(self.live.received), "gaze_rejected": float(self.rejected)}
 
+    def _set_offset(self, value: Any) -> None:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"clock_offset_us must be an integer, got {value!r}")
+        logger.info("gaze clock offset %d -> %d us", self.live.clock_offset_us, value)
+        self.live.clock_offset_us = value
+
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
@@ -179,7 +196,11 @@ class UdpGazeFeed:
             except OSError:
                 return
             try:
-                self.live.push(*parse_gaze_datagram(data))
+                payload = _datagram_payload(data)
+                if "clock_offset_us" in payload and "t_us" not in payload:
+                    self._set_offset(payload["clock_offset_us"])
+                else:
+                    self.live.push(*_gaze_sample(payload))
             except ValueError as exc:
                 self.rejected += 1
                 if logger.isEnabledFor(logging.DEBUG):

@@ -92,13 +92,16 @@ def test_udp_feed_receives_and_counts_rejects() -> None:
             sender.sendto(json.dumps({"t_us": 100, "yaw": 0.0, "pitch": 0.0}).encode(), ("127.0.0.1", feed.port))
             sender.sendto(b"garbage", ("127.0.0.1", feed.port))
             sender.sendto(msgpack.packb({"t_us": 200, "yaw": 0.0, "pitch": 0.05}), ("127.0.0.1", feed.port))
+            sender.sendto(json.dumps({"clock_offset_us": 1000}).encode(), ("127.0.0.1", feed.port))
+            sender.sendto(json.dumps({"clock_offset_us": "soon"}).encode(), ("127.0.0.1", feed.port))
         deadline = time.monotonic() + 2
-        while (live.received < 2 or feed.rejected < 1) and time.monotonic() < deadline:
+        while (live.received < 2 or feed.rejected < 2) and time.monotonic() < deadline:
             time.sleep(0.01)
     finally:
         feed.stop()
-    assert feed.stats == {"gaze_received": 2.0, "gaze_rejected": 1.0}
-    assert live.angles_at(200) == pytest.approx((0.0, 0.05))
+    assert feed.stats == {"gaze_received": 2.0, "gaze_rejected": 2.0}
+    assert live.clock_offset_us == 1000  # set at run time by the control datagram
+    assert live.angles_at(1200) == pytest.approx((0.0, 0.05))
 
 
 def test_udp_port_in_use_is_a_device_error() -> None:

@@ -277,3 +277,19 @@ def test_metrics_http_endpoint_serves_prometheus_text() -> None:
 
 def test_event_dtype_is_the_shared_one() -> None:
     assert ListSource([]).width == 1280 and EVENT_CD_DTYPE.itemsize == 16
+
+
+def test_watchdog_is_no_longer_fed_when_the_source_stalls() -> None:
+    ev = events_in_box(2000, 540, 310, 200, 100)
+    source = ListSource(chunked(ev, 500))
+    pings: list[float] = []
+    settings = PipelineSettings(period_ms=5.0, stall_s=0.1)
+    pipeline = Pipeline(source, FixedGaze(), ink_where_events, lambda f, t: None, settings,
+                        watchdog=lambda: pings.append(time.monotonic()))
+    pipeline.start()
+    assert source.done.wait(5)  # then silence, as from a hung sensor
+    last_event = time.monotonic()
+    time.sleep(0.3)
+    pipeline.stop()
+    assert pings and pings[0] < last_event + 0.1
+    assert max(pings) < last_event + 0.15  # no pings once stalled
