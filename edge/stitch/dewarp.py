@@ -89,17 +89,55 @@ def estimate_line_warp(
     return warp
 
 
-def apply_line_warp(canvas: Canvas, warp: LineWarp) -> bool:
-    """Resample every layer of a strip canvas in place; False when the warp is negligible."""
+def warped_layers(canvas: Canvas, warp: LineWarp) -> dict[str, np.ndarray] | None:
+    """Every layer of a strip canvas resampled by ``warp``; None when the warp is negligible."""
     h, w = canvas.shape
     cols = np.arange(w, dtype=np.float64) + canvas.x0
     dx, dy = warp.at(cols)
     if max(np.abs(dx).max(initial=0), np.abs(dy).max(initial=0)) < _MIN_SHIFT_PX:
-        return False
-    map_x = np.broadcast_to((np.arange(w) + dx).astype(np.float32), (h, w))
+        return None
+    map_x = np.ascontiguousarray(np.broadcast_to((np.arange(w) + dx).astype(np.float32), (h, w)))
     map_y = (np.arange(h, dtype=np.float32)[:, None] + dy.astype(np.float32)[None, :]).astype(np.float32)
-    map_x = np.ascontiguousarray(map_x)
+    out = {}
     for name, layer in canvas.layers.items():
         interp = cv2.INTER_LINEAR if name in ("avg", "conf") else cv2.INTER_NEAREST
-        canvas.layers[name] = cv2.remap(layer, map_x, map_y, interp, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        out[name] = cv2.remap(layer, map_x, map_y, interp, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return out
+
+
+def apply_line_warp(canvas: Canvas, warp: LineWarp) -> bool:
+    """Resample every layer of a strip canvas in place; False when the warp is negligible."""
+    layers = warped_layers(canvas, warp)
+    if layers is None:
+        return False
+    canvas.layers = layers
     return True
+
+
+def _agreement(reference: np.ndarray, strip: np.ndarray, where: np.ndarray) -> float:
+    """Normalised correlation of two ink images over ``where``."""
+    a, b = reference[where].astype(np.float64), strip[where].astype(np.float64)
+    if a.size < 2 or a.std() == 0 or b.std() == 0:
+        return -1.0
+    return float(np.corrcoef(a, b)[0, 1])
+
+
+def dewarp_strip(canvas: Canvas, reference: np.ndarray, reference_valid: np.ndarray, cfg: StitchConfig) -> LineWarp | None:
+    """Estimate a finished strip's warp against the page (same box as the canvas) and undo it, but
+    only if that makes the strip agree better with the page where both have content (a warp fitted
+    to the neighbouring line's features must not tilt the line itself)."""
+    valid = canvas.layers["count"] > 0
+    warp = estimate_line_warp(reference, reference_valid, canvas.layers["avg"], valid, canvas.x0, cfg)
+    if warp is None:
+        return None
+    layers = warped_layers(canvas, warp)
+    if layers is None:
+        return None
+    before_where = reference_valid & valid
+    after_where = reference_valid & (layers["count"] > 0)
+    before = _agreement(reference, canvas.layers["avg"], before_where)
+    after = _agreement(reference, layers["avg"], after_where)
+    if after < before + cfg.dewarp_min_gain:
+        return None
+    canvas.layers = layers
+    return warp

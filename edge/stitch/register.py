@@ -22,6 +22,15 @@ class Registration:
     shift_xy: tuple[int, int]  # correction to the predicted top-left
     score: float  # normalised correlation at the peak, in [-1, 1]
     overlap: float  # share of the frame that overlapped known content
+    subpixel_xy: tuple[float, float] = (0.0, 0.0)  # parabolic refinement of the peak, within +-0.5 px
+
+
+def _parabola_vertex(left: float, centre: float, right: float) -> float:
+    """Offset of the vertex of the parabola through three equally spaced samples."""
+    curvature = left - 2.0 * centre + right
+    if curvature >= 0:  # not a maximum
+        return 0.0
+    return float(np.clip(0.5 * (left - right) / curvature, -0.5, 0.5))
 
 
 def blur(image: np.ndarray, sigma: float) -> np.ndarray:
@@ -69,4 +78,6 @@ def register_frame(
     by, bx = np.unravel_index(int(np.argmax(scores)), scores.shape)
     dx, dy = int(bx) - radius, int(by) - radius
     peak = float(scores[by, bx]) + _CENTRE_PRIOR * (dx * dx + dy * dy) / float(max(1, radius) ** 2)
-    return Registration((dx, dy), peak, overlap)
+    sx = _parabola_vertex(*scores[by, bx - 1 : bx + 2]) if 0 < bx < scores.shape[1] - 1 else 0.0
+    sy = _parabola_vertex(*scores[by - 1 : by + 2, bx]) if 0 < by < scores.shape[0] - 1 else 0.0
+    return Registration((dx, dy), peak, overlap, (sx, sy))

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from darkread.edge.stitch.dewarp import apply_line_warp, estimate_line_warp
+from darkread.edge.stitch.dewarp import dewarp_strip
 from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
 from darkread.edge.stitch.page import (
     PageCanvas,
@@ -51,7 +51,7 @@ class PageStitcher:
         self._page = PageCanvas()
         self._lines: list[_FinishedLine] = []
         self._strip: LineStrip | None = None
-        self._correction = np.zeros(2, dtype=np.int64)  # page position - sensor position (head motion)
+        self._correction = np.zeros(2)  # page position - sensor position (head motion), sub-pixel
         self._used = 0
         self._dropped = 0
         self._positions: dict[int, tuple[int, int]] = {}
@@ -80,10 +80,8 @@ class PageStitcher:
         if not self._page.canvas.empty:
             box = strip.canvas.box
             reference, seen = self._page.reference(None, box)
-            warp = estimate_line_warp(
-                reference, seen, strip.canvas.layers["avg"], strip.canvas.layers["count"] > 0, box[0], self.cfg
-            )
-            if warp is not None and apply_line_warp(strip.canvas, warp):
+            warp = dewarp_strip(strip.canvas, reference, seen, self.cfg)
+            if warp is not None:
                 log.debug("line %d de-warped with %d tracked points", len(self._lines), warp.points)
         self._page.add_strip(strip)
         self._lines.append(_FinishedLine(strip, float(np.median(strip.gaze_rows))))
@@ -100,7 +98,8 @@ class PageStitcher:
             self._strip = LineStrip()
         h, w = mask.shape
         r = cfg.search_radius_px
-        px, py = (np.asarray(frame.origin_xy) + self._correction).tolist()
+        px, py = np.round(np.asarray(frame.origin_xy) + self._correction).astype(int).tolist()
+        x, y = float(px), float(py)
         reference, seen = self._page.reference(self._strip, (px - r, py - r, px + w + r, py + h + r))
         reg = register_frame(reference, seen, mask, r, cfg.blur_sigma_px, cfg.min_overlap_fraction)
         if reg is None:
@@ -111,11 +110,12 @@ class PageStitcher:
             return
         else:
             score = reg.score
-            px, py = px + reg.shift_xy[0], py + reg.shift_xy[1]
-            self._correction = np.array([px, py]) - np.asarray(frame.origin_xy)
+            x = px + reg.shift_xy[0] + (reg.subpixel_xy[0] if cfg.subpixel else 0.0)
+            y = py + reg.shift_xy[1] + (reg.subpixel_xy[1] if cfg.subpixel else 0.0)
+            self._correction = np.array([x, y]) - np.asarray(frame.origin_xy)
         gaze_row = frame.gaze_px[1] + float(self._correction[1])
-        self._strip.add(mask, px, py, score, gaze_row, frame.frame_id, cfg)
-        self._positions[frame.frame_id] = (px, py)
+        self._strip.add(mask, x, y, score, gaze_row, frame.frame_id, cfg)
+        self._positions[frame.frame_id] = (x, y)
         self._used += 1
 
     def page(self) -> Page:

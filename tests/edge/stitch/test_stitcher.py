@@ -12,7 +12,7 @@ from darkread.edge.stitch import PageStitcher, StitchConfig, StitchFrame, naive_
 def test_stitched_page_matches_the_truth(rendered_page, stitched) -> None:
     exact, _ = ink_f1_aligned(stitched.image, rendered_page.mask)
     tolerant, _ = ink_f1_aligned(stitched.image, rendered_page.mask, tolerance_px=1)
-    assert exact >= 0.75  # measured 0.82 (strokes ~2 px wide; frames rotated by head roll)
+    assert exact >= 0.75  # measured 0.82 (strokes are ~2 px wide; frames are rotated by the head roll)
     assert tolerant >= 0.97  # measured 0.998
 
 
