@@ -181,3 +181,25 @@ def test_unit_file_is_notify_with_watchdog_and_hardening() -> None:
     assert directives["StateDirectory"] == "darkread-edge"
     assert "edge run" in directives["ExecStart"]
     assert directives["SupplementaryGroups"]
+
+
+def test_edge_run_options_become_config_overrides(tmp_path: Path) -> None:
+    import argparse
+
+    from darkread.edge.cli import overrides_from_args, register
+
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(
+        ["edge", "run", "--replay", "rec", "--cloud", "ws://h:1/v1/stream", "--api-key", "K",
+         "--speed", "max", "--mode", "pages", "--spool", str(tmp_path), "--metrics-port", "9100"]
+    )
+    config = load_config(None, environ={}, overrides=overrides_from_args(args))
+    assert config.source.kind == "replay" and config.source.path == "rec" and config.source.speed == 0.0
+    assert config.gaze.kind == "recording"
+    assert config.uplink.url == "ws://h:1/v1/stream" and config.uplink.api_key == "K"
+    assert config.uplink.mode == "pages" and config.uplink.spool_dir == str(tmp_path)
+    assert config.metrics.port == 9100
+    args = parser.parse_args(["edge", "run", "--speed", "2", "--gaze", "udp", "--gaze-port", "7100"])
+    config = load_config(None, environ={}, overrides=overrides_from_args(args))
+    assert config.source.speed == 2.0 and config.gaze.kind == "udp" and config.gaze.udp_port == 7100

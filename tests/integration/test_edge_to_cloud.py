@@ -144,3 +144,27 @@ def test_cloud_killed_mid_stream_every_frame_delivered_once(tmp_path: Path, reco
         assert service.uplink.spool.depth == 0
     finally:
         cloud.stop()
+
+
+def test_edge_run_cli_stitches_pages_on_the_glasses(tmp_path: Path, recording: Path) -> None:
+    port = free_port()
+    cloud = Cloud(tmp_path / "cloud", port)
+    cloud.start()
+    try:
+        env = dict(os.environ, DARKREAD_EDGE_UPLINK_API_KEY=API_KEY)
+        run = subprocess.run(
+            [sys.executable, "-m", "darkread", "edge", "run", "--replay", str(recording),
+             "--cloud", f"ws://127.0.0.1:{port}/v1/stream", "--speed", "max", "--mode", "pages",
+             "--model", str(tiny_model(tmp_path / "tiny.onnx")), "--spool", str(tmp_path / "spool"),
+             "--session", "cli-pages", "--drain-timeout", "15"],
+            env=env, capture_output=True, text=True, timeout=60,
+        )
+        assert run.returncode == 0, run.stderr[-2000:]
+        with sqlite3.connect(tmp_path / "cloud" / "darkread.sqlite3") as db:
+            pages = db.execute("SELECT seq, rows, cols FROM pages WHERE session_id = 'cli-pages'").fetchall()
+            frames = db.execute("SELECT COUNT(*) FROM frames WHERE session_id = 'cli-pages'").fetchone()[0]
+        assert pages and frames == 0
+        assert all(rows > 0 and cols > 0 for _, rows, cols in pages)
+        assert "stopped (clean)" in run.stderr
+    finally:
+        cloud.stop()
