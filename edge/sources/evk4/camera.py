@@ -16,6 +16,8 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from usb.util import SPEED_SUPER
+
 from darkread.edge.errors import DarkreadError, DeviceError
 from darkread.edge.events import Events
 from darkread.edge.sources.base import EventSink
@@ -180,7 +182,7 @@ class Evk4Camera:
                     f"(need {format_version(regs.MIN_FIRMWARE_VERSION)} or newer): update it with Prophesee's "
                     "firmware tool (see https://support.prophesee.ai)"
                 )
-        if dev.speed is not None and dev.speed < 4:
+        if dev.speed is not None and dev.speed < SPEED_SUPER:
             log.warning("camera %s is not on a SuperSpeed (USB 3) port: expect dropped events", device.serial)
         sensor_id = device.read_register(regs.REG_SENSOR_ID)
         variant = device.read_register(regs.REG_SENSOR_VARIANT)
@@ -200,8 +202,8 @@ class Evk4Camera:
         self._stop_event.clear()
         self._reader_error = None
         self._queue = queue.SimpleQueue()
-        with self._counts_lock:
-            self._counts["queued_bytes"] = 0
+        with self._counts_lock:  # stream counters describe the current run
+            self._counts.update({k: 0 for k in self._counts if k != "roi_writes"})
         self._threads = [
             threading.Thread(target=self._decode_loop, args=(decoder, sink), name="evk4-decode", daemon=True),
             threading.Thread(target=self._drain_loop, args=(device,), name="evk4-drain", daemon=True),
@@ -244,9 +246,11 @@ class Evk4Camera:
         self._threads = []
 
     def close(self) -> None:
-        """Stop, power the sensor down and release the USB interface; safe to call twice."""
+        """Stop, power the sensor down and release the USB interface; best effort, safe to call twice."""
         try:
             self.stop()
+        except DeviceError as exc:
+            log.warning("stopping the sensor failed: %s", exc)
         finally:
             device, self._device = self._device, None
             if device is not None:
@@ -434,7 +438,13 @@ class Evk4Camera:
         return self._roi or (0, 0, regs.WIDTH, regs.HEIGHT)
 
     @property
+    def error(self) -> DarkreadError | None:
+        """Why the drain thread stopped on its own (camera unplugged, USB error), if it did."""
+        return self._reader_error
+
+    @property
     def stats(self) -> dict[str, float]:
+        """Counters of the current (or last) run; ``*_s`` in seconds, rates per second."""
         with self._counts_lock:
             counts = {k: float(v) for k, v in self._counts.items()}
         end = self._stopped_at or time.monotonic()

@@ -86,6 +86,7 @@ class FakeEvk4:
         self.served_bytes = 0
         self._streaming_since = (0.0, 0)  # (monotonic time, served bytes) when streaming began
         self.claimed = False
+        self.unplugged = False
         self._replies: deque[bytes] = deque()
         self._lock = threading.Lock()
 
@@ -115,6 +116,10 @@ class FakeEvk4:
 
     def register(self, addr: int) -> int:
         return self.registers.get(addr, 0)
+
+    def unplug(self) -> None:
+        """Every later transfer fails as on a disconnected device."""
+        self.unplugged = True
 
     # --- control endpoint ---------------------------------------------------------------------
 
@@ -190,6 +195,11 @@ class FakeEvk4:
                     return b""  # the bridge sends full buffers; until one is filled the read times out
             self.served_bytes += count
             return self.recording[start : start + count]
+
+
+def _check_plugged(board: FakeEvk4) -> None:
+    if board.unplugged:
+        raise usb.core.USBError("No such device (it may have been disconnected)", -4, errno.ENODEV)
 
 
 class FakeUsbBackend(usb.backend.IBackend):
@@ -292,6 +302,7 @@ class FakeUsbBackend(usb.backend.IBackend):
     # --- transfers ----------------------------------------------------------------------------
 
     def bulk_write(self, dev_handle: FakeEvk4, ep: int, intf: int, data: array.array, timeout: int) -> int:
+        _check_plugged(dev_handle)
         if ep != regs.EP_CONTROL_OUT:
             raise usb.core.USBError("Pipe error", -9, errno.EPIPE)
         payload = data.tobytes()
@@ -299,6 +310,7 @@ class FakeUsbBackend(usb.backend.IBackend):
         return len(payload)
 
     def bulk_read(self, dev_handle: FakeEvk4, ep: int, intf: int, buff: array.array, timeout: int) -> int:
+        _check_plugged(dev_handle)
         capacity = len(buff) * buff.itemsize
         if ep == regs.EP_CONTROL_IN:
             reply = dev_handle.control_reply()

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from factories import random_events
 
+from darkread.edge.errors import DeviceError
 from darkread.edge.events import EVENT_CD_DTYPE, Events
 from darkread.edge.io.evt3 import Evt3Decoder
 from darkread.edge.sources.evk4.camera import Evk4Camera
@@ -141,6 +142,21 @@ def test_sink_errors_are_counted_and_the_stream_goes_on() -> None:
     assert camera.stats["sink_errors"] == 1 and len(calls) > 1
     assert sum(calls) == len(events)  # only the failed chunk is lost downstream, nothing upstream
     camera.close()
+
+
+def test_unplugged_camera_ends_the_stream_with_a_clear_error() -> None:
+    fake = FakeEvk4.from_events(random_events(50_000, seed=4), chunk_bytes=1024, rate_bytes_s=1e6)
+    sink = Collector()
+    camera = camera_on(fake, transfer_bytes=1024)
+    camera.start(sink)
+    wait_for(lambda: sink.count > 0)
+    fake.unplug()
+    wait_for(lambda: camera.error is not None)
+    assert "disappeared" in str(camera.error) and camera.stats["reader_failed"] == 1
+    with pytest.raises(DeviceError, match="disappeared"):
+        camera.stop()
+    camera.close()  # best effort after an unplug: logs, does not raise
+    assert not camera.is_open and not fake.claimed
 
 
 @pytest.mark.shared
