@@ -53,16 +53,16 @@ CREATE TABLE IF NOT EXISTS frames (
     gaze_u REAL NOT NULL, gaze_v REAL NOT NULL, yaw REAL NOT NULL, pitch REAL NOT NULL,
     events_used INTEGER NOT NULL, rows INTEGER NOT NULL, cols INTEGER NOT NULL, bits BLOB NOT NULL,
     PRIMARY KEY (session_id, seq)
-) WITHOUT ROWID;
+);
 CREATE TABLE IF NOT EXISTS pages (
     session_id TEXT NOT NULL, seq INTEGER NOT NULL, page_id INTEGER NOT NULL, t_us INTEGER NOT NULL,
     rows INTEGER NOT NULL, cols INTEGER NOT NULL, png_path TEXT NOT NULL, lines TEXT NOT NULL,
     PRIMARY KEY (session_id, seq)
-) WITHOUT ROWID;
+);
 CREATE TABLE IF NOT EXISTS gaze (
     session_id TEXT NOT NULL, seq INTEGER NOT NULL, samples BLOB NOT NULL,
     PRIMARY KEY (session_id, seq)
-) WITHOUT ROWID;
+);
 """
 
 
@@ -157,9 +157,10 @@ class Store:
     # --- plumbing -----------------------------------------------------------------------------
 
     def _connect(self) -> sqlite3.Connection:
-        conn = sqlite3.connect(self.db_path, timeout=30, check_same_thread=False)
+        # Autocommit mode: transactions are explicit (BEGIN/COMMIT in the writer), so a savepoint
+        # never commits on its own.
+        conn = sqlite3.connect(self.db_path, timeout=30, check_same_thread=False, isolation_level=None)
         conn.execute("PRAGMA synchronous=FULL")  # a commit is on disk before we ack
-        conn.execute("PRAGMA foreign_keys=ON")
         return conn
 
     @contextmanager
@@ -189,21 +190,27 @@ class Store:
             conn.close()
 
     def _run_batch(self, conn: sqlite3.Connection, batch: list[_Job]) -> None:
+        """One transaction, one commit (one fsync) for the whole batch; a failing job rolls back
+        only its own savepoint and reports its error to its own caller."""
         results: list[tuple[Callable[[Any, BaseException | None], None], Any, BaseException | None]] = []
         seqs_before = dict(self._last_seq)
         try:
-            with conn:  # one transaction, one commit for the whole batch
-                for work, done in batch:
-                    try:
-                        conn.execute("SAVEPOINT job")
-                        results.append((done, work(conn), None))
-                        conn.execute("RELEASE job")
-                    except Exception as exc:  # noqa: BLE001 - the error belongs to the job's caller
-                        conn.execute("ROLLBACK TO job")
-                        conn.execute("RELEASE job")
-                        results.append((done, None, exc))
+            conn.execute("BEGIN IMMEDIATE")
+            for work, done in batch:
+                conn.execute("SAVEPOINT job")
+                try:
+                    value = work(conn)
+                except Exception as exc:  # noqa: BLE001 - the error belongs to the job's caller
+                    conn.execute("ROLLBACK TO job")
+                    results.append((done, None, exc))
+                else:
+                    results.append((done, value, None))
+                conn.execute("RELEASE job")
+            conn.execute("COMMIT")
         except (sqlite3.Error, OSError) as exc:
             log.error("store commit failed: %s", exc)
+            if conn.in_transaction:
+                conn.execute("ROLLBACK")
             self._last_seq = seqs_before
             for _, done in batch:
                 done(None, StoreError(f"commit failed: {exc}"))
