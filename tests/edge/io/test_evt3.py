@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib.util
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -19,6 +21,16 @@ def pack(*words: int) -> bytes:
     return np.array(words, dtype="<u2").tobytes()
 
 
+HAVE_NUMBA = importlib.util.find_spec("numba") is not None
+BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(not HAVE_NUMBA, reason="numba not installed"))]
+CHUNKED_BACKEND = "auto"
+
+
+@pytest.fixture(params=BACKENDS)
+def backend(request: pytest.FixtureRequest) -> str:
+    return request.param
+
+
 TH, TL, Y, X, BASE, V12, V8, TRIG, OTHERS, CONT12, CONT4 = 8, 6, 0, 2, 3, 4, 5, 0xA, 0xE, 0xF, 0x7
 
 
@@ -26,43 +38,43 @@ def columns(events: np.ndarray) -> list[tuple[int, int, int, int]]:
     return [(int(e["x"]), int(e["y"]), int(e["p"]), int(e["t"])) for e in events]
 
 
-def test_single_events_take_row_time_and_polarity() -> None:
+def test_single_events_take_row_time_and_polarity(backend: str) -> None:
     data = pack(w(TH, 5), w(TL, 7), w(Y, 10), w(X, 3 | 0x800), w(X, 4), w(TL, 9), w(Y, 11), w(X, 1279))
-    events, triggers = decode_evt3(data)
+    events, triggers = decode_evt3(data, backend=backend)
     assert columns(events) == [(3, 10, 1, 5 * 4096 + 7), (4, 10, 0, 5 * 4096 + 7), (1279, 11, 0, 5 * 4096 + 9)]
     assert len(triggers) == 0
 
 
-def test_vector_group_expands_bits_from_base_and_advances_it() -> None:
+def test_vector_group_expands_bits_from_base_and_advances_it(backend: str) -> None:
     # base 64 ON; VECT_12 bits 0 and 11; VECT_12 bit 0 (-> 76); VECT_8 bit 7 (-> 88 + 7); then a continuation group
     data = pack(w(TH, 1), w(TL, 2), w(Y, 3), w(BASE, 64 | 0x800), w(V12, 0x801), w(V12, 0x001), w(V8, 0xF80), w(V12, 1))
-    events, _ = decode_evt3(data)
+    events, _ = decode_evt3(data, backend=backend)
     assert [e[0] for e in columns(events)] == [64, 75, 76, 95, 96]
     assert set(events["p"]) == {1} and set(events["y"]) == {3}
     assert set(events["t"]) == {4096 + 2}
 
 
-def test_vectors_and_single_events_keep_stream_order() -> None:
+def test_vectors_and_single_events_keep_stream_order(backend: str) -> None:
     data = pack(w(TH, 0), w(TL, 1), w(Y, 0), w(X, 500), w(BASE, 32), w(V12, 3), w(X, 7), w(V12, 1), w(X, 8))
-    events, _ = decode_evt3(data)
+    events, _ = decode_evt3(data, backend=backend)
     assert [e[0] for e in columns(events)] == [500, 32, 33, 7, 44, 8]
 
 
-def test_vector_beyond_width_is_dropped_and_counted() -> None:
-    decoder = Evt3Decoder(640, 480)
+def test_vector_beyond_width_is_dropped_and_counted(backend: str) -> None:
+    decoder = Evt3Decoder(640, 480, backend=backend)
     events, _ = decoder.decode(pack(w(TH, 0), w(Y, 1), w(BASE, 636), w(V12, 0xFFF), w(V8, 1), w(X, 639)))
     assert columns(events) == [(639, 1, 0, 0)]
     assert decoder.stats.vectors_out_of_range == 2
 
 
-def test_time_high_change_resets_low_and_repeat_keeps_it() -> None:
+def test_time_high_change_resets_low_and_repeat_keeps_it(backend: str) -> None:
     data = pack(w(TH, 1), w(TL, 100), w(TH, 1), w(X, 0), w(TH, 2), w(X, 1), w(TL, 5), w(TL, 3), w(X, 2))
-    events, _ = decode_evt3(data)
+    events, _ = decode_evt3(data, backend=backend)
     assert list(events["t"]) == [4096 + 100, 2 * 4096, 2 * 4096 + 3]
 
 
-def test_time_high_wrap_adds_a_loop_and_small_drop_is_non_monotonic() -> None:
-    decoder = Evt3Decoder()
+def test_time_high_wrap_adds_a_loop_and_small_drop_is_non_monotonic(backend: str) -> None:
+    decoder = Evt3Decoder(backend=backend)
     data = pack(w(TH, 4095), w(TL, 1), w(X, 0), w(TH, 0), w(TL, 2), w(X, 1), w(TH, 1), w(X, 2))
     events, _ = decoder.decode(data)
     assert list(events["t"]) == [4095 * 4096 + 1, (1 << 24) + 2, (1 << 24) + 4096]
@@ -74,16 +86,16 @@ def test_time_high_wrap_adds_a_loop_and_small_drop_is_non_monotonic() -> None:
     assert decoder.stats.dropped_non_monotonic == 1
 
 
-def test_words_before_first_time_high_are_skipped() -> None:
-    decoder = Evt3Decoder()
+def test_words_before_first_time_high_are_skipped(backend: str) -> None:
+    decoder = Evt3Decoder(backend=backend)
     events, _ = decoder.decode(pack(w(Y, 5), w(X, 1), w(TL, 3), w(TH, 7), w(X, 2)))
     assert columns(events) == [(2, 0, 0, 7 * 4096)]
     assert decoder.stats.skipped_before_time_high == 3
     assert decoder.stats.words == 5
 
 
-def test_triggers_others_and_continued_words() -> None:
-    decoder = Evt3Decoder()
+def test_triggers_others_and_continued_words(backend: str) -> None:
+    decoder = Evt3Decoder(backend=backend)
     data = pack(w(TH, 3), w(TL, 9), w(TRIG, 0x601), w(OTHERS, 0x14), w(CONT12, 0xFFF), w(CONT12, 1), w(CONT4, 2),
                 w(0xB, 0), w(0xD, 1), w(Y, 2), w(X, 5), w(TRIG, 0x600))
     events, triggers = decoder.decode(data)
@@ -93,40 +105,40 @@ def test_triggers_others_and_continued_words() -> None:
     assert (decoder.stats.events, decoder.stats.triggers) == (1, 2)
 
 
-def test_time_shift_subtracts_openeb_offset() -> None:
-    events, _ = decode_evt3(pack(w(TH, 10), w(TL, 5), w(X, 0), w(TH, 11), w(X, 1)), time_shift=True)
+def test_time_shift_subtracts_openeb_offset(backend: str) -> None:
+    events, _ = decode_evt3(pack(w(TH, 10), w(TL, 5), w(X, 0), w(TH, 11), w(X, 1)), time_shift=True, backend=backend)
     assert list(events["t"]) == [4096 + 5, 2 * 4096]
 
 
-def test_y_range_keeps_only_those_rows() -> None:
+def test_y_range_keeps_only_those_rows(backend: str) -> None:
     data = pack(w(TH, 0), w(Y, 9), w(X, 0), w(Y, 10), w(X, 1), w(Y, 19), w(X, 2), w(Y, 20), w(X, 3))
-    events, _ = decode_evt3(data, y_range=(10, 20))
+    events, _ = decode_evt3(data, y_range=(10, 20), backend=backend)
     assert list(events["y"]) == [10, 19]
 
 
-def test_pixels_outside_the_sensor_are_dropped_and_counted() -> None:
-    decoder = Evt3Decoder(640, 480)
+def test_pixels_outside_the_sensor_are_dropped_and_counted(backend: str) -> None:
+    decoder = Evt3Decoder(640, 480, backend=backend)
     events, _ = decoder.decode(pack(w(TH, 0), w(Y, 479), w(X, 640), w(X, 639), w(Y, 480), w(X, 0)))
     assert columns(events) == [(639, 479, 0, 0)]
     assert decoder.stats.events_out_of_range == 2
 
 
-def test_odd_trailing_byte_is_counted_or_raises_in_strict_mode() -> None:
+def test_odd_trailing_byte_is_counted_or_raises_in_strict_mode(backend: str) -> None:
     data = pack(w(TH, 0), w(X, 1)) + b"\x01"
-    decoder = Evt3Decoder(path="cut.raw", byte_offset=100)
+    decoder = Evt3Decoder(path="cut.raw", byte_offset=100, backend=backend)
     events, _ = decoder.decode(data)
     decoder.finish()
     assert len(events) == 1 and decoder.stats.trailing_bytes == 1
-    strict = Evt3Decoder(path="cut.raw", byte_offset=100, strict=True)
+    strict = Evt3Decoder(path="cut.raw", byte_offset=100, strict=True, backend=backend)
     strict.decode(data)
     with pytest.raises(CorruptRawError, match=r"cut\.raw at byte 104"):
         strict.finish()
 
 
-def test_empty_and_garbage_input_never_crash() -> None:
-    assert len(decode_evt3(b"")[0]) == 0
+def test_empty_and_garbage_input_never_crash(backend: str) -> None:
+    assert len(decode_evt3(b"", backend=backend)[0]) == 0
     rng = np.random.default_rng(1)
-    decoder = Evt3Decoder(640, 480)
+    decoder = Evt3Decoder(640, 480, backend=backend)
     for _ in range(20):
         events, triggers = decoder.decode(rng.integers(0, 256, int(rng.integers(0, 5000)), dtype=np.uint8).tobytes())
         assert np.all(events["x"] < 640) and np.all(events["y"] < 480)
@@ -135,7 +147,7 @@ def test_empty_and_garbage_input_never_crash() -> None:
     assert decoder.stats.words > 0
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(cuts=st.lists(st.integers(0, 80), max_size=12), seed=st.integers(0, 2**16))
 def test_chunked_decode_equals_whole_decode_on_random_words(cuts: list[int], seed: int) -> None:
     rng = np.random.default_rng(seed)
@@ -143,8 +155,14 @@ def test_chunked_decode_equals_whole_decode_on_random_words(cuts: list[int], see
     payload = rng.integers(0, 4096, size=40)
     payload[kinds == TH] = np.sort(rng.integers(0, 4096, int(np.sum(kinds == TH))))
     data = pack(*((kinds << 12) | payload).tolist())
-    whole, whole_trig = decode_evt3(data, 640, 480)
-    decoder = Evt3Decoder(640, 480)
+    whole, whole_trig = decode_evt3(data, 640, 480, backend="numpy")
+    for other in ("numba",) if HAVE_NUMBA else ():
+        numpy_decoder, jit_decoder = Evt3Decoder(640, 480, backend="numpy"), Evt3Decoder(640, 480, backend=other)
+        ev_np, tr_np = numpy_decoder.decode(data)
+        ev_jit, tr_jit = jit_decoder.decode(data)
+        assert np.array_equal(ev_jit, ev_np) and np.array_equal(tr_jit, tr_np)
+        assert jit_decoder.stats == numpy_decoder.stats
+    decoder = Evt3Decoder(640, 480, backend=CHUNKED_BACKEND)
     bounds = sorted({min(c, len(data)) for c in cuts} | {0, len(data)})
     parts = [decoder.decode(data[a:b]) for a, b in zip(bounds, bounds[1:])]
     decoder.finish()

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from darkread.edge.errors import RawFormatError
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
+from darkread.edge.io.evt3 import Evt3Decoder
 from darkread.edge.io.raw import RawReader, make_decoder, read_raw
 from darkread.edge.io.raw_header import format_raw_header
 
@@ -92,6 +93,20 @@ def test_evt3_package_gives_identical_arrays(real_events_dir: Path, name: str) -
     np.testing.assert_array_equal(raw.triggers["t"], np.asarray(ref_triggers.timestamp).astype(np.int64))
     np.testing.assert_array_equal(raw.triggers["p"], ref_triggers.value)
     np.testing.assert_array_equal(raw.triggers["id"], ref_triggers.id)
+
+
+@pytest.mark.parametrize("name", EVT3_FILES)
+def test_numpy_and_compiled_backends_agree_on_real_files(real_events_dir: Path, name: str) -> None:
+    pytest.importorskip("numba")
+    whole = read_raw(real_events_dir / name)
+    payload = _bytes(real_events_dir / name)[whole.header.data_offset :]
+    results = []
+    for backend in ("numpy", "numba"):
+        decoder = Evt3Decoder(whole.header.width, whole.header.height, backend=backend)
+        results.append((*decoder.decode(payload), decoder.stats))
+    np.testing.assert_array_equal(results[0][0], results[1][0])
+    np.testing.assert_array_equal(results[0][1], results[1][1])
+    assert results[0][2] == results[1][2]
 
 
 def test_sample_recording_decodes_all_events(shared_sample_recording: Path) -> None:
