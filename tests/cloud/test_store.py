@@ -116,3 +116,27 @@ def test_closed_store_refuses_writes(tmp_path: Path) -> None:
             store.open_session(hello("s"))
 
     asyncio.run(scenario())
+
+
+def test_a_batch_is_one_transaction(store: Store) -> None:
+    """Writes queued together commit together: inside the batch, a reader sees none of them yet."""
+    import threading
+
+    release = threading.Event()
+
+    def count_committed(_conn: object) -> int:
+        with store._reader() as reader:
+            return int(reader.execute("SELECT COUNT(*) FROM frames").fetchone()[0])
+
+    async def scenario() -> tuple[int, list[WriteResult]]:
+        await store.open_session(hello("s"))
+        blocker = store._submit(lambda _conn: release.wait(5))  # holds the writer so the rest queue up
+        writes = [store.add_frame("s", frame(seq)) for seq in range(3)]
+        seen = store._submit(count_committed)
+        release.set()
+        await blocker
+        return await seen, list(await asyncio.gather(*writes))
+
+    seen_inside, results = asyncio.run(scenario())
+    assert seen_inside == 0
+    assert all(r.stored for r in results) and len(store.frames("s", 10)) == 3
