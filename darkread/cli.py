@@ -19,6 +19,7 @@ from darkread import __version__
 COMMAND_MODULES: tuple[str, ...] = (
     "darkread.edge.inspect",
     "darkread.edge.cli",
+    "darkread.edge.sources.evk4.cli",
     "darkread.cloud.cli",
     "darkread.read",
     "darkread.models.synth.cli",

@@ -143,6 +143,11 @@ class Evk4Camera:
     def is_running(self) -> bool:
         return bool(self._threads)
 
+    @property
+    def device_serial(self) -> str:
+        """Serial number the open board reports (Treuzell property 0x72)."""
+        return self._require_device().serial
+
     def open(self) -> None:
         """Find and claim the board, check firmware and sensor, then bring the sensor up."""
         if self._device is not None:
@@ -192,8 +197,12 @@ class Evk4Camera:
                 f"{variant & 3}; this driver supports only the IMX636 (id 0x{regs.IMX636_SENSOR_ID:08X}, variant 0)"
             )
 
-    def start(self, sink: EventSink) -> None:
-        """Open if needed, start the drain and decode threads, then start the sensor."""
+    def start(self, sink: EventSink, raw_sink: Callable[[bytes], None] | None = None) -> None:
+        """Open if needed, start the drain and decode threads, then start the sensor.
+
+        ``raw_sink`` (optional) receives every USB chunk as read, on the drain thread, before
+        any drop: for recording RAW files. It must be fast.
+        """
         if self._threads:
             raise RuntimeError("camera already started; call stop() first")
         self.open()
@@ -206,7 +215,7 @@ class Evk4Camera:
             self._counts.update({k: 0 for k in self._counts if k != "roi_writes"})
         self._threads = [
             threading.Thread(target=self._decode_loop, args=(decoder, sink), name="evk4-decode", daemon=True),
-            threading.Thread(target=self._drain_loop, args=(device,), name="evk4-drain", daemon=True),
+            threading.Thread(target=self._drain_loop, args=(device, raw_sink), name="evk4-drain", daemon=True),
         ]
         for thread in self._threads:
             thread.start()
@@ -271,7 +280,7 @@ class Evk4Camera:
 
     # --- threads ------------------------------------------------------------------------------
 
-    def _drain_loop(self, device: Evk4Device) -> None:
+    def _drain_loop(self, device: Evk4Device, raw_sink: Callable[[bytes], None] | None) -> None:
         offset = 0  # position of the next byte in the sensor's stream, dropped bytes included
         while not self._stop_event.is_set():
             try:
@@ -280,6 +289,13 @@ class Evk4Camera:
                 log.error("event stream stopped: %s", exc)
                 self._reader_error = exc
                 return
+            if data and raw_sink is not None:
+                try:
+                    raw_sink(data)
+                except Exception as exc:  # e.g. disk full while recording: end the stream, say why
+                    log.error("raw data sink failed, stream stopped: %s", exc)
+                    self._reader_error = DarkreadError(f"raw data sink failed: {exc}")
+                    return
             with self._counts_lock:
                 counts = self._counts
                 counts["usb_reads"] += 1
