@@ -85,14 +85,22 @@ class Evk4Device:
                 f"Check the cable and power; if the camera is plugged in, {UDEV_HINT}"
             )
         seen: list[str] = []
+        errors: list[DeviceError] = []
         for dev in candidates:
             device = cls(dev, sleep=sleep)
-            device.claim()
+            try:
+                device.claim()
+            except DeviceError as exc:  # busy or inaccessible: another board may still do
+                errors.append(exc)
+                continue
             if serial is None or device.serial.lower() == serial.lower():
                 return device
             seen.append(device.serial)
             device.release()
-        raise DeviceError(f"no camera with serial {serial!r}; found serials {', '.join(seen)}")
+        if errors and (serial is None or not seen):
+            raise errors[0]
+        unopened = f"; {len(errors)} more could not be opened ({errors[0]})" if errors else ""
+        raise DeviceError(f"no camera with serial {serial!r}; found serials {', '.join(seen)}{unopened}")
 
     @property
     def usb_id(self) -> str:
@@ -116,10 +124,14 @@ class Evk4Device:
             self.release()
             raise _usb_error("claim", exc) from exc
         try:
-            self.release_version = self.request(tz.PROP_RELEASE_VERSION).word(0)
-        except tz.TreuzellError:
-            self.release_version = 0
-        self.serial = self._read_serial()
+            try:
+                self.release_version = self.request(tz.PROP_RELEASE_VERSION).word(0)
+            except tz.TreuzellError:
+                self.release_version = 0
+            self.serial = self._read_serial()
+        except DeviceError:
+            self.release()
+            raise
 
     def _read_serial(self) -> str:
         reply = self.request(tz.PROP_SERIAL)

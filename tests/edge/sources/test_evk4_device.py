@@ -62,6 +62,15 @@ def test_busy_camera_is_reported() -> None:
     first.release()
 
 
+def test_a_busy_board_does_not_hide_a_free_one() -> None:
+    busy, free = FakeEvk4(serial=1), FakeEvk4(serial=2)
+    holder = Evk4Device.open(backend=FakeUsbBackend([busy]))
+    device = Evk4Device.open(backend=FakeUsbBackend([busy, free]))
+    assert device.serial == "00000002"
+    holder.release()
+    device.release()
+
+
 def test_serial_selects_among_several_boards() -> None:
     boards = [FakeEvk4(serial=1), FakeEvk4(serial=2)]
     device = Evk4Device.open(serial="00000002", backend=FakeUsbBackend(boards))
