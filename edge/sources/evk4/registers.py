@@ -119,6 +119,7 @@ REG_TIME_BASE_CTRL = 0x9008
 # --- sequences --------------------------------------------------------------------------------
 
 # Power-up, PLL and readout configuration; leaves the sensor configured for EVT3 but not started.
+# Learned from: hal_psee_plugins/include/devices/imx636/imx636_evk3_issd.h (init).
 INIT: RegisterSequence = (
     Write(0x001C, 0x00000001),
     Delay(1_000_000),
@@ -203,7 +204,7 @@ INIT: RegisterSequence = (
     Write(0x9000, 0x00000200),
 )
 
-# Digital then analog start: time base on, pixel reset released.
+# Digital then analog start: time base on, pixel reset released. Learned from: hal_psee_plugins/include/devices/imx636/imx636_evk3_issd.h (start).
 START: RegisterSequence = (
     Write(0xB000, 0x000002F9),
     Write(0x9028, 0x00000000),
@@ -213,6 +214,7 @@ START: RegisterSequence = (
 )
 
 # Analog then digital stop; the 1 ms lets the readout flush before the time base halts.
+# Learned from: hal_psee_plugins/include/devices/imx636/imx636_evk3_issd.h (stop).
 STOP: RegisterSequence = (
     Field(REG_ROI_CTRL, PX_TD_RSTN, 0),
     Write(0x002C, 0x0022C324),
@@ -224,6 +226,7 @@ STOP: RegisterSequence = (
 )
 
 # Power-down: PLL and bias generator off, digital blocks back to reset.
+# Learned from: hal_psee_plugins/include/devices/imx636/imx636_evk3_issd.h (destroy).
 DESTROY: RegisterSequence = (
     Write(0x0070, 0x00400008),
     Write(0x006C, 0x0EE47114),
@@ -255,13 +258,15 @@ DESTROY: RegisterSequence = (
 )
 
 # EVT3 output (INIT already selects it; written again so a board left in EVT2.1 recovers).
+# Learned from: hal_psee_plugins/src/devices/imx636/imx636_tz_device.cpp (set_output_format).
 FORMAT_EVT3: RegisterSequence = (
     Field(REG_EDF_PIPELINE_CONTROL, EDF_FORMAT_EVT21, 0),
     Field(REG_EOI_8000, EOI_FORMAT_MASK, EOI_FORMAT_EVT3),
 )
 
 # Every column and row enabled (line masks are inverted: 0 = enabled); the last row register
-# holds 16 rows in its low half.
+# holds 16 rows in its low half. Learned from: hal_psee_plugins/src/devices/gen41/gen41_roi_command.cpp
+# (reset_to_full_roi) and the register map's td_roi_x00..x39 / td_roi_y00..y22.
 ROI_LINES_RESET: RegisterSequence = (
     *(Write(addr, 0) for addr in ROI_COLUMN_REGS),
     *(Write(addr, 0) for addr in ROI_ROW_REGS[:-1]),
@@ -329,7 +334,10 @@ def erc_event_count(rate_ev_s: float, period_us: int = ERC_REFERENCE_PERIOD_US) 
 
 
 def erc_init_sequence(event_count: int = ERC_DEFAULT_EVENT_COUNT) -> RegisterSequence:
-    """ERC block configured with the linear drop LUT, dropping still disabled."""
+    """ERC block configured with the linear drop LUT, dropping still disabled.
+
+    Learned from: hal_psee_plugins/src/devices/gen41/gen41_erc.cpp (initialize, enable).
+    """
     return (
         Field(REG_ERC_MODE, 0b11, 0),
         Field(REG_ERC_IN_DROP_RATE_CONTROL, 0b1, 1),
@@ -381,7 +389,10 @@ ROI_ENABLE_BITS = ROI_TD_EN | ROI_TD_SHADOW_TRIGGER | ROI_TD_RONI_N_EN
 
 
 def roi_window_sequence(x0: int, y0: int, width: int, height: int) -> RegisterSequence:
-    """Program the window and arm it (the caller then polls ``ROI_WIN_DONE``)."""
+    """Program the window and arm it (the caller then polls ``ROI_WIN_DONE``).
+
+    Learned from: hal_psee_plugins/src/devices/gen41/gen41_roi_command.cpp (write_ROI_windows, enable).
+    """
     start, end = roi_window_words(x0, y0, width, height)
     return (
         Write(REG_ROI_WIN_START, start),
