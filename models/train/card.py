@@ -28,6 +28,19 @@ def _dataset_line(manifest: dict[str, Any] | None, fallback: str) -> str:
     return f"{fallback} ({'; '.join(str(p) for p in parts)})" if parts else fallback
 
 
+def _int8_sentence(latency: dict[str, Any]) -> str:
+    fp32, int8 = latency.get("fp32_ms"), latency.get("int8_ms")
+    if not isinstance(fp32, (int, float)) or not isinstance(int8, (int, float)):
+        return ""
+    if int8 < 0.9 * fp32:
+        return "Static int8 is faster here; check its scores below before switching the edge to it."
+    return (
+        "At this size static int8 is not faster than fp32 on this CPU (the depthwise convolutions and "
+        "the quantize/dequantize pairs cost about what they save), so the fp32 model is the default; "
+        "the int8 file is for targets with fast int8 kernels."
+    )
+
+
 def render_card(info: dict[str, Any]) -> str:
     report = info["report"]
     fit = info["fit"]
@@ -36,7 +49,7 @@ def render_card(info: dict[str, Any]) -> str:
     methods = [("fp32", "net fp32"), ("int8", "net int8"), ("baseline", "baseline")]
     methods = [(k, label) for k, label in methods if f"{k}_f1" in report["overall"]]
     lux_rows = report.get("by_lux", [])
-    row30 = next((r for r in lux_rows if r["group"] == "30"), None)
+    row30 = next((r for r in lux_rows if str(r["group"]).split()[0] == "30"), None)
     headline = ""
     if row30 is not None:
         headline = (
@@ -69,7 +82,7 @@ Four-scale U-Net built for one CPU core at 100x200: one narrow 3x3 conv at full 
 bilinear resize + **add** (not concat) skip + separable refinement, 1x1 head.
 **{fit['parameters']:,} parameters.** Size-based resize makes the odd 100 -> 50 -> 25 -> 13 pyramid
 round-trip without padding. Full-resolution work (the memory-bound part at this size) is kept to
-8 channels; that is what brings it near the 2 ms goal.
+{fit['net']['widths'][0]} channels; that is what brings it near the 2 ms goal.
 
 ## Latency (`python -m darkread.bench --only inference`, one core, onnxruntime {latency.get('ort_version', '')})
 
@@ -80,9 +93,7 @@ round-trip without padding. Full-resolution work (the memory-bound part at this 
 | reference, same run: {latency.get('reference', '')} | {latency.get('reference_ms', float('nan')):.2f} |
 
 Measured on the development VM (AMD EPYC, shared by other jobs; best median of 3x60 runs).
-Session: ORT_ENABLE_ALL, 1 intra-op thread, spinning off. At this size int8 is not faster
-than fp32 (depthwise convs and the quantize/dequantize pairs cost as much as they save), so
-the fp32 model ships as the default; the int8 file is there for targets with fast int8 kernels.
+Session: ORT_ENABLE_ALL, 1 intra-op thread, spinning off. {_int8_sentence(latency)}
 Dynamic int8 quantisation is not offered: it is several times slower for conv nets.
 
 ## Training

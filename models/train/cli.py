@@ -124,6 +124,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--train-dir", type=Path, default=DEFAULT_TRAIN)
     p.add_argument("--val-dir", type=Path, default=DEFAULT_VAL)
     p.add_argument("--train-samples", type=int, default=30000)
-    p.add_argument("--val-samples", type=int, default=3000)
+    p.add_argument("--val-samples", type=int, default=2000)
     _add_fit_options(p)
     p.set_defaults(func=_cmd_all)

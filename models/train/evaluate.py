@@ -65,10 +65,19 @@ def grouped_scores(preds: dict[str, np.ndarray], targets: np.ndarray, groups: np
 
 
 def lux_groups(lux: np.ndarray) -> tuple[np.ndarray, list[str]]:
-    values = np.asarray(lux, float)
-    nearest = np.array([min(LUX_LEVELS, key=lambda level: abs(np.log(max(v, 1e-3) / level))) for v in values])
-    labels = np.array([f"{level:g}" for level in nearest])
-    return labels, [f"{level:g}" for level in LUX_LEVELS]
+    """Each sample's nearest level of ``LUX_LEVELS`` on a log scale, labelled with the bin's range."""
+    levels = np.array(sorted(LUX_LEVELS))
+    edges = np.sqrt(levels[:-1] * levels[1:])  # geometric midpoints
+    names = []
+    for i, level in enumerate(levels):
+        lo = f"{edges[i - 1]:.0f}" if i > 0 else None
+        hi = f"{edges[i]:.0f}" if i < len(edges) else None
+        span = f"{lo}-{hi}" if lo and hi else (f"< {hi}" if hi else f">= {lo}")
+        names.append(f"{level:g} ({span})")
+    index = np.searchsorted(edges, np.asarray(lux, float), side="right")
+    labels = np.array([names[i] for i in index])
+    order = [names[i] for i in np.argsort([-lv for lv in levels])]
+    return labels, order
 
 
 def training_sample(train_dir: str | Path, n: int, seed: int = 0) -> Shard:

@@ -137,7 +137,7 @@ def evaluate_and_card(
 
 def reproduce(
     train_dir: str | Path, val_dir: str | Path, run_dir: str | Path = DEFAULT_RUN_DIR, *,
-    config: FitConfig | None = None, train_samples: int = 30000, val_samples: int = 3000, workers: int = 2,
+    config: FitConfig | None = None, train_samples: int = 30000, val_samples: int = 2000, workers: int = 2,
 ) -> dict[str, Any]:
     """Synthetic dataset (if absent) -> fit -> export -> int8 -> evaluate -> model card."""
     from darkread.models.train.data import shard_paths
@@ -161,10 +161,11 @@ def reproduce(
 
 
 def generate_dataset(split: str, root: str | Path, samples: int, workers: int) -> None:
-    """Make a synthetic split with the synth component's own command."""
+    """Make a synthetic split with the synth component's own command (train seed 1, val seed 2)."""
     from darkread.cli import main as darkread_main
 
-    argv = ["synth", "generate", "--split", split, "--samples", str(samples), "--out", str(root), "--workers", str(workers)]
+    seed = "1" if split == "train" else "2"
+    argv = ["synth", "dataset", str(root), "--samples", str(samples), "--workers", str(workers), "--seed", seed, "--split", split]
     log.info("generating %s set: darkread %s", split, " ".join(argv))
     code = darkread_main(argv)
     if code:
