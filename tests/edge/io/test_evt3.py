@@ -153,7 +153,9 @@ def test_chunked_decode_equals_whole_decode_on_random_words(cuts: list[int], see
     rng = np.random.default_rng(seed)
     kinds = rng.choice([TH, TL, Y, X, BASE, V12, V8, TRIG, OTHERS, CONT12], size=40)
     payload = rng.integers(0, 4096, size=40)
-    payload[kinds == TH] = np.sort(rng.integers(0, 4096, int(np.sum(kinds == TH))))
+    # TIME_HIGH as a walk with repeats, steps, small steps back (non-monotonic) and wraps
+    steps = rng.choice([0, 0, 1, 1, 3, -1, -40, -3000, 2500], size=int(np.sum(kinds == TH)))
+    payload[kinds == TH] = (rng.integers(0, 4096) + np.cumsum(steps)) % 4096
     data = pack(*((kinds << 12) | payload).tolist())
     whole, whole_trig = decode_evt3(data, 640, 480, backend="numpy")
     for other in ("numba",) if HAVE_NUMBA else ():
@@ -283,3 +285,12 @@ def test_write_raw_then_read_raw(tmp_path: Path) -> None:
     assert (raw.header.width, raw.header.height, raw.header.fields["serial_number"]) == (640, 480, "ab12")
     np.testing.assert_array_equal(raw.events, events)
     np.testing.assert_array_equal(raw.triggers, triggers)
+
+
+def test_backend_choice() -> None:
+    with pytest.raises(ValueError, match="backend"):
+        Evt3Decoder(backend="fortran")
+    assert Evt3Decoder(backend="numpy").backend == "numpy"
+    assert Evt3Decoder().backend == ("numba" if HAVE_NUMBA else "numpy")
+    with pytest.raises(ValueError, match="sensor size"):
+        Evt3Decoder(0, 720)
