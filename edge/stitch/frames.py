@@ -57,6 +57,8 @@ class StitchConfig:
       search_radius_px      correlation search around the predicted position (head tremor and the
                             drift change between two frames stay well inside; half a line pitch
                             would allow locking on the neighbouring line).
+      drift_window_frames   a line through the head-motion corrections of this many recent frames
+                            predicts the next frame's place (tremor averages out, drift is followed).
       min_match_score       normalised correlation (TM_CCOEFF_NORMED) below which a frame is dropped.
       min_overlap_fraction  share of the frame that must overlap what the page already shows for a
                             correlation to be trusted; otherwise the frame goes to its predicted place.
@@ -97,7 +99,8 @@ class StitchConfig:
     sweep_context_frames: int = 3
     sweep_confirm_frames: int = 2
     min_line_frames: int = 4
-    search_radius_px: int = 14
+    search_radius_px: int = 16
+    drift_window_frames: int = 6
     min_match_score: float = 0.25
     min_overlap_fraction: float = 0.25
     blur_sigma_px: float = 1.2
@@ -118,6 +121,8 @@ class StitchConfig:
     def __post_init__(self) -> None:
         if self.sweep_confirm_frames < 0 or self.sweep_context_frames < 1 or self.min_line_frames < 1:
             raise ValueError("sweep_confirm_frames must be >= 0, sweep_context_frames and min_line_frames >= 1")
+        if self.drift_window_frames < 1:
+            raise ValueError(f"drift_window_frames must be >= 1, got {self.drift_window_frames}")
         if self.search_radius_px < 0:
             raise ValueError(f"search_radius_px must be >= 0, got {self.search_radius_px}")
         if not 0.0 <= self.alpha <= 1.0 or not 0.0 < self.ink_threshold < 1.0:

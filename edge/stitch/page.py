@@ -130,18 +130,57 @@ def main_column_span(columns_with_ink: np.ndarray, max_gap: int) -> tuple[int, i
 
 
 def assign_lines(gaze_rows: Sequence[float], band_centres: Sequence[float]) -> list[int]:
-    """Band index of each read line, from its mean gaze row.
+    """Band index of each read line (in reading order), from its mean gaze row.
 
     The gaze tracker's common vertical bias (calibration) is estimated first as the median offset
-    to the nearest band and removed; then each line takes the nearest band.
+    to the nearest band and removed. Lines read one after another go down the page, so the
+    assignment is the monotone one (each line on a band below the one before while there are
+    bands enough) of least squared distance, which rides over single lines whose gaze sat nearer
+    to a neighbour. A line read well above the previous one (back up the page) restarts the order.
     """
     if not band_centres:
         return [-1] * len(gaze_rows)
+    if not gaze_rows:
+        return []
     centres = np.asarray(band_centres, dtype=np.float64)
     rows = np.asarray(gaze_rows, dtype=np.float64)
     nearest = np.abs(rows[:, None] - centres[None, :]).argmin(axis=1)
-    bias = float(np.median(centres[nearest] - rows))
-    return np.abs(rows[:, None] + bias - centres[None, :]).argmin(axis=1).tolist()
+    rows = rows + float(np.median(centres[nearest] - rows))
+    out: list[int] = []
+    start = 0
+    for i in range(1, len(rows) + 1):
+        if i == len(rows) or rows[i] < rows[i - 1] - 1.5 * _median_pitch(centres):
+            out += _monotone_assignment(rows[start:i], centres)
+            start = i
+    return out
+
+
+def _median_pitch(centres: np.ndarray) -> float:
+    return float(np.median(np.diff(centres))) if centres.size > 1 else 0.0
+
+
+def _monotone_assignment(rows: np.ndarray, centres: np.ndarray) -> list[int]:
+    """Band indices for ``rows`` minimising the squared distance, strictly increasing when there
+    are at least as many bands as rows, non-decreasing otherwise (dynamic programme)."""
+    cost = (rows[:, None] - centres[None, :]) ** 2
+    n, m = cost.shape
+    step = 1 if m >= n else 0
+    total = np.full((n, m), np.inf)
+    choice = np.zeros((n, m), dtype=np.int64)
+    total[0] = cost[0]
+    for i in range(1, n):
+        # best predecessor band k <= j - step for every j
+        prefix_arg = np.zeros(m, dtype=np.int64)
+        for j in range(1, m):
+            prefix_arg[j] = prefix_arg[j - 1] if total[i - 1][prefix_arg[j - 1]] <= total[i - 1][j] else j
+        for j in range(step, m):
+            k = prefix_arg[j - step]
+            total[i, j] = cost[i, j] + total[i - 1, k]
+            choice[i, j] = k
+    path = [int(np.argmin(total[-1]))]
+    for i in range(n - 1, 0, -1):
+        path.append(int(choice[i][path[-1]]))
+    return path[::-1]
 
 
 def naive_page(frames: Sequence[StitchFrame], average: bool = False, cfg: StitchConfig = StitchConfig()) -> Page:

@@ -9,6 +9,7 @@ before it, then refined by correlation against the page and the growing strip.
 from __future__ import annotations
 
 import logging
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -38,6 +39,22 @@ class _FinishedLine:
     gaze_row: float  # median gaze row in page coordinates
 
 
+def predict_correction(recent: Sequence[tuple[int, np.ndarray]], t_us: int) -> np.ndarray:
+    """Head-motion correction expected at ``t_us`` from recent measurements: a straight line
+    through them (drift is slow and smooth; the fit averages tremor out), evaluated at ``t_us``;
+    their median while there are too few, or too old, to fit a velocity."""
+    if not recent:
+        return np.zeros(2)
+    times = np.array([t for t, _ in recent], dtype=np.float64)
+    values = np.array([c for _, c in recent])
+    if len(recent) < 3 or np.ptp(times) <= 0 or t_us - times[-1] > 1_000_000:
+        return np.median(values, axis=0)
+    centre = times.mean()
+    slope, intercept = np.polyfit(times - centre, values, 1)
+    # extrapolate at most half a second ahead
+    return intercept + slope * min(t_us - centre, float(np.ptp(times)) / 2 + 500_000)
+
+
 class PageStitcher:
     """Incremental stitcher: ``add`` frames in time order as they arrive, ask for ``page`` any time.
 
@@ -51,7 +68,8 @@ class PageStitcher:
         self._page = PageCanvas()
         self._lines: list[_FinishedLine] = []
         self._strip: LineStrip | None = None
-        self._correction = np.zeros(2)  # page position - sensor position (head motion), sub-pixel
+        # (t_us, page position - sensor position) of recent frames: the head motion, sub-pixel
+        self._corrections: deque[tuple[int, np.ndarray]] = deque(maxlen=cfg.drift_window_frames)
         self._used = 0
         self._dropped = 0
         self._positions: dict[int, tuple[int, int]] = {}
@@ -98,7 +116,8 @@ class PageStitcher:
             self._strip = LineStrip()
         h, w = mask.shape
         r = cfg.search_radius_px
-        px, py = np.round(np.asarray(frame.origin_xy) + self._correction).astype(int).tolist()
+        correction = predict_correction(self._corrections, frame.t_us)
+        px, py = np.round(np.asarray(frame.origin_xy) + correction).astype(int).tolist()
         x, y = float(px), float(py)
         reference, seen = self._page.reference(self._strip, (px - r, py - r, px + w + r, py + h + r))
         reg = register_frame(reference, seen, mask, r, cfg.blur_sigma_px, cfg.min_overlap_fraction)
@@ -112,8 +131,9 @@ class PageStitcher:
             score = reg.score
             x = px + reg.shift_xy[0] + (reg.subpixel_xy[0] if cfg.subpixel else 0.0)
             y = py + reg.shift_xy[1] + (reg.subpixel_xy[1] if cfg.subpixel else 0.0)
-            self._correction = np.array([x, y]) - np.asarray(frame.origin_xy)
-        gaze_row = frame.gaze_px[1] + float(self._correction[1])
+            correction = np.array([x, y]) - np.asarray(frame.origin_xy)
+            self._corrections.append((frame.t_us, correction))
+        gaze_row = frame.gaze_px[1] + float(correction[1])
         self._strip.add(mask, x, y, score, gaze_row, frame.frame_id, cfg)
         self._positions[frame.frame_id] = (x, y)
         self._used += 1
