@@ -138,7 +138,8 @@ def _record(args: argparse.Namespace) -> int:
         raise ValueError(f"--seconds must be positive, got {args.seconds}")
     biases, erc, roi = parse_biases(args.bias), parse_erc(args.erc), parse_roi(args.roi)
     backend, fake = _fake_backend(args.fake)
-    camera = Evk4Camera(serial=args.serial, biases=biases, erc_rate_ev_s=erc, backend=backend)
+    settle = time.sleep if fake is None else (lambda seconds: None)  # a fake board needs no settling
+    camera = Evk4Camera(serial=args.serial, biases=biases, erc_rate_ev_s=erc, backend=backend, sleep=settle)
     if roi is not None:
         camera.set_roi(*roi)
     output = Path(args.output)

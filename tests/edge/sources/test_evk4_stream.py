@@ -90,7 +90,7 @@ def test_nothing_is_served_before_start() -> None:
 
 
 def test_stop_halts_the_stream() -> None:
-    fake = FakeEvk4.from_events(random_events(200_000, seed=1), chunk_bytes=1024, rate_bytes_s=4e6)
+    fake = FakeEvk4.from_events(random_events(200_000, seed=1), chunk_bytes=1024, rate_bytes_s=1e6)
     sink = Collector()
     camera = camera_on(fake, transfer_bytes=1024)
     camera.start(sink)
