@@ -231,10 +231,11 @@ def _mixed_events(words, x_idx, v_idx, v_base, v_pol, state_at, stats, width) ->
 def _drop_invalid(out: Events, stats: DecodeStats, width: int, height: int) -> Events:
     timeless = out["t"] < 0
     outside = (out["x"] >= width) | (out["y"] >= height)
-    stats.dropped_non_monotonic += int(np.count_nonzero(timeless))
-    stats.events_out_of_range += int(np.count_nonzero(outside & ~timeless))
-    if timeless.any() or outside.any():
-        out = out[~(timeless | outside)]
+    bad = timeless | outside
+    if bad.any():  # only after a step back in time or in corrupt data
+        stats.dropped_non_monotonic += int(np.count_nonzero(timeless))
+        stats.events_out_of_range += int(np.count_nonzero(outside & ~timeless))
+        out = out[~bad]
     stats.events += len(out)
     return out
 
