@@ -150,7 +150,8 @@ def _record(args: argparse.Namespace) -> int:
         out.write(format_raw_header(regs.WIDTH, regs.HEIGHT, "EVT3", header))
         camera.start(lambda events: None, raw_sink=out.write)
         started = time.monotonic()
-        with tqdm(total=round(args.seconds, 1), unit="s", desc=f"recording {output.name}") as bar:
+        progress = "{desc}: {n:.1f}/{total:.1f} s |{bar}| {postfix}"
+        with tqdm(total=round(args.seconds, 1), desc=f"recording {output.name}", bar_format=progress) as bar:
             while (elapsed := time.monotonic() - started) < args.seconds and camera.error is None:
                 if fake is not None and fake.exhausted:
                     break
