@@ -105,7 +105,8 @@ class EventsIterator:
         ends = start + self.delta_t * np.arange(1, count + 1, dtype=np.int64)
         if stop is not None:
             ends = np.minimum(ends, stop)
-        cuts = np.searchsorted(buf["t"], ends, side="left")
+        # a running maximum keeps the cuts ordered when times jitter back by a few µs (real sensors)
+        cuts = np.maximum.accumulate(np.searchsorted(buf["t"], ends, side="left"))
         begin = 0
         for end_t, cut in zip(ends.tolist(), cuts.tolist()):
             self.current_time = end_t

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from darkread.edge.errors import RawFormatError
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
 from darkread.edge.io.evt3 import Evt3Decoder
+from darkread.edge.io.iterator import EventsIterator
 from darkread.edge.io.raw import RawReader, make_decoder, read_raw
 from darkread.edge.io.raw_header import format_raw_header
 
@@ -107,6 +108,16 @@ def test_numpy_and_compiled_backends_agree_on_real_files(real_events_dir: Path, 
     np.testing.assert_array_equal(results[0][0], results[1][0])
     np.testing.assert_array_equal(results[0][1], results[1][1])
     assert results[0][2] == results[1][2]
+
+
+@pytest.mark.parametrize("name", EVT3_FILES)
+def test_events_iterator_windows_partition_a_real_file(real_events_dir: Path, name: str) -> None:
+    whole = read_raw(real_events_dir / name)
+    windows = list(EventsIterator(real_events_dir / name, delta_t=1000, chunk_bytes=1 << 16))
+    assert sum(len(w) for w in windows) == len(whole.events)
+    np.testing.assert_array_equal(np.concatenate(windows), whole.events)
+    start = int(whole.events["t"][0]) // 1000 * 1000
+    assert len(windows) == (int(whole.events["t"].max()) - start) // 1000 + 1
 
 
 def test_sample_recording_decodes_all_events(shared_sample_recording: Path) -> None:
