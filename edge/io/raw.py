@@ -82,9 +82,14 @@ class RawReader:
         self.path = Path(path)
         self.header = read_raw_header(self.path)
         self.chunk_bytes = chunk_bytes
-        self._decoder = make_decoder(self.header, path=str(self.path), time_shift=time_shift, strict=strict)
+        self._time_shift, self._strict = time_shift, strict
+        self._decoder = self._new_decoder()
         self.stats: DecodeStats = self._decoder.stats
         self._triggers: list[Triggers] = []
+        self._started = False
+
+    def _new_decoder(self) -> Evt3Decoder | Evt2Decoder:
+        return make_decoder(self.header, path=str(self.path), time_shift=self._time_shift, strict=self._strict)
 
     @property
     def triggers(self) -> Triggers:
@@ -95,6 +100,11 @@ class RawReader:
         return self.header.height, self.header.width
 
     def __iter__(self) -> Iterator[Events]:
+        """Decode from the start of the data; iterating again starts over with fresh counters."""
+        if self._started:
+            self._decoder = self._new_decoder()
+            self.stats, self._triggers = self._decoder.stats, []
+        self._started = True
         with self.path.open("rb") as f:
             f.seek(self.header.data_offset)
             while chunk := f.read(self.chunk_bytes):

@@ -158,6 +158,8 @@ def test_raw_reader_streams_the_same_events(real_events_dir: Path, chunk_bytes: 
     assert reader.triggers.dtype == TRIGGER_DTYPE and all(c.dtype == EVENT_CD_DTYPE for c in chunks)
     assert reader.stats.events == len(whole.events)
     assert reader.get_size() == (480, 640)
+    np.testing.assert_array_equal(np.concatenate(list(reader)), whole.events)  # a second pass starts over
+    assert reader.stats.events == len(whole.events) and len(reader.triggers) == len(whole.triggers)
 
 
 @pytest.mark.parametrize("name", ALL_FILES)
