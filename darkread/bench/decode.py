@@ -48,8 +48,12 @@ def _inputs(ctx: BenchContext) -> dict[str, Path]:
 
     rng = np.random.default_rng(0)
     n = 500_000
-    events = make_events(rng.integers(0, 1280, n), rng.integers(0, 720, n), rng.integers(0, 2, n),
-                         np.sort(rng.integers(5_000_000, 7_000_000, n)))
+    events = make_events(
+        rng.integers(0, 1280, n),
+        rng.integers(0, 720, n),
+        rng.integers(0, 2, n),
+        np.sort(rng.integers(5_000_000, 7_000_000, n)),
+    )
     path = ctx.scratch / "synthetic.raw"
     path.write_bytes(format_raw_header(1280, 720) + encode_evt3(events))
     ctx.notes.append("decode: ../shared/data not found; measured on a synthetic encoded stream")
@@ -83,7 +87,9 @@ def _stream_figure(path: Path, whole_rate: float, repeat: int) -> Figure:
     n = read_all()
     rate = n / _best(read_all, repeat) / 1e6
     return Figure(
-        "decode_stream_64k_mev_per_s", rate, "RawReader 64 KiB chunks (file I/O incl.), Mev/s",
+        "decode_stream_64k_mev_per_s",
+        rate,
+        "RawReader 64 KiB chunks (file I/O incl.), Mev/s",
         f"whole-buffer decode: {whole_rate:.1f} Mev/s",
     )
 
@@ -108,12 +114,20 @@ def run(ctx: BenchContext) -> list[Figure]:
     if evt3 is not None:
         ref = events / sum(r["evt3_s"] for r in results.values()) / 1e6
         worst_name, worst = min(((k, r["evt3_s"] / r["ours_s"]) for k, r in results.items()), key=lambda kv: kv[1])
-        summary[0] = Figure("decode_mev_per_s", total_rate, summary[0].label, f"evt3 {evt3.__version__}: {ref:.1f} Mev/s", GOAL)
+        summary[0] = Figure(
+            "decode_mev_per_s", total_rate, summary[0].label, f"evt3 {evt3.__version__}: {ref:.1f} Mev/s", GOAL
+        )
         summary.append(Figure("evt3_decode_mev_per_s", ref, "evt3 decode, all files, Mev/s"))
         summary.append(Figure("decode_vs_evt3_ratio", worst, f"decode vs evt3, worst file ({worst_name}), x", "", GOAL))
     numpy_rate = events / sum(r["numpy_s"] for r in results.values()) / 1e6
-    summary.append(Figure("decode_numpy_backend_mev_per_s", numpy_rate, "EVT3 decode, numpy fallback (no numba), Mev/s",
-                          f"compiled path: {total_rate:.1f} Mev/s"))
+    summary.append(
+        Figure(
+            "decode_numpy_backend_mev_per_s",
+            numpy_rate,
+            "EVT3 decode, numpy fallback (no numba), Mev/s",
+            f"compiled path: {total_rate:.1f} Mev/s",
+        )
+    )
     stream_name = "sample" if "sample" in results else next(iter(results))
     stream_path = _inputs(ctx)[stream_name]
     whole_rate = results[stream_name]["events"] / results[stream_name]["ours_s"] / 1e6

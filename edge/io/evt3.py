@@ -158,7 +158,9 @@ def _resolve_backend(backend: str) -> str:
     return backend
 
 
-def _decode_words_jit(words: np.ndarray, state: DecoderState, stats: DecodeStats, width: int, height: int) -> tuple[Events, Triggers]:
+def _decode_words_jit(
+    words: np.ndarray, state: DecoderState, stats: DecodeStats, width: int, height: int
+) -> tuple[Events, Triggers]:
     jit = _jit()
     if jit is None:  # only reachable if numba vanished after the decoder was built
         raise ImportError("the compiled EVT3 decoder needs the numba package")

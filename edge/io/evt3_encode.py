@@ -39,7 +39,9 @@ def _check(events: Events, triggers: Triggers, width: int, period: int) -> None:
         raise ValueError(f"event x must be < width ({width}) and y < 2048")
     if len(events) and not np.isin(events["p"], (0, 1)).all():
         raise ValueError("event polarity must be 0 or 1")
-    if len(triggers) and not (np.isin(triggers["p"], (0, 1)).all() and triggers["id"].min() >= 0 and triggers["id"].max() < 16):
+    if len(triggers) and not (
+        np.isin(triggers["p"], (0, 1)).all() and triggers["id"].min() >= 0 and triggers["id"].max() < 16
+    ):
         raise ValueError("trigger p must be 0 or 1 and id in 0..15")
 
 
@@ -61,7 +63,14 @@ def _pixel_units(events: Events, min_vector_run: int) -> dict[str, np.ndarray]:
     kind = np.concatenate((np.zeros(len(single), np.int8), np.ones(len(vec_start), np.int8)))[order]
     x_or_base = np.concatenate((x[single], x[vec_start] & ~31))[order]
     mask = np.concatenate((np.zeros(len(single), np.int64), masks.astype(np.int64)))[order]
-    return {"t": t[first[order]], "y": y[first[order]], "p": p[first[order]], "kind": kind, "x": x_or_base, "mask": mask}
+    return {
+        "t": t[first[order]],
+        "y": y[first[order]],
+        "p": p[first[order]],
+        "kind": kind,
+        "x": x_or_base,
+        "mask": mask,
+    }
 
 
 def _pixel_words(u: dict[str, np.ndarray]) -> np.ndarray:

@@ -102,7 +102,12 @@ def _decode(words, state, counters, width, height, ev16, ev64, tr16, tr64):  # n
                         elif y >= height:
                             counters[EVENTS_OUT] += 1
                         else:
-                            ev16[8 * ne], ev16[8 * ne + 1], ev16[8 * ne + 2], ev16[8 * ne + 3] = base + b, y, polarity, 0
+                            ev16[8 * ne], ev16[8 * ne + 1], ev16[8 * ne + 2], ev16[8 * ne + 3] = (
+                                base + b,
+                                y,
+                                polarity,
+                                0,
+                            )
                             ev64[2 * ne + 1] = t
                             ne += 1
             base += n_bits

@@ -44,6 +44,7 @@ from darkread.edge.io.evt3_words import (
 if TYPE_CHECKING:
     from darkread.edge.io.evt3 import DecodeStats, Triggers
 
+
 @dataclass
 class DecoderState:
     """What a decoder carries from one chunk to the next."""
@@ -152,7 +153,9 @@ def _vectors(words: np.ndarray, types: np.ndarray, state: DecoderState) -> tuple
     return v_idx[is_vect], base[is_vect], polarity[is_vect]
 
 
-def decode_words(words: np.ndarray, state: DecoderState, stats: DecodeStats, width: int, height: int) -> tuple[Events, Triggers]:
+def decode_words(
+    words: np.ndarray, state: DecoderState, stats: DecodeStats, width: int, height: int
+) -> tuple[Events, Triggers]:
     """Decode one chunk of words, updating ``state`` and ``stats``."""
     stats.words += len(words)
     words = _skip_until_time_high(words, state, stats)

@@ -93,7 +93,9 @@ def _resolve(fields: dict[str, str], where: str) -> tuple[str, int, int]:
     if fmt not in SUPPORTED_FORMATS:
         raise RawFormatError(f"{where}: event format {fmt!r} is not supported (supported: EVT3, EVT2)")
     if width is None or height is None:
-        raise RawFormatError(f"{where}: the RAW header gives no sensor size (no 'format' size, 'geometry' or known 'system_ID')")
+        raise RawFormatError(
+            f"{where}: the RAW header gives no sensor size (no 'format' size, 'geometry' or known 'system_ID')"
+        )
     return fmt, _int_field(width, "width", where), _int_field(height, "height", where)
 
 

@@ -45,7 +45,9 @@ def test_time_uses_all_34_bits() -> None:
 
 def test_triggers_others_and_words_before_time_high() -> None:
     decoder = Evt2Decoder(640, 480)
-    data = pack(cd(1, 0, 1, 1), high(2), trigger(3, 6, 1), (0xE << 28) | 5, (0xF << 28), cd(0, 1, 2, 2), trigger(4, 31, 0))
+    data = pack(
+        cd(1, 0, 1, 1), high(2), trigger(3, 6, 1), (0xE << 28) | 5, (0xF << 28), cd(0, 1, 2, 2), trigger(4, 31, 0)
+    )
     events, triggers = decoder.decode(data)
     assert [tuple(int(v) for v in e) for e in events] == [(2, 2, 0, 129)]
     assert [(int(t["p"]), int(t["id"]), int(t["t"])) for t in triggers] == [(1, 6, 131), (0, 31, 132)]
@@ -98,7 +100,9 @@ def test_chunked_decode_equals_whole_decode(seed: int, cuts: list[int]) -> None:
     payload = rng.integers(0, 1 << 28, size=100)
     payload[kinds == 0x8] = np.sort(rng.integers(0, 1 << 20, int(np.sum(kinds == 0x8))))
     n_cd = int(np.sum(kinds <= 1))  # mostly inside a 640x480 sensor, some outside
-    payload[kinds <= 1] = (rng.integers(0, 64, n_cd) << 22) | (rng.integers(0, 700, n_cd) << 11) | rng.integers(0, 500, n_cd)
+    payload[kinds <= 1] = (
+        (rng.integers(0, 64, n_cd) << 22) | (rng.integers(0, 700, n_cd) << 11) | rng.integers(0, 500, n_cd)
+    )
     data = pack(*((kinds.astype(np.int64) << 28) | payload).tolist())
     whole, whole_triggers = decode_evt2(data)
     decoder = Evt2Decoder()

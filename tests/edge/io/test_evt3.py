@@ -96,8 +96,20 @@ def test_words_before_first_time_high_are_skipped(backend: str) -> None:
 
 def test_triggers_others_and_continued_words(backend: str) -> None:
     decoder = Evt3Decoder(backend=backend)
-    data = pack(w(TH, 3), w(TL, 9), w(TRIG, 0x601), w(OTHERS, 0x14), w(CONT12, 0xFFF), w(CONT12, 1), w(CONT4, 2),
-                w(0xB, 0), w(0xD, 1), w(Y, 2), w(X, 5), w(TRIG, 0x600))
+    data = pack(
+        w(TH, 3),
+        w(TL, 9),
+        w(TRIG, 0x601),
+        w(OTHERS, 0x14),
+        w(CONT12, 0xFFF),
+        w(CONT12, 1),
+        w(CONT4, 2),
+        w(0xB, 0),
+        w(0xD, 1),
+        w(Y, 2),
+        w(X, 5),
+        w(TRIG, 0x600),
+    )
     events, triggers = decoder.decode(data)
     assert columns(events) == [(5, 2, 0, 3 * 4096 + 9)]
     assert [(int(t["p"]), int(t["id"]), int(t["t"])) for t in triggers] == [(1, 6, 3 * 4096 + 9), (0, 6, 3 * 4096 + 9)]

@@ -196,7 +196,9 @@ def test_garbage_after_a_valid_header_decodes_within_the_sensor(tmp_path: Path) 
     rng = np.random.default_rng(3)
     for fmt, (width, height) in (("EVT3", (640, 480)), ("EVT2", (640, 480))):
         path = tmp_path / f"{fmt}.raw"
-        path.write_bytes(format_raw_header(width, height, fmt) + rng.integers(0, 256, 100_001, dtype=np.uint8).tobytes())
+        path.write_bytes(
+            format_raw_header(width, height, fmt) + rng.integers(0, 256, 100_001, dtype=np.uint8).tobytes()
+        )
         raw = read_raw(path)
         assert np.all(raw.events["x"] < width) and np.all(raw.events["y"] < height)
         assert np.all(raw.events["t"] >= 0)
