@@ -82,11 +82,12 @@ def test_time_shift_matches_openeb(real_events_dir: Path, expected: dict, name: 
     assert int(shifted.events["t"][0]) == expected[name]["t_first_us"] - expected[name]["openeb_time_shift_us"]
 
 
-@pytest.mark.parametrize("name", EVT3_FILES)
+@pytest.mark.parametrize("name", [*EVT3_FILES, "../sample_recording/events.raw"])
 def test_evt3_package_gives_identical_arrays(real_events_dir: Path, name: str) -> None:
     evt3 = pytest.importorskip("evt3")
     ref, ref_triggers = evt3.decode_file_with_triggers(str(real_events_dir / name))
     raw = read_raw(real_events_dir / name)
+    assert len(raw.events) == len(ref)
     np.testing.assert_array_equal(raw.events["x"], ref.x)
     np.testing.assert_array_equal(raw.events["y"], ref.y)
     np.testing.assert_array_equal(raw.events["p"], ref.polarity)
