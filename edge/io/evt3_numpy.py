@@ -61,6 +61,9 @@ class DecoderState:
     first_high: int | None = None
 
 
+_POPCOUNT_12 = np.array([bin(m).count("1") for m in range(4096)], dtype=np.int64)  # set bits of a 12-bit mask
+
+
 def _ffill(sets: np.ndarray, values: np.ndarray, init: int) -> np.ndarray:
     """Forward fill: at each position, the value of the last position where ``sets`` is True
     (``values`` lists those in order), or ``init`` before the first one."""
@@ -183,7 +186,7 @@ def decode_words(
 
     x_idx = np.flatnonzero(is_x)
     if n_vect:
-        events = _mixed_events(words, x_idx, *_vectors(words, types, state), state_at, stats, width)
+        events = _mixed_events(words, types, x_idx, *_vectors(words, types, state), state_at, stats, width)
     else:
         events = _single_events(words, x_idx, state_at)
     triggers = _triggers(words, np.flatnonzero(is_trigger), state_at, stats)
@@ -191,43 +194,42 @@ def decode_words(
 
 
 def _single_events(words: np.ndarray, x_idx: np.ndarray, state_at) -> Events:  # noqa: ANN001
-    x_val = words[x_idx]
     out = np.zeros(len(x_idx), dtype=EVENT_CD_DTYPE)
-    out["x"] = x_val & 0x7FF
-    out["p"] = x_val >> 11
-    out["p"] &= 1
-    out["t"], out["y"] = state_at(x_idx)
+    _fill_singles(out, slice(None), words[x_idx], *state_at(x_idx))
     return out
 
 
-def _mixed_events(words, x_idx, v_idx, v_base, v_pol, state_at, stats, width) -> Events:  # noqa: ANN001
+def _fill_singles(out: Events, slots: np.ndarray | slice, x_val: np.ndarray, t: np.ndarray, y: np.ndarray) -> None:
+    out["x"][slots] = x_val & 0x7FF
+    out["p"][slots] = (x_val >> 11) & 1
+    out["t"][slots], out["y"][slots] = t, y
+
+
+def _mixed_events(words, types, x_idx, v_idx, v_base, v_pol, state_at, stats, width) -> Events:  # noqa: ANN001
     """Single and vector events in stream order."""
     v_word = words[v_idx]
     is_12 = (v_word >> 12) == VECT_12
-    masks = v_word & np.where(is_12, 0xFFF, 0xFF).astype(np.uint16)
+    masks = np.where(is_12, v_word & 0xFFF, v_word & 0xFF).astype("<u2")
     outside = v_base + np.where(is_12, 12, 8) > width
     stats.vectors_out_of_range += int(np.count_nonzero(outside))
     masks[outside] = 0
-    bits = np.unpackbits(masks.astype("<u2").view(np.uint8).reshape(-1, 2), axis=1, bitorder="little")
-    row, bit = np.nonzero(bits)
-    per_word = bits.sum(axis=1, dtype=np.intp)
+    row, bit = np.nonzero(np.unpackbits(masks.view(np.uint8).reshape(-1, 2), axis=1, bitorder="little"))
+    per_word = _POPCOUNT_12[masks]
 
-    word_pos = np.concatenate((x_idx, v_idx))
-    order = np.argsort(word_pos, kind="stable")
-    count = np.concatenate((np.ones(len(x_idx), np.intp), per_word))[order]
-    slot = np.cumsum(count) - count  # first output slot of each event word, in stream order
-    single_slot = np.empty(len(x_idx), dtype=np.intp)
-    single_slot[order[order < len(x_idx)]] = slot[order < len(x_idx)]
-    is_single = np.zeros(int(count.sum()), dtype=bool)
-    is_single[single_slot] = True
-    vector_slot = np.flatnonzero(~is_single)
+    # output slots: every event word in stream order takes 1 (single) or popcount (vector) slots
+    e_idx = np.flatnonzero((types == ADDR_X) | (types == VECT_12) | (types == VECT_8))
+    single = types[e_idx] == ADDR_X
+    count = np.ones(len(e_idx), dtype=np.int64)
+    count[~single] = per_word
+    slot = np.cumsum(count) - count
+    first_of_word = np.cumsum(per_word) - per_word
+    vector_slot = slot[~single][row] + np.arange(len(row)) - first_of_word[row]
 
-    out = np.zeros(len(is_single), dtype=EVENT_CD_DTYPE)
-    out[single_slot] = _single_events(words, x_idx, state_at)
+    out = np.zeros(int(count.sum()), dtype=EVENT_CD_DTYPE)
+    _fill_singles(out, slot[single], words[x_idx], *state_at(x_idx))
     t_v, y_v = state_at(v_idx)
-    vec = np.zeros(len(row), dtype=EVENT_CD_DTYPE)
-    vec["x"], vec["p"], vec["t"], vec["y"] = v_base[row] + bit, v_pol[row], t_v[row], y_v[row]
-    out[vector_slot] = vec
+    out["x"][vector_slot], out["p"][vector_slot] = v_base[row] + bit, v_pol[row]
+    out["t"][vector_slot], out["y"][vector_slot] = t_v[row], y_v[row]
     return out
 
 
