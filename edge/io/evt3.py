@@ -15,8 +15,8 @@ OpenEB's default ``(first_time_high - 1) * 4096`` µs.
 Two backends decode identically (the tests run both on every input): a compiled one-pass loop
 (``evt3_jit.py``, numba), used when numba is installed (``backend="auto"``), and a vectorised
 numpy path (``evt3_numpy.py``, no per-word Python loop). Profiling showed why both exist: the numpy
-path needs about twenty array passes per chunk and reaches 0.1-0.3x the speed of the ``evt3``
-package (Rust); the compiled loop is on par with it.
+path needs about twenty array passes per chunk and reaches 0.05-0.3x the speed of the ``evt3``
+package (Rust), depending on load; the compiled loop measures 0.85-1.2x of it.
 
 Bad input never raises IndexError or loops: words before the first TIME_HIGH carry no time and are
 skipped; OTHERS, CONTINUED and reserved types are skipped and counted; pixels outside the sensor

@@ -1,7 +1,8 @@
 """Compiled EVT 3.0 word loop (numba), the fast path of :class:`Evt3Decoder`.
 
-The numpy decoder in ``evt3.py`` needs some twenty array passes per chunk and reaches a fraction of
-a compiled decoder's speed; this loop makes one pass and writes straight into the output records.
+The numpy decoder (``evt3_numpy.py``) needs some twenty array passes and temporaries per chunk and
+reaches a fraction of a compiled decoder's speed; this loop makes one pass (after a cheap pass that
+sizes the output) and writes straight into the output records.
 It follows exactly the rules of the numpy path (the tests decode every input with both and compare):
 same time rules, same drops, same counters. Requires numba; ``evt3.py`` falls back to numpy without it.
 """
@@ -13,7 +14,7 @@ import numpy as np
 
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
 
-# Slots of the state vector and of the counters vector shared with evt3.py.
+# Slots of the state vector and of the counters vector (evt3.py maps them to its dataclasses).
 STARTED, LAST_HIGH, LOOPS, MAX_HIGH, HIGH, LOW, Y, BASE, POLARITY, FIRST_HIGH = range(10)
 SKIPPED_BEFORE, SKIPPED_OTHER, NON_MONOTONIC, VECTORS_OUT, EVENTS_OUT, DROPPED = range(6)
 
@@ -127,7 +128,9 @@ def _decode(words, state, counters, width, height, ev16, ev64, tr16, tr64):  # n
     return ne, nt
 
 
-def decode_words(words: np.ndarray, state: np.ndarray, counters: np.ndarray, width: int, height: int):  # noqa: ANN201
+def decode_words(
+    words: np.ndarray, state: np.ndarray, counters: np.ndarray, width: int, height: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Events and triggers of ``words``; ``state`` and ``counters`` (int64 vectors) are updated."""
     n_pixels, n_triggers = _bounds(words)
     events = np.empty(n_pixels, dtype=EVENT_CD_DTYPE)  # every byte is written, padding included
