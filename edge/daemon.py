@@ -27,6 +27,28 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 
+class JournalFormatter(logging.Formatter):
+    """``<priority>name: message`` lines: journald reads the syslog priority, adds time and unit."""
+
+    PRIORITIES = ((logging.CRITICAL, 2), (logging.ERROR, 3), (logging.WARNING, 4), (logging.INFO, 6))
+
+    def format(self, record: logging.LogRecord) -> str:
+        priority = next((p for level, p in self.PRIORITIES if record.levelno >= level), 7)
+        text = f"{record.name}: {record.getMessage()}"
+        if record.exc_info:
+            text += "\n" + self.formatException(record.exc_info)
+        return "\n".join(f"<{priority}>{line}" for line in text.splitlines())
+
+
+def use_journal_format_if_under_systemd(environ: Mapping[str, str] | None = None) -> bool:
+    """Switch the root handlers to :class:`JournalFormatter` when stderr goes to the journal."""
+    if not (os.environ if environ is None else environ).get("JOURNAL_STREAM"):
+        return False
+    for handler in logging.getLogger().handlers:
+        handler.setFormatter(JournalFormatter())
+    return True
+
+
 def sd_notify(state: str, environ: Mapping[str, str] | None = None) -> bool:
     """Send one sd_notify(3) datagram (``READY=1``, ``STATUS=...``); False when not under systemd."""
     address = (os.environ if environ is None else environ).get("NOTIFY_SOCKET", "")
@@ -36,6 +58,7 @@ def sd_notify(state: str, environ: Mapping[str, str] | None = None) -> bool:
         address = "\0" + address[1:]
     try:
         with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC) as sock:
+            sock.setblocking(False)  # never stall the processing loop on a full notify queue
             sock.connect(address)
             sock.sendall(state.encode("utf-8"))
     except OSError as exc:

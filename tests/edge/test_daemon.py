@@ -203,3 +203,23 @@ def test_edge_run_options_become_config_overrides(tmp_path: Path) -> None:
     args = parser.parse_args(["edge", "run", "--speed", "2", "--gaze", "udp", "--gaze-port", "7100"])
     config = load_config(None, environ={}, overrides=overrides_from_args(args))
     assert config.source.speed == 2.0 and config.gaze.kind == "udp" and config.gaze.udp_port == 7100
+
+
+def test_journal_format_carries_syslog_priorities() -> None:
+    import logging
+
+    from darkread.edge.daemon import JournalFormatter, use_journal_format_if_under_systemd
+
+    formatter = JournalFormatter()
+    warning = logging.LogRecord("darkread.edge", logging.WARNING, __file__, 1, "spool at %d", (5,), None)
+    assert formatter.format(warning) == "<4>darkread.edge: spool at 5"
+    debug = logging.LogRecord("x", logging.DEBUG, __file__, 1, "a\nb", None, None)
+    assert formatter.format(debug) == "<7>x: a\n<7>b"
+    assert not use_journal_format_if_under_systemd({})
+
+
+def test_sd_notify_never_blocks_on_a_full_queue(notify_socket) -> None:
+    path, _ = notify_socket  # nobody reads: the kernel queue fills up
+    results = [sd_notify("WATCHDOG=1", {"NOTIFY_SOCKET": path}) for _ in range(500)]
+    assert results[0] is True
+    assert results[-1] is False  # dropped, not stuck

@@ -7,6 +7,7 @@ Every frame must be stored exactly once: the cloud's seqs equal the edge's, no g
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -118,9 +119,23 @@ def test_cloud_killed_mid_stream_every_frame_delivered_once(tmp_path: Path, reco
                 },
             },
         )
-        service = EdgeService(config, Notifier({}))
+        notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        notify.bind(str(tmp_path / "notify.sock"))
+        notify.settimeout(0.2)
+        states: list[str] = []
+
+        def listen() -> None:  # as systemd does: read every notification as it comes
+            with contextlib.suppress(OSError):
+                while True:
+                    with contextlib.suppress(TimeoutError):
+                        states.append(notify.recv(4096).decode())
+
+        threading.Thread(target=listen, daemon=True).start()
+        environ = {"NOTIFY_SOCKET": str(tmp_path / "notify.sock"), "WATCHDOG_USEC": "100000"}
+        service = EdgeService(config, Notifier(environ))
+        daemon = Daemon(service, service.notifier, tick_s=0.02)
         result: list[int] = []
-        edge = threading.Thread(target=lambda: result.append(Daemon(service, service.notifier, tick_s=0.02).run()))
+        edge = threading.Thread(target=lambda: result.append(daemon.run()))
         edge.start()
 
         deadline = time.monotonic() + 10
@@ -142,7 +157,16 @@ def test_cloud_killed_mid_stream_every_frame_delivered_once(tmp_path: Path, reco
         assert sent == list(range(len(sent)))
         assert service.metrics.totals["reconnects"] >= 1
         assert service.uplink.spool.depth == 0
+
+        notify.close()
+        assert states[0].startswith("READY=1\nSTATUS=replay 1280x720 open, model tiny.onnx warm")
+        assert states.count("WATCHDOG=1") >= 10  # fed from the processing loop, every ~50 ms
+        assert "STOPPING=1" in states
     finally:
+        if "daemon" in locals():
+            daemon.force_exit = True
+            daemon.should_exit.set()
+            edge.join(timeout=10)
         cloud.stop()
 
 
