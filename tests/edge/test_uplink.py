@@ -92,6 +92,15 @@ class ProtoServer:
             await ws.send(encode(Ack(seq=seqs[-1])))
 
 
+def wait_for(condition, timeout_s: float = 5.0) -> bool:  # noqa: ANN001
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
+
+
 def frame(frame_id: int) -> Frame:
     mask = np.zeros((100, 200), np.uint8)
     mask[frame_id % 100, :] = 1
@@ -157,8 +166,8 @@ def test_cloud_restart_mid_stream_resends_spooled_frames(server: ProtoServer) ->
     server.kill()
     for i in range(10, 25):  # produced while the cloud is down: spooled
         uplink.submit(frame(i))
-    time.sleep(0.1)
-    assert uplink.spool.depth == 15 and not uplink.connected.is_set()
+    assert wait_for(lambda: not uplink.connected.is_set())
+    assert uplink.spool.depth == 15
     server.start()  # same port, same storage
     assert uplink.stop(drain_timeout_s=5)
     assert server.stored[uplink.session_id] == list(range(25))
@@ -187,7 +196,8 @@ def test_wrong_key_is_refused_and_kept_in_spool(server: ProtoServer) -> None:
     uplink = Uplink(settings(server.url, api_key="wrong"), Spool(None))
     uplink.start()
     uplink.submit(frame(0))
-    assert not uplink.stop(drain_timeout_s=0.3)
+    assert wait_for(lambda: "403" in uplink.last_error)
+    assert not uplink.stop(drain_timeout_s=0.1)
     assert "403" in uplink.last_error
     assert uplink.spool.depth == 1 and server.stored == {}
 
