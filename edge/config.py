@@ -58,7 +58,7 @@ class UplinkConfig:
     url: str = "ws://127.0.0.1:8000/v1/stream"
     api_key: str = ""
     device_id: str = ""  # empty: the host name
-    session_id: str = ""  # empty: resume the spool's session, or start a new one
+    session_id: str = ""  # empty: resume the spool's session if frames wait in it, else a new one
     mode: str = "frames"  # "frames" (binary frames) or "pages" (stitched on the glasses)
     spool_dir: str = ""  # empty: in memory (lost on restart)
     spool_max_mb: float = 256.0

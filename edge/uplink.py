@@ -53,7 +53,7 @@ class UplinkSettings:
     url: str
     api_key: str = ""
     device_id: str = ""
-    session_id: str = ""  # empty: the spool's session, else a new one
+    session_id: str = ""  # empty: the spool's session if it holds unsent frames, else a new one
     mode: str = "frames"
     sensor_wh: tuple[int, int] = (1280, 720)
     fovea_hw: tuple[int, int] = (100, 200)
@@ -86,7 +86,9 @@ class Uplink:
         self.metrics = metrics or EdgeMetrics()
         self.metrics.spool_depth = lambda: spool.depth
         self.device_id = settings.device_id or default_device_id()
-        self.session_id = settings.session_id or spool.session_id() or f"{self.device_id}-{uuid.uuid4().hex[:12]}"
+        # frames waiting in the spool belong to the spool's session: resume it; otherwise start anew
+        pending_session = spool.session_id() if spool.depth else None
+        self.session_id = settings.session_id or pending_session or f"{self.device_id}-{uuid.uuid4().hex[:12]}"
         spool.set_session_id(self.session_id)
         self.acked_seq = -1
         self.connected = threading.Event()

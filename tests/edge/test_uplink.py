@@ -191,6 +191,14 @@ def test_edge_restart_resends_from_disk_spool(tmp_path: Path, server: ProtoServe
     assert second.stop(drain_timeout_s=5)
     assert server.stored[first.session_id] == list(range(15))
 
+    second.spool.close()
+    third = Uplink(settings(server.url), Spool(tmp_path))  # nothing pending: a new session
+    assert third.session_id != first.session_id
+    third.start()
+    assert third.submit(frame(15)) == 15  # seqs never go back
+    assert third.stop(drain_timeout_s=5)
+    assert server.stored[third.session_id] == [15]
+
 
 def test_wrong_key_is_refused_and_kept_in_spool(server: ProtoServer) -> None:
     uplink = Uplink(settings(server.url, api_key="wrong"), Spool(None))
