@@ -21,6 +21,7 @@ SKIPPED_BEFORE, SKIPPED_OTHER, NON_MONOTONIC, VECTORS_OUT, EVENTS_OUT, DROPPED =
 
 # Most events a word can carry, by type (ADDR_X 1, VECT_12 12, VECT_8 8), and triggers (EXT_TRIGGER).
 _PIXELS_PER_TYPE = np.array([0, 0, 1, 0, 12, 8, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0], dtype=np.int64)
+_POPCOUNT_12 = np.array([bin(m).count("1") for m in range(4096)], dtype=np.int64)  # set bits of a 12-bit mask
 _TRIGGERS_PER_TYPE = np.array([0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0], dtype=np.int64)
 
 
@@ -36,9 +37,9 @@ def _bounds(words: np.ndarray) -> tuple[int, int]:  # pragma: no cover - compile
 
 
 @nb.njit(cache=True, nogil=True)
-def _decode(words, state, counters, width, height, ev16, ev64, tr16, tr64):  # noqa: ANN001  # pragma: no cover
-    """Decode ``words`` into flat views of the records (EVENT_CD: x, y, p at u16 slots 0-2 and t at
-    i64 slot 1 of each 16 bytes; TRIGGER: p, id at u16 slots 0 and 8, t at i64 slot 1 of 24 bytes);
+def _decode(words, state, counters, width, height, ev64, tr16, tr64):  # noqa: ANN001  # pragma: no cover
+    """Decode ``words`` into flat views of the records (EVENT_CD: x | y << 16 | p << 32 and t in the
+    two i64 slots of each 16 bytes; TRIGGER: p, id at u16 slots 0 and 8, t at i64 slot 1 of 24 bytes);
     returns the numbers of events and triggers written."""
     last_high, loops, max_high = state[LAST_HIGH], state[LOOPS], state[MAX_HIGH]
     high, low, y, base, polarity = state[HIGH], state[LOW], state[Y], state[BASE], state[POLARITY]
@@ -68,7 +69,7 @@ def _decode(words, state, counters, width, height, ev16, ev64, tr16, tr64):  # n
             elif x >= width or y >= height:
                 counters[EVENTS_OUT] += 1
             else:
-                ev16[8 * ne], ev16[8 * ne + 1], ev16[8 * ne + 2], ev16[8 * ne + 3] = x, y, v >> 11, 0
+                ev64[2 * ne] = x | (y << 16) | ((v >> 11) << 32)  # x, y, p and the padding
                 ev64[2 * ne + 1] = (high << 12) | low
                 ne += 1
         elif kind == 6:
@@ -94,23 +95,20 @@ def _decode(words, state, counters, width, height, ev16, ev64, tr16, tr64):  # n
             mask = v if kind == 4 else v & 0xFF
             if base + n_bits > width:
                 counters[VECTORS_OUT] += 1
-            elif mask:
+            elif high < 0:
+                counters[DROPPED] += _POPCOUNT_12[mask]
+            elif y >= height:
+                counters[EVENTS_OUT] += _POPCOUNT_12[mask]
+            else:
                 t = (high << 12) | low
-                for b in range(n_bits):
-                    if (mask >> b) & 1:
-                        if high < 0:
-                            counters[DROPPED] += 1
-                        elif y >= height:
-                            counters[EVENTS_OUT] += 1
-                        else:
-                            ev16[8 * ne], ev16[8 * ne + 1], ev16[8 * ne + 2], ev16[8 * ne + 3] = (
-                                base + b,
-                                y,
-                                polarity,
-                                0,
-                            )
-                            ev64[2 * ne + 1] = t
-                            ne += 1
+                x = base
+                while mask:  # set bits, lowest first
+                    if mask & 1:
+                        ev64[2 * ne] = x | (y << 16) | (polarity << 32)  # x, y, p and the padding
+                        ev64[2 * ne + 1] = t
+                        ne += 1
+                    mask >>= 1
+                    x += 1
             base += n_bits
         elif kind == 10:
             if high < 0:
@@ -135,9 +133,9 @@ def decode_words(
     n_pixels, n_triggers = _bounds(words)
     events = np.empty(n_pixels, dtype=EVENT_CD_DTYPE)  # every byte is written, padding included
     triggers = np.empty(n_triggers, dtype=TRIGGER_DTYPE)
-    ev16, ev64 = events.view(np.uint16), events.view(np.int64)  # flat views of the records
+    ev64 = events.view(np.int64)  # flat views of the records
     tr16, tr64 = triggers.view(np.uint16), triggers.view(np.int64)
-    ne, nt = _decode(words, state, counters, width, height, ev16, ev64, tr16, tr64)
+    ne, nt = _decode(words, state, counters, width, height, ev64, tr16, tr64)
     # A view, not a copy: copying costs as much as decoding, and the unused tail of the buffer
     # (vectors with few bits set) is never written, so it takes address space but no memory.
     return events[:ne], triggers[:nt]
