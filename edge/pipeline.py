@@ -17,7 +17,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -27,6 +27,9 @@ from darkread.edge.metrics import EdgeMetrics
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
 from darkread.edge.voxel import VoxelConfig, voxel_grid
+
+if TYPE_CHECKING:
+    from darkread.proto.messages import Frame
 
 logger = logging.getLogger(__name__)
 
@@ -71,8 +74,9 @@ class FrameResult:
     mask: np.ndarray  # uint8 [H, W], 1 = ink
     inference_ms: float
 
-    def to_message(self) -> "Frame":  # noqa: F821 (proto imported lazily: the core needs no msgpack)
-        from darkread.proto.messages import Frame, pack_mask
+    def to_message(self) -> Frame:
+        """The wire message (``seq`` is assigned by the uplink)."""
+        from darkread.proto.messages import Frame, pack_mask  # lazily: the core needs no msgpack
 
         shape, bits = pack_mask(self.mask)
         return Frame(
