@@ -44,13 +44,15 @@ class StitchConfig:
                             saccades (7-9 letters, ~70 px) and small regressions stay below it.
       sweep_line_fraction   ... and by at least this fraction of the current line's gaze extent, so a
                             long regression mid-line does not end it.
-      sweep_max_rise_px     a left jump that also moves the gaze *up* by more than this is a
-                            regression to an earlier line, not a return sweep.
-      sweep_context_frames  gaze samples before the jump whose median stands for "where the eye was"
-                            (noise ~25-50 px is averaged down).
-      sweep_confirm_frames  samples after the jump that must agree (median) before a break is
-                            declared; a single noisy sample does not start a line. Adds this many
-                            frames of latency to the incremental stitcher.
+      sweep_max_rise_px     a left jump that also moves the gaze *up* by more than this (median of
+                            the samples after vs before) is a regression to an earlier line, not a
+                            return sweep (a sweep goes down a pitch; ~2 pitches above that, as
+                            vertical gaze noise of 30-45 px would otherwise veto real sweeps).
+      sweep_context_frames  gaze samples before the jump; the rightmost stands for the launch point.
+      sweep_confirm_frames  further samples after the jump whose median (with the first) must stay
+                            left of the launch point by half the needed jump: a single wild sample
+                            does not start a line. Adds this many frames of latency to the
+                            incremental stitcher.
       min_line_frames       no second break within this many frames of the last one (an undershooting
                             sweep followed by its corrective saccade is one break).
     Registration:
@@ -95,8 +97,8 @@ class StitchConfig:
 
     sweep_min_px: float = 140.0
     sweep_line_fraction: float = 0.5
-    sweep_max_rise_px: float = 45.0
-    sweep_context_frames: int = 3
+    sweep_max_rise_px: float = 60.0
+    sweep_context_frames: int = 4
     sweep_confirm_frames: int = 2
     min_line_frames: int = 4
     search_radius_px: int = 16

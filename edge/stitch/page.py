@@ -136,7 +136,9 @@ def assign_lines(gaze_rows: Sequence[float], band_centres: Sequence[float]) -> l
     to the nearest band and removed. Lines read one after another go down the page, so the
     assignment is the monotone one (each line on a band below the one before while there are
     bands enough) of least squared distance, which rides over single lines whose gaze sat nearer
-    to a neighbour. A line read well above the previous one (back up the page) restarts the order.
+    to a neighbour: a return sweep goes down one line, and staying on a band (a line split in two
+    by a long regression) or skipping one costs as much as a gaze error of one pitch. A line read
+    well above the previous one (back up the page) restarts the order.
     """
     if not band_centres:
         return [-1] * len(gaze_rows)
@@ -146,11 +148,12 @@ def assign_lines(gaze_rows: Sequence[float], band_centres: Sequence[float]) -> l
     rows = np.asarray(gaze_rows, dtype=np.float64)
     nearest = np.abs(rows[:, None] - centres[None, :]).argmin(axis=1)
     rows = rows + float(np.median(centres[nearest] - rows))
+    pitch = _median_pitch(centres)
     out: list[int] = []
     start = 0
     for i in range(1, len(rows) + 1):
-        if i == len(rows) or rows[i] < rows[i - 1] - 1.5 * _median_pitch(centres):
-            out += _monotone_assignment(rows[start:i], centres)
+        if i == len(rows) or rows[i] < rows[i - 1] - 1.5 * pitch:
+            out += _monotone_assignment(rows[start:i], centres, pitch**2)
             start = i
     return out
 
@@ -159,25 +162,21 @@ def _median_pitch(centres: np.ndarray) -> float:
     return float(np.median(np.diff(centres))) if centres.size > 1 else 0.0
 
 
-def _monotone_assignment(rows: np.ndarray, centres: np.ndarray) -> list[int]:
-    """Band indices for ``rows`` minimising the squared distance, strictly increasing when there
-    are at least as many bands as rows, non-decreasing otherwise (dynamic programme)."""
+def _monotone_assignment(rows: np.ndarray, centres: np.ndarray, jump_cost: float) -> list[int]:
+    """Non-decreasing band indices for ``rows`` minimising squared distance plus transition costs
+    (dynamic programme): the next band is free (a return sweep goes down one line), staying costs
+    ``jump_cost`` and every band skipped costs ``jump_cost`` too."""
     cost = (rows[:, None] - centres[None, :]) ** 2
     n, m = cost.shape
-    step = 1 if m >= n else 0
-    total = np.full((n, m), np.inf)
+    steps = np.arange(m)[None, :] - np.arange(m)[:, None]  # [from, to]
+    transition = np.where(steps < 0, np.inf, np.where(steps == 1, 0.0, jump_cost * np.abs(steps - 1)))
+    total = cost[0].copy()
     choice = np.zeros((n, m), dtype=np.int64)
-    total[0] = cost[0]
     for i in range(1, n):
-        # best predecessor band k <= j - step for every j
-        prefix_arg = np.zeros(m, dtype=np.int64)
-        for j in range(1, m):
-            prefix_arg[j] = prefix_arg[j - 1] if total[i - 1][prefix_arg[j - 1]] <= total[i - 1][j] else j
-        for j in range(step, m):
-            k = prefix_arg[j - step]
-            total[i, j] = cost[i, j] + total[i - 1, k]
-            choice[i, j] = k
-    path = [int(np.argmin(total[-1]))]
+        via = total[:, None] + transition  # [from, to]
+        choice[i] = via.argmin(axis=0)
+        total = cost[i] + via.min(axis=0)
+    path = [int(np.argmin(total))]
     for i in range(n - 1, 0, -1):
         path.append(int(choice[i][path[-1]]))
     return path[::-1]

@@ -1,7 +1,8 @@
 """Lines from the gaze track: a return sweep (a long jump left, not up) starts a new line.
 
-The rule works on medians of a few gaze samples on each side of a jump, so tracker noise of
-25-50 px neither starts nor hides a line; an undershooting sweep and its corrective saccade left
+The rule compares the launch point (the right edge of the last few samples) with the first sample
+after the jump and the median of a few more, so tracker noise of 25-50 px neither starts nor hides
+a line; an undershooting sweep and its corrective saccade left
 count as one break (``min_line_frames``). The same streaming decision serves the batch
 ``segment_lines`` and the incremental ``PageStitcher``.
 """
@@ -14,6 +15,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from darkread.edge.stitch.frames import StitchConfig, StitchFrame
+
+
+LAUNCH_PCT = 75
+CONFIRM_FRAC = 1.0
 
 
 class LineSegmenter:
@@ -55,14 +60,19 @@ class LineSegmenter:
         cfg = self.cfg
         if not self._recent or self._since_break < cfg.min_line_frames:
             return False
-        before = np.median(np.asarray(self._recent), axis=0)
-        after_samples = [f.gaze_px for f in list(self._pending)[: cfg.sweep_confirm_frames + 1]]
-        first = np.asarray(self._pending[0].gaze_px)
-        after = np.median(np.asarray(after_samples), axis=0)
+        recent = np.asarray(self._recent)
+        # where the eye was: the right edge of its last few samples (a sweep launches from the
+        # line's end; a median would lag behind the last forward saccades)
+        launch_x = float(np.percentile(recent[:, 0], LAUNCH_PCT))
+        launch_y = float(np.median(recent[:, 1]))
+        after = np.asarray([f.gaze_px for f in list(self._pending)[: cfg.sweep_confirm_frames + 1]])
         needed = max(cfg.sweep_min_px, cfg.sweep_line_fraction * self._line_extent())
-        jumped_left = before[0] - first[0] > needed and before[0] - after[0] > needed
-        went_up = before[1] - after[1] > cfg.sweep_max_rise_px
-        return bool(jumped_left and not went_up)
+        jumped_left = launch_x - after[0, 0] > needed
+        # confirmed unless the eye came straight back (one wild sample); reading on to the right
+        # along the new line is fine, hence half the jump
+        stayed_left = launch_x - float(np.median(after[:, 0])) > needed * CONFIRM_FRAC
+        went_up = launch_y - float(np.median(after[:, 1])) > cfg.sweep_max_rise_px
+        return bool(jumped_left and stayed_left and not went_up)
 
     def _decide(self) -> tuple[StitchFrame, bool]:
         new_line = (not self._started) or self._is_sweep()

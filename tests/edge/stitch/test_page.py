@@ -22,6 +22,12 @@ def test_lines_are_assigned_despite_a_common_gaze_bias() -> None:
     assert assign_lines(gaze, []) == [-1] * 4
 
 
+def test_a_line_split_in_two_segments_keeps_one_band_and_order_restarts_going_up() -> None:
+    centres = [100.0, 128.0, 156.0, 184.0]
+    assert assign_lines([101.0, 127.0, 131.0, 157.0], centres) == [0, 1, 1, 2]
+    assert assign_lines([100.0, 128.0, 156.0, 101.0, 129.0], centres) == [0, 1, 2, 0, 1]
+
+
 def test_binarize_thresholds_and_removes_single_pixel_specks() -> None:
     avg = np.zeros((20, 20), np.float32)
     avg[5:8, 5:8] = 0.9
