@@ -4,7 +4,7 @@ Every component is a sum of sinusoids with random frequencies and phases, so a t
 pure function of time (deterministic for a seed, cheap to evaluate at any rate):
 
 * head drift / sway: 0.5-3 deg over seconds (0.05-0.5 Hz),
-* physiological tremor: ~0.05-0.2 deg at 5-15 Hz,
+* physiological tremor: ~0.05-0.2 deg at 5-15 Hz (0.02-0.06 deg for a resting head, level ``still``),
 * walking: vertical bob at the step frequency (1.6-2.2 Hz), lateral sway at half of it, pitch bob,
 * hand-held page: slow sway in position and angle.
 """
@@ -77,10 +77,11 @@ class Motion:
 def random_motion(level: str, rng: np.random.Generator) -> Motion:
     if level not in MOTION_LEVELS:
         raise ValueError(f"unknown motion level {level!r}; use one of {', '.join(MOTION_LEVELS)}")
-    tremor = Oscillators.random(rng, 6, 5.0, 15.0, rng.uniform(0.05, 0.2) / np.sqrt(2) * np.array([1.0, 1.0, 0.5]))
-    if level == "still":
+    if level == "still":  # head resting: the low end of physiological tremor
+        tremor = Oscillators.random(rng, 6, 5.0, 15.0, rng.uniform(0.02, 0.06) / np.sqrt(2) * np.array([1.0, 1.0, 0.5]))
         drift = Oscillators.random(rng, 3, 0.05, 0.3, rng.uniform(0.2, 0.6) * np.array([1.0, 1.0, 0.3]))
         return Motion(level, (drift, tremor), (Oscillators.zero(),), (Oscillators.zero(),))
+    tremor = Oscillators.random(rng, 6, 5.0, 15.0, rng.uniform(0.05, 0.2) / np.sqrt(2) * np.array([1.0, 1.0, 0.5]))
     drift = Oscillators.random(rng, 4, 0.05, 0.5, rng.uniform(0.5, 2.0) * np.array([1.0, 0.8, 0.3]))
     page_rot = Oscillators.random(rng, 3, 0.2, 1.0, rng.uniform(0.2, 0.8) * np.array([1.0, 1.0, 0.5]))
     page_pos = Oscillators.random(rng, 3, 0.2, 1.0, rng.uniform(0.001, 0.004) * np.array([1.0, 1.0, 0.5]))

@@ -30,6 +30,17 @@ class Region:
     height: int
     rays: np.ndarray  # [h*w, 2] undistorted normalised coordinates
 
+    @property
+    def rays32(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rays as two float32 [h, w] images (x/z, y/z), computed once."""
+        if getattr(self, "_rays32", None) is None:
+            shape = (self.height, self.width)
+            self._rays32 = (
+                np.ascontiguousarray(self.rays[:, 0], dtype=np.float32).reshape(shape),
+                np.ascontiguousarray(self.rays[:, 1], dtype=np.float32).reshape(shape),
+            )
+        return self._rays32
+
     @staticmethod
     def of(calib: Calibration, x0: int, y0: int, width: int, height: int) -> Region:
         return Region(int(x0), int(y0), int(width), int(height), region_rays(calib, x0, y0, width, height))
@@ -84,13 +95,12 @@ class Scene:
 
     # -- images ----------------------------------------------------------------------------------
     def texel_maps(self, region: Region, t_s: float) -> tuple[np.ndarray, np.ndarray]:
-        inv = np.linalg.inv(self.texel_to_camera(t_s))
-        r = region.rays
-        u = inv[0, 0] * r[:, 0] + inv[0, 1] * r[:, 1] + inv[0, 2]
-        v = inv[1, 0] * r[:, 0] + inv[1, 1] * r[:, 1] + inv[1, 2]
-        w = inv[2, 0] * r[:, 0] + inv[2, 1] * r[:, 1] + inv[2, 2]
-        shape = (region.height, region.width)
-        return (u / w).astype(np.float32).reshape(shape), (v / w).astype(np.float32).reshape(shape)
+        inv = np.linalg.inv(self.texel_to_camera(t_s)).astype(np.float32)
+        rx, ry = region.rays32
+        inv_w = 1.0 / (inv[2, 0] * rx + inv[2, 1] * ry + inv[2, 2])
+        u = (inv[0, 0] * rx + inv[0, 1] * ry + inv[0, 2]) * inv_w
+        v = (inv[1, 0] * rx + inv[1, 1] * ry + inv[1, 2]) * inv_w
+        return u, v
 
     def reflectance(self, region: Region, t_s: float) -> np.ndarray:
         mx, my = self.texel_maps(region, t_s)

@@ -21,7 +21,7 @@ from darkread.edge.voxel import VoxelConfig, voxel_grid
 from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
 from darkread.models.synth.scene import Region, Scene
-from darkread.models.synth.sensor import EventSensor, SensorParams
+from darkread.models.synth.sensor import EventSensor, SensorParams, concat_events
 from darkread.models.synth.session import Session, SessionSpec, choose_dt_us, make_session, random_lux
 
 log = logging.getLogger(__name__)
@@ -80,7 +80,7 @@ def simulate_window(
         if ev.size:
             chunks.append(ev)
             count += ev.size
-    events = np.concatenate(chunks) if chunks else np.zeros(0, dtype=ev.dtype)
+    events = concat_events(chunks)
     return events, t
 
 

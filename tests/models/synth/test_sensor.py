@@ -44,7 +44,7 @@ def test_refractory_drops_events_but_reference_advances():
     ev = s.step(np.full((1, 1), 10.0 * math.exp(10.5 * 0.2), dtype=np.float32), 1000.0)  # 10 crossings, ~95 us apart
     assert 1 < ev.size < 10
     assert np.all(np.diff(ev["t"]) >= 299)
-    np.testing.assert_allclose(s.ref[0], math.log(10.0) + 10 * 0.2, atol=1e-6)
+    np.testing.assert_allclose(s.ref[0], math.log(10.0) + 10 * 0.2, atol=1e-5)
     # nothing left to cross: a further step at the same brightness is silent
     assert s.step(np.full((1, 1), 10.0 * math.exp(10.5 * 0.2), dtype=np.float32), 1000.0).size == 0
 

@@ -1,0 +1,355 @@
+"""Synthetic calibration captures: a marker board flashing on a screen, seen by the event camera
+(through the ESIM sensor model of ``sensor.py``) and by the glasses' RGB camera.
+
+The screen switches between the board and a blank white page at known times. The glasses are
+held still in a few poses; at each pose the board appears and disappears a few times. The event
+camera fires a burst at every switch; the RGB camera takes frames at a fixed rate on the device
+clock, and a frame whose exposure spans a switch shows a blend of the two pictures.
+
+The board and anything around the screen are planes: each pixel's undistorted ray meets the
+screen plane at a point given by a homography of the ray, so the picture is exact under any lens
+model. Per pose only the pixels that see the screen are simulated; the rest of the sensor gets
+the sensor's noise rates (``background_events``).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from darkread.edge.calibrate.cameras import Camera, PinholeCamera
+from darkread.edge.calibrate.markers import BoardSpec, save_board
+from darkread.edge.io.calibration import Calibration, save_calibration
+from darkread.edge.io.raw import write_raw
+from darkread.models.synth.camera import SENSOR_WH, random_calibration, region_rays, rotation_xyz
+from darkread.models.synth.sensor import EventSensor, SensorParams, background_events, concat_events
+
+RGB_FRAMES_NAME = "rgb_frames.csv"
+
+
+@dataclass
+class ScreenTarget:
+    """A board shown on a screen with a white margin; luminances in lux-equivalent at the sensor."""
+
+    spec: BoardSpec
+    px_per_m: float = 2000.0
+    margin_m: float = 0.02
+    white_lux: float = 250.0
+    black_fraction: float = 0.3  # screen black level relative to white (a dimmed flash keeps event counts small)
+    surround: float = 0.04  # what lies around the screen, relative to white
+    _texture: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def texture(self) -> np.ndarray:
+        """Board picture with its margin, float32 0..1, lightly blurred (display and optics)."""
+        if self._texture is None:
+            board = self.spec.image(self.px_per_m).astype(np.float32) / 255.0
+            m = int(round(self.margin_m * self.px_per_m))
+            tex = np.pad(board, m, constant_values=1.0)
+            tex = self.black_fraction + (1.0 - self.black_fraction) * tex
+            self._texture = cv2.GaussianBlur(tex, (0, 0), 0.6).astype(np.float32)
+        return self._texture
+
+    def corners_m(self) -> np.ndarray:
+        """Screen area (board plus margin) corners in the board frame, (4, 3)."""
+        w, h = self.spec.size_m
+        m = self.margin_m
+        return np.array([[-m, -m, 0], [w + m, -m, 0], [w + m, h + m, 0], [-m, h + m, 0]], dtype=np.float64)
+
+    def render(self, rays: np.ndarray, shape: tuple[int, int], T_cam_board: np.ndarray, shown: float) -> np.ndarray:
+        """Irradiance (float32 ``shape``) of pixels with normalised rays ``rays`` [h*w, 2].
+
+        ``shown`` in [0, 1] blends the blank screen (0) and the board (1), as an exposure that
+        spans a switch sees it.
+        """
+        return self.blend(*self.render_pair(rays, shape, T_cam_board), shown)
+
+    def render_pair(self, rays: np.ndarray, shape: tuple[int, int], T_cam_board: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(board shown, blank screen) irradiance images; any exposure is a blend of the two."""
+        H = np.column_stack([T_cam_board[:3, 0], T_cam_board[:3, 1], T_cam_board[:3, 3]])
+        inv = np.linalg.inv(H).astype(np.float32)
+        rx = rays[:, 0].astype(np.float32).reshape(shape)
+        ry = rays[:, 1].astype(np.float32).reshape(shape)
+        w = inv[2, 0] * rx + inv[2, 1] * ry + inv[2, 2]
+        behind = w <= 0
+        w = np.where(behind, np.float32(1.0), w)
+        scale, offset = np.float32(self.px_per_m), np.float32(self.margin_m * self.px_per_m - 0.5)
+        u = (inv[0, 0] * rx + inv[0, 1] * ry + inv[0, 2]) / w * scale + offset
+        v = (inv[1, 0] * rx + inv[1, 1] * ry + inv[1, 2]) / w * scale + offset
+        board = cv2.remap(self.texture, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+        outside = (board < 0) | behind
+        lux = np.float32(self.white_lux)
+        shown = np.where(outside, np.float32(self.surround), board) * lux
+        blank = np.where(outside, np.float32(self.surround), np.float32(1.0)) * lux
+        return shown.astype(np.float32), blank.astype(np.float32)
+
+    @staticmethod
+    def blend(shown_image: np.ndarray, blank_image: np.ndarray, shown: float) -> np.ndarray:
+        return (np.float32(shown) * shown_image + np.float32(1.0 - shown) * blank_image).astype(np.float32)
+
+
+def look_at_board(target: ScreenTarget, distance_m: float, tilt_deg: tuple[float, float, float], offset_m: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """``T_cam_board`` with the board centre ``distance_m`` ahead (shifted by ``offset_m``), tilted."""
+    w, h = target.spec.size_m
+    R = rotation_xyz(*np.radians(tilt_deg))
+    T = np.eye(4)
+    T[:3, :3] = R
+    centre = np.array([offset_m[0], offset_m[1], distance_m])
+    T[:3, 3] = centre - R @ np.array([w / 2, h / 2, 0.0])
+    return T
+
+
+def screen_region(calib: Calibration, target: ScreenTarget, T_event_board: np.ndarray, margin_px: int = 6) -> tuple[int, int, int, int]:
+    """(x0, y0, w, h): the sensor pixels that see the screen (dense sampling of its outline)."""
+    c = target.corners_m()
+    s = np.linspace(0, 1, 33)[:, None]
+    outline = np.concatenate([c[i] + s * (c[(i + 1) % 4] - c[i]) for i in range(4)])
+    pts = outline @ T_event_board[:3, :3].T + T_event_board[:3, 3]
+    uv = calib.project(pts)
+    uv = uv[np.isfinite(uv).all(axis=1)]
+    if uv.size == 0:
+        raise ValueError("the screen is not in front of the event camera")
+    w, h = SENSOR_WH
+    x0, y0 = np.maximum(np.floor(uv.min(axis=0)) - margin_px, 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(uv.max(axis=0)) + margin_px + 1, [w, h]).astype(int)
+    if x1 <= x0 or y1 <= y0:
+        raise ValueError("the screen is outside the event camera's view")
+    return int(x0), int(y0), int(x1 - x0), int(y1 - y0)
+
+
+def flash_events(
+    calib: Calibration,
+    target: ScreenTarget,
+    T_event_board: np.ndarray,
+    switches_us: list[tuple[float, bool]],
+    params: SensorParams,
+    rng: np.random.Generator,
+    *,
+    fine_dt_us: float = 100.0,
+    fine_us: float = 1000.0,
+    coarse_dt_us: float = 1000.0,
+    after_us: float = 3000.0,
+) -> np.ndarray:
+    """Events of the screen pixels around each switch ``(t_us, shown_after)`` at one pose.
+
+    Each switch is simulated from 1 ms before to ``after_us`` after it: finely right after the
+    switch (crossing times matter for the clock), coarsely while the photoreceptors settle.
+    Between switches the scene is static and only noise fires, which ``background_events`` adds.
+    """
+    x0, y0, w, h = screen_region(calib, target, T_event_board)
+    rays = region_rays(calib, x0, y0, w, h)
+    shown, blank = target.render_pair(rays, (h, w), T_event_board)
+    sensor = EventSensor(params, (h, w), (x0, y0), rng)
+    out = []
+    for t_switch, shown_after in switches_us:
+        before, after = (blank, shown) if shown_after else (shown, blank)
+        sensor.reset(before, t_switch - 1000.0, steady=True)
+        out.append(sensor.step(before, 1000.0))
+        t = 0.0
+        while t < after_us:
+            dt = fine_dt_us if t < fine_us else coarse_dt_us
+            out.append(sensor.step(after, dt))
+            t += dt
+    return concat_events(out)
+
+
+def camera_rays(camera: Camera) -> np.ndarray:
+    """Normalised rays of every pixel centre of ``camera``, [h*w, 2]."""
+    xs, ys = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
+    return camera.unproject(np.stack([xs.ravel(), ys.ravel()], axis=1))
+
+
+def to_picture(irradiance: np.ndarray, white_lux: float, rng: np.random.Generator, *, noise: float = 2.0) -> np.ndarray:
+    """Linear irradiance -> grey uint8 with an sRGB-like gamma and sensor noise."""
+    linear = irradiance / np.float32(white_lux)
+    grey = 255.0 * np.clip(linear, 0, 1) ** (1 / 2.2) + rng.normal(0.0, noise, linear.shape)
+    return np.clip(np.round(grey), 0, 255).astype(np.uint8)
+
+
+def shown_fraction(switch_times_us: np.ndarray, shown_after: np.ndarray, t0_us: np.ndarray, t1_us: np.ndarray, initial: bool = False) -> np.ndarray:
+    """Share of each interval [t0, t1) during which the board was shown (square wave of switches)."""
+    order = np.argsort(switch_times_us)
+    times = np.asarray(switch_times_us, dtype=np.float64)[order]
+    states = np.asarray(shown_after, dtype=bool)[order]
+    t0 = np.asarray(t0_us, dtype=np.float64)
+    t1 = np.asarray(t1_us, dtype=np.float64)
+    edges = np.concatenate([[-np.inf], times, [np.inf]])
+    level = np.concatenate([[initial], states]).astype(np.float64)
+    total = np.zeros_like(t0)
+    for k in range(level.size):  # a few dozen switches
+        lo = np.maximum(t0, edges[k])
+        hi = np.minimum(t1, edges[k + 1])
+        total += level[k] * np.clip(hi - lo, 0.0, None)
+    return total / np.maximum(t1 - t0, 1e-9)
+
+
+@dataclass
+class FlashCaptureSpec:
+    """What a synthetic capture holds; defaults make a small one (seconds, a few poses)."""
+
+    seed: int = 0
+    board: BoardSpec = field(default_factory=lambda: BoardSpec("charuco", 9, 6, 0.03, 0.022))
+    n_poses: int = 6
+    pose_s: float = 0.6  # glasses still for this long per pose
+    flashes_per_pose: int = 1  # appear + disappear cycles per pose
+    rgb_fps: float = 30.0
+    rgb_exposure_us: float = 16000.0
+    rgb_camera: PinholeCamera = field(default_factory=lambda: PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5))
+    with_rgb: bool = True
+    lux: float = 250.0
+    distance_m: tuple[float, float] = (0.6, 0.7)
+    tilt_scale: float = 1.6  # strong tilts separate focal length from distance
+
+
+@dataclass
+class FlashCapture:
+    """A capture in memory (what ``write_flash_capture`` puts on disk) and its truth."""
+
+    events: np.ndarray  # event clock
+    board: BoardSpec
+    rgb_times_us: np.ndarray  # device clock, exposure middles
+    rgb_exposure_us: float
+    rgb_frames: list[np.ndarray]
+    rgb_camera: PinholeCamera
+    truth: Calibration  # true event intrinsics, T_event_cpf and clock offset
+    T_rgb_cpf: np.ndarray
+    T_cpf_board: list[np.ndarray]  # per pose
+    switches_event_us: np.ndarray  # true switch times on the event clock
+    shown_after: np.ndarray
+
+    def nominal_calibration(self) -> Calibration:
+        """What a user knows before calibrating: the RGB camera; nominal event-camera values."""
+        w, h = SENSOR_WH
+        return Calibration(
+            width=w, height=h, fx=1400.0, fy=1400.0, cx=w / 2, cy=h / 2, distortion=(0.0, 0.0, 0.0, 0.0),
+            T_event_cpf=np.diag([-1.0, -1.0, 1.0, 1.0]), gaze_to_event_time_offset_us=0,
+            rgb_camera=rgb_camera_block(self.rgb_camera, self.T_rgb_cpf) if self.rgb_frames else None,
+        )
+
+
+def _rgb_pose(rng: np.random.Generator) -> np.ndarray:
+    """The RGB camera a few cm to the right of the CPF, looking slightly down-outwards (Aria-like)."""
+    T = np.eye(4)
+    flip = np.diag([-1.0, -1.0, 1.0])
+    T[:3, :3] = rotation_xyz(*np.radians(rng.normal([3.0, -9.0, 0.5], 0.5))) @ flip
+    T[:3, 3] = [0.04 + rng.normal(0, 0.002), 0.006, 0.011]
+    return T
+
+
+def _poses(spec: FlashCaptureSpec, target: ScreenTarget, rng: np.random.Generator) -> list[np.ndarray]:
+    """Board poses in the event camera frame that cover the image: centre, corners, tilted."""
+    offsets = [(0.0, 0.0), (-0.14, -0.07), (0.14, -0.07), (-0.14, 0.07), (0.14, 0.07), (0.0, 0.0), (0.0, -0.08), (0.0, 0.08)]
+    tilts = [(0, 0, 0), (15, -20, 5), (-15, -20, -5), (15, 20, 3), (-15, 20, -3), (-25, 0, 10), (20, 10, 0), (-20, -10, 0)]
+    poses = []
+    for k in range(spec.n_poses):
+        tilt = np.array(tilts[k % len(tilts)], dtype=np.float64) * spec.tilt_scale + rng.normal(0, 2, 3)
+        distance = float(rng.uniform(*spec.distance_m))
+        off = np.array(offsets[k % len(offsets)]) * distance / 0.65
+        poses.append(look_at_board(target, distance, tuple(tilt), tuple(off)))
+    return poses
+
+
+def unique_events(events: np.ndarray, width: int = SENSOR_WH[0], height: int = SENSOR_WH[1]) -> np.ndarray:
+    """Time-sorted events, at most one per pixel and microsecond (as a sensor reports them)."""
+    key = (events["t"].astype(np.int64) - int(events["t"].min(initial=0))) * (width * height) + (
+        events["y"].astype(np.int64) * width + events["x"]
+    )
+    _, first = np.unique(key, return_index=True)
+    return events[first]
+
+
+def simulate_flash_capture(spec: FlashCaptureSpec = FlashCaptureSpec()) -> FlashCapture:
+    """Simulate a capture: bursts of events at every switch, RGB frames on the device clock."""
+    rng = np.random.default_rng([spec.seed, 7])
+    true_calib = random_calibration(rng)
+    event_t0 = int(rng.integers(0, 1 << 24))
+    device_t0 = int(rng.integers(5_000_000_000, 20_000_000_000))
+    true_calib = replace(true_calib, gaze_to_event_time_offset_us=event_t0 - device_t0)
+    T_rgb_cpf = _rgb_pose(rng)
+    target = ScreenTarget(spec.board, white_lux=spec.lux)
+    params = SensorParams(lux=spec.lux, c_on=0.3, c_off=0.3)
+    poses_event = _poses(spec, target, rng)
+
+    switches, states, events = [], [], []
+    cycle_us = spec.pose_s * 1e6 / spec.flashes_per_pose
+    for k, T_event_board in enumerate(poses_event):
+        pose_switches = []
+        for j in range(spec.flashes_per_pose):
+            base = k * spec.pose_s * 1e6 + j * cycle_us
+            on = base + rng.uniform(0.1, 0.3) * cycle_us + 0.37
+            off = on + rng.uniform(0.35, 0.5) * cycle_us + 0.61
+            pose_switches += [(on, True), (off, False)]
+        events.append(flash_events(true_calib, target, T_event_board, pose_switches, params, rng))
+        switches += [s for s, _ in pose_switches]
+        states += [b for _, b in pose_switches]
+    duration_us = int(spec.n_poses * spec.pose_s * 1e6)
+    events.append(background_events(params, 0, duration_us, SENSOR_WH, None, rng))
+    ev = unique_events(concat_events(events))
+    ev = ev[(ev["t"] >= 0) & (ev["t"] < duration_us)]
+    ev["t"] += event_t0
+
+    switches_event = np.asarray(switches) + event_t0
+    states_arr = np.asarray(states, dtype=bool)
+    T_cpf_event = np.linalg.inv(true_calib.T_event_cpf)
+    T_cpf_board = [T_cpf_event @ T for T in poses_event]
+    times, frames = np.zeros(0), []
+    if spec.with_rgb:
+        times, frames = _rgb_frames(spec, target, T_rgb_cpf, T_cpf_board, switches_event - true_calib.gaze_to_event_time_offset_us, states_arr, device_t0, duration_us, rng)
+    return FlashCapture(ev, spec.board, times, spec.rgb_exposure_us, frames, spec.rgb_camera, true_calib, T_rgb_cpf, T_cpf_board, switches_event, states_arr)
+
+
+def write_flash_capture(out: str | Path, capture: FlashCapture) -> Path:
+    """Write a capture folder: ``events.raw``, ``board.json``, ``rgb_frames.csv`` + PNG frames, and an
+    input ``calibration.json`` with only what a user knows beforehand (see ``nominal_calibration``)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_raw(out / "events.raw", capture.events, width=SENSOR_WH[0], height=SENSOR_WH[1])
+    save_board(out / "board.json", capture.board)
+    if capture.rgb_frames:
+        (out / "rgb_frames").mkdir(exist_ok=True)
+        with open(out / RGB_FRAMES_NAME, "w", newline="", encoding="utf-8") as handle:
+            writer = csv.writer(handle, lineterminator="\n")
+            writer.writerow(["timestamp_us", "exposure_us", "file"])
+            for t, picture in zip(capture.rgb_times_us, capture.rgb_frames):
+                name = f"rgb_frames/{int(t)}.png"
+                cv2.imwrite(str(out / name), picture)
+                writer.writerow([int(t), int(capture.rgb_exposure_us), name])
+    save_calibration(out / "calibration.json", capture.nominal_calibration())
+    return out
+
+
+def rgb_camera_block(camera: PinholeCamera, T_rgb_cpf: np.ndarray) -> dict:
+    return {
+        "width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
+        "distortion": {"model": "none"}, "T_rgb_cpf": np.asarray(T_rgb_cpf).tolist(),
+    }
+
+
+def _rgb_frames(
+    spec: FlashCaptureSpec, target: ScreenTarget, T_rgb_cpf: np.ndarray, T_cpf_board: list[np.ndarray],
+    switches_device_us: np.ndarray, states: np.ndarray, device_t0: int, duration_us: int, rng: np.random.Generator,
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    period = 1e6 / spec.rgb_fps
+    mids = np.round(device_t0 + rng.uniform(0, period) + np.arange(int(duration_us / period)) * period)
+    half = spec.rgb_exposure_us / 2
+    mids = mids[mids + half < device_t0 + duration_us]
+    fractions = shown_fraction(switches_device_us, states, mids - half, mids + half)
+    rays = camera_rays(spec.rgb_camera)
+    shape = (spec.rgb_camera.height, spec.rgb_camera.width)
+    pairs = [target.render_pair(rays, shape, T_rgb_cpf @ T) for T in T_cpf_board]
+    frames = []
+    for mid, frac in zip(mids, fractions):
+        k = min(int((mid - device_t0) // (spec.pose_s * 1e6)), len(T_cpf_board) - 1)
+        frames.append(to_picture(ScreenTarget.blend(*pairs[k], float(frac)), target.white_lux, rng))
+    return mids.astype(np.int64), frames
+
+
+def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
+    """Angle of the rotation between two rotation matrices, degrees."""
+    cos = (np.trace(R_a.T @ R_b) - 1) / 2
+    return math.degrees(math.acos(float(np.clip(cos, -1.0, 1.0))))

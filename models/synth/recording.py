@@ -1,0 +1,231 @@
+"""Whole synthetic reading sessions written in the recording format.
+
+The region the fovea can reach (every window around the tracker's gaze estimates, plus a margin)
+is simulated pixel by pixel at >= 2 kHz; the rest of the sensor receives noise events at the same
+per-pixel rates (shot, leak, hot pixels), which keeps generation fast. Event times are absolute
+sensor time starting anywhere in the 24-bit range; gaze rows are on the device clock, related to
+the event clock by ``calibration.json``'s offset (written with a few ms of alignment error).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from darkread.edge.fovea import FoveaConfig
+from darkread.edge.io.calibration import save_calibration
+from darkread.edge.io.gaze_csv import write_gaze_csv
+from darkread.edge.io.raw import write_raw
+from darkread.models.synth.camera import SENSOR_WH
+from darkread.models.synth.gaze import points_from_angles, row_times_us, tracker_rows
+from darkread.models.synth.scene import Region
+from darkread.models.synth.sensor import EventSensor, background_events, concat_events
+from darkread.models.synth.session import Session, SessionSpec, choose_dt_us, make_session
+from darkread.models.synth.text import CORPUS_SOURCE
+
+log = logging.getLogger(__name__)
+
+REGION_MARGIN_PX = 16
+WRAP_US = 1 << 24
+
+
+@dataclass(frozen=True)
+class RecordingSpec:
+    lux: float = 100.0
+    motion: str = "normal"
+    kind: str = "paragraph"
+    seconds: float = 10.0
+    seed: int = 0
+    font: str | None = None
+    xheight_px: float | None = None
+    n_lines: int | None = None
+    line_chars: int | None = None
+    description: str = "synthetic reading session"
+
+
+def _cpf_points(session: Session, tex_xy: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """CPF points (m) of texels ``tex_xy`` [N, 2] at times ``t_s`` [N]."""
+    T = session.calib.T_event_cpf
+    rot, trans = T[:3, :3], T[:3, 3]
+    out = np.empty((len(t_s), 3))
+    for i, (xy, t) in enumerate(zip(tex_xy, t_s)):  # one row per eye-tracking frame (~60 per second)
+        p_cam = session.scene.points_camera(xy[None, :], float(t))[0]
+        out[i] = rot.T @ (p_cam - trans)
+    return out
+
+
+def gaze_rows(session: Session, device_t0_us: int, seconds: float, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """The tracker's rows: device times, per-eye yaws, pitch, depth, and the blink flag."""
+    tr = session.tracker
+    t_rows = row_times_us(device_t0_us, seconds, tr.rate_hz, tr.missing_p, rng)
+    t_rows = t_rows[t_rows < device_t0_us + int(seconds * 1e6)]
+    eye_t = (t_rows - device_t0_us) * 1e-6 - tr.latency_us * 1e-6
+    tex = session.scanpath.position(np.maximum(eye_t, 0.0))
+    true_cpf = _cpf_points(session, tex, np.maximum(eye_t, 0.0))
+    blink = session.scanpath.in_blink(eye_t)
+    left, right, pitch, depth = tracker_rows(true_cpf, t_rows, blink, tr, rng)
+    return {"t_us": t_rows, "left": left, "right": right, "pitch": pitch, "depth": depth, "blink": blink}
+
+
+def gaze_pixels(session: Session, rows: dict[str, np.ndarray]) -> np.ndarray:
+    """Where the edge will centre its window for each row (format's worked example)."""
+    tc = (np.tan(rows["left"]) + np.tan(rows["right"])) / 2
+    p_cpf = points_from_angles(np.arctan(tc), rows["pitch"], rows["depth"])
+    return session.calib.project(session.calib.cpf_to_event(p_cpf))
+
+
+def reachable_region(uv: np.ndarray, fovea: FoveaConfig = FoveaConfig(), margin: int = REGION_MARGIN_PX) -> tuple[int, int, int, int]:
+    """(x0, y0, w, h): every fovea window around ``uv`` plus a margin, clipped to the sensor."""
+    ok = np.all(np.isfinite(uv), axis=1)
+    if not ok.any():
+        raise ValueError("no finite gaze pixel: cannot place the simulated region")
+    lo = np.percentile(uv[ok], 1, axis=0)
+    hi = np.percentile(uv[ok], 99, axis=0)
+    half = np.array([fovea.width / 2 + margin, fovea.height / 2 + margin])
+    x0, y0 = np.maximum(np.floor(lo - half), 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(hi + half), np.array(SENSOR_WH)).astype(int)
+    return int(x0), int(y0), int(max(x1 - x0, 1)), int(max(y1 - y0, 1))
+
+
+def simulate_region(
+    session: Session, region: Region, seconds: float, rng: np.random.Generator, *, progress: bool = False
+) -> np.ndarray:
+    """All events of ``region`` over [0, seconds) s; times in µs from the session start."""
+    scene, params = session.scene, session.sensor
+    dt_us = choose_dt_us(scene)
+    sensor = EventSensor(params, (region.height, region.width), (region.x0, region.y0), rng)
+    warm_steps, warm_dt_us = 15, 2000.0
+    t = -warm_steps * warm_dt_us * 1e-6
+    sensor.reset(scene.irradiance(region, t), t * 1e6)
+    for _ in range(warm_steps):
+        t += warm_dt_us * 1e-6
+        sensor.settle(scene.irradiance(region, t), warm_dt_us)
+    sensor.rebase()
+    sensor.t = 0.0
+    n_steps = int(math.ceil(seconds * 1e6 / dt_us))
+    chunks = []
+    from tqdm import tqdm
+
+    for k in tqdm(range(n_steps), disable=not progress, unit="step", desc="simulating", leave=False):
+        t_s = (k + 1) * dt_us * 1e-6
+        ev = sensor.step(scene.irradiance(region, t_s), dt_us)
+        if ev.size:
+            chunks.append(ev)
+    events = concat_events(chunks)
+    return events[events["t"] < int(seconds * 1e6)]
+
+
+def drop_same_time_duplicates(events: np.ndarray, width: int = SENSOR_WH[0]) -> np.ndarray:
+    """Time-sorted events with at most one event per pixel and microsecond (as a sensor reports)."""
+    pix = events["y"].astype(np.int64) * width + events["x"]
+    order = np.lexsort((pix, events["t"]))
+    ev = events[order]
+    p = pix[order]
+    keep = np.ones(ev.size, dtype=bool)
+    keep[1:] = (ev["t"][1:] != ev["t"][:-1]) | (p[1:] != p[:-1])
+    return ev[keep]
+
+
+def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = True) -> dict:
+    """Write a recording folder (events.raw, general_eye_gaze.csv, calibration.json, text.txt, meta.json)."""
+    if spec.seconds <= 0:
+        raise ValueError("--seconds must be positive")
+    if not 0.5 <= spec.lux <= 100_000:
+        raise ValueError(f"--lux {spec.lux} is outside 0.5..100000")
+    t_wall = time.perf_counter()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    session_spec = SessionSpec(
+        split="train",
+        lux=spec.lux,
+        motion=spec.motion,
+        kind=spec.kind,
+        font=spec.font,
+        xheight_px=spec.xheight_px,
+        n_lines=spec.n_lines,
+        line_chars=spec.line_chars,
+        duration_s=spec.seconds,
+    )
+    session = make_session(session_spec, spec.seed)
+    rng = np.random.default_rng([spec.seed, 2])
+
+    event_t0 = int(rng.integers(0, WRAP_US))
+    device_t0 = int(rng.integers(5_000_000_000, 20_000_000_000))
+    true_offset = event_t0 - device_t0
+    written_offset = true_offset + int(round(rng.normal(0.0, 2000.0)))
+    calib = replace(session.calib, gaze_to_event_time_offset_us=int(written_offset))
+
+    rows = gaze_rows(session, device_t0, spec.seconds, rng)
+    uv = gaze_pixels(session, {k: v[~rows["blink"]] for k, v in rows.items()})
+    x0, y0, w, h = reachable_region(uv)
+    region = Region.of(session.calib, x0, y0, w, h)
+    log.info("simulating region x=%d..%d y=%d..%d (%d px)", x0, x0 + w, y0, y0 + h, w * h)
+    signal = simulate_region(session, region, spec.seconds, rng, progress=progress)
+    background = background_events(session.sensor, 0, int(spec.seconds * 1e6), SENSOR_WH, (x0, y0, w, h), rng)
+    events = drop_same_time_duplicates(concat_events([signal, background]))
+    events["t"] += event_t0
+
+    serial = f"{int(rng.integers(0, 1 << 32)):08x}"
+    write_raw(
+        out / "events.raw",
+        events,
+        width=SENSOR_WH[0],
+        height=SENSOR_WH[1],
+        header_extra={
+            "camera_integrator_name": "Prophesee",
+            "date": "2026-01-01 00:00:00",
+            "generation": "4.2",
+            "integrator_name": "Prophesee",
+            "plugin_integrator_name": "Prophesee",
+            "plugin_name": "hal_plugin_imx636_evk4",
+            "sensor_generation": "4.2",
+            "serial_number": serial,
+            "system_ID": "49",
+        },
+    )
+    uid_bytes = rng.integers(0, 256, 16).astype(np.uint8).tobytes()
+    import uuid
+
+    write_gaze_csv(
+        out / "general_eye_gaze.csv",
+        rows["t_us"],
+        rows["left"],
+        rows["right"],
+        rows["pitch"],
+        rows["depth"],
+        bounds_rad=0.05,
+        session_uid=str(uuid.UUID(bytes=uid_bytes, version=4)),
+    )
+    save_calibration(out / "calibration.json", calib)
+    (out / "text.txt").write_text(session.page.text, encoding="ascii")
+    duration = float(spec.seconds)
+    face_family = session.page.font.removesuffix(" Bold")
+    meta = {
+        "description": spec.description,
+        "lux": float(spec.lux),
+        "motion": session.scene.motion.level,
+        "text_kind": session.kind,
+        "font": face_family,
+        "font_face": session.page.font,
+        "xheight_px": round(session.xheight_px, 2),
+        "xheight_px_measured_t0": round(session.scene.xheight_px(0.0), 2),
+        "duration_s": duration,
+        "text_source": CORPUS_SOURCE if session.kind in ("paragraph", "words") else f"generated ({session.kind})",
+        "n_lines": len(session.page.lines),
+        "event_count": int(events.size),
+        "event_rate_hz": round(events.size / duration, 1),
+        "seed": int(spec.seed),
+        "simulated_region_xywh": [x0, y0, w, h],
+        "sensor": session.sensor.to_dict(),
+        "page": {k: round(float(v), 4) for k, v in session.extras.items()},
+        "generator": "darkread.models.synth",
+    }
+    (out / "meta.json").write_text(json.dumps(meta, indent=2))
+    log.info("wrote %s: %d events in %.1f s wall", out, events.size, time.perf_counter() - t_wall)
+    return meta
