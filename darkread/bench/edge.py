@@ -149,6 +149,22 @@ class _AckServer:
         self.loop.close()
 
 
+def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
+    """Bytes of one 2880x2880 RGB PNG: the recording's snapshot upscaled and encoded, or the estimate."""
+    from darkread.edge.metrics import RGB_FRAME_BYTES_ESTIMATE
+
+    rgb = recording / "rgb.png"
+    if rgb.is_file():
+        import cv2
+
+        image = cv2.imread(str(rgb), cv2.IMREAD_COLOR)
+        if image is not None:
+            ok, png = cv2.imencode(".png", cv2.resize(image, (2880, 2880), interpolation=cv2.INTER_CUBIC))
+            if ok:
+                return int(png.size), "measured"
+    return RGB_FRAME_BYTES_ESTIMATE, "estimated"
+
+
 def run(ctx: BenchContext) -> list[Figure]:
     from darkread.edge.io.recording import open_recording
     from darkread.edge.spool import Spool
@@ -191,6 +207,9 @@ def run(ctx: BenchContext) -> list[Figure]:
         uplinks[0].stop(drain_timeout_s=5)
     finally:
         server.close()
+    sent_kb_s = paced.totals["bytes_sent"] / 1e3 / span_s
+    raw_kb_s = (recording / "events.raw").stat().st_size / 1e3 / span_s
+    rgb_bytes, rgb_how = _rgb_frame_bytes(recording)
     latency = np.fromiter(paced.latency_ms, float)
     inference = np.fromiter(paced.inference_ms, float)
     rate = meta.get("event_rate_hz", source.stats["events_out"] / max(span_s, 1e-9))
@@ -206,6 +225,10 @@ def run(ctx: BenchContext) -> list[Figure]:
         Figure(
             "edge_latency_p50_ms", float(np.percentile(latency, 50)),
             f"event-to-wire latency p50, paced at 1x ({latency.size} frames)", reference=infer_ref,
+        ),
+        Figure(
+            "edge_uplink_kbyte_per_s", sent_kb_s, "uplink bandwidth, frames mode, paced at 1x",
+            reference=f"raw EVT3 stream {raw_kb_s:.0f} kB/s; one 2880x2880 RGB PNG {rgb_bytes / 1e3:.0f} kB ({rgb_how})",
         ),
         Figure("edge_latency_p99_ms", float(np.percentile(latency, 99)), "event-to-wire latency p99, paced at 1x",
                reference=infer_ref, goal="<= 20 ms"),
