@@ -299,6 +299,9 @@ class EdgeService:
                 raise ValueError("a replay needs a recording: --replay PATH or [source] path")
             recording = open_recording(cfg.path, gaze=cfg.gaze_csv or None, calibration=cfg.calibration or None)
             self.source = ReplaySource(recording.raw_path, speed=cfg.speed or None)
+            n_events = recording.meta.get("event_count")
+            if isinstance(n_events, int) and n_events > 0:  # the bandwidth ratio against this very stream
+                self.metrics.raw_bytes_per_event = recording.raw_path.stat().st_size / n_events
             return recording.calibration, recording.gaze
         from darkread.edge.sources.evk4.camera import Evk4Camera
 

@@ -20,7 +20,7 @@ import numpy as np
 logger = logging.getLogger(__name__)
 
 RESERVOIR = 4096
-RAW_EVT3_BYTES_PER_EVENT = 2.0  # EVT3 packs most events in about one 16-bit word; a conservative 2 bytes
+RAW_EVT3_BYTES_PER_EVENT = 2.0  # EVT3 lower bound (one 16-bit word per event); replays measure their own
 RGB_FRAME_BYTES_ESTIMATE = 2880 * 2880 * 3 // 2  # a 2880x2880 RGB capture as PNG, about 1.5 bytes/pixel
 
 COUNTERS = (
@@ -50,6 +50,7 @@ class Snapshot:
     latency_ms_p50: float
     latency_ms_p99: float
     spool_depth: int
+    raw_bytes_per_event: float = RAW_EVT3_BYTES_PER_EVENT
 
     def log_line(self) -> str:
         r = self.rates
@@ -67,7 +68,7 @@ class Snapshot:
         return self.rates["bytes_sent"] / RGB_FRAME_BYTES_ESTIMATE
 
     def bandwidth_vs_raw(self) -> float:
-        raw = self.rates["events_in"] * RAW_EVT3_BYTES_PER_EVENT
+        raw = self.rates["events_in"] * self.raw_bytes_per_event
         return self.rates["bytes_sent"] / raw if raw > 0 else 0.0
 
 
@@ -85,6 +86,7 @@ class EdgeMetrics:
         self.inference_ms: deque[float] = deque(maxlen=RESERVOIR)
         self.latency_ms: deque[float] = deque(maxlen=RESERVOIR)
         self.spool_depth: Callable[[], int] = lambda: 0
+        self.raw_bytes_per_event = RAW_EVT3_BYTES_PER_EVENT  # the raw stream's size, for the bandwidth ratio
         self._started = clock()
         self._last_time = self._started
         self._last_totals = dict(self.totals)
@@ -116,6 +118,7 @@ class EdgeMetrics:
             latency_ms_p50=percentile(latency, 50),
             latency_ms_p99=percentile(latency, 99),
             spool_depth=self.spool_depth(),
+            raw_bytes_per_event=self.raw_bytes_per_event,
         )
 
     def prometheus_text(self) -> str:
