@@ -282,7 +282,8 @@ class EdgeService:
         close = getattr(self.source, "close", None)
         if close is not None:
             close()
-        logger.info("final: %s", self.metrics.snapshot().log_line())
+        if self.pipeline is not None:
+            logger.info("final: %s", self.metrics.snapshot().log_line())
         return drained
 
     # -- wiring ------------------------------------------------------------------------------
@@ -296,7 +297,10 @@ class EdgeService:
             from darkread.edge.sources.replay import ReplaySource
 
             if not cfg.path:
-                raise ValueError("a replay needs a recording: --replay PATH or [source] path")
+                raise ValueError(
+                    "nothing to read: pass --replay RECORDING, or a --config whose [source] names a "
+                    "recording (path) or the camera (kind = \"evk4\")"
+                )
             recording = open_recording(cfg.path, gaze=cfg.gaze_csv or None, calibration=cfg.calibration or None)
             self.source = ReplaySource(recording.raw_path, speed=cfg.speed or None)
             n_events = recording.meta.get("event_count")
