@@ -51,6 +51,7 @@ class PipelineConfig:
     ring_capacity: int = 1 << 19  # 8 MB: 0.5 s at 1 Mev/s, far more than a window needs
     lossless: bool = False  # True: the reader waits for inference instead of skipping windows
     stall_s: float = 5.0  # no events for this long: the watchdog is no longer fed (systemd restarts us)
+    sensor_roi: bool = False  # move the sensor's ROI with the foveal window (EVK4: less USB traffic)
 
 
 @dataclass(frozen=True)

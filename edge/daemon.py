@@ -227,7 +227,7 @@ class EdgeService:
             self._pages = PageStitcher()
         settings = PipelineSettings(
             n_events=cfg.pipeline.n_events, period_ms=cfg.pipeline.period_ms, fovea=fovea,
-            bins=cfg.pipeline.bins, stall_s=cfg.pipeline.stall_s,
+            bins=cfg.pipeline.bins, stall_s=cfg.pipeline.stall_s, sensor_roi=cfg.pipeline.sensor_roi,
             # a replay as fast as possible has no clock to keep up with: make every window
             lossless=cfg.pipeline.lossless or (cfg.source.kind == "replay" and cfg.source.speed == 0),
         )

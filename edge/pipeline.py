@@ -55,6 +55,7 @@ class PipelineSettings:
     history_events: int = 1 << 16  # usual cap of the ring events searched for a window's events
     lossless: bool = False  # the reader reconstructs (waits for inference) instead of skipping windows
     stall_s: float = 5.0  # no events for this long: stop feeding the watchdog (a sensor always has noise)
+    sensor_roi: bool = False  # follow the window with the source's ROI (less USB traffic; sees only the window)
 
     @property
     def voxel(self) -> VoxelConfig:
@@ -279,6 +280,8 @@ class Pipeline:
         origin = window_origin(gaze_px, self.sensor_wh, self.settings.fovea)
         moved = origin != self._origin
         self._origin = origin
+        if moved and self.settings.sensor_roi:
+            self.source.set_roi(origin[0], origin[1], self.settings.fovea.width, self.settings.fovea.height)
         if new_foveated == 0 and not moved:
             return
         recent = self._recent_events(origin)

@@ -51,6 +51,7 @@ class ListSource:
         self.chunks = chunks
         self.pause_s = pause_s
         self.done = threading.Event()
+        self.rois: list[tuple[int, int, int, int]] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -73,7 +74,7 @@ class ListSource:
             self._thread.join()
 
     def set_roi(self, x0: int, y0: int, width: int, height: int) -> None:
-        pass
+        self.rois.append((x0, y0, width, height))
 
     @property
     def stats(self) -> dict[str, float]:
@@ -293,3 +294,14 @@ def test_watchdog_is_no_longer_fed_when_the_source_stalls() -> None:
     pipeline.stop()
     assert pings and pings[0] < last_event + 0.1
     assert max(pings) < last_event + 0.15  # no pings once stalled
+
+
+def test_sensor_roi_follows_the_window() -> None:
+    ev = events_in_box(8000, 540, 310, 200, 100)
+    source = ListSource(chunked(ev, 200))
+    gaze = FixedGaze((640.0, 360.0))
+    frames, _, _ = run_pipeline(source, gaze, PipelineSettings(lossless=True, sensor_roi=True))
+    assert frames and source.rois == [(540, 310, 200, 100)]  # programmed once: the gaze did not move
+    plain = ListSource(chunked(ev, 200))
+    run_pipeline(plain, FixedGaze(), PipelineSettings(lossless=True))
+    assert plain.rois == []
