@@ -180,7 +180,14 @@ def test_unit_file_is_notify_with_watchdog_and_hardening() -> None:
     assert directives["NoNewPrivileges"] == "yes"
     assert directives["StateDirectory"] == "darkread-edge"
     assert "edge run" in directives["ExecStart"]
-    assert directives["SupplementaryGroups"]
+    rules = Path(darkread.edge.__file__).parent / "systemd" / "99-darkread-evk4.rules"
+    if rules.is_file():  # the camera's group is the one the udev rule assigns
+        import re
+
+        groups = set(re.findall(r'GROUP="([^"]+)"', rules.read_text()))
+        assert groups == {directives["SupplementaryGroups"]}
+    else:
+        assert directives["SupplementaryGroups"]
 
 
 def test_edge_run_options_become_config_overrides(tmp_path: Path) -> None:
