@@ -11,6 +11,8 @@ import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
+from darkread.cloud.store import StoreError
+from darkread.cloud.stream import close_reason
 from darkread.proto.errors import CloseCode
 from darkread.proto.messages import Ack, Error, Frame, Hello, Page, Welcome, decode, encode, pack_mask
 
@@ -237,3 +239,36 @@ def test_metrics_count_connections_messages_and_bytes(server: LiveServer) -> Non
     assert metrics.frames_stored._value.get() == 3
     assert metrics.messages.labels(type="frame")._value.get() == 3
     assert metrics.bytes_received._value.get() == len(encode(hello("sess-m"))) + sum(len(encode(frame(s))) for s in range(3))
+
+
+def test_storage_failure_closes_with_internal_error_and_the_client_can_resume(server: LiveServer, monkeypatch: pytest.MonkeyPatch) -> None:
+    store = server.context.store
+    real_add_frame = store.add_frame
+
+    def failing_add_frame(session_id: str, message: Frame) -> Any:
+        if message.seq == 2:
+            return store._submit(lambda _conn: (_ for _ in ()).throw(StoreError("disk full")))
+        return real_add_frame(session_id, message)
+
+    monkeypatch.setattr(store, "add_frame", failing_add_frame)
+
+    async def scenario() -> None:
+        ws, _ = await open_stream(server, "sess-fail")
+        for seq in range(3):
+            await ws.send(encode(frame(seq)))
+        assert [decode(await ws.recv(), max_bytes=LIMIT) for _ in range(2)] == [Ack(seq=0), Ack(seq=1)]
+        error, code, _ = await expect_error_close(ws)
+        assert error.code == code == CloseCode.INTERNAL_ERROR and "disk full" in error.message
+        monkeypatch.setattr(store, "add_frame", real_add_frame)
+        ws, welcome = await open_stream(server, "sess-fail")
+        assert welcome.last_acked_seq == 1
+        async with ws:
+            await ws.send(encode(frame(2)))
+            assert decode(await ws.recv(), max_bytes=LIMIT) == Ack(seq=2)
+
+    asyncio.run(scenario())
+
+
+def test_close_reason_fits_the_websocket_limit() -> None:
+    reason = close_reason("é" * 200)
+    assert len(reason.encode()) <= 123 and reason == "é" * 60
