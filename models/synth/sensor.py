@@ -68,7 +68,7 @@ def random_sensor_params(rng: np.random.Generator, lux: float) -> SensorParams:
         c_sigma=float(rng.uniform(0.03, 0.05)),
         refractory_us=float(rng.uniform(20.0, 300.0)),
         cutoff_hz=float(rng.uniform(300.0, 1000.0)),
-        cutoff_half_lux=float(rng.uniform(50.0, 200.0)),
+        cutoff_half_lux=float(rng.uniform(100.0, 400.0)),
         dark_lux=float(rng.uniform(0.5, 3.0)),
         shot_rate_100lux_hz=float(rng.uniform(0.03, 0.1)),
         shot_lux_exponent=float(rng.uniform(0.9, 1.1)),
