@@ -122,7 +122,11 @@ def test_a_batch_is_one_transaction(store: Store) -> None:
     """Writes queued together commit together: inside the batch, a reader sees none of them yet."""
     import threading
 
-    release = threading.Event()
+    release, running = threading.Event(), threading.Event()
+
+    def hold_writer(_conn: object) -> None:  # its batch is formed once it runs; the rest queue up
+        running.set()
+        release.wait(5)
 
     def count_committed(_conn: object) -> int:
         with store._reader() as reader:
@@ -130,7 +134,9 @@ def test_a_batch_is_one_transaction(store: Store) -> None:
 
     async def scenario() -> tuple[int, list[WriteResult]]:
         await store.open_session(hello("s"))
-        blocker = store._submit(lambda _conn: release.wait(5))  # holds the writer so the rest queue up
+        blocker = store._submit(hold_writer)
+        while not running.wait(0.001):
+            await asyncio.sleep(0.001)
         writes = [store.add_frame("s", frame(seq)) for seq in range(3)]
         seen = store._submit(count_committed)
         release.set()
