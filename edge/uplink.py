@@ -62,6 +62,7 @@ class UplinkSettings:
     max_in_flight: int = 512
     heartbeat_s: float = 5.0
     open_timeout_s: float = 5.0
+    stable_connection_s: float = 2.0  # a connection that lasted this long resets the backoff
 
 
 def backoff_delays(initial_s: float, max_s: float, rng: random.Random) -> Iterator[float]:
@@ -103,6 +104,7 @@ class Uplink:
         self._drained = threading.Event()
         self._thread: threading.Thread | None = None
         self._rng = random.Random()
+        self._connected_since: float | None = None
 
     # -- called from other threads ---------------------------------------------------------
     def start(self) -> None:
@@ -179,9 +181,9 @@ class Uplink:
             if not first:
                 self.metrics.add("reconnects")
             first = False
+            self._connected_since = None
             try:
                 await self._connection()
-                delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
             except InvalidStatus as exc:
                 self.last_error = f"cloud refused the connection: HTTP {exc.response.status_code}"
                 logger.error("%s (check the API key and URL)", self.last_error)
@@ -195,6 +197,10 @@ class Uplink:
                 self.connected.clear()
             if self._stopping:
                 break
+            stable_s = self.settings.stable_connection_s
+            if self._connected_since is not None and time.monotonic() - self._connected_since >= stable_s:
+                # a connection that worked for a while: the next outage starts from a short delay again
+                delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
             await self._sleep_or_stop(next(delays))
 
     async def _sleep_or_stop(self, delay_s: float) -> None:
@@ -228,6 +234,7 @@ class Uplink:
             if not isinstance(welcome, Welcome):
                 raise ConnectionError(f"expected welcome, got {welcome.TYPE}")
             self._on_ack(welcome.last_acked_seq)
+            self._connected_since = time.monotonic()
             self.connected.set()
             self.last_error = ""
             logger.info(

@@ -226,3 +226,27 @@ def test_backoff_grows_with_jitter_and_caps() -> None:
     assert 0.1 <= values[1] <= 0.2
     assert all(0.5 <= v <= 1.0 for v in values[4:])
     assert len(set(values)) == len(values)  # jittered
+
+
+def test_backoff_restarts_small_after_a_stable_connection(server: ProtoServer) -> None:
+    server.kill()
+    uplink = Uplink(settings(server.url, backoff_initial_s=0.02, backoff_max_s=5.0, stable_connection_s=0.05), Spool(None))
+    delays: list[float] = []
+    sleep = uplink._sleep_or_stop
+
+    async def recording_sleep(delay_s: float) -> None:
+        delays.append(delay_s)
+        await sleep(delay_s)
+
+    uplink._sleep_or_stop = recording_sleep  # type: ignore[method-assign]
+    uplink.start()
+    assert wait_for(lambda: len(delays) >= 4)  # outage 1: the delays grow
+    server.start()
+    assert wait_for(uplink.connected.is_set)
+    n_before = len(delays)
+    time.sleep(0.1)  # stable for longer than stable_connection_s
+    server.kill()
+    assert wait_for(lambda: len(delays) > n_before)
+    uplink.stop(drain_timeout_s=0)
+    assert delays[3] > delays[0]
+    assert delays[n_before] <= 0.02  # outage 2 starts from the shortest delay again
