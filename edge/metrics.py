@@ -33,6 +33,7 @@ COUNTERS = (
     "messages_sent",
     "bytes_sent",
     "messages_acked",
+    "messages_rejected",
     "reconnects",
     "pages",
 )

@@ -27,7 +27,7 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidSta
 
 from darkread.edge.metrics import EdgeMetrics
 from darkread.edge.spool import Spool
-from darkread.proto.errors import ProtocolError
+from darkread.proto.errors import CloseCode, ProtocolError
 from darkread.proto.messages import (
     DEFAULT_MAX_MESSAGE_BYTES,
     Ack,
@@ -45,7 +45,10 @@ from darkread.proto.messages import (
 logger = logging.getLogger(__name__)
 
 Sequenced = Frame | Page | Gaze
-LATENCY_TRACKED = 8192  # seqs whose submit time is remembered for the event-to-wire latency
+LATENCY_TRACKED = 8192
+MESSAGE_REJECTED_CODES = frozenset({
+    CloseCode.MESSAGE_TOO_BIG, CloseCode.MALFORMED, CloseCode.BAD_MASK,
+})  # the close names one bad message, not a bad connection  # seqs whose submit time is remembered for the event-to-wire latency
 
 
 @dataclass(frozen=True)
@@ -105,6 +108,7 @@ class Uplink:
         self._thread: threading.Thread | None = None
         self._rng = random.Random()
         self._connected_since: float | None = None
+        self._rejected: tuple[int, str] | None = None  # close code and reason naming a bad message
 
     # -- called from other threads ---------------------------------------------------------
     def start(self) -> None:
@@ -187,7 +191,12 @@ class Uplink:
             except InvalidStatus as exc:
                 self.last_error = f"cloud refused the connection: HTTP {exc.response.status_code}"
                 logger.error("%s (check the API key and URL)", self.last_error)
-            except (OSError, ConnectionClosed, InvalidHandshake, TimeoutError, ProtocolError) as exc:
+            except ConnectionClosed as exc:
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                logger.warning("uplink to %s lost: %s", self.settings.url, self.last_error)
+                if exc.rcvd is not None and exc.rcvd.code in MESSAGE_REJECTED_CODES:
+                    self._rejected = (exc.rcvd.code, exc.rcvd.reason)  # dropped after the next welcome
+            except (OSError, InvalidHandshake, TimeoutError, ProtocolError) as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
                 logger.warning("uplink to %s lost: %s", self.settings.url, self.last_error)
             except InvalidURI as exc:
@@ -234,6 +243,7 @@ class Uplink:
             if not isinstance(welcome, Welcome):
                 raise ConnectionError(f"expected welcome, got {welcome.TYPE}")
             self._on_ack(welcome.last_acked_seq)
+            self._drop_rejected(welcome.last_acked_seq)
             self._connected_since = time.monotonic()
             self.connected.set()
             self.last_error = ""
@@ -298,6 +308,21 @@ class Uplink:
                 log("cloud error %d: %s", message.code, message.message)
                 self.last_error = f"cloud error {message.code}: {message.message}"
         raise ConnectionError("cloud closed the connection")
+
+    def _drop_rejected(self, last_stored_seq: int) -> None:
+        """The cloud closed because of one message (malformed, bad mask, too big). It stores in seq
+        order, so that is the first one after what the next welcome says it has; resending it would
+        fail forever."""
+        if self._rejected is None:
+            return
+        code, reason = self._rejected
+        self._rejected = None
+        pending = self.spool.pending(after_seq=last_stored_seq, limit=1)
+        if pending:
+            seq = pending[0][0]
+            self.spool.discard(seq)
+            self.metrics.add("messages_rejected")
+            logger.error("cloud rejected message seq %d (close %d: %s); dropped from the spool", seq, code, reason)
 
     def _on_ack(self, seq: int) -> None:
         if seq > self.acked_seq:

@@ -29,8 +29,9 @@ class ProtoServer:
     acknowledging the last one (its ack is lost, as on a network drop).
     """
 
-    def __init__(self, drop_after: int | None = None) -> None:
+    def __init__(self, drop_after: int | None = None, reject_frame_id: int | None = None) -> None:
         self.stored: dict[str, list[int]] = {}
+        self.reject_frame_id = reject_frame_id
         self.received = 0
         self.hellos: list[Hello] = []
         self.drop_after = drop_after
@@ -83,6 +84,9 @@ class ProtoServer:
             self.received += 1
             if not isinstance(message, Frame):
                 continue
+            if message.frame_id == self.reject_frame_id:
+                await ws.close(4422, "bad mask")  # as the cloud does for an invalid message
+                return
             if not seqs or message.seq > seqs[-1]:
                 seqs.append(message.seq)
                 count += 1
@@ -250,3 +254,18 @@ def test_backoff_restarts_small_after_a_stable_connection(server: ProtoServer) -
     uplink.stop(drain_timeout_s=0)
     assert delays[3] > delays[0]
     assert delays[n_before] <= 0.02  # outage 2 starts from the shortest delay again
+
+
+def test_a_message_the_cloud_rejects_is_dropped_not_resent_forever() -> None:
+    server = ProtoServer(reject_frame_id=3)
+    server.start()
+    try:
+        uplink = Uplink(settings(server.url), Spool(None))
+        uplink.start()
+        for i in range(8):
+            uplink.submit(frame(i))
+        assert uplink.stop(drain_timeout_s=5)
+        assert server.stored[uplink.session_id] == [0, 1, 2, 4, 5, 6, 7]
+        assert uplink.metrics.totals["messages_rejected"] == 1
+    finally:
+        server.close()
