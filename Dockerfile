@@ -25,7 +25,6 @@ WORKDIR /app
 COPY . .
 RUN pip install "setuptools>=69" wheel \
     && pip install ".[cloud,edge]" \
-    && if [ "$WITH_TESSERACT" = "1" ]; then pip install pytesseract; fi \
     && useradd --create-home --uid 10001 darkread \
     && mkdir -p /data /spool && chown darkread /data /spool
 USER darkread
