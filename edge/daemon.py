@@ -178,7 +178,7 @@ class Daemon:
 class EdgeService:
     """Source + gaze + reconstructor + pipeline + uplink + metrics, built from an ``EdgeConfig``."""
 
-    def __init__(self, config: "EdgeConfig", notifier: Notifier | None = None) -> None:
+    def __init__(self, config: EdgeConfig, notifier: Notifier | None = None) -> None:
         from darkread.edge.metrics import EdgeMetrics
 
         self.config = config
