@@ -140,7 +140,8 @@ async def stream_endpoint(websocket: WebSocket) -> None:
         await _receive_loop(websocket, connection, outbox)
     finally:
         connection.state = StreamState.CLOSED
-        await outbox.put(None)
+        if not sender.done():  # a sender that died cannot drain a full outbox
+            await outbox.put(None)
         await sender
         metrics.active.dec()
 
