@@ -25,11 +25,13 @@ import numpy as np
 from darkread.edge.calibrate.cameras import Camera, PinholeCamera
 from darkread.edge.calibrate.markers import BoardSpec, save_board
 from darkread.edge.io.calibration import Calibration, save_calibration
+from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
 from darkread.edge.io.raw import write_raw
 from darkread.models.synth.camera import SENSOR_WH, random_calibration, region_rays, rotation_xyz
 from darkread.models.synth.sensor import EventSensor, SensorParams, background_events, concat_events
 
 RGB_FRAMES_NAME = "rgb_frames.csv"
+SESSION_US = 12_000_000  # captures of one session start and end within this span (start_s + duration)
 
 
 @dataclass
@@ -190,9 +192,14 @@ def shown_fraction(switch_times_us: np.ndarray, shown_after: np.ndarray, t0_us: 
 
 @dataclass
 class FlashCaptureSpec:
-    """What a synthetic capture holds; defaults make a small one (seconds, a few poses)."""
+    """What a synthetic capture holds; defaults make a small one (seconds, a few poses).
 
-    seed: int = 0
+    ``n_poses=1`` with several ``flashes_per_pose`` is a still capture, as the clock alignment wants.
+    """
+
+    seed: int = 0  # this capture's poses, switch times and noise
+    device_seed: int = 0  # the glasses (true calibration, clocks, RGB camera pose): shared by a session's captures
+    start_s: float = 0.0  # capture start within the session (both clocks advance by this)
     board: BoardSpec = field(default_factory=lambda: BoardSpec("charuco", 9, 6, 0.03, 0.022))
     n_poses: int = 6
     pose_s: float = 0.6  # glasses still for this long per pose
@@ -221,6 +228,14 @@ class FlashCapture:
     T_cpf_board: list[np.ndarray]  # per pose
     switches_event_us: np.ndarray  # true switch times on the event clock
     shown_after: np.ndarray
+
+    def triggers(self) -> np.ndarray:
+        """Edges on the external-trigger input (channel 0), as if the screen's sync output were wired
+        to it: rising when the board appears, falling when it goes."""
+        trig = np.zeros(self.switches_event_us.size, dtype=TRIGGER_DTYPE)
+        trig["t"] = np.round(self.switches_event_us).astype(np.int64)
+        trig["p"] = self.shown_after.astype(np.int16)
+        return trig
 
     def nominal_calibration(self) -> Calibration:
         """What a user knows before calibrating: the RGB camera; nominal event-camera values."""
@@ -265,12 +280,20 @@ def unique_events(events: np.ndarray, width: int = SENSOR_WH[0], height: int = S
 
 def simulate_flash_capture(spec: FlashCaptureSpec = FlashCaptureSpec()) -> FlashCapture:
     """Simulate a capture: bursts of events at every switch, RGB frames on the device clock."""
-    rng = np.random.default_rng([spec.seed, 7])
-    true_calib = random_calibration(rng)
-    event_t0 = int(rng.integers(0, 1 << 24))
-    device_t0 = int(rng.integers(5_000_000_000, 20_000_000_000))
+    device = np.random.default_rng([spec.device_seed, 11])  # the glasses: same for every capture of a session
+    true_calib = random_calibration(device)
+    # the session (all its captures) stays within one period of the sensor's 24-bit clock, so a RAW
+    # file's own time base is the session's and one clock offset holds for every capture
+    event_t0 = int(device.integers(0, (1 << 24) - SESSION_US))
+    device_t0 = int(device.integers(5_000_000_000, 20_000_000_000))
     true_calib = replace(true_calib, gaze_to_event_time_offset_us=event_t0 - device_t0)
-    T_rgb_cpf = _rgb_pose(rng)
+    T_rgb_cpf = _rgb_pose(device)
+    start_us = int(round(spec.start_s * 1e6))
+    if start_us + spec.n_poses * spec.pose_s * 1e6 > SESSION_US:
+        raise ValueError(f"a capture must end within {SESSION_US / 1e6:.0f} s of the session start")
+    event_t0 += start_us
+    device_t0 += start_us
+    rng = np.random.default_rng([spec.seed, 7])
     target = ScreenTarget(spec.board, white_lux=spec.lux)
     params = SensorParams(lux=spec.lux, c_on=0.3, c_off=0.3)
     poses_event = _poses(spec, target, rng)
@@ -308,7 +331,7 @@ def write_flash_capture(out: str | Path, capture: FlashCapture) -> Path:
     input ``calibration.json`` with only what a user knows beforehand (see ``nominal_calibration``)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    write_raw(out / "events.raw", capture.events, width=SENSOR_WH[0], height=SENSOR_WH[1])
+    write_raw(out / "events.raw", capture.events, width=SENSOR_WH[0], height=SENSOR_WH[1], triggers=capture.triggers())
     save_board(out / "board.json", capture.board)
     if capture.rgb_frames:
         (out / "rgb_frames").mkdir(exist_ok=True)
@@ -353,3 +376,65 @@ def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
     """Angle of the rotation between two rotation matrices, degrees."""
     cos = (np.trace(R_a.T @ R_b) - 1) / 2
     return math.degrees(math.acos(float(np.clip(cos, -1.0, 1.0))))
+
+
+@dataclass
+class GazeFlowScene:
+    """Events and gaze of a reader whose head moves, for the clock refinement (no page rendering).
+
+    The page image shifts by ``shift(t)`` (head motion); page features fire events at a rate
+    proportional to the image speed; the gaze holds on a word during a fixation (so its pixel moves
+    with the page) and jumps between words in saccades. Gaze rows are on the device clock.
+    """
+
+    events: np.ndarray
+    gaze_t_device_us: np.ndarray
+    gaze_pixels: np.ndarray
+    offset_us: int  # true t_event - t_device
+
+
+def simulate_gaze_flow(seed: int = 0, seconds: float = 6.0, *, gaze_hz: float = 60.0, events_per_px: float = 400.0) -> GazeFlowScene:
+    rng = np.random.default_rng([seed, 13])
+    dt_us = 500
+    t = np.arange(0, int(seconds * 1e6), dt_us, dtype=np.int64)
+    ts = t * 1e-6
+    shift = np.zeros((t.size, 2))
+    for _ in range(6):  # head motion: a few smooth oscillations per axis
+        f = rng.uniform(0.3, 2.5)
+        amp = rng.uniform(3.0, 14.0, 2)
+        phase = rng.uniform(0, 2 * np.pi, 2)
+        shift += amp * np.sin(2 * np.pi * f * ts[:, None] + phase)
+    velocity = np.gradient(shift, ts, axis=0)
+    speed = np.linalg.norm(velocity[:-1] + velocity[1:], axis=1) / 2  # px/s over each step
+    t, shift = t[:-1], shift[:-1]
+    features = np.c_[rng.uniform(300, 900, 4000), rng.uniform(250, 450, 4000)]
+    n_per_step = rng.poisson(speed * events_per_px * dt_us * 1e-6)
+    step = np.repeat(np.arange(t.size), n_per_step)
+    feat = rng.integers(0, len(features), step.size)
+    pos = features[feat] + shift[step] + rng.normal(0, 0.7, (step.size, 2))
+    noise_n = int(seconds * 50_000)
+    event_t0 = int(rng.integers(0, 1 << 24))
+    x = np.concatenate([pos[:, 0], rng.uniform(0, 1280, noise_n)])
+    y = np.concatenate([pos[:, 1], rng.uniform(0, 720, noise_n)])
+    tt = np.concatenate([t[step] + rng.integers(0, dt_us, step.size), rng.integers(0, t[-1], noise_n)])
+    ev = np.zeros(x.size, dtype=EVENT_CD_DTYPE)
+    ev["x"] = np.clip(np.round(x), 0, 1279)
+    ev["y"] = np.clip(np.round(y), 0, 719)
+    ev["t"] = tt + event_t0
+    ev["p"] = rng.integers(0, 2, x.size)
+    ev = ev[np.argsort(ev["t"], kind="stable")]
+    # reading: fixations of 150-350 ms on successive words, 30 ms saccades
+    device_t0 = int(rng.integers(5_000_000_000, 20_000_000_000))
+    rows = np.cumsum(rng.uniform(0.8, 1.2, int(seconds * gaze_hz * 1.2)) * 1e6 / gaze_hz)
+    rows = rows[rows < seconds * 1e6 - 1]
+    fix_end = np.cumsum(rng.uniform(150e3, 350e3, 200))
+    word = np.searchsorted(fix_end, rows)
+    target = np.c_[350 + (word % 12) * 45.0, 300 + (word // 12 % 4) * 30.0]
+    since = rows - np.concatenate([[0.0], fix_end])[word]
+    prev = np.c_[350 + ((word - 1) % 12) * 45.0, 300 + ((word - 1) // 12 % 4) * 30.0]
+    w = np.clip(since / 30e3, 0, 1)[:, None]
+    page_point = prev + w * (target - prev)
+    head = np.c_[np.interp(rows, t, shift[:, 0]), np.interp(rows, t, shift[:, 1])]
+    gaze_px = page_point + head + rng.normal(0, 0.5, page_point.shape)
+    offset = event_t0 - device_t0
+    return GazeFlowScene(ev, (device_t0 + rows).astype(np.int64), gaze_px, offset)

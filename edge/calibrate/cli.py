@@ -1,0 +1,234 @@
+"""``darkread calibrate intrinsics|clock|extrinsics|check``: make and check ``calibration.json``.
+
+Order of a calibration session (see docs/calibration.md): intrinsics from a flashing board seen
+from several angles; the clock from the board flashing while the glasses stay still (RGB frames
+or the trigger input); the pose from the board seen by both cameras; then ``check`` on a reading
+recording. Each step reads the calibration written by the one before (``--calibration``) and
+writes an updated one (``--out``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import logging
+from pathlib import Path
+
+logger = logging.getLogger(__name__)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "calibrate",
+        help="make calibration.json (intrinsics, clock offset, pose) and check it",
+        description=(
+            "Calibrate the event camera on the glasses from captures of a flashing ArUco/ChArUco board: "
+            "intrinsics, clock offset to the glasses' device clock, pose relative to the eyes' frame (CPF). "
+            "`check` draws the gaze track over a recording's events to see whether a calibration is right."
+        ),
+    )
+    sub = parser.add_subparsers(dest="calibrate_command", metavar="STEP")
+
+    p = sub.add_parser("intrinsics", help="fx, fy, cx, cy and radtan distortion from a flashing or moved board",
+                       description="Detect the board in every event burst of CAPTURE and run cv2.calibrateCamera.")
+    p.add_argument("capture", help="capture directory (events.raw, board.json) or a .raw file")
+    _common(p)
+    p.add_argument("--tangential", action="store_true",
+                   help="also fit p1, p2 (default 0: below detection noise for these lenses, and they trade off against cx, cy)")
+    p.set_defaults(func=_intrinsics)
+
+    p = sub.add_parser("clock", help="gaze_to_event_time_offset_us from flash times (RGB frames or trigger input)",
+                       description=(
+                           "Align the board's switches seen in the events (burst onsets, or edges on the external-trigger "
+                           "input with --trigger) with the RGB frames' brightness (rgb_frames.csv, device clock). "
+                           "Hold the glasses still. With --refine RECORDING, refine an offset on a reading recording by "
+                           "cross-correlating event activity with gaze speed."
+                       ))
+    p.add_argument("capture", help="capture directory (events.raw, rgb_frames.csv) or, with --refine, a recording")
+    _common(p)
+    p.add_argument("--rgb-frames", help="rgb_frames.csv (default: CAPTURE/rgb_frames.csv)")
+    p.add_argument("--trigger", action="store_true", help="take switch times from the external-trigger input")
+    p.add_argument("--trigger-channel", type=int, default=None, help="trigger channel (default: all)")
+    p.add_argument("--trigger-falling-shown", action="store_true", help="a falling edge means the board appeared")
+    p.add_argument("--refine", action="store_true", help="CAPTURE is a reading recording: refine its offset")
+    p.add_argument("--search-ms", type=float, default=40.0, help="refinement search range +- ms (default 40)")
+    p.set_defaults(func=_clock)
+
+    p = sub.add_parser("extrinsics", help="T_event_cpf from the board seen by the RGB and the event camera",
+                       description=(
+                           "solvePnP of the board in both cameras at the same instants, composed with the RGB camera's "
+                           "pose relative to CPF. The RGB camera comes from --calibration's rgb_camera block (pinhole) or "
+                           "from --aria-calibration (Fisheye624, with --T-device-cpf). --homography-only gives the flat-page "
+                           "fallback (an RGB->event homography, valid on that page only, no pose)."
+                       ))
+    p.add_argument("capture", help="capture directory (events.raw, board.json, rgb_frames.csv)")
+    _common(p)
+    p.add_argument("--rgb-frames", help="rgb_frames.csv (default: CAPTURE/rgb_frames.csv)")
+    p.add_argument("--aria-calibration", help="Aria device-calibration JSON (camera-rgb, FisheyeRadTanThinPrism)")
+    p.add_argument("--aria-label", default="camera-rgb", help="camera label in the device calibration")
+    p.add_argument("--T-device-cpf", dest="t_device_cpf", help="JSON file: 4x4 T_device_cpf (rows first) for --aria-calibration")
+    p.add_argument("--homography-only", action="store_true", help="flat-page fallback: RGB->event homography, no pose")
+    p.set_defaults(func=_extrinsics)
+
+    p = sub.add_parser("check", help="draw the projected gaze track over a recording's events",
+                       description="Accumulate a recording's events and draw the gaze track projected with the calibration.")
+    p.add_argument("recording", help="recording directory")
+    p.add_argument("--calibration", help="calibration.json to check (default: the recording's)")
+    p.add_argument("--png", default="calibration_check.png", help="output picture (default calibration_check.png)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=_check)
+    parser.set_defaults(func=lambda args: parser.print_help() or 2)
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--board", help="board description JSON (default: CAPTURE/board.json)")
+    p.add_argument("--calibration", help="calibration.json to start from (default: CAPTURE/calibration.json if present)")
+    p.add_argument("--out", help="write the updated calibration.json here")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def _start_calibration(args: argparse.Namespace, width: int = 1280, height: int = 720):  # noqa: ANN202
+    import numpy as np
+
+    from darkread.edge.io.calibration import Calibration, load_calibration
+
+    capture = Path(args.capture)
+    path = Path(args.calibration) if args.calibration else (capture / "calibration.json" if capture.is_dir() else None)
+    if path is not None and path.is_file():
+        return load_calibration(path)
+    if args.calibration:
+        from darkread.edge.errors import CalibrationError
+
+        raise CalibrationError(f"{args.calibration}: calibration file not found")
+    logger.warning("no calibration to start from: nominal values (identity-like pose, zero clock offset)")
+    return Calibration(width, height, 1400.0, 1400.0, width / 2, height / 2, (0.0, 0.0, 0.0, 0.0),
+                       np.diag([-1.0, -1.0, 1.0, 1.0]), 0)
+
+
+def _finish(args: argparse.Namespace, result: dict, calibration=None) -> int:  # noqa: ANN001
+    if calibration is not None and args.out:
+        from darkread.edge.io.calibration import save_calibration
+
+        save_calibration(args.out, calibration)
+        result["written"] = str(args.out)
+    if args.json:
+        print(json.dumps(result, indent=1))
+    else:
+        for key, value in result.items():
+            print(f"  {key:24s} {value}")
+    return 0
+
+
+def _intrinsics(args: argparse.Namespace) -> int:
+    from darkread.edge.calibrate.capture import board_of, read_capture_events
+    from darkread.edge.calibrate.intrinsics import calibrate_intrinsics, detect_views
+
+    data = read_capture_events(args.capture)
+    spec = board_of(args.capture, args.board)
+    views = detect_views(data.events, spec, data.width, data.height)
+    result = calibrate_intrinsics([v.detection for v in views if v.detection is not None], data.width, data.height,
+                                  zero_tangential=not args.tangential)
+    calib = _start_calibration(args, data.width, data.height)
+    calib = dataclasses.replace(calib, width=data.width, height=data.height, fx=result.fx, fy=result.fy, cx=result.cx,
+                                cy=result.cy, distortion=result.distortion)
+    out = {"bursts": len(views), **result.to_dict()}
+    return _finish(args, out, calib)
+
+
+def _clock(args: argparse.Namespace) -> int:
+    if args.refine:
+        return _clock_refine(args)
+    from darkread.edge.calibrate.capture import RGB_FRAMES_NAME, read_capture_events
+    from darkread.edge.calibrate.clock import fit_offset, load_rgb_frames, switches_from_bursts, switches_from_triggers
+    from darkread.edge.calibrate.event_image import find_bursts
+
+    data = read_capture_events(args.capture)
+    capture = Path(args.capture)
+    frames = load_rgb_frames(args.rgb_frames or (capture if capture.is_dir() else capture.parent) / RGB_FRAMES_NAME)
+    if args.trigger:
+        switches, shown = switches_from_triggers(data.triggers, channel=args.trigger_channel,
+                                                 rising_means_shown=not args.trigger_falling_shown)
+        source = "trigger"
+    else:
+        switches, shown = switches_from_bursts(find_bursts(data.events))
+        source = "bursts"
+    result = fit_offset(switches, shown, frames, source=source)
+    calib = dataclasses.replace(_start_calibration(args, data.width, data.height),
+                                gaze_to_event_time_offset_us=int(round(result.offset_us)))
+    return _finish(args, result.to_dict(), calib)
+
+
+def _clock_refine(args: argparse.Namespace) -> int:
+    from darkread.edge.calibrate.check import gaze_track_pixels
+    from darkread.edge.calibrate.clock import refine_offset
+    from darkread.edge.io.raw import read_raw
+    from darkread.edge.io.recording import open_recording
+
+    recording = open_recording(args.capture, calibration=args.calibration)
+    calib = recording.calibration
+    track = recording.gaze()
+    t_event, pixels = gaze_track_pixels(calib, track)
+    events = read_raw(recording.raw_path).events
+    t_device = t_event - calib.gaze_to_event_time_offset_us
+    result = refine_offset(events["t"], t_device, pixels, float(calib.gaze_to_event_time_offset_us),
+                           search_us=args.search_ms * 1000.0)
+    calib = dataclasses.replace(calib, gaze_to_event_time_offset_us=int(round(result.offset_us)))
+    return _finish(args, result.to_dict(), calib)
+
+
+def _extrinsics(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from darkread.edge.calibrate.cameras import PinholeCamera, aria_camera_from_device_calibration, rgb_camera_from_calibration
+    from darkread.edge.calibrate.capture import RGB_FRAMES_NAME, board_of, paired_views, read_capture_events
+    from darkread.edge.calibrate.clock import load_rgb_frames
+    from darkread.edge.calibrate.event_image import find_bursts
+    from darkread.edge.calibrate.extrinsics import extrinsics_from_views, page_homography
+    from darkread.edge.io.calibration import calibration_to_dict
+    from darkread.edge.errors import CalibrationError
+
+    data = read_capture_events(args.capture)
+    spec = board_of(args.capture, args.board)
+    calib = _start_calibration(args, data.width, data.height)
+    capture = Path(args.capture)
+    frames = load_rgb_frames(args.rgb_frames or (capture if capture.is_dir() else capture.parent) / RGB_FRAMES_NAME, max_side=None)
+    pairs = paired_views(data.events, find_bursts(data.events), frames, calib.gaze_to_event_time_offset_us, spec,
+                         data.width, data.height)
+    if not pairs:
+        raise CalibrationError("the board was not found in both cameras at the same time (run `calibrate clock` first?)")
+    event_camera = PinholeCamera(calib.width, calib.height, calib.fx, calib.fy, calib.cx, calib.cy, calib.distortion)
+    if args.homography_only:
+        result = page_homography(pairs[0][0], pairs[0][1])
+        return _finish(args, result.to_dict())
+    if args.aria_calibration:
+        if not args.t_device_cpf:
+            raise CalibrationError("--aria-calibration needs --T-device-cpf (the CPF pose in the device frame)")
+        rgb_camera, T_device_rgb = aria_camera_from_device_calibration(args.aria_calibration, label=args.aria_label)
+        T_device_cpf = np.asarray(json.loads(Path(args.t_device_cpf).read_text()), dtype=np.float64)
+        T_rgb_cpf = np.linalg.inv(T_device_rgb) @ T_device_cpf
+    else:
+        rgb_camera, T_rgb_cpf = rgb_camera_from_calibration(calibration_to_dict(calib))
+    result = extrinsics_from_views(pairs, event_camera, rgb_camera, T_rgb_cpf)
+    calib = dataclasses.replace(calib, T_event_cpf=result.T_event_cpf)
+    return _finish(args, result.to_dict(), calib)
+
+
+def _check(args: argparse.Namespace) -> int:
+    from darkread.edge.calibrate.check import render_check, write_check_png
+    from darkread.edge.io.raw import read_raw
+    from darkread.edge.io.recording import open_recording
+
+    recording = open_recording(args.recording, calibration=args.calibration)
+    events = read_raw(recording.raw_path).events
+    title = Path(args.calibration).name if args.calibration else "calibration.json"
+    result = render_check(events, recording.calibration, recording.gaze(), title=title)
+    write_check_png(args.png, result)
+    out = {**result.to_dict(), "png": str(args.png)}
+    if args.json:
+        print(json.dumps(out, indent=1))
+    else:
+        print(f"  gaze samples drawn       {result.n_gaze}")
+        print(f"  gaze on text             {result.on_text_fraction:.0%}")
+        print(f"  picture                  {args.png}")
+    return 0
