@@ -6,7 +6,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from darkread.proto.messages import DEFAULT_MAX_MESSAGE_BYTES
@@ -50,6 +50,12 @@ class Settings(BaseSettings):
     openai_token_param: Literal["max_tokens", "max_completion_tokens"] = "max_completion_tokens"
     openai_max_output_tokens: int = Field(1024, ge=1)
     openai_max_retries: int = Field(2, ge=0, description="retries after HTTP 429, honouring retry-after")
+
+    @field_validator("api_key", "google_api_key", "google_bearer_token", "openai_api_key", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, value: object) -> object:
+        """``DARKREAD_API_KEY=`` (empty) means no key, not the empty key."""
+        return None if value in ("", None) else value
 
     def database_path(self) -> Path:
         return self.data_dir / "darkread.sqlite3"
