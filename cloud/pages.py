@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .store import Store
+from .store import Store, StoredFrame
 
 Box = tuple[int, int, int, int]
 
@@ -33,7 +33,7 @@ def ink_to_paper(mask: np.ndarray) -> np.ndarray:
     return np.where(mask != 0, 0, 255).astype(np.uint8)
 
 
-def stitch_frames(frames: list, page_id: str) -> PageImage:  # type: ignore[type-arg]
+def stitch_frames(frames: list[StoredFrame], page_id: str) -> PageImage:
     """Stored frames -> the stitched page (the same stitcher the glasses run)."""
     try:
         from darkread.edge.stitch import StitchFrame, stitch_page
@@ -45,7 +45,8 @@ def stitch_frames(frames: list, page_id: str) -> PageImage:  # type: ignore[type
     page = stitch_page(stitch_frames_)
     if page.image.size == 0:
         raise NoPageError("the frames stored so far did not stitch into a page (blank or unregistered)")
-    return PageImage(page_id, ink_to_paper(page.image), [tuple(int(v) for v in box) for box in page.lines])
+    lines: list[Box] = [(int(x0), int(y0), int(x1), int(y1)) for x0, y0, x1, y1 in page.lines]
+    return PageImage(page_id, ink_to_paper(page.image), lines)
 
 
 class PageAssembler:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from dataclasses import asdict
 from typing import Annotated
 
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Response, status
@@ -34,7 +35,7 @@ class SessionModel(BaseModel):
 
     @classmethod
     def of(cls, info: SessionInfo) -> SessionModel:
-        return cls(**info.__dict__)
+        return cls(**asdict(info))
 
 
 class AskRequest(BaseModel):
