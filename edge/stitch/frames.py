@@ -64,6 +64,13 @@ class StitchConfig:
       min_match_score       normalised correlation (TM_CCOEFF_NORMED) below which a frame is dropped.
       min_overlap_fraction  share of the frame that must overlap what the page already shows for a
                             correlation to be trusted; otherwise the frame goes to its predicted place.
+      roll_step_deg         the frame is also tried rotated by +- this around the recent head roll
+                            (parabola-refined): the page turns in the sensor as the head rolls.
+                            0 searches shifts only.
+      roll_every_frames     the rotation is searched on every n-th registered frame (head roll is
+                            slow; each search costs two more correlations).
+      roll_window           the median of this many recent roll measurements places the frames.
+      max_roll_deg          roll estimates are clamped to +- this.
       blur_sigma_px         Gaussian blur before correlation: widens the peak, tames speckle.
       min_ink_fraction      frames with less ink than this (blank reconstructions) are dropped.
       subpixel              refine the correlation peak to a fraction of a pixel and blend the frame
@@ -74,6 +81,9 @@ class StitchConfig:
                             with at least ``alpha`` so slow changes are followed.
       improvement_tolerance a pixel takes the new frame only where the frame's match score is at
                             least the best score saved for that pixel minus this (improvement mask).
+      replace_margin        where the frame's score beats the saved one by more than this, the
+                            pixel starts afresh from the frame (drops what a frame placed without
+                            registration, score 0, put there).
       taper_sigma_rows      vertical Gaussian (rows) weighting each frame's rows around its centre:
                             the fixated line counts most, neighbouring lines less.
     De-warp (KLT between a finished line and the page above it):
@@ -104,12 +114,17 @@ class StitchConfig:
     search_radius_px: int = 16
     drift_window_frames: int = 6
     min_match_score: float = 0.25
-    min_overlap_fraction: float = 0.25
+    min_overlap_fraction: float = 0.1
+    roll_step_deg: float = 0.5
+    roll_every_frames: int = 3
+    roll_window: int = 5
+    max_roll_deg: float = 5.0
     blur_sigma_px: float = 1.2
     min_ink_fraction: float = 0.003
     subpixel: bool = True
     alpha: float = 0.08
     improvement_tolerance: float = 0.15
+    replace_margin: float = 0.3
     taper_sigma_rows: float = 22.0
     dewarp_degree: int = 0
     dewarp_max_shift_px: float = 8.0
@@ -123,6 +138,8 @@ class StitchConfig:
     def __post_init__(self) -> None:
         if self.sweep_confirm_frames < 0 or self.sweep_context_frames < 1 or self.min_line_frames < 1:
             raise ValueError("sweep_confirm_frames must be >= 0, sweep_context_frames and min_line_frames >= 1")
+        if self.roll_every_frames < 1 or self.roll_window < 1:
+            raise ValueError("roll_every_frames and roll_window must be >= 1")
         if self.drift_window_frames < 1:
             raise ValueError(f"drift_window_frames must be >= 1, got {self.drift_window_frames}")
         if self.search_radius_px < 0:

@@ -7,6 +7,7 @@ content takes part, so fresh text entering on the right does not pull the match.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -23,6 +24,7 @@ class Registration:
     score: float  # normalised correlation at the peak, in [-1, 1]
     overlap: float  # share of the frame that overlapped known content
     subpixel_xy: tuple[float, float] = (0.0, 0.0)  # parabolic refinement of the peak, within +-0.5 px
+    angle_deg: float = 0.0  # rotation of the frame (about its centre) that matches best
 
 
 def _parabola_vertex(left: float, centre: float, right: float) -> float:
@@ -44,19 +46,50 @@ def _known_span(fraction: np.ndarray) -> tuple[int, int]:
     return (int(idx[0]), int(idx[-1]) + 1) if idx.size else (0, 0)
 
 
+def _interior(scores: np.ndarray, y: int, x: int, axis: int) -> bool:
+    """Both neighbours of (y, x) along ``axis`` exist."""
+    return 0 < x < scores.shape[1] - 1 if axis == 0 else 0 < y < scores.shape[0] - 1
+
+
+def frame_transform(shape: tuple[int, int], angle_deg: float, dx: float = 0.0, dy: float = 0.0) -> np.ndarray:
+    """2x3 affine map of a frame: rotation by ``angle_deg`` about its centre, then a shift."""
+    h, w = shape
+    move = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), float(angle_deg), 1.0)
+    move[0, 2] += dx
+    move[1, 2] += dy
+    return move
+
+
+def _prior(shape: tuple[int, int], radius: int) -> np.ndarray:
+    """Score penalty growing with the distance from the predicted place (zero for radius 0)."""
+    if radius <= 0:
+        return np.zeros(shape, np.float32)
+    yy, xx = np.mgrid[-radius : radius + 1, -radius : radius + 1]
+    return (_CENTRE_PRIOR * (xx**2 + yy**2) / float(radius**2)).astype(np.float32)
+
+
+def _match(search: np.ndarray, sub: np.ndarray, radius: int) -> np.ndarray:
+    """Normalised correlation of ``sub`` at every offset in ``search``, minus the centre prior."""
+    scores = np.nan_to_num(cv2.matchTemplate(search, sub, cv2.TM_CCOEFF_NORMED), nan=-1.0, posinf=-1.0, neginf=-1.0)
+    return scores - _prior(scores.shape, radius) if radius > 0 else scores
+
+
 def register_frame(
     reference: np.ndarray,
     known: np.ndarray,
     template: np.ndarray,
     radius: int,
     blur_sigma: float = 1.2,
-    min_overlap_fraction: float = 0.25,
+    min_overlap_fraction: float = 0.1,
+    angles_deg: Sequence[float] = (0.0,),
 ) -> Registration | None:
-    """Best shift of ``template`` inside ``reference`` (``radius`` px around the centre).
+    """Best shift (and rotation among ``angles_deg``) of ``template`` inside ``reference``,
+    ``radius`` px around the centre.
 
     ``reference``/``known`` cover the predicted box grown by ``radius`` on every side (shape
-    h + 2r, w + 2r): the ink probability seen so far and where anything was seen. Returns None when
-    too little of the frame overlaps known content to trust a correlation.
+    h + 2r, w + 2r): the ink probability seen so far and where anything was seen. With three or
+    more equally spaced angles the best one is refined by a parabola. Returns None when too little
+    of the frame overlaps known content to trust a correlation.
     """
     h, w = template.shape
     if reference.shape != (h + 2 * radius, w + 2 * radius) or known.shape != reference.shape:
@@ -67,17 +100,28 @@ def register_frame(
     overlap = (y1 - y0) * (x1 - x0) / float(h * w)
     if overlap < min_overlap_fraction:
         return None
-    sub = blur(template, blur_sigma)[y0:y1, x0:x1]
-    if float(sub.std()) < 1e-3:
+    blurred = blur(template, blur_sigma)
+    if float(blurred[y0:y1, x0:x1].std()) < 1e-3:
         return None
     search = blur(reference, blur_sigma)[y0 : y1 + 2 * radius, x0 : x1 + 2 * radius]
-    scores = np.nan_to_num(cv2.matchTemplate(search, sub, cv2.TM_CCOEFF_NORMED), nan=-1.0, posinf=-1.0, neginf=-1.0)
-    if radius > 0:
-        yy, xx = np.mgrid[-radius : radius + 1, -radius : radius + 1]
-        scores = scores - _CENTRE_PRIOR * (xx**2 + yy**2) / float(radius**2)
+
+    def turned(angle: float) -> np.ndarray:
+        if angle == 0:
+            return np.ascontiguousarray(blurred[y0:y1, x0:x1])
+        rotated = cv2.warpAffine(blurred, frame_transform((h, w), angle), (w, h), flags=cv2.INTER_LINEAR)
+        return np.ascontiguousarray(rotated[y0:y1, x0:x1])
+
+    peaks = {i: _match(search, turned(angle), radius) for i, angle in enumerate(angles_deg)}
+    peaks = {i: (float(scores.max()), scores) for i, scores in peaks.items()}
+    best = max(peaks, key=lambda i: peaks[i][0])
+    scores = peaks[best][1]
+    angle = float(angles_deg[best])
+    if 0 < best < len(angles_deg) - 1:
+        step = (angles_deg[best + 1] - angles_deg[best - 1]) / 2.0
+        angle += step * _parabola_vertex(peaks[best - 1][0], peaks[best][0], peaks[best + 1][0])
     by, bx = np.unravel_index(int(np.argmax(scores)), scores.shape)
     dx, dy = int(bx) - radius, int(by) - radius
     peak = float(scores[by, bx]) + _CENTRE_PRIOR * (dx * dx + dy * dy) / float(max(1, radius) ** 2)
-    sx = _parabola_vertex(*scores[by, bx - 1 : bx + 2]) if 0 < bx < scores.shape[1] - 1 else 0.0
-    sy = _parabola_vertex(*scores[by - 1 : by + 2, bx]) if 0 < by < scores.shape[0] - 1 else 0.0
-    return Registration((dx, dy), peak, overlap, (sx, sy))
+    sx = _parabola_vertex(*scores[by, bx - 1 : bx + 2]) if _interior(scores, by, bx, 0) else 0.0
+    sy = _parabola_vertex(*scores[by - 1 : by + 2, bx]) if _interior(scores, by, bx, 1) else 0.0
+    return Registration((dx, dy), peak, overlap, (sx, sy), angle)

@@ -70,6 +70,8 @@ class PageStitcher:
         self._strip: LineStrip | None = None
         # (t_us, page position - sensor position) of recent frames: the head motion, sub-pixel
         self._corrections: deque[tuple[int, np.ndarray]] = deque(maxlen=cfg.drift_window_frames)
+        self._rolls: deque[float] = deque(maxlen=cfg.roll_window)  # frame rotation vs the page
+        self._registered = 0
         self._used = 0
         self._dropped = 0
         self._positions: dict[int, tuple[int, int]] = {}
@@ -120,9 +122,12 @@ class PageStitcher:
         px, py = np.round(np.asarray(frame.origin_xy) + correction).astype(int).tolist()
         x, y = float(px), float(py)
         reference, seen = self._page.reference(self._strip, (px - r, py - r, px + w + r, py + h + r))
-        reg = register_frame(reference, seen, mask, r, cfg.blur_sigma_px, cfg.min_overlap_fraction)
+        roll = float(np.median(self._rolls)) if self._rolls else 0.0
+        search_roll = cfg.roll_step_deg > 0 and self._registered % cfg.roll_every_frames == 0
+        angles = (roll - cfg.roll_step_deg, roll, roll + cfg.roll_step_deg) if search_roll else (roll,)
+        reg = register_frame(reference, seen, mask, r, cfg.blur_sigma_px, cfg.min_overlap_fraction, angles)
         if reg is None:
-            score = cfg.min_match_score  # nothing to compare with yet: trust the prediction, weakly
+            score = 0.0  # nothing to compare with yet: placed as predicted, first to be replaced
         elif reg.score < cfg.min_match_score:
             self._dropped += 1
             log.debug("frame %d dropped: match score %.2f", frame.frame_id, reg.score)
@@ -133,8 +138,12 @@ class PageStitcher:
             y = py + reg.shift_xy[1] + (reg.subpixel_xy[1] if cfg.subpixel else 0.0)
             correction = np.array([x, y]) - np.asarray(frame.origin_xy)
             self._corrections.append((frame.t_us, correction))
+            self._registered += 1
+            if search_roll:
+                self._rolls.append(float(np.clip(reg.angle_deg, -cfg.max_roll_deg, cfg.max_roll_deg)))
+                roll = float(np.median(self._rolls))
         gaze_row = frame.gaze_px[1] + float(correction[1])
-        self._strip.add(mask, x, y, score, gaze_row, frame.frame_id, cfg)
+        self._strip.add(mask, x, y, score, gaze_row, frame.frame_id, cfg, roll)
         self._positions[frame.frame_id] = (x, y)
         self._used += 1
 
