@@ -1,0 +1,195 @@
+"""What each way of getting the page off the glasses costs in bytes.
+
+Per recording (one page): one RGB snapshot (raw, PNG, JPEG at several qualities), the whole event
+stream as EVT3, the foveated event stream as EVT3, the binary frame stream as sent (encoded wire
+messages), and the stitched page as one encoded ``Page`` message. Streams are also given per second.
+The ratios sit next to the paper's figures: ~98 % of events removed by foveation, the frame stream
+~20x below one RGB image, the stitched page ~2400x below it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from darkread.edge.events import Events
+
+JPEG_QUALITIES: tuple[int, ...] = (100, 80, 60, 40, 20)
+PAPER_FOVEATION_REMOVED = 0.98
+PAPER_FRAMES_VS_RGB = 20.0
+PAPER_PAGE_VS_RGB = 2400.0
+GAZE_TIME_STEP_US = 1000  # gaze is looked up once per millisecond of events (it moves slowly)
+
+
+def image_sizes(image: np.ndarray, qualities: tuple[int, ...] = JPEG_QUALITIES) -> dict[str, int]:
+    """Bytes of one image uncompressed, as PNG, and as JPEG at each quality (OpenCV encoders)."""
+    import cv2
+
+    array = np.ascontiguousarray(image)
+    if array.dtype != np.uint8 or array.ndim not in (2, 3):
+        raise ValueError(f"expected a uint8 [h, w] or [h, w, 3] image, got {array.dtype} {array.shape}")
+    bgr = array[..., ::-1] if array.ndim == 3 else array
+    sizes = {"raw": int(array.nbytes)}
+    ok, png = cv2.imencode(".png", bgr)
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    sizes["png"] = int(png.size)
+    for quality in qualities:
+        ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+        if not ok:
+            raise RuntimeError(f"JPEG encoding at quality {quality} failed")
+        sizes[f"jpeg{quality}"] = int(jpeg.size)
+    return sizes
+
+
+def raw_data_bytes(raw_path: str | Path) -> int:
+    """Bytes of a RAW file's event data (the file without its text header)."""
+    from darkread.edge.io.raw_header import read_raw_header
+
+    header = read_raw_header(raw_path)
+    return Path(raw_path).stat().st_size - int(header.data_offset)
+
+
+def foveate_along_gaze(events: Events, gaze_px_at: Any, sensor_wh: tuple[int, int]) -> Events:
+    """Events inside the 100 x 200 window around the gaze at their own time (NaN gaze: dropped).
+
+    ``gaze_px_at(t_us [N]) -> [N, 2]`` is e.g. ``GazeMapper.pixels_at``; it is called once per
+    millisecond of events, not per event.
+    """
+    from darkread.edge.fovea import crop_along_track, window_origins
+
+    if events.shape[0] == 0:
+        return events[:0]
+    t = events["t"].astype(np.int64)
+    steps, index = np.unique(t // GAZE_TIME_STEP_US, return_inverse=True)
+    centres = np.asarray(gaze_px_at(steps * GAZE_TIME_STEP_US + GAZE_TIME_STEP_US // 2), dtype=np.float64)
+    origins = window_origins(centres, sensor_wh)
+    return crop_along_track(events, origins[index.reshape(-1)])
+
+
+def frame_message_bytes(shape: tuple[int, int] = (100, 200)) -> int:
+    """Bytes of one encoded ``Frame`` wire message (a packed 1-bit mask: size does not depend on content)."""
+    from darkread.proto.messages import Frame, encode, pack_mask
+
+    mask_shape, bits = pack_mask(np.zeros(shape, dtype=np.uint8))
+    message = Frame(
+        seq=2**31, frame_id=2**31, t_us=2**40, origin=(1080, 620), gaze_px=(640.5, 360.5), gaze_rad=(0.1, -0.1),
+        events_used=1600, shape=mask_shape, bits=bits,
+    )
+    return len(encode(message))
+
+
+def page_message_bytes(ink: np.ndarray, lines: list[tuple[int, int, int, int]] | None = None) -> int:
+    """Bytes of one encoded ``Page`` wire message holding the binary page ``ink`` (1 = ink)."""
+    from darkread.proto.messages import Page, encode, pack_mask
+
+    shape, bits = pack_mask(np.asarray(ink, dtype=np.uint8))
+    return len(encode(Page(seq=0, page_id=0, t_us=0, shape=shape, bits=bits, lines=tuple(lines or ()))))
+
+
+def page_ink_from_png(path: str | Path) -> np.ndarray:
+    """The cloud's stitched page (black text on white PNG) as an ink mask."""
+    import cv2
+
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        raise FileNotFoundError(f"{path}: not a readable image")
+    return (image < 128).astype(np.uint8)
+
+
+@dataclass
+class Bandwidth:
+    """Bytes for one recording (one page), with the recording's duration for per-second rates."""
+
+    recording: str
+    duration_s: float
+    rgb: dict[str, int]  # one snapshot: raw, png, jpeg100 ... jpeg20
+    events: int
+    evt3_bytes: int
+    events_foveated: int
+    foveated_evt3_bytes: int
+    frames: int
+    frame_stream_bytes: int
+    page_bytes: int
+    frames_measured: bool = False  # frame figures come from a real edge run (else: estimated)
+
+    @property
+    def foveation_removed(self) -> float:
+        return 1.0 - self.events_foveated / self.events if self.events else 0.0
+
+    def per_second(self, nbytes: int) -> float:
+        return nbytes / self.duration_s if self.duration_s > 0 else math.nan
+
+    def ratios(self) -> dict[str, float]:
+        """The paper's three figures, measured here (RGB as PNG and as JPEG q80)."""
+        frames_per_s = self.per_second(self.frame_stream_bytes)
+        out = {"foveation_removed": self.foveation_removed}
+        for fmt in ("raw", "png", "jpeg80"):
+            if fmt in self.rgb:
+                out[f"rgb_{fmt}_vs_frames_per_s"] = self.rgb[fmt] / frames_per_s if frames_per_s > 0 else math.nan
+                out[f"rgb_{fmt}_vs_page"] = self.rgb[fmt] / self.page_bytes if self.page_bytes else math.nan
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        doc = asdict(self)
+        doc["ratios"] = self.ratios()
+        return doc
+
+    @staticmethod
+    def from_json(doc: dict[str, Any]) -> Bandwidth:
+        return Bandwidth(**{k: v for k, v in doc.items() if k != "ratios"})
+
+
+def measure_bandwidth(
+    recording_dir: str | Path,
+    rgb_image: np.ndarray,
+    *,
+    frames: int | None = None,
+    frame_stream_bytes: int | None = None,
+    page_ink: np.ndarray | None = None,
+) -> Bandwidth:
+    """Bandwidth figures of one recording.
+
+    ``frames`` / ``frame_stream_bytes`` are what a real edge run sent (``ReadResult.messages_sent``,
+    ``bytes_sent``); without them the frame count is estimated as one frame per 1600 foveated
+    events. ``page_ink`` is the stitched page; without it the page figure is 0.
+    """
+    from darkread.edge.gaze import GazeMapper
+    from darkread.edge.io.gaze_csv import read_gaze_csv
+    from darkread.edge.io.raw import read_raw
+    from darkread.edge.io.recording import open_recording
+    from darkread.edge.io.evt3_encode import encode_evt3
+    from darkread.edge.pipeline import PipelineSettings
+
+    recording = open_recording(recording_dir)
+    raw = read_raw(recording.raw_path)
+    events = raw.events
+    sensor_wh = (int(raw.header.width), int(raw.header.height))
+    mapper = GazeMapper(recording.calibration, read_gaze_csv(recording.gaze_path))
+    foveated = foveate_along_gaze(events, mapper.pixels_at, sensor_wh)
+    foveated_bytes = len(encode_evt3(foveated, width=sensor_wh[0])) if foveated.shape[0] else 0
+    duration_s = float(recording.meta.get("duration_s") or 0.0)
+    if duration_s <= 0 and events.shape[0] > 1:
+        duration_s = (int(events["t"][-1]) - int(events["t"][0])) * 1e-6
+    measured = frames is not None and frame_stream_bytes is not None
+    if frames is None:
+        frames = math.ceil(foveated.shape[0] / PipelineSettings().n_events)
+    if frame_stream_bytes is None:
+        frame_stream_bytes = frames * frame_message_bytes()
+    return Bandwidth(
+        recording=str(recording.path),
+        duration_s=duration_s,
+        rgb=image_sizes(rgb_image),
+        events=int(events.shape[0]),
+        evt3_bytes=raw_data_bytes(recording.raw_path),
+        events_foveated=int(foveated.shape[0]),
+        foveated_evt3_bytes=int(foveated_bytes),
+        frames=int(frames),
+        frame_stream_bytes=int(frame_stream_bytes),
+        page_bytes=page_message_bytes(page_ink) if page_ink is not None else 0,
+        frames_measured=measured,
+    )

@@ -1,0 +1,105 @@
+"""``darkread eval SUITE_DIR`` and ``darkread eval make-suite OUT``: evaluation suites and the report."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+logger = logging.getLogger(__name__)
+
+EVAL_HELP = """\
+Two forms:
+
+  darkread eval make-suite OUT [--small]
+      write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
+      text kinds, three font families incl. one held out of training, x-heights 7-12, motion
+      still/normal/walking). --small: 17 short recordings, one axis varied at a time (CI-sized).
+
+  darkread eval SUITE_DIR [--out docs/eval] [--backend local]
+      read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
+      snapshot of the same scene, compare OCR engines on the stitched pages, measure bandwidth, and
+      write the Markdown report with PNG plots to --out. Results are kept per recording under
+      SUITE_DIR/eval_runs, so an interrupted evaluation resumes (--force redoes them).
+      --report-only rebuilds the report from the stored results.
+"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "eval",
+        help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
+        description=EVAL_HELP,
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small]",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
+    parser.add_argument("make_suite_out", nargs="?", metavar="OUT", help=argparse.SUPPRESS)
+    parser.add_argument("--out", default="docs/eval", metavar="DIR", help="report folder (default docs/eval)")
+    parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
+                        help="OCR engine for darkread and the RGB baseline (default: local)")
+    parser.add_argument("--compare", nargs="*", metavar="ENGINE", default=None,
+                        help="OCR engines to compare on the stitched pages (default: every installed offline "
+                             "engine, plus remote ones when configured)")
+    parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
+    parser.add_argument("--work", metavar="DIR", help="per-recording outputs (default SUITE_DIR/eval_runs)")
+    parser.add_argument("--force", action="store_true", help="re-evaluate recordings that already have results")
+    parser.add_argument("--report-only", action="store_true", help="rebuild the report from stored results")
+    parser.add_argument("--small", action="store_true", help="make-suite: the small (CI) suite")
+    parser.add_argument("--limit", type=int, metavar="N", help="make-suite: only the first N recordings")
+    parser.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    if args.target == "make-suite":
+        return _make_suite(args)
+    if args.make_suite_out is not None:
+        raise ValueError(f"unexpected argument {args.make_suite_out!r}; `darkread eval SUITE_DIR` takes one folder")
+    return _evaluate(args)
+
+
+def _make_suite(args: argparse.Namespace) -> int:
+    from darkread.eval.suite import make_suite
+
+    if not args.make_suite_out:
+        raise ValueError("give the output folder: darkread eval make-suite OUT [--small]")
+    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit)
+    print(f"{len(entries)} recordings in {args.make_suite_out}")
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from darkread.edge.reconstruct import default_model_path
+    from darkread.eval.report import ReportInfo, describe_model, git_commit, write_report
+    from darkread.eval.runner import evaluate_suite, load_results
+
+    suite = Path(args.target)
+    work = Path(args.work) if args.work else suite / "eval_runs"
+    if args.report_only:
+        results = load_results(work)
+        if not results:
+            raise FileNotFoundError(f"{work}: no stored results; run `darkread eval {suite}` first")
+    else:
+        results = evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model,
+                                 force=args.force)
+    info = ReportInfo(
+        commit=git_commit(),
+        backend=args.backend,
+        model=describe_model(args.model or default_model_path()),
+        suite=_describe_suite(suite, results),
+    )
+    path = write_report(results, args.out, info)
+    print(f"report: {path}")
+    return 0
+
+
+def _describe_suite(suite: Path, results: list[dict]) -> str:
+    import json
+
+    seconds = sorted({r.get("duration_s") for r in results if r.get("duration_s")})
+    kind = ""
+    doc = suite / "suite.json"
+    if doc.is_file():
+        kind = "small suite, " if json.loads(doc.read_text()).get("small") else "full suite, "
+    span = ", ".join(f"{s:g}" for s in seconds)
+    return f"{len(results)} synthetic recordings ({kind}{span} s each; `darkread eval make-suite`, fixed seeds)"

@@ -1,0 +1,215 @@
+"""Evaluate recordings: darkread end to end, the RGB baseline, OCR engines on the page, bandwidth.
+
+Each recording's result is a JSON document (``<work_dir>/<name>/result.json``),
+so an interrupted evaluation resumes where it stopped and the report can be rebuilt from the
+stored results alone.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+logger = logging.getLogger(__name__)
+
+OFFLINE_BACKENDS: tuple[str, ...] = ("rapidocr", "tesseract")
+REMOTE_BACKENDS: tuple[str, ...] = ("google", "openai")
+RESULT_NAME = "result.json"
+
+
+def make_ocr_backend(name: str) -> Any:
+    """An OCR engine by name, configured from ``DARKREAD_*`` settings like the cloud service."""
+    from darkread.cloud.ocr import create_backend
+    from darkread.cloud.settings import Settings
+
+    return create_backend(Settings(ocr_backend=name))  # type: ignore[arg-type]
+
+
+def remote_configured(name: str) -> bool:
+    from darkread.cloud.settings import Settings
+
+    settings = Settings()
+    if name == "google":
+        return settings.google_api_key is not None or settings.google_bearer_token is not None
+    if name == "openai":
+        return settings.openai_api_key is not None
+    return False
+
+
+def available_backends(names: Sequence[str] | None = None) -> list[str]:
+    """Engines to compare: the offline ones that are installed, remote ones only when configured."""
+    wanted = list(names) if names else [*OFFLINE_BACKENDS, *REMOTE_BACKENDS]
+    ready = []
+    for name in wanted:
+        if name in REMOTE_BACKENDS and not remote_configured(name):
+            continue
+        try:
+            if make_ocr_backend(name).ready():
+                ready.append(name)
+            else:
+                logger.info("OCR engine %s is not available; left out of the comparison", name)
+        except Exception as exc:  # a misconfigured engine must not stop the evaluation
+            logger.info("OCR engine %s left out: %s", name, exc)
+    return ready
+
+
+def conditions(recording_dir: Path) -> dict[str, Any]:
+    """The recording's conditions from ``meta.json`` (the grouping keys of the report)."""
+    from darkread.eval.suite import HELD_OUT_FONTS
+
+    meta = json.loads((recording_dir / "meta.json").read_text()) if (recording_dir / "meta.json").is_file() else {}
+    font = meta.get("font")
+    return {
+        "name": recording_dir.name,
+        "lux": meta.get("lux"),
+        "motion": meta.get("motion"),
+        "kind": meta.get("text_kind"),
+        "font": font,
+        "held_out_font": font in HELD_OUT_FONTS if font else None,
+        "xheight_px": meta.get("xheight_px"),
+        "duration_s": meta.get("duration_s"),
+        "reference_chars": len((recording_dir / "text.txt").read_text(encoding="utf-8")),
+    }
+
+
+def _guard(label: str, func: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    try:
+        return func()
+    except Exception as exc:  # one failing stage is recorded, the others still run
+        logger.warning("%s failed: %s", label, exc)
+        logger.debug("%s", traceback.format_exc())
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+def evaluate_recording(
+    recording_dir: str | Path,
+    run_dir: str | Path,
+    *,
+    backend: str = "local",
+    compare: Sequence[str] = (),
+    model: str | None = None,
+    ocr_cache: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Everything the report needs about one recording (errors are recorded per stage)."""
+    from darkread.eval.bandwidth import measure_bandwidth, page_ink_from_png
+    from darkread.eval.metrics import error_rates
+    from darkread.eval.rgb_baseline import read_snapshot, snapshot_for_recording
+    from darkread.read import read_recording
+
+    recording_dir, run_dir = Path(recording_dir), Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    cache = ocr_cache if ocr_cache is not None else {}
+
+    def engine(name: str) -> Any:
+        if name not in cache:
+            cache[name] = make_ocr_backend(name)
+        return cache[name]
+
+    reference = (recording_dir / "text.txt").read_text(encoding="utf-8")
+    result: dict[str, Any] = {**conditions(recording_dir), "backend": backend}
+    read: dict[str, Any] = {}
+
+    def run_darkread() -> dict[str, Any]:
+        started = time.perf_counter()
+        r = read_recording(recording_dir, backend=backend, model=model, out_dir=run_dir / "read")
+        read["result"] = r
+        return {
+            "text": r.text, "cer": r.cer, "wer": r.wer, "frames": r.frames, "messages_sent": r.messages_sent,
+            "bytes_sent": r.bytes_sent, "events_in": r.events_in, "events_foveated": r.events_foveated,
+            "page_png": r.page_png, "seconds": round(time.perf_counter() - started, 2),
+        }
+
+    result["darkread"] = _guard(f"{recording_dir.name}: darkread", run_darkread)
+    snapshot: dict[str, Any] = {}
+
+    def run_rgb() -> dict[str, Any]:
+        import cv2
+
+        snap = snapshot_for_recording(recording_dir, full_frame=True)
+        snapshot["snap"] = snap
+        cv2.imwrite(str(run_dir / "rgb_crop.png"), cv2.cvtColor(snap.crop, cv2.COLOR_RGB2BGR))
+        text = read_snapshot(snap, engine(backend))
+        rates = error_rates(reference, text)
+        return {"text": text, "cer": rates.cer, "wer": rates.wer, **snap.describe()}
+
+    result["rgb"] = _guard(f"{recording_dir.name}: RGB baseline", run_rgb)
+
+    def run_compare() -> dict[str, Any]:
+        import cv2
+
+        page_png = result["darkread"].get("page_png")
+        if not page_png:
+            raise RuntimeError("no stitched page to read")
+        page = cv2.imread(page_png, cv2.IMREAD_GRAYSCALE)
+        out = {}
+        for name in compare:
+            started = time.perf_counter()
+            text = _guard(f"{name} on the page", lambda: {"text": engine(name).read(page).text})
+            if "text" in text:
+                rates = error_rates(reference, text["text"])
+                text.update(cer=rates.cer, wer=rates.wer, seconds=round(time.perf_counter() - started, 2))
+            out[name] = text
+        return out
+
+    result["backends"] = _guard(f"{recording_dir.name}: OCR comparison", run_compare) if compare else {}
+
+    def run_bandwidth() -> dict[str, Any]:
+        snap = snapshot.get("snap")
+        if snap is None or snap.full is None:
+            raise RuntimeError("no RGB snapshot to compare with")
+        r = read.get("result")
+        bw = measure_bandwidth(
+            recording_dir, snap.full,
+            frames=r.messages_sent if r else None,
+            frame_stream_bytes=r.bytes_sent if r else None,
+            page_ink=page_ink_from_png(r.page_png) if r else None,
+        )
+        return bw.to_json()
+
+    result["bandwidth"] = _guard(f"{recording_dir.name}: bandwidth", run_bandwidth)
+    (run_dir / RESULT_NAME).write_text(json.dumps(result, indent=1))
+    return result
+
+
+def evaluate_suite(
+    suite_dir: str | Path,
+    work_dir: str | Path | None = None,
+    *,
+    backend: str = "local",
+    compare: Sequence[str] | None = None,
+    model: str | None = None,
+    force: bool = False,
+    progress: bool = True,
+) -> list[dict[str, Any]]:
+    """Evaluate every recording of a suite; stored results are reused unless ``force``.
+
+    Per-recording outputs (page image, RGB crop, cloud data, ``result.json``) go to ``work_dir``
+    (default: ``SUITE_DIR/eval_runs``), one folder per recording.
+    """
+    from tqdm import tqdm
+
+    from darkread.eval.suite import load_suite
+
+    folders = load_suite(suite_dir)
+    runs = Path(work_dir) if work_dir is not None else Path(suite_dir) / "eval_runs"
+    engines = available_backends(compare)
+    logger.info("%d recordings; OCR comparison on the stitched page with: %s", len(folders), ", ".join(engines) or "none")
+    cache: dict[str, Any] = {}
+    results = []
+    for folder in tqdm(folders, desc="evaluating", unit="rec", disable=not progress):
+        stored = runs / folder.name / RESULT_NAME
+        if stored.is_file() and not force:
+            results.append(json.loads(stored.read_text()))
+            continue
+        results.append(evaluate_recording(folder, runs / folder.name, backend=backend, compare=engines, model=model, ocr_cache=cache))
+    return results
+
+
+def load_results(work_dir: str | Path) -> list[dict[str, Any]]:
+    runs = Path(work_dir)
+    return [json.loads(p.read_text()) for p in sorted(runs.glob(f"*/{RESULT_NAME}"))]

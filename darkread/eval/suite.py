@@ -1,0 +1,119 @@
+"""The evaluation suite: synthetic recordings over light, text, font, size and motion, fixed seeds.
+
+Every recording is written by ``darkread.models.synth.recording.write_recording`` with a fully
+fixed ``RecordingSpec`` (nothing left to chance but the seeded generator), plus ``spec.json``
+(that spec, so the RGB baseline can re-create the scene) and ``suite.json`` at the suite root.
+
+Axes: lux 1000/100/30/10/5; text kinds letters/words/pangram/paragraph; font families DejaVu Sans
+and STIX General (training) and Roboto (held out of training); x-heights 7-12 event pixels;
+motion still/normal/walking. The full suite crosses lux x motion x kind (fonts and x-heights
+rotate through that grid) and adds an x-height x font sweep; ``small`` varies one axis at a time
+around a base condition, for CI and quick looks.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from darkread.eval.rgb_baseline import SPEC_NAME
+
+logger = logging.getLogger(__name__)
+
+SUITE_NAME = "suite.json"
+LUX_LEVELS: tuple[float, ...] = (1000.0, 100.0, 30.0, 10.0, 5.0)
+TEXT_KINDS: tuple[str, ...] = ("letters", "words", "pangram", "paragraph")
+FONTS: tuple[str, ...] = ("DejaVu Sans", "STIX General", "Roboto")  # Roboto: held out of training
+HELD_OUT_FONTS: tuple[str, ...] = ("Roboto",)
+XHEIGHTS_PX: tuple[float, ...] = (7.0, 8.0, 9.0, 10.0, 11.0, 12.0)
+MOTIONS: tuple[str, ...] = ("still", "normal", "walking")
+BASE_SEED = 20250611
+
+
+@dataclass(frozen=True)
+class SuiteEntry:
+    name: str
+    lux: float
+    motion: str
+    kind: str
+    font: str
+    xheight_px: float
+    seconds: float
+    n_lines: int
+    line_chars: int
+    seed: int
+
+    def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
+        from darkread.models.synth.recording import RecordingSpec
+
+        return RecordingSpec(
+            lux=self.lux, motion=self.motion, kind=self.kind, seconds=self.seconds, seed=self.seed, font=self.font,
+            xheight_px=self.xheight_px, n_lines=self.n_lines, line_chars=self.line_chars,
+            description=f"darkread evaluation suite: {self.name}",
+        )
+
+
+def _entry(index: int, lux: float, motion: str, kind: str, font: str, xheight: float, *, small: bool) -> SuiteEntry:
+    seconds, n_lines, line_chars = (2.5, 3, 20) if small else (4.0, 4, 28)
+    slug = font.lower().replace(" ", "")
+    name = f"{index:03d}_lux{lux:g}_{motion}_{kind}_{slug}_xh{xheight:g}"
+    return SuiteEntry(name, float(lux), motion, kind, font, float(xheight), seconds, n_lines, line_chars, BASE_SEED + index)
+
+
+def suite_entries(*, small: bool = False) -> list[SuiteEntry]:
+    """The suite's recordings, in a fixed order with fixed seeds."""
+    conditions: list[tuple[float, str, str, str, float]] = []
+    if small:
+        base = (100.0, "normal", "pangram", "DejaVu Sans", 10.0)
+        conditions += [(lux, "normal", "pangram", "DejaVu Sans", 10.0) for lux in LUX_LEVELS]
+        conditions += [(lux, motion, "pangram", "DejaVu Sans", 10.0) for lux in (30.0, 5.0) for motion in ("still", "walking")]
+        conditions += [(100.0, "normal", kind, "DejaVu Sans", 10.0) for kind in TEXT_KINDS if kind != base[2]]
+        conditions += [(100.0, "normal", "pangram", font, 10.0) for font in FONTS if font != base[3]]
+        conditions += [(100.0, "normal", "pangram", "DejaVu Sans", xh) for xh in (7.0, 8.0, 12.0)]
+    else:
+        k = 0
+        for lux in LUX_LEVELS:
+            for motion in MOTIONS:
+                for kind in TEXT_KINDS:
+                    conditions.append((lux, motion, kind, FONTS[k % len(FONTS)], XHEIGHTS_PX[(k * 5) % len(XHEIGHTS_PX)]))
+                    k += 1
+        conditions += [(100.0, "normal", "paragraph", font, xh) for font in FONTS for xh in XHEIGHTS_PX]
+    return [_entry(i, *c, small=small) for i, c in enumerate(conditions)]
+
+
+def make_suite(out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None) -> list[SuiteEntry]:
+    """Write the suite under ``out``; recordings already complete (their ``spec.json`` matches) are kept."""
+    from tqdm import tqdm
+
+    from darkread.models.synth.recording import write_recording
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    entries = suite_entries(small=small)[:only]
+    (out / SUITE_NAME).write_text(
+        json.dumps({"small": small, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                    "recordings": [asdict(e) for e in entries]}, indent=1)
+    )
+    for entry in tqdm(entries, desc="recordings", unit="rec", disable=not progress):
+        folder = out / entry.name
+        spec_doc = asdict(entry.recording_spec())
+        spec_path = folder / SPEC_NAME
+        if spec_path.is_file() and json.loads(spec_path.read_text()) == spec_doc and (folder / "meta.json").is_file():
+            continue
+        write_recording(folder, entry.recording_spec(), progress=False)
+        spec_path.write_text(json.dumps(spec_doc, indent=1))  # last: marks the recording complete
+    return entries
+
+
+def load_suite(suite_dir: str | Path) -> list[Path]:
+    """Recording folders of a suite (every sub-folder with a ``text.txt``), in name order."""
+    root = Path(suite_dir)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: no such suite directory")
+    folders = sorted(p for p in root.iterdir() if p.is_dir() and (p / "text.txt").is_file())
+    if not folders:
+        raise FileNotFoundError(f"{root}: no recordings (sub-folders with text.txt); make one with `darkread eval make-suite`")
+    return folders

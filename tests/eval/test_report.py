@@ -1,0 +1,104 @@
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from PIL import Image
+
+from darkread.eval.report import ReportInfo, bandwidth_table, grouped_table, rate, write_report
+
+
+def _bandwidth(png: int, frames_bytes: int, page: int) -> dict[str, Any]:
+    return {
+        "recording": "r", "duration_s": 2.0,
+        "rgb": {"raw": 24_883_200, "png": png, "jpeg100": png // 2, "jpeg80": png // 10, "jpeg60": png // 20,
+                "jpeg40": png // 30, "jpeg20": png // 40},
+        "events": 1_000_000, "evt3_bytes": 4_000_000, "events_foveated": 20_000, "foveated_evt3_bytes": 90_000,
+        "frames": 300, "frame_stream_bytes": frames_bytes, "page_bytes": page, "frames_measured": True,
+    }
+
+
+def fake_results() -> list[dict[str, Any]]:
+    """Two recordings with given outcomes: darkread reads both, the RGB snapshot fails in the dark."""
+    common = {"kind": "pangram", "font": "DejaVu Sans", "held_out_font": False, "duration_s": 2.0, "backend": "local"}
+    return [
+        {**common, "name": "000_bright", "lux": 1000.0, "motion": "still", "xheight_px": 10.0,
+         "darkread": {"text": "the quick fox", "cer": 0.02, "wer": 0.10},
+         "rgb": {"text": "the quick fox", "cer": 0.0, "wer": 0.0, "exposure_ms": 11.8, "gain": 1.0,
+                 "paper_electrons": 1000.0, "blur_px": 1.0},
+         "backends": {"rapidocr": {"cer": 0.02, "wer": 0.1}, "tesseract": {"cer": 0.10, "wer": 0.3}},
+         "bandwidth": _bandwidth(png=20_000_000, frames_bytes=2_000_000, page=10_000)},
+        {**common, "name": "001_dark", "lux": 5.0, "motion": "walking", "xheight_px": 8.0, "font": "Roboto",
+         "held_out_font": True,
+         "darkread": {"text": "the quick fix", "cer": 0.06, "wer": 0.30},
+         "rgb": {"text": "", "cer": 1.0, "wer": 1.0, "exposure_ms": 33.3, "gain": 16.0,
+                 "paper_electrons": 12.5, "blur_px": 15.0},
+         "backends": {"rapidocr": {"cer": 0.06, "wer": 0.3}, "tesseract": {"error": "OcrError: boom"}},
+         "bandwidth": _bandwidth(png=18_000_000, frames_bytes=1_000_000, page=8_000)},
+    ]
+
+
+def test_rate_reads_nested_sections_and_clips() -> None:
+    r = {"darkread": {"cer": 1.7}, "backends": {"x": {"cer": 0.25}}, "rgb": {"error": "no"}}
+    assert rate(r, "darkread") == 1.0
+    assert rate(r, "backends.x") == 0.25
+    assert rate(r, "rgb") is None and rate(r, "backends.y") is None
+
+
+def test_grouped_table_means_per_lux() -> None:
+    rows = grouped_table(fake_results(), "lux", "lux", lambda v: f"{v:g}")
+    assert rows[2] == "| 5 | 1 | 6.0% | 30.0% | 100.0% | 100.0% |"
+    assert rows[3] == "| 1000 | 1 | 2.0% | 10.0% | 0.0% | 0.0% |"
+
+
+def test_bandwidth_table_medians_and_paper_ratios() -> None:
+    text = "\n".join(bandwidth_table(fake_results()))
+    # medians: PNG 19 MB; frames 1.5 MB per page = 750 kB/s; page 9 kB
+    assert "| RGB snapshot, PNG | 19.0 MB | – | 1.0x |" in text
+    assert "| binary frames as sent (Frame messages, mode `frames`) | 1.50 MB | 750 kB | 25x |" in text
+    assert "| events removed by foveation | 98.0% | ~98% (real scenes) |" in text
+    # PNG / frames-per-second: 20 MB / 1 MB/s = 20 and 18 MB / 0.5 MB/s = 36 -> median 28
+    assert "| one RGB image (PNG) / one second of binary frames | 28x | ~20x |" in text
+    # PNG / page: 2000 and 2250 -> median 2125
+    assert "| one RGB image (PNG) / stitched page | 2,125x | ~2400x |" in text
+
+
+def test_report_on_a_two_recording_suite(tmp_path: Path) -> None:
+    info = ReportInfo(date="2026-01-02 03:04 UTC", commit="abc1234567", backend="local", model="m.onnx (sha256 x)",
+                      suite="2 fake recordings")
+    path = write_report(fake_results(), tmp_path, info)
+    md = path.read_text()
+    assert path.name == "README.md"
+    for expected in ("2026-01-02 03:04 UTC", "`abc1234567`", "2 fake recordings", "![CER vs lux](cer_vs_lux.png)",
+                     "Roboto (held out of training)", "| 000_bright | 1000 | still | pangram |", "## Bandwidth",
+                     "darkread mean CER 4.0%", "RGB snapshot mean CER 50.0%", "## Failures", "001_dark: OCR engine tesseract: OcrError: boom"):
+        assert expected in md, expected
+    assert "| pangram | 2 | 4.0% | 10.0% |" in md  # engine comparison: tesseract's failure is left out of its mean
+    for name in ("cer_vs_lux.png", "cer_vs_xheight.png", "ocr_backends_by_kind.png"):
+        with Image.open(tmp_path / name) as image:
+            assert image.format == "PNG" and image.size[0] > 300
+    assert json.loads((tmp_path / "results.json").read_text())[1]["name"] == "001_dark"
+
+
+def test_cli_rebuilds_the_report_from_stored_results(tmp_path: Path) -> None:
+    from darkread.cli import main
+
+    suite = tmp_path / "suite"
+    for result in fake_results():
+        folder = suite / "eval_runs" / result["name"]
+        folder.mkdir(parents=True)
+        (folder / "result.json").write_text(json.dumps(result))
+    out = tmp_path / "report"
+    assert main(["eval", str(suite), "--report-only", "--out", str(out)]) == 0
+    md = (out / "README.md").read_text()
+    assert "2 synthetic recordings" in md and "(cer_vs_lux.png)" in md
+
+
+def test_cli_refuses_a_report_without_results(tmp_path: Path) -> None:
+    from darkread.cli import main
+
+    (tmp_path / "suite").mkdir()
+    with pytest.raises(FileNotFoundError, match="no stored results"):
+        main(["-vv", "eval", str(tmp_path / "suite"), "--report-only", "--out", str(tmp_path / "out")])
