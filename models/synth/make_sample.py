@@ -19,11 +19,11 @@ SAMPLE_SPEC = RecordingSpec(
     motion="still",
     kind="paragraph",
     seconds=3.0,
-    seed=20,
+    seed=22,
     font="DejaVu Sans",
     xheight_px=10.0,
     n_lines=3,
-    line_chars=24,
+    line_chars=20,
     description="synthetic reading session (darkread sample, made by darkread.models.synth.make_sample)",
 )
 

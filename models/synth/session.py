@@ -100,7 +100,10 @@ def make_session(spec: SessionSpec, seed: int) -> Session:
     reflect = reflectance(page, paper=paper, contrast=contrast, blur_tex=blur)
     rot, centre = base_pose(rng, distance)
     lux = float(spec.lux) if spec.lux is not None else random_lux(rng)
-    scene = Scene(page, reflect, calib, rot, centre, random_motion(motion_level, rng), lux, float(rng.uniform(0.05, 0.4)))
+    surround = float(rng.uniform(0.05, 0.4))  # a desk or clothing around the paper
+    if np.random.default_rng([seed, 3]).random() < 0.8:
+        surround = paper  # usually the sheet extends beyond the field of view (no page edge in view)
+    scene = Scene(page, reflect, calib, rot, centre, random_motion(motion_level, rng), lux, surround)
     deg_per_texel = math.degrees(texel_m / distance)
     scanpath = reading_scanpath(page, spec.duration_s + 1.0, deg_per_texel, rng, start_line=0)
     return Session(
