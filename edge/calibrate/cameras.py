@@ -19,7 +19,6 @@ from typing import Any, Protocol
 
 import cv2
 import numpy as np
-
 from darkread.edge.errors import CalibrationError
 
 

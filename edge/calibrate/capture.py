@@ -9,13 +9,19 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
-
 from darkread.edge.calibrate.clock import RgbFrames
 from darkread.edge.calibrate.event_image import Burst, burst_events, detection_image
-from darkread.edge.calibrate.markers import BOARD_NAME, BoardSpec, Detection, detect_board, load_board
+from darkread.edge.calibrate.markers import (
+    BOARD_NAME,
+    BoardSpec,
+    Detection,
+    detect_board,
+    load_board,
+)
 from darkread.edge.errors import CalibrationError
 
 logger = logging.getLogger(__name__)
@@ -55,7 +61,7 @@ def board_of(path: str | Path, board: str | Path | None) -> BoardSpec:
 def shown_intervals(bursts: list[Burst]) -> list[tuple[float, float]]:
     """(appear, disappear) onsets on the event clock: an OFF burst followed by an ON burst."""
     out = []
-    for a, b in zip(bursts[:-1], bursts[1:]):
+    for a, b in pairwise(bursts):
         if a.polarity == 0 and b.polarity == 1:
             out.append((a.onset_us, b.onset_us))
     return out

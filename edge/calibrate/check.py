@@ -15,7 +15,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-
 from darkread.edge.calibrate.event_image import count_image, denoise
 from darkread.edge.io.calibration import Calibration
 from darkread.edge.io.gaze_csv import GazeTrack

@@ -88,9 +88,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
-def _start_calibration(args: argparse.Namespace, width: int = 1280, height: int = 720):  # noqa: ANN202
+def _start_calibration(args: argparse.Namespace, width: int = 1280, height: int = 720):
     import numpy as np
-
     from darkread.edge.io.calibration import Calibration, load_calibration
 
     capture = Path(args.capture)
@@ -106,7 +105,7 @@ def _start_calibration(args: argparse.Namespace, width: int = 1280, height: int 
                        np.diag([-1.0, -1.0, 1.0, 1.0]), 0)
 
 
-def _finish(args: argparse.Namespace, result: dict, calibration=None) -> int:  # noqa: ANN001
+def _finish(args: argparse.Namespace, result: dict, calibration=None) -> int:
     if calibration is not None and args.out:
         from darkread.edge.io.calibration import save_calibration
 
@@ -140,7 +139,12 @@ def _clock(args: argparse.Namespace) -> int:
     if args.refine:
         return _clock_refine(args)
     from darkread.edge.calibrate.capture import RGB_FRAMES_NAME, read_capture_events
-    from darkread.edge.calibrate.clock import fit_offset, load_rgb_frames, switches_from_bursts, switches_from_triggers
+    from darkread.edge.calibrate.clock import (
+        fit_offset,
+        load_rgb_frames,
+        switches_from_bursts,
+        switches_from_triggers,
+    )
     from darkread.edge.calibrate.event_image import find_bursts
 
     data = read_capture_events(args.capture)
@@ -155,7 +159,7 @@ def _clock(args: argparse.Namespace) -> int:
         source = "bursts"
     result = fit_offset(switches, shown, frames, source=source)
     calib = dataclasses.replace(_start_calibration(args, data.width, data.height),
-                                gaze_to_event_time_offset_us=int(round(result.offset_us)))
+                                gaze_to_event_time_offset_us=round(result.offset_us))
     return _finish(args, result.to_dict(), calib)
 
 
@@ -173,20 +177,31 @@ def _clock_refine(args: argparse.Namespace) -> int:
     t_device = t_event - calib.gaze_to_event_time_offset_us
     result = refine_offset(events["t"], t_device, pixels, float(calib.gaze_to_event_time_offset_us),
                            search_us=args.search_ms * 1000.0)
-    calib = dataclasses.replace(calib, gaze_to_event_time_offset_us=int(round(result.offset_us)))
+    calib = dataclasses.replace(calib, gaze_to_event_time_offset_us=round(result.offset_us))
     return _finish(args, result.to_dict(), calib)
 
 
 def _extrinsics(args: argparse.Namespace) -> int:
     import numpy as np
-
-    from darkread.edge.calibrate.cameras import PinholeCamera, aria_camera_from_device_calibration, rgb_camera_from_calibration
-    from darkread.edge.calibrate.capture import RGB_FRAMES_NAME, board_of, paired_views, read_capture_events
+    from darkread.edge.calibrate.cameras import (
+        PinholeCamera,
+        aria_camera_from_device_calibration,
+        rgb_camera_from_calibration,
+    )
+    from darkread.edge.calibrate.capture import (
+        RGB_FRAMES_NAME,
+        board_of,
+        paired_views,
+        read_capture_events,
+    )
     from darkread.edge.calibrate.clock import load_rgb_frames
     from darkread.edge.calibrate.event_image import find_bursts
-    from darkread.edge.calibrate.extrinsics import extrinsics_from_views, page_homography
-    from darkread.edge.io.calibration import calibration_to_dict
+    from darkread.edge.calibrate.extrinsics import (
+        extrinsics_from_views,
+        page_homography,
+    )
     from darkread.edge.errors import CalibrationError
+    from darkread.edge.io.calibration import calibration_to_dict
 
     data = read_capture_events(args.capture)
     spec = board_of(args.capture, args.board)

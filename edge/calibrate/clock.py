@@ -23,7 +23,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-
 from darkread.edge.calibrate.event_image import Burst
 from darkread.edge.errors import CalibrationError
 
@@ -203,15 +202,16 @@ def fit_offset(
         centre = float(best[int(np.argmin(scores))])
     span = search_us if search_us is not None else 1.5 * period
 
-    def refine(sw: np.ndarray, states: np.ndarray, tt: np.ndarray, ee: np.ndarray, mm: np.ndarray) -> float:
-        grid = centre + np.arange(-span, span + 1e-9, max(period / 400, 20.0))
+    def refine(sw: np.ndarray, states: np.ndarray, tt: np.ndarray, ee: np.ndarray, mm: np.ndarray, around: float, half: float) -> float:
+        step = max(half / 150, 20.0)
+        grid = around + np.arange(-half, half + 1e-9, step)
         costs = np.array([_cost(o, sw, states, tt, ee, mm) for o in grid])
-        k = int(np.argmin(costs))
-        fine = grid[k] + np.linspace(-grid[1] + grid[0], grid[1] - grid[0], 41)
+        best = grid[int(np.argmin(costs))]
+        fine = best + np.linspace(-step, step, 41)
         fine_costs = np.array([_cost(o, sw, states, tt, ee, mm) for o in fine])
         return float(fine[int(np.argmin(fine_costs))])
 
-    offset = refine(switch_event, shown_after, t, e, m)
+    offset = refine(switch_event, shown_after, t, e, m, centre, span)
     pred = predicted_fractions(switch_event - offset, shown_after, t, e)
     mixed = (pred > 0.02) & (pred < 0.98)
     # jackknife over switches: drop one switch and the frames within a period of it
@@ -219,7 +219,7 @@ def fit_offset(
     for k in range(switch_event.size):
         keep_sw = np.arange(switch_event.size) != k
         near = np.abs(t - (switch_event[k] - offset)) < period + e
-        estimates.append(refine(switch_event[keep_sw], shown_after[keep_sw], t[~near], e[~near], m[~near]))
+        estimates.append(refine(switch_event[keep_sw], shown_after[keep_sw], t[~near], e[~near], m[~near], offset, period / 4))
     estimates = np.asarray(estimates)
     n = estimates.size
     jack = float(np.sqrt((n - 1) / n * np.sum((estimates - estimates.mean()) ** 2)))

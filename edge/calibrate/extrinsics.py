@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-
 from darkread.edge.calibrate.cameras import Camera, Fisheye624Camera, PinholeCamera
 from darkread.edge.calibrate.markers import Detection, board_pose, pose_matrix
 from darkread.edge.errors import CalibrationError
@@ -131,7 +130,7 @@ def page_homography(event_det: Detection, rgb_det: Detection, *, rgb_camera: Cam
     dst = event_det.image_points[ie].astype(np.float64)
     if rgb_camera is not None and isinstance(rgb_camera, Fisheye624Camera):
         raise CalibrationError("undistort fisheye RGB points before the homography fallback (use the pose route instead)")
-    H, inliers = cv2.findHomography(src, dst, cv2.USAC_MAGSAC, 2.0)
+    H, _ = cv2.findHomography(src, dst, cv2.USAC_MAGSAC, 2.0)
     if H is None:
         raise CalibrationError("no consistent homography between the two views of the page")
     mapped = cv2.perspectiveTransform(src.reshape(-1, 1, 2), H).reshape(-1, 2)

@@ -12,8 +12,12 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-
-from darkread.edge.calibrate.event_image import Burst, burst_events, detection_image, find_bursts
+from darkread.edge.calibrate.event_image import (
+    Burst,
+    burst_events,
+    detection_image,
+    find_bursts,
+)
 from darkread.edge.calibrate.markers import BoardSpec, Detection, detect_board
 from darkread.edge.errors import CalibrationError
 
@@ -40,6 +44,7 @@ class IntrinsicsResult:
     cy: float
     distortion: tuple[float, float, float, float]
     rms_px: float  # RMS reprojection error over all corners of all used views
+    std: dict[str, float]  # standard deviations of fx, fy, cx, cy, k1, k2, p1, p2 (from the fit's Jacobian)
     per_view_rms_px: list[float]
     n_views: int
     n_corners: int
@@ -52,7 +57,7 @@ class IntrinsicsResult:
         return {
             "fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy,
             "distortion": dict(zip(("k1", "k2", "p1", "p2"), self.distortion)),
-            "rms_px": self.rms_px, "n_views": self.n_views, "n_corners": self.n_corners,
+            "rms_px": self.rms_px, "std": self.std, "n_views": self.n_views, "n_corners": self.n_corners,
         }
 
 
@@ -81,8 +86,11 @@ def calibrate_intrinsics(
     img = [d.image_points.reshape(-1, 1, 2).astype(np.float32) for d in used]
     flags = cv2.CALIB_FIX_K3 | (cv2.CALIB_ZERO_TANGENT_DIST if zero_tangential else 0)
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
-    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, (width, height), None, None, flags=flags, criteria=criteria)
+    rms, K, dist, rvecs, tvecs, std_intrinsics, _, _ = cv2.calibrateCameraExtended(
+        obj, img, (width, height), None, None, flags=flags, criteria=criteria
+    )
     dist = np.asarray(dist, dtype=np.float64).reshape(-1)
+    std = np.asarray(std_intrinsics, dtype=np.float64).reshape(-1)
     per_view, poses = [], []
     for o, i, r, t in zip(obj, img, rvecs, tvecs):
         projected, _ = cv2.projectPoints(o, r, t, K, dist)
@@ -100,6 +108,7 @@ def calibrate_intrinsics(
         cy=float(K[1, 2]),
         distortion=(float(dist[0]), float(dist[1]), float(dist[2]), float(dist[3])),
         rms_px=float(rms),
+        std=dict(zip(("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"), (float(v) for v in std[:8]))),
         per_view_rms_px=per_view,
         n_views=len(used),
         n_corners=int(sum(len(d) for d in used)),

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-
 from darkread.edge.errors import CalibrationError
 
 BOARD_NAME = "board.json"
@@ -72,7 +71,7 @@ class BoardSpec:
         """The pattern as uint8 (0 = black, 255 = white), no margin: pixel (i, j) covers board
         x in [j, j + 1) / px_per_m, y in [i, i + 1) / px_per_m."""
         w_m, h_m = self.size_m
-        size = (int(round(w_m * px_per_m)), int(round(h_m * px_per_m)))
+        size = (round(w_m * px_per_m), round(h_m * px_per_m))
         return self.board().generateImage(size, marginSize=0, borderBits=1)
 
     def to_dict(self) -> dict:

@@ -21,14 +21,23 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-
 from darkread.edge.calibrate.cameras import Camera, PinholeCamera
 from darkread.edge.calibrate.markers import BoardSpec, save_board
-from darkread.edge.io.calibration import Calibration, save_calibration
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
+from darkread.edge.io.calibration import Calibration, save_calibration
 from darkread.edge.io.raw import write_raw
-from darkread.models.synth.camera import SENSOR_WH, random_calibration, region_rays, rotation_xyz
-from darkread.models.synth.sensor import EventSensor, SensorParams, background_events, concat_events
+from darkread.models.synth.camera import (
+    SENSOR_WH,
+    random_calibration,
+    region_rays,
+    rotation_xyz,
+)
+from darkread.models.synth.sensor import (
+    EventSensor,
+    SensorParams,
+    background_events,
+    concat_events,
+)
 
 RGB_FRAMES_NAME = "rgb_frames.csv"
 SESSION_US = 12_000_000  # captures of one session start and end within this span (start_s + duration)
@@ -51,7 +60,7 @@ class ScreenTarget:
         """Board picture with its margin, float32 0..1, lightly blurred (display and optics)."""
         if self._texture is None:
             board = self.spec.image(self.px_per_m).astype(np.float32) / 255.0
-            m = int(round(self.margin_m * self.px_per_m))
+            m = round(self.margin_m * self.px_per_m)
             tex = np.pad(board, m, constant_values=1.0)
             tex = self.black_fraction + (1.0 - self.black_fraction) * tex
             self._texture = cv2.GaussianBlur(tex, (0, 0), 0.6).astype(np.float32)
@@ -278,8 +287,9 @@ def unique_events(events: np.ndarray, width: int = SENSOR_WH[0], height: int = S
     return events[first]
 
 
-def simulate_flash_capture(spec: FlashCaptureSpec = FlashCaptureSpec()) -> FlashCapture:
+def simulate_flash_capture(spec: FlashCaptureSpec | None = None) -> FlashCapture:
     """Simulate a capture: bursts of events at every switch, RGB frames on the device clock."""
+    spec = spec if spec is not None else FlashCaptureSpec()
     device = np.random.default_rng([spec.device_seed, 11])  # the glasses: same for every capture of a session
     true_calib = random_calibration(device)
     # the session (all its captures) stays within one period of the sensor's 24-bit clock, so a RAW
@@ -288,7 +298,7 @@ def simulate_flash_capture(spec: FlashCaptureSpec = FlashCaptureSpec()) -> Flash
     device_t0 = int(device.integers(5_000_000_000, 20_000_000_000))
     true_calib = replace(true_calib, gaze_to_event_time_offset_us=event_t0 - device_t0)
     T_rgb_cpf = _rgb_pose(device)
-    start_us = int(round(spec.start_s * 1e6))
+    start_us = round(spec.start_s * 1e6)
     if start_us + spec.n_poses * spec.pose_s * 1e6 > SESSION_US:
         raise ValueError(f"a capture must end within {SESSION_US / 1e6:.0f} s of the session start")
     event_t0 += start_us

@@ -10,8 +10,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-from darkread.models.synth.markers import FlashCapture, FlashCaptureSpec, simulate_flash_capture, write_flash_capture
+from darkread.models.synth.markers import (
+    FlashCapture,
+    FlashCaptureSpec,
+    simulate_flash_capture,
+    write_flash_capture,
+)
 
 
 @pytest.fixture(scope="session")

@@ -1,8 +1,12 @@
 from __future__ import annotations
 
 import numpy as np
-
-from darkread.edge.calibrate.event_image import burst_events, count_image, detection_image, find_bursts
+from darkread.edge.calibrate.event_image import (
+    burst_events,
+    count_image,
+    detection_image,
+    find_bursts,
+)
 from darkread.edge.events import empty_events, make_events
 
 

@@ -2,8 +2,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from darkread.edge.calibrate.markers import BoardSpec, board_pose, detect_board, load_board, pose_matrix, save_board
+from darkread.edge.calibrate.markers import (
+    BoardSpec,
+    board_pose,
+    detect_board,
+    load_board,
+    pose_matrix,
+    save_board,
+)
 from darkread.edge.errors import CalibrationError
 
 

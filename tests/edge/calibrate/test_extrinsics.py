@@ -1,0 +1,71 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from darkread.edge.calibrate.cameras import Fisheye624Camera, PinholeCamera
+from darkread.edge.calibrate.extrinsics import (
+    average_poses,
+    extrinsics_from_views,
+    page_homography,
+    rotation_deg,
+)
+from darkread.edge.calibrate.markers import BoardSpec, Detection, pose_matrix
+from darkread.edge.errors import CalibrationError
+
+FISHEYE = (610.0, 1440.0, 1440.0, 0.40, -0.45, 0.12, 0.70, -1.50, 0.80, 1e-4, -2e-4, 1e-4, -1e-5, 2e-4, -3e-5)
+
+EVENT = PinholeCamera(1280, 720, 1410.0, 1412.0, 643.0, 358.0, (-0.03, 0.01, 0.0, 0.0))
+
+
+def _detection(camera, T_cam_board, rng, noise_px=0.2):
+    obj = BoardSpec().board().getChessboardCorners().astype(np.float32)
+    pts = obj @ T_cam_board[:3, :3].T + T_cam_board[:3, 3]
+    uv = camera.project(pts) + rng.normal(0, noise_px, (len(obj), 2))
+    return Detection(obj, uv.astype(np.float32), np.arange(len(obj)), 17)
+
+
+def _truth():
+    T_event_cpf = pose_matrix(np.radians([1.0, -2.0, 180.0]), [-0.03, 0.01, 0.0])
+    T_rgb_cpf = pose_matrix(np.radians([3.0, -9.0, 180.0]), [0.04, 0.006, 0.011])
+    return T_event_cpf, T_rgb_cpf
+
+
+@pytest.mark.parametrize("rgb", [PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5), Fisheye624Camera(2880, 2880, FISHEYE)])
+def test_pose_is_recovered_through_either_rgb_model(rgb):
+    rng = np.random.default_rng(0)
+    T_event_cpf, T_rgb_cpf = _truth()
+    views = []
+    for k in range(4):
+        T_cpf_board = np.linalg.inv(T_event_cpf) @ pose_matrix(np.radians([10.0 * k - 15, 5.0, 2.0]), [-0.12, -0.08, 0.55 + 0.03 * k])
+        views.append((_detection(EVENT, T_event_cpf @ T_cpf_board, rng), _detection(rgb, T_rgb_cpf @ T_cpf_board, rng)))
+    result = extrinsics_from_views(views, EVENT, rgb, T_rgb_cpf)
+    assert result.n_views == 4
+    assert rotation_deg(result.T_event_cpf[:3, :3], T_event_cpf[:3, :3]) < 0.5  # the stated tolerance
+    assert np.linalg.norm(result.T_event_cpf[:3, 3] - T_event_cpf[:3, 3]) < 0.005
+    assert max(result.event_rms_px) < 0.5
+
+
+def test_average_of_poses_is_a_rotation_near_each():
+    poses = [pose_matrix(np.radians([a, 0.0, 0.0]), [a, 0.0, 0.0]) for a in (-1.0, 0.0, 1.0)]
+    mean = average_poses(poses)
+    assert np.allclose(mean[:3, :3] @ mean[:3, :3].T, np.eye(3))
+    assert np.allclose(mean, np.eye(4), atol=1e-9)
+
+
+def test_no_views_is_an_error():
+    with pytest.raises(CalibrationError):
+        extrinsics_from_views([], EVENT, EVENT, np.eye(4))
+
+
+def test_homography_fallback_maps_page_points_only():
+    rng = np.random.default_rng(3)
+    T_event_cpf, T_rgb_cpf = _truth()
+    T_cpf_board = np.linalg.inv(T_event_cpf) @ pose_matrix(np.radians([10.0, -5.0, 2.0]), [-0.12, -0.08, 0.5])
+    rgb = PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5)
+    pinhole_event = PinholeCamera(1280, 720, 1410.0, 1412.0, 643.0, 358.0)
+    ev = _detection(pinhole_event, T_event_cpf @ T_cpf_board, rng, 0.1)
+    rg = _detection(rgb, T_rgb_cpf @ T_cpf_board, rng, 0.1)
+    result = page_homography(ev, rg)
+    assert result.rms_px < 0.5
+    assert "page plane" in result.note
+    assert np.abs(result.map(rg.image_points) - ev.image_points).max() < 1.0
