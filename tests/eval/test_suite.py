@@ -1,0 +1,92 @@
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from darkread.eval.suite import (
+    FONTS,
+    HELD_OUT_FONTS,
+    LUX_LEVELS,
+    MOTIONS,
+    TEXT_KINDS,
+    XHEIGHTS_PX,
+    load_suite,
+    make_suite,
+    suite_entries,
+)
+from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
+
+
+@pytest.mark.parametrize("small", [True, False])
+def test_suite_covers_every_axis_with_fixed_unique_seeds(small: bool) -> None:
+    entries = suite_entries(small=small)
+    assert entries == suite_entries(small=small)  # same every time
+    assert len({e.seed for e in entries}) == len(entries) and len({e.name for e in entries}) == len(entries)
+    assert {e.lux for e in entries} == set(LUX_LEVELS)
+    assert {e.kind for e in entries} == set(TEXT_KINDS)
+    assert {e.motion for e in entries} == set(MOTIONS)
+    assert {e.font for e in entries} == set(FONTS)
+    assert all(7 <= e.xheight_px <= 12 for e in entries)
+    if not small:
+        assert {e.xheight_px for e in entries} == set(XHEIGHTS_PX)
+
+
+def test_fonts_include_one_held_out_of_training() -> None:
+    assert set(HELD_OUT_FONTS) <= set(HELD_OUT_FAMILIES)
+    assert set(FONTS) - set(HELD_OUT_FONTS) <= set(TRAIN_FAMILIES)
+
+
+def test_small_suite_is_ci_sized() -> None:
+    entries = suite_entries(small=True)
+    assert 10 <= len(entries) <= 20
+    assert sum(e.seconds for e in entries) <= 60
+
+
+def test_entry_spec_fixes_everything_the_generator_would_draw() -> None:
+    spec = suite_entries(small=True)[0].recording_spec()
+    assert None not in (spec.font, spec.xheight_px, spec.n_lines, spec.line_chars)
+
+
+def test_load_suite_lists_recordings_and_explains_an_empty_folder(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="make-suite"):
+        load_suite(tmp_path)
+    for name in ("b", "a"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "text.txt").write_text("x")
+    (tmp_path / "eval_runs").mkdir()
+    assert [p.name for p in load_suite(tmp_path)] == ["a", "b"]
+
+
+@pytest.mark.slow
+def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A one-second suite recording through make_suite, darkread (edge -> cloud -> OCR), the RGB baseline
+    and the bandwidth accounting. Checks the plumbing, not the model's quality."""
+    import darkread.eval.suite as suite_module
+    from darkread.eval.runner import evaluate_recording
+
+    short = replace(suite_entries(small=True)[0], seconds=1.0, n_lines=2, line_chars=12)
+    monkeypatch.setattr(suite_module, "suite_entries", lambda small=False: [short])
+    entries = make_suite(tmp_path, small=True, progress=False)
+    folder = tmp_path / entries[0].name
+    for name in ("events.raw", "general_eye_gaze.csv", "calibration.json", "text.txt", "meta.json", "spec.json"):
+        assert (folder / name).is_file(), name
+    doc = json.loads((tmp_path / "suite.json").read_text())
+    assert doc["small"] is True and doc["recordings"][0]["seed"] == short.seed
+    before = (folder / "events.raw").stat().st_mtime_ns
+    make_suite(tmp_path, small=True, progress=False)  # complete recordings are kept
+    assert (folder / "events.raw").stat().st_mtime_ns == before
+
+    result = evaluate_recording(folder, tmp_path / "run", compare=["rapidocr"])
+    assert result["lux"] == short.lux and result["kind"] == short.kind
+    assert "error" not in result["rgb"], result["rgb"]  # the RGB baseline re-created the same page
+    assert 0.0 <= result["rgb"]["cer"] and result["rgb"]["exposure_ms"] > 0
+    assert "error" not in result["darkread"], result["darkread"]
+    assert result["darkread"]["frames"] > 0 and result["darkread"]["cer"] is not None
+    bw = result["bandwidth"]
+    assert bw["frames_measured"] and bw["frame_stream_bytes"] == result["darkread"]["bytes_sent"]
+    assert bw["rgb"]["raw"] == 2880 * 2880 * 3 and bw["page_bytes"] > 0
+    assert 0 < bw["events_foveated"] < bw["events"]
+    assert json.loads((tmp_path / "run" / "result.json").read_text())["name"] == folder.name
