@@ -68,7 +68,7 @@ def run(ctx: BenchContext) -> list[Figure]:
             ours_ms,
             f"stitch: ms per frame ({where})",
             f"naive placement: {naive_ms:.3f} ms/frame",
-            "<= 5 ms/frame (real time at 200 frames/s on one core)",
+            "<= 10 ms/frame (100 frames/s on one core)",
         ),
         Figure(
             "stitch_ink_f1",

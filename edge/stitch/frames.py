@@ -130,7 +130,7 @@ class StitchConfig:
     dewarp_max_shift_px: float = 8.0
     dewarp_min_points: int = 12
     dewarp_min_gain: float = 0.005
-    ink_threshold: float = 0.45
+    ink_threshold: float = 0.4
     min_component_px: int = 2
     min_views: int = 2
     line_gap_px: int = 30

@@ -47,3 +47,22 @@ def test_no_registration_without_overlap_or_ink(rendered_page) -> None:
 def test_reference_of_the_wrong_size_is_refused(rendered_page) -> None:
     with pytest.raises(ValueError, match="grown by"):
         register_frame(np.zeros((100, 200), np.float32), np.ones((100, 200), bool), np.zeros((100, 200), np.uint8), 4)
+
+
+@pytest.mark.parametrize("roll", [-1.2, 0.7])
+def test_recovers_a_small_rotation_of_the_frame(rendered_page, roll: float) -> None:
+    import cv2
+
+    from darkread.edge.stitch.register import frame_transform
+
+    r = 8
+    px, py = 200, 130
+    reference = rendered_page.coverage[py - r : py + 100 + r, px - r : px + 200 + r].astype(np.float32)
+    window = rendered_page.coverage[py : py + 100, px : px + 200]
+    # the camera saw the page turned by -roll: turning the frame by +roll undoes it
+    seen = cv2.warpAffine(window, frame_transform((100, 200), -roll), (200, 100), flags=cv2.INTER_LINEAR)
+    frame = (seen >= 0.5).astype(np.uint8)
+    reg = register_frame(reference, np.ones_like(reference, bool), frame, r, angles_deg=(roll - 0.6, roll - 0.1, roll + 0.4))
+    assert reg is not None
+    assert abs(reg.angle_deg - roll) < 0.25
+    assert reg.shift_xy == (0, 0)

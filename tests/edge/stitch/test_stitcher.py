@@ -12,7 +12,7 @@ from darkread.edge.stitch import PageStitcher, StitchConfig, StitchFrame, naive_
 def test_stitched_page_matches_the_truth(rendered_page, stitched) -> None:
     exact, _ = ink_f1_aligned(stitched.image, rendered_page.mask)
     tolerant, _ = ink_f1_aligned(stitched.image, rendered_page.mask, tolerance_px=1)
-    assert exact >= 0.75  # measured 0.82 (strokes are ~2 px wide; frames are rotated by the head roll)
+    assert exact >= 0.72  # measured 0.79 here, 0.85 mean over 6 seeds (strokes are ~2 px wide)
     assert tolerant >= 0.97  # measured 0.998
 
 
@@ -101,3 +101,24 @@ def test_frames_and_config_validate_their_input() -> None:
     assert frame.mask.max() == 1
     with pytest.raises(ValueError):
         StitchConfig(search_radius_px=-1)
+
+
+def test_head_motion_is_predicted_from_recent_corrections() -> None:
+    from darkread.edge.stitch.stitcher import predict_correction
+
+    assert np.array_equal(predict_correction([], 0), np.zeros(2))
+    two = [(0, np.array([1.0, 2.0])), (40_000, np.array([3.0, 2.0]))]
+    assert np.allclose(predict_correction(two, 80_000), [2.0, 2.0])  # too few for a velocity: median
+    moving = [(t, np.array([0.1 * t / 1000, -5.0])) for t in range(0, 200_000, 40_000)]
+    assert np.allclose(predict_correction(moving, 240_000), [24.0, -5.0])
+
+
+def test_head_roll_is_tracked_and_undone(rendered_page) -> None:
+    from stitch_scan import ScanParams
+
+    reading = simulate_reading(rendered_page, ScanParams(roll_deg=1.5), seed=3)
+    with_roll = stitch_page(reading.frames)
+    shifts_only = stitch_page(reading.frames, StitchConfig(roll_step_deg=0.0))
+    tracked, _ = ink_f1_aligned(with_roll.image, rendered_page.mask, tolerance_px=1)
+    untracked, _ = ink_f1_aligned(shifts_only.image, rendered_page.mask, tolerance_px=1)
+    assert tracked > 0.97 and tracked > untracked + 0.04  # measured 0.999 vs 0.912
