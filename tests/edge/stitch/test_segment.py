@@ -73,3 +73,22 @@ def test_streaming_decisions_equal_batch_and_lag_by_the_confirmation(reading) ->
     decided += segmenter.flush()
     breaks = [f.frame_id for f, new in decided if new]
     assert breaks == [line[0].frame_id for line in segment_lines(reading.frames, cfg)]
+
+
+def test_segmentation_partitions_any_gaze_track_in_order() -> None:
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    coords = st.tuples(st.floats(0, 1280, allow_nan=False), st.floats(0, 720, allow_nan=False))
+
+    @settings(max_examples=60, deadline=None)
+    @given(st.lists(coords, max_size=60), st.integers(0, 4))
+    def check(gaze: list[tuple[float, float]], confirm: int) -> None:
+        frames = _frames(gaze)
+        cfg = StitchConfig(sweep_confirm_frames=confirm)
+        lines = segment_lines(frames, cfg)
+        assert [f.frame_id for line in lines for f in line] == [f.frame_id for f in frames]
+        assert all(lines)
+        assert all(len(line) >= cfg.min_line_frames for line in lines[:-1])
+
+    check()

@@ -122,3 +122,13 @@ def test_head_roll_is_tracked_and_undone(rendered_page) -> None:
     tracked, _ = ink_f1_aligned(with_roll.image, rendered_page.mask, tolerance_px=1)
     untracked, _ = ink_f1_aligned(shifts_only.image, rendered_page.mask, tolerance_px=1)
     assert tracked > 0.97 and tracked > untracked + 0.04  # measured 0.999 vs 0.912
+
+
+def test_other_window_sizes_stitch_too(rendered_page) -> None:
+    from stitch_scan import ScanParams
+
+    reading = simulate_reading(rendered_page, ScanParams(frame_hw=(80, 160)), seed=4)
+    assert reading.frames[0].mask.shape == (80, 160)
+    page = stitch_page(reading.frames)
+    f1, _ = ink_f1_aligned(page.image, rendered_page.mask, tolerance_px=1)
+    assert f1 > 0.95
