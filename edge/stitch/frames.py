@@ -89,10 +89,8 @@ class StitchConfig:
     De-warp (KLT between a finished line and the page above it):
       dewarp_degree         polynomial degree in x of the line's displacement (0 = offset, 1 = offset
                             + slope). Default 0: frames already register against the page above, and
-                            a slope fitted where strip and page overlap (mostly the neighbouring line,
-                            seen under another head roll) tilted the line itself (synthetic readings,
-                            6 seeds: mean ink F1 0.828 with slope vs 0.850 offset only). Use 1 when
-                            lines are stitched without the page as reference.
+                            a slope fitted where strip and page overlap (mostly the neighbouring line)
+                            did not help on synthetic readings (see README.md).
       dewarp_max_shift_px   larger corrections are distrusted and skipped.
       dewarp_min_points     tracked features needed to estimate a warp.
       dewarp_min_gain       the warp is undone only if the strip's correlation with the page where
