@@ -295,6 +295,35 @@ def plot_backends(results: Sequence[dict[str, Any]], path: str | Path) -> Path |
     return path
 
 
+def plot_examples(results: Sequence[dict[str, Any]], path: str | Path, *, motion: str = "normal") -> Path | None:
+    """One row per lux level: the RGB snapshot crop next to the page darkread stitched (same scene)."""
+    chosen = []
+    for lux, group in sorted(group_by(results, "lux").items(), key=lambda kv: -float(kv[0] or 0)):
+        pick = [r for r in group if r.get("motion") == motion] or group
+        r = pick[0]
+        crop, page = (r.get("rgb") or {}).get("crop_png"), (r.get("darkread") or {}).get("page_png")
+        if crop and page and Path(crop).is_file() and Path(page).is_file():
+            chosen.append((r, crop, page))
+    if not chosen:
+        return None
+    plt = _pyplot()
+    from PIL import Image
+
+    fig, axes = plt.subplots(len(chosen), 2, figsize=(8.0, 1.7 * len(chosen)), dpi=120, squeeze=False)
+    for row, (r, crop, page) in zip(axes, chosen):
+        for ax, file, title in ((row[0], crop, f"RGB snapshot, CER {_pct(rate(r, 'rgb'))}"),
+                                (row[1], page, f"darkread page, CER {_pct(rate(r, 'darkread'))}")):
+            with Image.open(file) as image:
+                ax.imshow(image.convert("L"), cmap="gray", vmin=0, vmax=255)
+            ax.set_title(f"{r.get('lux', 0):g} lux, {r.get('motion')}: {title}", fontsize=8)
+            ax.set_axis_off()
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 # -- the report ------------------------------------------------------------------------------------
 
 
@@ -352,6 +381,7 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
     plot_cer_vs(results, "xheight_px", out / "cer_vs_xheight.png", xlabel="x-height (event-camera pixels)",
                 title="CER vs text size")
     backends_png = plot_backends(results, out / "ocr_backends_by_kind.png")
+    examples_png = plot_examples(results, out / "examples.png")
     (out / RESULTS_NAME).write_text(json.dumps(results, indent=1))
 
     dk, rgb = mean(rate(r, "darkread") for r in results), mean(rate(r, "rgb") for r in results)
@@ -377,6 +407,8 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "",
         *grouped_table(results, "lux", "lux", lambda v: f"{v:g}"),
         "",
+        *(["What the OCR saw, one recording per light level (left: the RGB snapshot's page crop; right: the "
+           "page darkread stitched from binary frames):", "", "![examples](examples.png)", ""] if examples_png else []),
         "## By motion, text kind, font and x-height",
         "",
         *grouped_table(results, "motion", "motion"),

@@ -132,10 +132,11 @@ def evaluate_recording(
 
         snap = snapshot_for_recording(recording_dir, full_frame=True)
         snapshot["snap"] = snap
-        cv2.imwrite(str(run_dir / "rgb_crop.png"), cv2.cvtColor(snap.crop, cv2.COLOR_RGB2BGR))
+        crop_png = run_dir / "rgb_crop.png"
+        cv2.imwrite(str(crop_png), cv2.cvtColor(snap.crop, cv2.COLOR_RGB2BGR))
         text = read_snapshot(snap, engine(backend))
         rates = error_rates(reference, text)
-        return {"text": text, "cer": rates.cer, "wer": rates.wer, **snap.describe()}
+        return {"text": text, "cer": rates.cer, "wer": rates.wer, **snap.describe(), "crop_png": str(crop_png)}
 
     result["rgb"] = _guard(f"{recording_dir.name}: RGB baseline", run_rgb)
 

@@ -102,3 +102,20 @@ def test_cli_refuses_a_report_without_results(tmp_path: Path) -> None:
     (tmp_path / "suite").mkdir()
     with pytest.raises(FileNotFoundError, match="no stored results"):
         main(["-vv", "eval", str(tmp_path / "suite"), "--report-only", "--out", str(tmp_path / "out")])
+
+
+def test_examples_grid_shows_the_rgb_crop_next_to_the_page(tmp_path: Path) -> None:
+    from darkread.eval.report import plot_examples
+
+    results = fake_results()
+    for r in results:
+        crop, page = tmp_path / f"{r['name']}_crop.png", tmp_path / f"{r['name']}_page.png"
+        Image.new("RGB", (120, 60), (90, 90, 90)).save(crop)
+        Image.new("L", (200, 80), 255).save(page)
+        r["rgb"]["crop_png"], r["darkread"]["page_png"] = str(crop), str(page)
+    path = plot_examples(results, tmp_path / "examples.png")
+    assert path is not None
+    with Image.open(path) as image:
+        assert image.size[1] > image.size[0] / 4  # two rows
+    assert plot_examples(fake_results(), tmp_path / "none.png") is None  # no images: no figure
+    assert "(examples.png)" in write_report(results, tmp_path / "report", ReportInfo()).read_text()
