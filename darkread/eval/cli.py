@@ -40,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="OCR engine for darkread and the RGB baseline (default: local)")
     parser.add_argument("--compare", nargs="*", metavar="ENGINE", default=None,
                         help="OCR engines to compare on the stitched pages (default: every installed offline "
-                             "engine, plus remote ones when configured)")
+                             "engine, plus remote ones when configured; --compare alone: no comparison)")
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
     parser.add_argument("--work", metavar="DIR", help="per-recording outputs (default SUITE_DIR/eval_runs)")
     parser.add_argument("--force", action="store_true", help="re-evaluate recordings that already have results")

@@ -43,7 +43,7 @@ def remote_configured(name: str) -> bool:
 
 def available_backends(names: Sequence[str] | None = None) -> list[str]:
     """Engines to compare: the offline ones that are installed, remote ones only when configured."""
-    wanted = list(names) if names else [*OFFLINE_BACKENDS, *REMOTE_BACKENDS]
+    wanted = list(names) if names is not None else [*OFFLINE_BACKENDS, *REMOTE_BACKENDS]
     ready = []
     for name in wanted:
         if name in REMOTE_BACKENDS and not remote_configured(name):

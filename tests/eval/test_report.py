@@ -119,3 +119,14 @@ def test_examples_grid_shows_the_rgb_crop_next_to_the_page(tmp_path: Path) -> No
         assert image.size[1] > image.size[0] / 4  # two rows
     assert plot_examples(fake_results(), tmp_path / "none.png") is None  # no images: no figure
     assert "(examples.png)" in write_report(results, tmp_path / "report", ReportInfo()).read_text()
+
+
+def test_engine_selection_skips_unconfigured_remote_engines(monkeypatch: pytest.MonkeyPatch) -> None:
+    from darkread.eval import runner
+
+    monkeypatch.delenv("DARKREAD_OPENAI_API_KEY", raising=False)
+    monkeypatch.delenv("DARKREAD_GOOGLE_API_KEY", raising=False)
+    monkeypatch.delenv("DARKREAD_GOOGLE_BEARER_TOKEN", raising=False)
+    monkeypatch.chdir(Path(__file__).parent)  # no .env here
+    assert runner.available_backends([]) == []
+    assert runner.available_backends(["openai", "google"]) == []
