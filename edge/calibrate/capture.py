@@ -14,7 +14,12 @@ from pathlib import Path
 
 import numpy as np
 from darkread.edge.calibrate.clock import RgbFrames
-from darkread.edge.calibrate.event_image import Burst, burst_events, detection_image
+from darkread.edge.calibrate.event_image import (
+    Burst,
+    burst_events,
+    detection_image,
+    latency_image,
+)
 from darkread.edge.calibrate.markers import (
     BOARD_NAME,
     BoardSpec,
@@ -99,3 +104,32 @@ def paired_views(
             continue
         pairs.append((ev_det, rgb_det))
     return pairs
+
+
+def page_view(
+    events: np.ndarray,
+    bursts: list[Burst],
+    frames: RgbFrames,
+    offset_us: float,
+    spec: BoardSpec,
+    width: int,
+    height: int,
+    *,
+    settle_us: float = 100_000.0,
+) -> tuple[Detection, Detection]:
+    """Markers printed on a page, seen when a lamp is switched on (the first ON burst) and in the
+    first RGB frame exposed ``settle_us`` or more after it (device clock via ``offset_us``)."""
+    lamp = next((b for b in bursts if b.polarity == 1), None)
+    if lamp is None:
+        raise CalibrationError("no burst of ON events (a lamp switched on) in the stream")
+    event_det = detect_board(latency_image(events, width, height, lamp.onset_us - 200.0), spec, min_corners=4)
+    after = np.flatnonzero(frames.t_us - frames.exposure_us / 2 >= lamp.onset_us - offset_us + settle_us)
+    candidates = after if after.size else np.arange(len(frames))
+    rgb_det = None
+    for k in candidates[:10]:
+        rgb_det = detect_board(frames.images[k], spec, min_corners=4)
+        if rgb_det is not None:
+            break
+    if event_det is None or rgb_det is None:
+        raise CalibrationError(f"page markers not found in the {'events' if event_det is None else 'RGB frames'}")
+    return event_det, rgb_det

@@ -60,7 +60,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                            "solvePnP of the board in both cameras at the same instants, composed with the RGB camera's "
                            "pose relative to CPF. The RGB camera comes from --calibration's rgb_camera block (pinhole) or "
                            "from --aria-calibration (Fisheye624, with --T-device-cpf). --homography-only gives the flat-page "
-                           "fallback (an RGB->event homography, valid on that page only, no pose)."
+                           "fallback for markers printed around a page, seen when a lamp is switched on (an RGB->event "
+                           "homography, valid on that page only, no pose; calibration.json is left unchanged)."
                        ))
     p.add_argument("capture", help="capture directory (events.raw, board.json, rgb_frames.csv)")
     _common(p)
@@ -191,6 +192,7 @@ def _extrinsics(args: argparse.Namespace) -> int:
     from darkread.edge.calibrate.capture import (
         RGB_FRAMES_NAME,
         board_of,
+        page_view,
         paired_views,
         read_capture_events,
     )
@@ -208,14 +210,17 @@ def _extrinsics(args: argparse.Namespace) -> int:
     calib = _start_calibration(args, data.width, data.height)
     capture = Path(args.capture)
     frames = load_rgb_frames(args.rgb_frames or (capture if capture.is_dir() else capture.parent) / RGB_FRAMES_NAME, max_side=None)
-    pairs = paired_views(data.events, find_bursts(data.events), frames, calib.gaze_to_event_time_offset_us, spec,
-                         data.width, data.height)
+    bursts = find_bursts(data.events)
+    if args.homography_only:
+        event_det, rgb_det = page_view(data.events, bursts, frames, calib.gaze_to_event_time_offset_us, spec,
+                                       data.width, data.height)
+        result = page_homography(event_det, rgb_det)
+        logger.warning("homography fallback: valid only for points on this page; calibration.json is not changed")
+        return _finish(args, result.to_dict())
+    pairs = paired_views(data.events, bursts, frames, calib.gaze_to_event_time_offset_us, spec, data.width, data.height)
     if not pairs:
         raise CalibrationError("the board was not found in both cameras at the same time (run `calibrate clock` first?)")
     event_camera = PinholeCamera(calib.width, calib.height, calib.fx, calib.fy, calib.cx, calib.cy, calib.distortion)
-    if args.homography_only:
-        result = page_homography(pairs[0][0], pairs[0][1])
-        return _finish(args, result.to_dict())
     if args.aria_calibration:
         if not args.t_device_cpf:
             raise CalibrationError("--aria-calibration needs --T-device-cpf (the CPF pose in the device frame)")

@@ -51,20 +51,68 @@ def denoise(counts: np.ndarray, *, median_px: int = 3) -> np.ndarray:
 
 
 def detection_image(
-    events: np.ndarray, width: int, height: int, *, median_px: int = 3, blur_sigma_px: float = 0.7
+    events: np.ndarray,
+    width: int,
+    height: int,
+    *,
+    median_px: int = 3,
+    blur_sigma_px: float = 0.7,
+    more_events_is_dark: bool = True,
 ) -> np.ndarray:
-    """uint8 image of a flash burst, dark where pixels fired (the pattern's dark parts), white elsewhere.
+    """uint8 image of a burst for a marker detector.
 
-    The light Gaussian blur turns the graded counts at pattern edges into smooth ramps, which the
-    detector's sub-pixel corner refinement needs.
+    Screen flashing between the pattern and white (default): the pattern's dark parts are what
+    fired, so many events -> dark, silent white parts -> white. Screen flashing between black and
+    the pattern (``more_events_is_dark=False``): the white parts fire, so many events -> white; the
+    counts are stretched between the 2nd and 98th percentile of the pixels that fired. (For a
+    printed page lit by a lamp use ``latency_image``.) The light Gaussian blur turns graded counts
+    at edges into smooth ramps, which sub-pixel corner refinement needs.
     """
     counts = denoise(count_image(events, width, height), median_px=median_px)
     if blur_sigma_px > 0:
         counts = cv2.GaussianBlur(counts, (0, 0), blur_sigma_px)
     fired = counts[counts > 0]
-    top = float(np.percentile(fired, 95)) if fired.size else 1.0
-    level = np.clip(counts / max(top, 1e-6), 0.0, 1.0)
-    return np.round(255.0 * (1.0 - level)).astype(np.uint8)
+    if more_events_is_dark:
+        top = float(np.percentile(fired, 95)) if fired.size else 1.0
+        level = np.clip(counts / max(top, 1e-6), 0.0, 1.0)
+        return np.round(255.0 * (1.0 - level)).astype(np.uint8)
+    lo, hi = (np.percentile(fired, [2, 98]) if fired.size else (0.0, 1.0))
+    level = np.clip((counts - lo) / max(float(hi - lo), 1e-6), 0.0, 1.0)
+    return np.round(255.0 * level).astype(np.uint8)
+
+
+def latency_image(
+    events: np.ndarray, width: int, height: int, t_switch_us: float, *, polarity: int = 1, median_px: int = 3, blur_sigma_px: float = 1.2
+) -> np.ndarray:
+    """uint8 image of how soon each pixel fired after a lamp was switched on: early = white.
+
+    A pixel's photoreceptor gets faster with its light, so white paper fires within microseconds
+    and black ink hundreds of microseconds later. Unlike event counts (which the refractory period
+    and the log response make non-monotonic in brightness) the first-event latency falls
+    monotonically with brightness, so static printed markers come out dark on white. Pixels that
+    never fired are black. Latencies are ranked (histogram-equalised): they span decades.
+    """
+    if events.dtype != EVENT_CD_DTYPE:
+        raise ValueError(f"events must have EVENT_CD_DTYPE, got {events.dtype}")
+    keep = (events["p"] == polarity) & (events["t"] >= t_switch_us) & (events["x"] < width) & (events["y"] < height)
+    ev = events[keep]
+    first = np.full(width * height, np.inf)
+    np.minimum.at(first, ev["y"].astype(np.intp) * width + ev["x"], (ev["t"] - t_switch_us).astype(np.float64))
+    fired = np.isfinite(first)
+    if not fired.any():
+        return np.zeros((height, width), dtype=np.uint8)
+    # rank (histogram-equalise) the latencies: their spread spans decades, from paper to ink
+    latency = first[fired]
+    rank = np.empty(latency.size)
+    rank[np.argsort(latency, kind="stable")] = np.arange(latency.size) / latency.size
+    flat = np.zeros(width * height)
+    flat[fired] = np.clip(1.0 - rank / 0.95, 0.0, 1.0)
+    level = flat.astype(np.float32).reshape(height, width)
+    if median_px > 1:
+        level = cv2.medianBlur(level, median_px)
+    if blur_sigma_px > 0:
+        level = cv2.GaussianBlur(level, (0, 0), blur_sigma_px)
+    return np.round(255.0 * level).astype(np.uint8)
 
 
 def activity(t_us: np.ndarray, bin_us: int, t0_us: int | None = None, t1_us: int | None = None) -> tuple[int, np.ndarray]:

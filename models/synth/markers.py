@@ -82,18 +82,7 @@ class ScreenTarget:
 
     def render_pair(self, rays: np.ndarray, shape: tuple[int, int], T_cam_board: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(board shown, blank screen) irradiance images; any exposure is a blend of the two."""
-        H = np.column_stack([T_cam_board[:3, 0], T_cam_board[:3, 1], T_cam_board[:3, 3]])
-        inv = np.linalg.inv(H).astype(np.float32)
-        rx = rays[:, 0].astype(np.float32).reshape(shape)
-        ry = rays[:, 1].astype(np.float32).reshape(shape)
-        w = inv[2, 0] * rx + inv[2, 1] * ry + inv[2, 2]
-        behind = w <= 0
-        w = np.where(behind, np.float32(1.0), w)
-        scale, offset = np.float32(self.px_per_m), np.float32(self.margin_m * self.px_per_m - 0.5)
-        u = (inv[0, 0] * rx + inv[0, 1] * ry + inv[0, 2]) / w * scale + offset
-        v = (inv[1, 0] * rx + inv[1, 1] * ry + inv[1, 2]) / w * scale + offset
-        board = cv2.remap(self.texture, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
-        outside = (board < 0) | behind
+        board, outside = sample_plane(self.texture, self.px_per_m, self.margin_m, rays, shape, T_cam_board)
         lux = np.float32(self.white_lux)
         shown = np.where(outside, np.float32(self.surround), board) * lux
         blank = np.where(outside, np.float32(self.surround), np.float32(1.0)) * lux
@@ -102,6 +91,28 @@ class ScreenTarget:
     @staticmethod
     def blend(shown_image: np.ndarray, blank_image: np.ndarray, shown: float) -> np.ndarray:
         return (np.float32(shown) * shown_image + np.float32(1.0 - shown) * blank_image).astype(np.float32)
+
+
+def sample_plane(
+    texture: np.ndarray, px_per_m: float, margin_m: float, rays: np.ndarray, shape: tuple[int, int], T_cam_plane: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(texture value, outside mask) seen along each ray; texel (0, 0) covers plane point -margin.
+
+    A pixel's ray meets the plane z = 0 of ``T_cam_plane`` at a point that is a homography of the
+    ray, so this is exact under any lens model (the rays carry the distortion).
+    """
+    H = np.column_stack([T_cam_plane[:3, 0], T_cam_plane[:3, 1], T_cam_plane[:3, 3]])
+    inv = np.linalg.inv(H).astype(np.float32)
+    rx = rays[:, 0].astype(np.float32).reshape(shape)
+    ry = rays[:, 1].astype(np.float32).reshape(shape)
+    w = inv[2, 0] * rx + inv[2, 1] * ry + inv[2, 2]
+    behind = w <= 0
+    w = np.where(behind, np.float32(1.0), w)
+    scale, offset = np.float32(px_per_m), np.float32(margin_m * px_per_m - 0.5)
+    u = (inv[0, 0] * rx + inv[0, 1] * ry + inv[0, 2]) / w * scale + offset
+    v = (inv[1, 0] * rx + inv[1, 1] * ry + inv[1, 2]) / w * scale + offset
+    value = cv2.remap(texture, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+    return value, (value < 0) | behind
 
 
 def look_at_board(target: ScreenTarget, distance_m: float, tilt_deg: tuple[float, float, float], offset_m: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
@@ -448,3 +459,168 @@ def simulate_gaze_flow(seed: int = 0, seconds: float = 6.0, *, gaze_hz: float = 
     gaze_px = page_point + head + rng.normal(0, 0.5, page_point.shape)
     offset = event_t0 - device_t0
     return GazeFlowScene(ev, (device_t0 + rows).astype(np.int64), gaze_px, offset)
+
+
+def evaluate_session(*, device_seed: int = 0, n_poses: int = 8, flashes_per_pose: int = 2, seed: int = 1) -> list[dict]:
+    """Calibrate a synthetic session (posed capture, still capture, reading-like gaze scene) with the
+    library functions and return rows of recovered-vs-true values for docs/calibration.md."""
+    from darkread.edge.calibrate.capture import paired_views
+    from darkread.edge.calibrate.clock import (
+        RgbFrames,
+        fit_offset,
+        refine_offset,
+        switches_from_bursts,
+        switches_from_triggers,
+    )
+    from darkread.edge.calibrate.event_image import find_bursts
+    from darkread.edge.calibrate.extrinsics import extrinsics_from_views
+    from darkread.edge.calibrate.intrinsics import calibrate_intrinsics, detect_views
+
+    def frames(c: FlashCapture, side: int | None) -> RgbFrames:
+        images = c.rgb_frames if side is None else [cv2.resize(im, (side, side), interpolation=cv2.INTER_AREA) for im in c.rgb_frames]
+        return RgbFrames(c.rgb_times_us, np.full(len(images), c.rgb_exposure_us), images)
+
+    still = simulate_flash_capture(FlashCaptureSpec(seed=seed + 1, device_seed=device_seed, start_s=0.0, n_poses=1, pose_s=2.0,
+                                                    flashes_per_pose=6, distance_m=(1.0, 1.1)))
+    posed = simulate_flash_capture(FlashCaptureSpec(seed=seed, device_seed=device_seed, start_s=3.0, n_poses=n_poses,
+                                                    pose_s=0.5 * flashes_per_pose, flashes_per_pose=flashes_per_pose))
+    truth = posed.truth
+    rows: list[dict] = []
+    views = detect_views(posed.events, posed.board, *SENSOR_WH)
+    intr = calibrate_intrinsics([v.detection for v in views if v.detection is not None], *SENSOR_WH)
+    for name in ("fx", "fy", "cx", "cy"):
+        rows.append({"quantity": f"{name} (px)", "true": getattr(truth, name), "recovered": getattr(intr, name),
+                     "sigma": intr.std[name]})
+    for i, name in enumerate(("k1", "k2")):
+        rows.append({"quantity": name, "true": truth.distortion[i], "recovered": intr.distortion[i], "sigma": intr.std[name]})
+    rows.append({"quantity": "reprojection RMS (px)", "true": 0.0, "recovered": intr.rms_px, "sigma": None})
+    estimate = replace(truth, fx=intr.fx, fy=intr.fy, cx=intr.cx, cy=intr.cy, distortion=intr.distortion)
+    xs, ys = np.meshgrid(np.linspace(-0.36, 0.36, 25), np.linspace(-0.2, 0.2, 15))
+    pts = np.c_[xs.ravel(), ys.ravel(), np.ones(xs.size)]
+    field_err = np.linalg.norm(estimate.project(pts) - truth.project(pts), axis=1)
+    rows.append({"quantity": "projection vs truth, central field, mean / max (px)", "true": 0.0,
+                 "recovered": f"{field_err.mean():.2f} / {field_err.max():.2f}", "sigma": None})
+
+    sw, shown = switches_from_bursts(find_bursts(still.events))
+    clock = fit_offset(sw, shown, frames(still, 128))
+    true_offset = truth.gaze_to_event_time_offset_us
+    rows.append({"quantity": "clock offset error, burst onsets vs RGB (us)", "true": 0.0,
+                 "recovered": clock.offset_us - true_offset, "sigma": clock.uncertainty_us})
+    sw, shown = switches_from_triggers(still.triggers())
+    clock_t = fit_offset(sw, shown, frames(still, 128), source="trigger")
+    rows.append({"quantity": "clock offset error, trigger input vs RGB (us)", "true": 0.0,
+                 "recovered": clock_t.offset_us - true_offset, "sigma": clock_t.uncertainty_us})
+
+    pairs = paired_views(posed.events, find_bursts(posed.events), frames(posed, None), clock.offset_us, posed.board, *SENSOR_WH)
+    event_camera = PinholeCamera(SENSOR_WH[0], SENSOR_WH[1], intr.fx, intr.fy, intr.cx, intr.cy, intr.distortion)
+    ext = extrinsics_from_views(pairs, event_camera, posed.rgb_camera, posed.T_rgb_cpf)
+    rows.append({"quantity": f"T_event_cpf rotation error (deg), {ext.n_views} views", "true": 0.0,
+                 "recovered": rotation_angle_deg(ext.T_event_cpf[:3, :3], truth.T_event_cpf[:3, :3]), "sigma": None})
+    rows.append({"quantity": "T_event_cpf translation error (mm)", "true": 0.0,
+                 "recovered": 1000 * float(np.linalg.norm(ext.T_event_cpf[:3, 3] - truth.T_event_cpf[:3, 3])), "sigma": None})
+    errors = []
+    for s in range(5):
+        scene = simulate_gaze_flow(s)
+        ref = refine_offset(scene.events["t"], scene.gaze_t_device_us, scene.gaze_pixels, scene.offset_us + 15_000)
+        errors.append(ref.offset_us - scene.offset_us)
+    rows.append({"quantity": "clock refinement error from a 15 ms error, 5 gaze-flow scenes (us)", "true": 0.0,
+                 "recovered": " / ".join(f"{e:+.0f}" for e in errors), "sigma": None})
+    return rows
+
+
+if __name__ == "__main__":
+    for row in evaluate_session():
+        sigma = "" if row["sigma"] is None else f"{row['sigma']:.4g}"
+        rec = row["recovered"] if isinstance(row["recovered"], str) else f"{row['recovered']:.5g}"
+        print(f"| {row['quantity']} | {row['true']:.5g} | {rec} | {sigma} |")
+
+
+# -- a printed page with static markers around the text, lit by a lamp switched on --------------
+
+
+@dataclass
+class PageCapture:
+    """Static ArUco markers printed around text, seen by the event camera when a lamp is switched on
+    and by one RGB frame of the lit page; for the flat-page homography fallback."""
+
+    events: np.ndarray
+    markers: BoardSpec  # a 2 x 2 grid: one marker in each corner around the text
+    rgb_frame: np.ndarray
+    rgb_camera: PinholeCamera
+    truth: Calibration
+    T_rgb_cpf: np.ndarray
+    T_cpf_page: np.ndarray
+    px_per_m: float
+    margin_m: float
+
+
+def page_texture(markers: BoardSpec, lines: list[str], px_per_m: float, margin_m: float) -> np.ndarray:
+    """Paper reflectance: the four corner markers and the text between them (DejaVu Sans)."""
+    from darkread.models.synth.fonts import face_by_name
+    from darkread.models.synth.page import render_page
+
+    board = markers.image(px_per_m).astype(np.float32) / 255.0
+    m = round(margin_m * px_per_m)
+    ink = 1.0 - np.pad(board, m, constant_values=1.0)
+    gap = round((markers.square_m - markers.marker_m) * px_per_m)
+    page = render_page(lines, face_by_name("DejaVu Sans"), xheight_tex=gap / (len(lines) * 3.0), texel_m=1 / px_per_m,
+                       margin_xheights=2.0)
+    text = page.coverage[: gap - 4, : gap - 4]
+    top = m + round(markers.marker_m * px_per_m) + 2
+    ink[top : top + text.shape[0], top : top + text.shape[1]] = np.maximum(ink[top : top + text.shape[0], top : top + text.shape[1]], text)
+    return (0.85 * (1.0 - 0.88 * np.clip(ink, 0, 1))).astype(np.float32)
+
+
+def simulate_page_capture(seed: int = 0, device_seed: int = 0, *, lux: float = 30.0, distance_m: float = 0.7) -> PageCapture:
+    """The lamp goes from 0.3 lux to ``lux``: paper gains more log-intensity than ink (the sensor's dark
+    current), so paper fires more events than the printed markers and text."""
+    device = np.random.default_rng([device_seed, 11])
+    truth = random_calibration(device)
+    device.integers(0, 1 << 24)  # keep the device stream aligned with simulate_flash_capture
+    device.integers(5_000_000_000, 20_000_000_000)
+    T_rgb_cpf = _rgb_pose(device)
+    rng = np.random.default_rng([seed, 17])
+    markers = BoardSpec("grid", 2, 2, square_m=0.17, marker_m=0.045)
+    px_per_m, margin_m = 2500.0, 0.01
+    texture = cv2.GaussianBlur(page_texture(markers, ["calibrate the", "glasses on a", "printed page"], px_per_m, margin_m), (0, 0), 0.6)
+    size = markers.size_m[0] + 2 * margin_m
+    T_event_page = look_at_board(ScreenTarget(markers, margin_m=margin_m), distance_m, tuple(rng.normal(0, 8, 3)))
+    params = SensorParams(lux=lux, c_on=0.25, c_off=0.25)
+    corners = np.array([[-margin_m, -margin_m, 0], [size - margin_m, -margin_m, 0], [size - margin_m, size - margin_m, 0], [-margin_m, size - margin_m, 0]])
+    uv = truth.project(corners @ T_event_page[:3, :3].T + T_event_page[:3, 3])
+    x0, y0 = np.maximum(np.floor(uv.min(axis=0)) - 8, 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(uv.max(axis=0)) + 9, SENSOR_WH).astype(int)
+    rays = region_rays(truth, int(x0), int(y0), int(x1 - x0), int(y1 - y0))
+    shape = (int(y1 - y0), int(x1 - x0))
+    value, outside = sample_plane(texture, px_per_m, margin_m, rays, shape, T_event_page)
+    reflect = np.where(outside, np.float32(0.15), value)
+    sensor = EventSensor(params, shape, (int(x0), int(y0)), rng)
+    off, on = reflect * np.float32(0.3), reflect * np.float32(lux)
+    sensor.reset(off, 0.0, steady=True)
+    parts = [sensor.step(off, 1000.0)]
+    for _ in range(30):  # 15 ms after the switch: dim pixels settle slowly
+        parts.append(sensor.step(on, 500.0))
+    parts.append(background_events(params, 0, 40_000, SENSOR_WH, (int(x0), int(y0), shape[1], shape[0]), rng))
+    events = unique_events(concat_events(parts))
+    events = events[(events["t"] >= 0) & (events["t"] < 40_000)]
+    events["t"] += 1_000_000
+    rgb_camera = PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5)
+    T_cpf_page = np.linalg.inv(truth.T_event_cpf) @ T_event_page
+    rgb_value, rgb_outside = sample_plane(texture, px_per_m, margin_m, camera_rays(rgb_camera), (512, 512), T_rgb_cpf @ T_cpf_page)
+    rgb = to_picture(np.where(rgb_outside, np.float32(0.15), rgb_value) * np.float32(lux), lux * 0.9, rng)
+    return PageCapture(events, markers, rgb, rgb_camera, truth, T_rgb_cpf, T_cpf_page, px_per_m, margin_m)
+
+
+def write_page_capture(out: str | Path, page: PageCapture) -> Path:
+    """A capture folder for ``darkread calibrate extrinsics --homography-only``: the lamp burst in
+    ``events.raw``, the page markers in ``board.json``, one RGB frame 0.2 s after the lamp (device
+    clock = event clock here, offset 0)."""
+    out = Path(out)
+    (out / "rgb_frames").mkdir(parents=True, exist_ok=True)
+    write_raw(out / "events.raw", page.events, width=SENSOR_WH[0], height=SENSOR_WH[1])
+    save_board(out / "board.json", page.markers)
+    cv2.imwrite(str(out / "rgb_frames" / "1200000.png"), page.rgb_frame)
+    (out / RGB_FRAMES_NAME).write_text("timestamp_us,exposure_us,file\n1200000,16000,rgb_frames/1200000.png\n", encoding="utf-8")
+    nominal = replace(page.truth, gaze_to_event_time_offset_us=0, rgb_camera=rgb_camera_block(page.rgb_camera, page.T_rgb_cpf))
+    save_calibration(out / "calibration.json", nominal)
+    return out

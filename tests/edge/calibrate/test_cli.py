@@ -63,3 +63,15 @@ def test_full_session_through_the_commands(posed_capture, still_capture_dir, tmp
     assert rotation_deg(final.T_event_cpf[:3, :3], truth.T_event_cpf[:3, :3]) < 0.5
     assert abs(final.gaze_to_event_time_offset_us - truth.gaze_to_event_time_offset_us) < 2000
     assert final.rgb_camera is not None  # carried through every step
+
+
+def test_homography_only_on_a_printed_page(tmp_path, capsys):
+    from darkread.models.synth.markers import simulate_page_capture, write_page_capture
+
+    capture = write_page_capture(tmp_path / "page", simulate_page_capture(seed=2))
+    before = (capture / "calibration.json").read_bytes()
+    assert main(["calibrate", "extrinsics", str(capture), "--homography-only", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["n_points"] == 16 and report["rms_px"] < 2.0
+    assert "page plane" in report["note"]
+    assert (capture / "calibration.json").read_bytes() == before  # no pose from a homography

@@ -69,3 +69,25 @@ def test_homography_fallback_maps_page_points_only():
     assert result.rms_px < 0.5
     assert "page plane" in result.note
     assert np.abs(result.map(rg.image_points) - ev.image_points).max() < 1.0
+
+
+def test_homography_fallback_on_a_printed_page_lit_by_a_lamp():
+    """Static markers around text (ESIM): first-event latency image vs one RGB frame."""
+    from darkread.edge.calibrate.event_image import find_bursts, latency_image
+    from darkread.edge.calibrate.markers import detect_board
+    from darkread.models.synth.markers import simulate_page_capture
+
+    page = simulate_page_capture(seed=1)
+    bursts = find_bursts(page.events)
+    assert len(bursts) == 1 and bursts[0].polarity == 1  # the lamp: everything brightens
+    event_det = detect_board(latency_image(page.events, 1280, 720, bursts[0].onset_us - 200), page.markers, min_corners=4)
+    rgb_det = detect_board(page.rgb_frame, page.markers, min_corners=4)
+    assert event_det is not None and len(event_det) == 16 and rgb_det is not None
+    result = page_homography(event_det, rgb_det)
+    xs, ys = np.meshgrid(np.linspace(0.0, 0.215, 8), np.linspace(0.0, 0.215, 8))
+    pts = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
+    T_event = page.truth.T_event_cpf @ page.T_cpf_page
+    T_rgb = page.T_rgb_cpf @ page.T_cpf_page
+    truth_event = page.truth.project(pts @ T_event[:3, :3].T + T_event[:3, 3])
+    mapped = result.map(page.rgb_camera.project(pts @ T_rgb[:3, :3].T + T_rgb[:3, 3]))
+    assert np.linalg.norm(mapped - truth_event, axis=1).max() < 2.0
