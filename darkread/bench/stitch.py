@@ -96,7 +96,7 @@ def run(ctx: BenchContext) -> list[Figure]:
             cer["naive"].append(jiwer.cer(truth, read(naive.to_png_bytes())))
     mean = {k: sum(v) / len(v) for k, v in f1.items()}
     ours_ms, naive_ms = 1000 * ours_s / frames_total, 1000 * naive_s / frames_total
-    where = f"{len(seeds)} readings, {frames_total} frames of 100x200"
+    where = f"{len(seeds)} reading{'s' if len(seeds) > 1 else ''}, {frames_total} frames of 100x200"
     figures = [
         Figure(
             "stitch_ms_per_frame",

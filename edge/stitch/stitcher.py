@@ -35,8 +35,14 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class _FinishedLine:
-    strip: LineStrip
+    """What the page keeps of a line once its strip is composed in (the strip itself is freed)."""
+
+    box: tuple[int, int, int, int]  # the strip's extent in page coordinates
     gaze_row: float  # median gaze row in page coordinates
+
+    @classmethod
+    def of(cls, strip: LineStrip) -> _FinishedLine:
+        return cls(strip.canvas.box, float(np.median(strip.gaze_rows)))
 
 
 def predict_correction(recent: Sequence[tuple[int, np.ndarray]], t_us: int) -> np.ndarray:
@@ -104,7 +110,7 @@ class PageStitcher:
             if warp is not None:
                 log.debug("line %d de-warped with %d tracked points", len(self._lines), warp.points)
         self._page.add_strip(strip)
-        self._lines.append(_FinishedLine(strip, float(np.median(strip.gaze_rows))))
+        self._lines.append(_FinishedLine.of(strip))
 
     def _integrate(self, frame: StitchFrame, new_line: bool) -> None:
         cfg = self.cfg
@@ -152,10 +158,10 @@ class PageStitcher:
         cfg = self.cfg
         lines = list(self._lines)
         if self._strip is not None and not self._strip.empty:
-            lines.append(_FinishedLine(self._strip, float(np.median(self._strip.gaze_rows))))
+            lines.append(_FinishedLine.of(self._strip))
         if not lines:
             return Page(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
-        box = union_box([ln.strip.canvas.box for ln in lines])
+        box = union_box([ln.box for ln in lines])
         current = self._strip if self._strip is not None and not self._strip.empty else None
         avg, seen = self._page.reference(current, box)
         cover = covered_box(seen)
