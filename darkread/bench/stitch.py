@@ -156,10 +156,15 @@ def write_example(path: Path, seed: int = 0) -> Path:
     truth = np.pad(page.mask, ((h, h), (w, w)))[dy + h : dy + 2 * h, dx + w : dx + 2 * w]
     panels = [
         ("truth: rendered page", truth),
-        (f"naive: frames pasted at their sensor position (ink F1 {exact_naive:.2f}; {f1_naive:.2f} within 1 px)", naive.image),
         (
-            f"stitched: {len(stitched.lines)} line boxes, {stitched.frames_used} frames "
-            f"(ink F1 {exact_ours:.2f}; {f1_ours:.2f} within 1 px)",
+            f"naive: frames pasted at their sensor position (ink F1 {exact_naive:.2f}; {f1_naive:.2f} within 1 px)",
+            naive.image,
+        ),
+        (
+            (
+                f"stitched: {len(stitched.lines)} line boxes, {stitched.frames_used} frames "
+                f"(ink F1 {exact_ours:.2f}; {f1_ours:.2f} within 1 px)"
+            ),
             stitched.image,
         ),
     ]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-_GROW_STEP = 128  # grow by whole blocks so a line of frames does not reallocate every time
+_GROW_STEP = 256  # grow by whole blocks so a line of frames does not reallocate every time
 
 
 class Canvas:

@@ -8,7 +8,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-
 from darkread.edge.stitch.canvas import Canvas
 from darkread.edge.stitch.frames import StitchConfig
 
@@ -68,10 +67,14 @@ def estimate_line_warp(
     corners = cv2.goodFeaturesToTrack(ref8, maxCorners=300, qualityLevel=0.02, minDistance=4, mask=overlap * 255)
     if corners is None or len(corners) < cfg.dewarp_min_points:
         return None
-    lk = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+    lk = {"winSize": (15, 15), "maxLevel": 2, "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)}
     fwd, st1, _ = cv2.calcOpticalFlowPyrLK(ref8, strip8, corners, None, **lk)
     back, st2, _ = cv2.calcOpticalFlowPyrLK(strip8, ref8, fwd, None, **lk)
-    good = (st1.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm((back - corners).reshape(-1, 2), axis=1) < _FB_MAX_ERROR_PX)
+    good = (
+        (st1.ravel() == 1)
+        & (st2.ravel() == 1)
+        & (np.linalg.norm((back - corners).reshape(-1, 2), axis=1) < _FB_MAX_ERROR_PX)
+    )
     if good.sum() < cfg.dewarp_min_points:
         return None
     p0 = corners.reshape(-1, 2)[good]
@@ -122,7 +125,9 @@ def _agreement(reference: np.ndarray, strip: np.ndarray, where: np.ndarray) -> f
     return float(np.corrcoef(a, b)[0, 1])
 
 
-def dewarp_strip(canvas: Canvas, reference: np.ndarray, reference_valid: np.ndarray, cfg: StitchConfig) -> LineWarp | None:
+def dewarp_strip(
+    canvas: Canvas, reference: np.ndarray, reference_valid: np.ndarray, cfg: StitchConfig
+) -> LineWarp | None:
     """Estimate a finished strip's warp against the page (same box as the canvas) and undo it, but
     only if that makes the strip agree better with the page where both have content (a warp fitted
     to the neighbouring line's features must not tilt the line itself)."""

@@ -6,7 +6,6 @@ from collections.abc import Sequence
 
 import cv2
 import numpy as np
-
 from darkread.edge.stitch.canvas import Canvas
 from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
 from darkread.edge.stitch.strip import LineStrip
@@ -59,7 +58,7 @@ def binarize(avg: np.ndarray, cfg: StitchConfig, views: np.ndarray | None = None
     if views is not None and cfg.min_views > 1:
         ink[views < cfg.min_views] = 0
     if cfg.min_component_px > 1 and ink.any():
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(ink, connectivity=8)
+        _, labels, stats, _ = cv2.connectedComponentsWithStats(ink, connectivity=8)
         small = stats[:, cv2.CC_STAT_AREA] < cfg.min_component_px
         small[0] = False
         if small.any():
@@ -101,7 +100,13 @@ def text_bands(ink: np.ndarray) -> list[tuple[int, int, float]]:
             if c1 - c0 < min_rows:
                 continue
             top, bottom = c0, c1 - 1
-            while top > 0 and not taken[top - 1] and profile[top - 1] > 0 and smooth[top - 1] <= smooth[top] and not core[top - 1]:
+            while (
+                top > 0
+                and not taken[top - 1]
+                and profile[top - 1] > 0
+                and smooth[top - 1] <= smooth[top]
+                and not core[top - 1]
+            ):
                 top -= 1
             while (
                 bottom < h - 1

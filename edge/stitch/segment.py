@@ -13,9 +13,7 @@ from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
-
 from darkread.edge.stitch.frames import StitchConfig, StitchFrame
-
 
 LAUNCH_PCT = 75
 CONFIRM_FRAC = 1.0

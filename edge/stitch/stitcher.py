@@ -14,7 +14,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
 from darkread.edge.stitch.dewarp import dewarp_strip
 from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
 from darkread.edge.stitch.page import (
@@ -80,7 +79,7 @@ class PageStitcher:
         self._registered = 0
         self._used = 0
         self._dropped = 0
-        self._positions: dict[int, tuple[int, int]] = {}
+        self._positions: dict[int, tuple[float, float]] = {}
 
     def add(self, frame: StitchFrame) -> None:
         for decided, new_line in self._segmenter.push(frame):
@@ -174,7 +173,6 @@ class PageStitcher:
         boxes, images = self._line_boxes(lines, image, (ox, oy))
         positions = {fid: (x - ox, y - oy) for fid, (x, y) in self._positions.items()}
         return Page(image, boxes, images, self._used, self._dropped, positions)
-
 
     def _line_boxes(
         self, lines: list[_FinishedLine], image: np.ndarray, origin: tuple[int, int]

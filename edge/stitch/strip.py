@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-
 from darkread.edge.stitch.canvas import Canvas
 from darkread.edge.stitch.frames import StitchConfig
 from darkread.edge.stitch.register import frame_transform

@@ -14,9 +14,8 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from PIL import Image, ImageDraw, ImageFont
-
 from darkread.edge.stitch import StitchFrame
+from PIL import Image, ImageDraw, ImageFont
 
 PARAGRAPH = (
     "Reading in the dark is hard for cameras and easy for events. A foveated window follows the "
@@ -79,7 +78,7 @@ def render_page(
     font_path = font_manager.findfont("DejaVu Sans")
     font = ImageFont.truetype(font_path, font_px * supersample)
     lines = textwrap.wrap(text, width_chars)
-    pitch = int(round(font_px * 1.5))
+    pitch = round(font_px * 1.5)
     x_height = 0.547 * font_px  # DejaVu Sans x-height / em
     ascent, _ = font.getmetrics()
     widths = [font.getlength(line) / supersample for line in lines]
@@ -199,7 +198,7 @@ def simulate_reading(page: RenderedPage | None = None, params: ScanParams = Scan
                 )
             )
             lines.append(li)
-            heads.append((int(round(head[0])), int(round(head[1]))))
+            heads.append((round(head[0]), round(head[1])))
         t += params.saccade_dt_us
     return Reading(page, frames, lines, heads, params)
 
@@ -247,7 +246,9 @@ def ink_f1_aligned(
     pose = (result, where)
     for angle in np.arange(-max_roll_deg, max_roll_deg + 1e-9, 0.1):
         rot = cv2.getRotationMatrix2D((rw / 2, rh / 2), float(angle), 1.0)
-        turned = (cv2.warpAffine(result.astype(np.float32), rot, (rw, rh), flags=cv2.INTER_LINEAR) >= 0.5).astype(np.uint8)
+        turned = (cv2.warpAffine(result.astype(np.float32), rot, (rw, rh), flags=cv2.INTER_LINEAR) >= 0.5).astype(
+            np.uint8
+        )
         f1, at = _f1_at(padded, turned, truth_ink, where, 12)
         if f1 > best:
             best, pose = f1, (turned, at)

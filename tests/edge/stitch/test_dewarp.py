@@ -3,7 +3,6 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-
 from darkread.edge.stitch import StitchConfig
 from darkread.edge.stitch.canvas import Canvas
 from darkread.edge.stitch.dewarp import apply_line_warp, dewarp_strip, estimate_line_warp
@@ -38,7 +37,6 @@ def test_applying_the_warp_brings_the_strip_back(rendered_page) -> None:
     canvas.ensure(0, 0, 500, 140)
     canvas.view("avg", 0, 0, 500, 140)[...] = _warped(reference, (1.0, 2.0), 0.004)
     canvas.view("count", 0, 0, 500, 140)[...] = 1
-    h, w = canvas.shape
     ref_full = canvas.crop("avg", *canvas.box) * 0
     ref_full[-canvas.y0 : -canvas.y0 + 140, -canvas.x0 : -canvas.x0 + 500] = reference
     valid = canvas.layers["count"] > 0

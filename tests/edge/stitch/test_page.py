@@ -2,7 +2,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-
 from darkread.edge.stitch import Page, StitchConfig
 from darkread.edge.stitch.page import assign_lines, binarize, main_column_span, text_bands
 
@@ -10,7 +9,9 @@ from darkread.edge.stitch.page import assign_lines, binarize, main_column_span, 
 def test_text_bands_find_every_line_including_a_short_last_one(rendered_page) -> None:
     bands = text_bands(rendered_page.mask)
     assert len(bands) == len(rendered_page.text_lines)
-    for (top, bottom, centre), (x0, y0, x1, y1), (_, _, yc) in zip(bands, rendered_page.line_boxes, rendered_page.line_centres):
+    for (top, bottom, centre), (x0, y0, x1, y1), (_, _, yc) in zip(
+        bands, rendered_page.line_boxes, rendered_page.line_centres
+    ):
         assert abs(centre - yc) < 3
         assert top <= y0 + 1 and bottom >= y1 - 1
 
@@ -52,4 +53,7 @@ def test_png_is_black_ink_on_white() -> None:
     decoded = cv2.imdecode(np.frombuffer(page.to_png_bytes(), np.uint8), cv2.IMREAD_UNCHANGED)
     assert decoded.shape == (30, 40)
     assert (decoded[image == 1] == 0).all() and (decoded[image == 0] == 255).all()
-    assert cv2.imdecode(np.frombuffer(Page(np.zeros((0, 0), np.uint8), [], []).to_png_bytes(), np.uint8), 0).shape == (1, 1)
+    assert cv2.imdecode(np.frombuffer(Page(np.zeros((0, 0), np.uint8), [], []).to_png_bytes(), np.uint8), 0).shape == (
+        1,
+        1,
+    )

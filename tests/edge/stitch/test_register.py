@@ -2,7 +2,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from darkread.edge.stitch import register_frame
 
 
@@ -52,7 +51,6 @@ def test_reference_of_the_wrong_size_is_refused(rendered_page) -> None:
 @pytest.mark.parametrize("roll", [-1.2, 0.7])
 def test_recovers_a_small_rotation_of_the_frame(rendered_page, roll: float) -> None:
     import cv2
-
     from darkread.edge.stitch.register import frame_transform
 
     r = 8
@@ -62,7 +60,9 @@ def test_recovers_a_small_rotation_of_the_frame(rendered_page, roll: float) -> N
     # the camera saw the page turned by -roll: turning the frame by +roll undoes it
     seen = cv2.warpAffine(window, frame_transform((100, 200), -roll), (200, 100), flags=cv2.INTER_LINEAR)
     frame = (seen >= 0.5).astype(np.uint8)
-    reg = register_frame(reference, np.ones_like(reference, bool), frame, r, angles_deg=(roll - 0.6, roll - 0.1, roll + 0.4))
+    reg = register_frame(
+        reference, np.ones_like(reference, bool), frame, r, angles_deg=(roll - 0.6, roll - 0.1, roll + 0.4)
+    )
     assert reg is not None
     assert abs(reg.angle_deg - roll) < 0.25
     assert reg.shift_xy == (0, 0)

@@ -2,16 +2,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from stitch_scan import ScanParams, simulate_reading
-
 from darkread.edge.stitch import LineSegmenter, StitchConfig, StitchFrame, segment_lines
+from stitch_scan import ScanParams, simulate_reading
 
 
 def _frames(gaze: list[tuple[float, float]]) -> list[StitchFrame]:
     blank = np.zeros((100, 200), np.uint8)
-    return [
-        StitchFrame(i, i * 40_000, blank, (int(u) - 100, int(v) - 50), (u, v)) for i, (u, v) in enumerate(gaze)
-    ]
+    return [StitchFrame(i, i * 40_000, blank, (int(u) - 100, int(v) - 50), (u, v)) for i, (u, v) in enumerate(gaze)]
 
 
 def _line(x0: float, x1: float, y: float, rng: np.random.Generator, per_fix: int = 3) -> list[tuple[float, float]]:
@@ -24,7 +21,9 @@ def test_lines_of_a_simulated_reading_match_the_text_lines(rendered_page, seed: 
     reading = simulate_reading(rendered_page, seed=seed)
     line_of = {f.frame_id: li for f, li in zip(reading.frames, reading.line_of_frame)}
     lines = segment_lines(reading.frames)
-    assert [sorted({line_of[f.frame_id] for f in line}) for line in lines] == [[i] for i in range(len(rendered_page.text_lines))]
+    assert [sorted({line_of[f.frame_id] for f in line}) for line in lines] == [
+        [i] for i in range(len(rendered_page.text_lines))
+    ]
 
 
 def test_heavy_gaze_noise_still_gives_one_segment_per_line(rendered_page) -> None:

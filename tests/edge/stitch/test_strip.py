@@ -1,7 +1,6 @@
 from __future__ import annotations
 
 import numpy as np
-
 from darkread.edge.stitch import StitchConfig
 from darkread.edge.stitch.canvas import Canvas
 from darkread.edge.stitch.strip import STRIP_LAYERS, accumulate, row_taper
