@@ -52,9 +52,25 @@ def test_finetuning_lowers_the_loss_and_keeps_batchnorm_statistics(page: np.ndar
     targets = np.stack([page[100:150, 150:250], page[120:170, 400:500]])  # small crops: the net is fully convolutional
     voxels = np.repeat(targets[:, None].astype(np.float32) * 2 - 0.2, 4, axis=1)
     stats = model.stem[1].running_mean.clone()
-    losses = finetune_arrays(model, voxels, targets, lr=1e-2, steps=8, batch_size=2, threads=1)
+    losses = finetune_arrays(model, voxels, targets, lr=1e-2, steps=5, batch_size=2, threads=1)
     assert losses[-1] < losses[0]
     assert torch.equal(model.stem[1].running_mean, stats)
     assert not model.training
     with pytest.raises(ValueError, match="no windows"):
         finetune_arrays(model, voxels[:0], targets[:0], lr=1e-5, steps=1)
+
+
+@pytest.mark.slow
+def test_windows_of_a_recording_match_its_printed_page(shared_sample_recording) -> None:
+    from darkread.edge.reconstruct import Reconstructor, default_model_path
+    from darkread.models.train.finetune import _font_for, recording_windows
+
+    if not default_model_path().is_file():
+        pytest.skip("no shipped model")
+    voxels, meta, text = recording_windows(shared_sample_recording, max_windows=12)
+    assert voxels.ndim == 4 and voxels.shape[1:] == (4, 100, 200) and len(voxels) > 0
+    preds = Reconstructor(warmup=0)(voxels)
+    page = render_page_ink(text, float(meta.get("xheight_px", 10.0)), _font_for(meta))
+    kept_v, kept_t, scores = make_targets(voxels, preds, page)
+    assert len(kept_v) >= 1 and min(scores) >= 0.35
+    assert kept_t.shape[1:] == (100, 200)
