@@ -10,6 +10,7 @@ whose neighbourhood holds more events than the median of the area the track cove
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -56,10 +57,21 @@ def on_text_fraction(density: np.ndarray, pixels: np.ndarray, *, radius_px: int 
     return float(np.mean(at_gaze > np.median(around)))
 
 
-def render_check(events: np.ndarray, calibration: Calibration, track: GazeTrack, *, title: str = "") -> CheckResult:
-    """The check picture and its on-text score."""
+def accumulate(chunks: Iterable[np.ndarray], width: int, height: int) -> np.ndarray:
+    """Events per pixel over a stream of event chunks (bounded memory)."""
+    total = np.zeros((height, width), dtype=np.float32)
+    for events in chunks:
+        total += count_image(events, width, height)
+    return total
+
+
+def render_check(
+    events: np.ndarray | Iterable[np.ndarray], calibration: Calibration, track: GazeTrack, *, title: str = ""
+) -> CheckResult:
+    """The check picture and its on-text score; ``events`` is one array or an iterable of chunks."""
     w, h = calibration.width, calibration.height
-    density = denoise(count_image(events, w, h))
+    chunks = [events] if isinstance(events, np.ndarray) else events
+    density = denoise(accumulate(chunks, w, h))
     scale = np.log1p(density)
     top = np.percentile(scale[scale > 0], 99.5) if np.any(scale > 0) else 1.0
     grey = np.clip(scale / top * 255, 0, 255).astype(np.uint8)

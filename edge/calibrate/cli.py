@@ -68,7 +68,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--rgb-frames", help="rgb_frames.csv (default: CAPTURE/rgb_frames.csv)")
     p.add_argument("--aria-calibration", help="Aria device-calibration JSON (camera-rgb, FisheyeRadTanThinPrism)")
     p.add_argument("--aria-label", default="camera-rgb", help="camera label in the device calibration")
-    p.add_argument("--T-device-cpf", dest="t_device_cpf", help="JSON file: 4x4 T_device_cpf (rows first) for --aria-calibration")
+    p.add_argument("--T-device-cpf", dest="t_device_cpf", help="JSON file for --aria-calibration: T_device_cpf as a 4x4 list (rows first) or "
+                        "{Translation, UnitQuaternion: [w, [x, y, z]]} (projectaria_tools get_transform_device_cpf)")
     p.add_argument("--homography-only", action="store_true", help="flat-page fallback: RGB->event homography, no pose")
     p.set_defaults(func=_extrinsics)
 
@@ -120,6 +121,19 @@ def _finish(args: argparse.Namespace, result: dict, calibration=None) -> int:
     return 0
 
 
+def _progress(chunks, path: Path):
+    """Event chunks with a progress bar (events) for recordings big enough to take a while."""
+    if path.stat().st_size < (64 << 20):
+        yield from chunks
+        return
+    from tqdm import tqdm
+
+    with tqdm(desc=path.name, unit="ev", unit_scale=True, leave=False) as bar:
+        for events in chunks:
+            bar.update(events.shape[0])
+            yield events
+
+
 def _intrinsics(args: argparse.Namespace) -> int:
     from darkread.edge.calibrate.capture import board_of, read_capture_events
     from darkread.edge.calibrate.intrinsics import calibrate_intrinsics, detect_views
@@ -166,17 +180,18 @@ def _clock(args: argparse.Namespace) -> int:
 
 def _clock_refine(args: argparse.Namespace) -> int:
     from darkread.edge.calibrate.check import gaze_track_pixels
-    from darkread.edge.calibrate.clock import refine_offset
-    from darkread.edge.io.raw import read_raw
+    from darkread.edge.calibrate.clock import ActivityCounter, refine_offset
     from darkread.edge.io.recording import open_recording
 
     recording = open_recording(args.capture, calibration=args.calibration)
     calib = recording.calibration
     track = recording.gaze()
     t_event, pixels = gaze_track_pixels(calib, track)
-    events = read_raw(recording.raw_path).events
+    activity = ActivityCounter()
+    for events in _progress(recording.reader(chunk_bytes=4 << 20), recording.raw_path):
+        activity.add(events["t"])
     t_device = t_event - calib.gaze_to_event_time_offset_us
-    result = refine_offset(events["t"], t_device, pixels, float(calib.gaze_to_event_time_offset_us),
+    result = refine_offset(activity, t_device, pixels, float(calib.gaze_to_event_time_offset_us),
                            search_us=args.search_ms * 1000.0)
     calib = dataclasses.replace(calib, gaze_to_event_time_offset_us=round(result.offset_us))
     return _finish(args, result.to_dict(), calib)
@@ -187,6 +202,8 @@ def _extrinsics(args: argparse.Namespace) -> int:
     from darkread.edge.calibrate.cameras import (
         PinholeCamera,
         aria_camera_from_device_calibration,
+        matrix_from_list,
+        pose_from_aria_json,
         rgb_camera_from_calibration,
     )
     from darkread.edge.calibrate.capture import (
@@ -225,7 +242,8 @@ def _extrinsics(args: argparse.Namespace) -> int:
         if not args.t_device_cpf:
             raise CalibrationError("--aria-calibration needs --T-device-cpf (the CPF pose in the device frame)")
         rgb_camera, T_device_rgb = aria_camera_from_device_calibration(args.aria_calibration, label=args.aria_label)
-        T_device_cpf = np.asarray(json.loads(Path(args.t_device_cpf).read_text()), dtype=np.float64)
+        doc = json.loads(Path(args.t_device_cpf).read_text(encoding="utf-8"))
+        T_device_cpf = pose_from_aria_json(doc, args.t_device_cpf) if isinstance(doc, dict) else matrix_from_list(doc, "--T-device-cpf")
         T_rgb_cpf = np.linalg.inv(T_device_rgb) @ T_device_cpf
     else:
         rgb_camera, T_rgb_cpf = rgb_camera_from_calibration(calibration_to_dict(calib))
@@ -236,13 +254,12 @@ def _extrinsics(args: argparse.Namespace) -> int:
 
 def _check(args: argparse.Namespace) -> int:
     from darkread.edge.calibrate.check import render_check, write_check_png
-    from darkread.edge.io.raw import read_raw
     from darkread.edge.io.recording import open_recording
 
     recording = open_recording(args.recording, calibration=args.calibration)
-    events = read_raw(recording.raw_path).events
+    chunks = _progress(recording.reader(chunk_bytes=4 << 20), recording.raw_path)
     title = Path(args.calibration).name if args.calibration else "calibration.json"
-    result = render_check(events, recording.calibration, recording.gaze(), title=title)
+    result = render_check(chunks, recording.calibration, recording.gaze(), title=title)
     write_check_png(args.png, result)
     out = {**result.to_dict(), "png": str(args.png)}
     if args.json:

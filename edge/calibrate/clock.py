@@ -289,8 +289,29 @@ def _peak(lags: np.ndarray, corr: np.ndarray) -> tuple[float, int]:
     return lag, k
 
 
+class ActivityCounter:
+    """Events per time bin, accumulated chunk by chunk (recordings larger than memory stream through)."""
+
+    def __init__(self, bin_us: float = 2_000.0) -> None:
+        self.bin_us = int(bin_us)
+        self.start_us: int | None = None
+        self.counts = np.zeros(0, dtype=np.int64)
+
+    def add(self, t_us: np.ndarray) -> None:
+        t = np.asarray(t_us, dtype=np.int64)
+        if t.size == 0:
+            return
+        if self.start_us is None:
+            self.start_us = int(t[0])
+        idx = np.maximum((t - self.start_us) // self.bin_us, 0).astype(np.intp)
+        chunk = np.bincount(idx)
+        if chunk.size > self.counts.size:
+            self.counts = np.concatenate([self.counts, np.zeros(chunk.size - self.counts.size, dtype=np.int64)])
+        self.counts[: chunk.size] += chunk
+
+
 def refine_offset(
-    event_t_us: np.ndarray,
+    event_t_us: np.ndarray | ActivityCounter,
     gaze_t_device_us: np.ndarray,
     gaze_pixels: np.ndarray,
     initial_offset_us: float,
@@ -303,6 +324,7 @@ def refine_offset(
 ) -> RefineResult:
     """Lag that best aligns event activity with gaze speed during fixations.
 
+    ``event_t_us`` are event times or an ``ActivityCounter`` filled from a stream (its bin wins).
     ``gaze_pixels`` are the gaze positions in the event image (a constant error in them does not
     matter: only their speed counts). Events are counted in ``bin_us`` bins; for each candidate
     offset the gaze speed is interpolated at every bin's device time and the correlation over
@@ -310,12 +332,17 @@ def refine_offset(
     ``n_blocks`` consecutive stretches of the recording.
     """
     mid, speed, fixation = gaze_speed(np.asarray(gaze_t_device_us), np.asarray(gaze_pixels, dtype=np.float64), saccade_px_per_s=saccade_px_per_s)
-    t_ev = np.asarray(event_t_us, dtype=np.int64)
-    if t_ev.size == 0:
+    if isinstance(event_t_us, ActivityCounter):
+        activity = event_t_us
+    else:
+        activity = ActivityCounter(bin_us)
+        activity.add(event_t_us)
+    if activity.start_us is None:
         raise CalibrationError("no events to refine the clock with")
-    start = int(t_ev[0])
-    n_bins = int((t_ev[-1] - start) // bin_us) + 1
-    counts = np.bincount(((t_ev - start) // int(bin_us)).astype(np.intp), minlength=n_bins).astype(np.float64)
+    bin_us = float(activity.bin_us)
+    start = activity.start_us
+    counts = activity.counts.astype(np.float64)
+    n_bins = counts.size
     centres = start + (np.arange(n_bins) + 0.5) * bin_us
     block = np.minimum((np.arange(n_bins) * n_blocks) // n_bins, n_blocks - 1)
     lags = np.arange(-search_us, search_us + 1e-9, step_us)

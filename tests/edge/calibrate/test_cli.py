@@ -75,3 +75,16 @@ def test_homography_only_on_a_printed_page(tmp_path, capsys):
     assert report["n_points"] == 16 and report["rms_px"] < 2.0
     assert "page plane" in report["note"]
     assert (capture / "calibration.json").read_bytes() == before  # no pose from a homography
+
+
+def test_check_picture_from_chunks_equals_from_one_array(shared_sample_recording):
+    from darkread.edge.calibrate.check import render_check
+    from darkread.edge.io.raw import read_raw
+    from darkread.edge.io.recording import open_recording
+
+    recording = open_recording(shared_sample_recording)
+    events = read_raw(recording.raw_path).events
+    whole = render_check(events, recording.calibration, recording.gaze())
+    chunked = render_check(iter(np.array_split(events, 5)), recording.calibration, recording.gaze())
+    assert np.array_equal(whole.picture, chunked.picture)
+    assert whole.on_text_fraction == chunked.on_text_fraction > 0.7

@@ -115,3 +115,15 @@ def test_refinement_recovers_a_wrong_offset_within_two_ms(seed):
     assert abs(result.offset_us - scene.offset_us) < 2000
     assert result.peak_correlation > 0.5
     assert abs(result.correction_us + 15_000) < 2000
+
+
+def test_activity_counted_in_chunks_equals_counted_at_once():
+    from darkread.edge.calibrate.clock import ActivityCounter
+
+    t = np.sort(np.random.default_rng(5).integers(1_000_000, 1_100_000, 5000))
+    whole, parts = ActivityCounter(2000), ActivityCounter(2000)
+    whole.add(t)
+    for chunk in np.array_split(t, 7):
+        parts.add(chunk)
+    assert parts.start_us == whole.start_us
+    assert np.array_equal(parts.counts, whole.counts) and parts.counts.sum() == t.size
