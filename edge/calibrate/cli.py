@@ -36,6 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _common(p)
     p.add_argument("--tangential", action="store_true",
                    help="also fit p1, p2 (default 0: below detection noise for these lenses, and they trade off against cx, cy)")
+    p.add_argument("--lamp", action="store_true",
+                   help="a printed board moved between poses and lit by a lamp switched on at each (first-event latency images)")
     p.set_defaults(func=_intrinsics)
 
     p = sub.add_parser("clock", help="gaze_to_event_time_offset_us from flash times (RGB frames or trigger input)",
@@ -140,7 +142,7 @@ def _intrinsics(args: argparse.Namespace) -> int:
 
     data = read_capture_events(args.capture)
     spec = board_of(args.capture, args.board)
-    views = detect_views(data.events, spec, data.width, data.height)
+    views = detect_views(data.events, spec, data.width, data.height, lamp=args.lamp)
     result = calibrate_intrinsics([v.detection for v in views if v.detection is not None], data.width, data.height,
                                   zero_tangential=not args.tangential)
     calib = _start_calibration(args, data.width, data.height)
@@ -193,6 +195,9 @@ def _clock_refine(args: argparse.Namespace) -> int:
     t_device = t_event - calib.gaze_to_event_time_offset_us
     result = refine_offset(activity, t_device, pixels, float(calib.gaze_to_event_time_offset_us),
                            search_us=args.search_ms * 1000.0)
+    if result.peak_correlation < 0.3:
+        logger.warning("weak agreement of gaze speed and event activity (r = %.2f): the refinement is unreliable "
+                       "(record with some head motion)", result.peak_correlation)
     calib = dataclasses.replace(calib, gaze_to_event_time_offset_us=round(result.offset_us))
     return _finish(args, result.to_dict(), calib)
 

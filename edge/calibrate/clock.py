@@ -241,8 +241,8 @@ def fit_offset(
 class RefineResult:
     offset_us: float
     correction_us: float  # refined minus initial offset
-    peak_correlation: float
-    uncertainty_us: float  # half-width of the correlation peak at 90 % of its height / sqrt(n bins)
+    peak_correlation: float  # below ~0.3 the recording has too little head motion to judge the clock
+    uncertainty_us: float  # jackknife over consecutive stretches of the recording
     lags_us: np.ndarray
     correlation: np.ndarray
 
@@ -373,8 +373,6 @@ def refine_offset(
             "within the search range: check the initial offset, or record with more head motion"
         )
     lag, k = _peak(lags, corr)
-    if corr[k] < 0.3:
-        logger.warning("weak agreement of gaze speed and event activity (r = %.2f): the refinement is unreliable", corr[k])
     leave_out = []
     for j in range(n_blocks):
         c = correlation(sums.sum(axis=1) - sums[:, j])

@@ -1,6 +1,7 @@
 """Event-camera intrinsics (fx, fy, cx, cy, radtan k1 k2 p1 p2) from a flashing or moved board.
 
-Every burst of the capture gives one detection image; the board corners found in each feed
+A board flashing on a screen, or a printed board moved to several poses and lit by a lamp
+switched on at each: every burst of the capture gives one detection image; the board corners found in each feed
 ``cv2.calibrateCamera`` with k3 fixed at zero (the recording format's radtan model has four
 coefficients). Views with too few corners are skipped; at least three views are needed.
 """
@@ -17,6 +18,7 @@ from darkread.edge.calibrate.event_image import (
     burst_events,
     detection_image,
     find_bursts,
+    latency_image,
 )
 from darkread.edge.calibrate.markers import BoardSpec, Detection, detect_board
 from darkread.edge.errors import CalibrationError
@@ -61,11 +63,22 @@ class IntrinsicsResult:
         }
 
 
-def detect_views(events: np.ndarray, spec: BoardSpec, width: int, height: int, *, bursts: list[Burst] | None = None) -> list[View]:
-    """One view per burst: its detection image and the board corners in it (or None)."""
+def detect_views(
+    events: np.ndarray, spec: BoardSpec, width: int, height: int, *, bursts: list[Burst] | None = None, lamp: bool = False
+) -> list[View]:
+    """One view per burst: its detection image and the board corners in it (or None).
+
+    ``lamp``: a printed board held at each pose while a lamp is switched on (ON bursts, imaged by
+    first-event latency) instead of a board flashing on a screen (every burst, imaged by counts).
+    """
     views = []
     for burst in bursts if bursts is not None else find_bursts(events):
-        image = detection_image(burst_events(events, burst), width, height)
+        if lamp:
+            if burst.polarity != 1:
+                continue
+            image = latency_image(burst_events(events, burst), width, height, burst.onset_us - 200.0)
+        else:
+            image = detection_image(burst_events(events, burst), width, height)
         views.append(View(burst, detect_board(image, spec)))
     found = sum(v.detection is not None for v in views)
     logger.info("board found in %d of %d bursts", found, len(views))

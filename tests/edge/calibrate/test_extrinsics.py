@@ -91,3 +91,12 @@ def test_homography_fallback_on_a_printed_page_lit_by_a_lamp():
     truth_event = page.truth.project(pts @ T_event[:3, :3].T + T_event[:3, 3])
     mapped = result.map(page.rgb_camera.project(pts @ T_rgb[:3, :3].T + T_rgb[:3, 3]))
     assert np.linalg.norm(mapped - truth_event, axis=1).max() < 2.0
+
+
+def test_lamp_views_find_the_printed_markers():
+    from darkread.edge.calibrate.intrinsics import detect_views
+    from darkread.models.synth.markers import simulate_page_capture
+
+    page = simulate_page_capture(seed=3)
+    views = detect_views(page.events, page.markers, 1280, 720, lamp=True)
+    assert len(views) == 1 and views[0].detection is not None and len(views[0].detection) == 16
