@@ -75,18 +75,22 @@ def mean(values: Iterable[float | None]) -> float | None:
     return sum(kept) / len(kept) if kept else None
 
 
-def group_by(results: Sequence[dict[str, Any]], key: str) -> dict[Any, list[dict[str, Any]]]:
+def group_by(results: Sequence[dict[str, Any]], key: str | tuple[str, ...]) -> dict[Any, list[dict[str, Any]]]:
+    """Results grouped by one condition, or by a tuple of conditions (keys are then tuples)."""
     groups: dict[Any, list[dict[str, Any]]] = {}
     for r in results:
-        groups.setdefault(r.get(key), []).append(r)
+        value = tuple(r.get(k) for k in key) if isinstance(key, tuple) else r.get(key)
+        groups.setdefault(value, []).append(r)
     return dict(sorted(groups.items(), key=lambda kv: _sort_key(kv[0])))
 
 
 _ORDER = {"still": 0, "normal": 1, "walking": 2, "letters": 0, "words": 1, "pangram": 2, "paragraph": 3}
 
 
-def _sort_key(value: Any) -> tuple[int, float, str]:
+def _sort_key(value: Any) -> Any:
     """Numbers ascending, then known categories in their natural order, then the rest by name."""
+    if isinstance(value, tuple):
+        return tuple(_sort_key(v) for v in value)
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         return (0, float(value), "")
     return (1, float(_ORDER.get(value, 99)), str(value))
@@ -120,7 +124,7 @@ def median(values: Iterable[float | None]) -> float | None:
     return kept[mid] if len(kept) % 2 else (kept[mid - 1] + kept[mid]) / 2
 
 
-def grouped_table(results: Sequence[dict[str, Any]], key: str, label: str, fmt: Any = str) -> list[str]:
+def grouped_table(results: Sequence[dict[str, Any]], key: str | tuple[str, ...], label: str, fmt: Any = str) -> list[str]:
     """Markdown rows: per value of ``key``, count and mean CER/WER of darkread and the RGB baseline."""
     lines = [
         f"| {label} | n | darkread CER | darkread WER | RGB CER | RGB WER |",
@@ -412,6 +416,10 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "## By motion, text kind, font and x-height",
         "",
         *grouped_table(results, "motion", "motion"),
+        "",
+        "Light and motion together (the RGB snapshot suffers from motion blur, darkread does not expose):",
+        "",
+        *grouped_table(results, ("lux", "motion"), "lux, motion", lambda v: f"{v[0]:g}, {v[1]}"),
         "",
         *grouped_table(results, "kind", "text kind"),
         "",

@@ -130,3 +130,8 @@ def test_engine_selection_skips_unconfigured_remote_engines(monkeypatch: pytest.
     monkeypatch.chdir(Path(__file__).parent)  # no .env here
     assert runner.available_backends([]) == []
     assert runner.available_backends(["openai", "google"]) == []
+
+
+def test_grouping_by_two_conditions() -> None:
+    rows = grouped_table(fake_results(), ("lux", "motion"), "lux, motion", lambda v: f"{v[0]:g}, {v[1]}")
+    assert [row.split(" | ")[0] for row in rows[2:]] == ["| 5, walking", "| 1000, still"]
