@@ -231,7 +231,7 @@ def _extrinsics(args: argparse.Namespace) -> int:
     spec = board_of(args.capture, args.board)
     calib = _start_calibration(args, data.width, data.height)
     capture = Path(args.capture)
-    frames = load_rgb_frames(args.rgb_frames or (capture if capture.is_dir() else capture.parent) / RGB_FRAMES_NAME, max_side=None)
+    frames = load_rgb_frames(args.rgb_frames or (capture if capture.is_dir() else capture.parent) / RGB_FRAMES_NAME, lazy=True)
     bursts = find_bursts(data.events)
     if args.homography_only:
         event_det, rgb_det = page_view(data.events, bursts, frames, calib.gaze_to_event_time_offset_us, spec,

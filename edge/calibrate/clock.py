@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import csv
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,41 +36,67 @@ class RgbFrames:
 
     t_us: np.ndarray
     exposure_us: np.ndarray
-    images: list[np.ndarray]
+    images: Sequence[np.ndarray]
 
     def __len__(self) -> int:
         return int(self.t_us.shape[0])
 
 
-def load_rgb_frames(path: str | Path, *, max_side: int | None = 128) -> RgbFrames:
+class LazyImages(Sequence):
+    """Grey images read from disk when indexed (full-resolution Aria frames are 8 MB each)."""
+
+    def __init__(self, paths: list[Path]) -> None:
+        self.paths = paths
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return LazyImages(self.paths[k])
+        image = cv2.imread(str(self.paths[k]), cv2.IMREAD_GRAYSCALE)
+        if image is None:
+            raise CalibrationError(f"{self.paths[k]}: cannot read image")
+        return image
+
+
+def load_rgb_frames(path: str | Path, *, max_side: int | None = 128, lazy: bool = False) -> RgbFrames:
     """Read ``rgb_frames.csv`` (``timestamp_us, exposure_us, file``; paths relative to the CSV).
 
     ``timestamp_us`` is the device-clock middle of the exposure (as Aria stamps frames). Frames
-    are read grey and shrunk to ``max_side`` pixels: the clock needs only their brightness.
+    are read grey and shrunk to ``max_side`` pixels (the clock needs only their brightness), or
+    with ``lazy`` read at full size only when used (pose estimation looks at a few of them).
     """
     path = Path(path)
     if not path.is_file():
         raise CalibrationError(f"{path}: RGB frame list not found (rgb_frames.csv with timestamp_us, exposure_us, file)")
-    times, exposures, images = [], [], []
+    times, exposures, images, paths = [], [], [], []
     with open(path, newline="", encoding="utf-8") as handle:
         for line, row in enumerate(csv.DictReader(handle), start=2):
             try:
                 t, e, name = int(row["timestamp_us"]), float(row["exposure_us"]), row["file"]
             except (KeyError, TypeError, ValueError) as exc:
                 raise CalibrationError(f"{path}:{line}: expected timestamp_us, exposure_us, file ({exc})") from None
-            image = cv2.imread(str(path.parent / name), cv2.IMREAD_GRAYSCALE)
-            if image is None:
-                raise CalibrationError(f"{path}:{line}: cannot read image {name}")
-            if max_side and max(image.shape) > max_side:
-                scale = max_side / max(image.shape)
-                image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+            frame_path = path.parent / name
+            if lazy:
+                if not frame_path.is_file():
+                    raise CalibrationError(f"{path}:{line}: cannot read image {name}")
+            else:
+                image = cv2.imread(str(frame_path), cv2.IMREAD_GRAYSCALE)
+                if image is None:
+                    raise CalibrationError(f"{path}:{line}: cannot read image {name}")
+                if max_side and max(image.shape) > max_side:
+                    scale = max_side / max(image.shape)
+                    image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+                images.append(image)
             times.append(t)
             exposures.append(e)
-            images.append(image)
+            paths.append(frame_path)
     if not times:
         raise CalibrationError(f"{path}: no frames listed")
     order = np.argsort(times)
-    return RgbFrames(np.asarray(times, dtype=np.int64)[order], np.asarray(exposures)[order], [images[i] for i in order])
+    ordered = LazyImages([paths[i] for i in order]) if lazy else [images[i] for i in order]
+    return RgbFrames(np.asarray(times, dtype=np.int64)[order], np.asarray(exposures)[order], ordered)
 
 
 def linear_levels(images: list[np.ndarray], *, gamma: float = 2.2) -> np.ndarray:

@@ -127,3 +127,15 @@ def test_activity_counted_in_chunks_equals_counted_at_once():
         parts.add(chunk)
     assert parts.start_us == whole.start_us
     assert np.array_equal(parts.counts, whole.counts) and parts.counts.sum() == t.size
+
+
+def test_lazy_frames_are_read_at_full_size_when_used(tmp_path):
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "1.png"), np.full((300, 400), 77, np.uint8))
+    (tmp_path / "rgb_frames.csv").write_text("timestamp_us,exposure_us,file\n1,8000,1.png\n")
+    frames = load_rgb_frames(tmp_path / "rgb_frames.csv", lazy=True)
+    assert frames.images[0].shape == (300, 400) and frames.images[0].mean() == 77
+    (tmp_path / "missing.csv").write_text("timestamp_us,exposure_us,file\n1,8000,nope.png\n")
+    with pytest.raises(CalibrationError, match="nope.png"):
+        load_rgb_frames(tmp_path / "missing.csv", lazy=True)
