@@ -90,3 +90,13 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     assert bw["rgb"]["raw"] == 2880 * 2880 * 3 and bw["page_bytes"] > 0
     assert 0 < bw["events_foveated"] < bw["events"]
     assert json.loads((tmp_path / "run" / "result.json").read_text())["name"] == folder.name
+
+
+def test_cli_make_suite_form(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from darkread.cli import main
+
+    assert main(["eval", "make-suite", str(tmp_path / "s"), "--small", "--limit", "0"]) == 0
+    assert json.loads((tmp_path / "s" / "suite.json").read_text())["recordings"] == []
+    assert "0 recordings" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="output folder"):
+        main(["-vv", "eval", "make-suite"])
