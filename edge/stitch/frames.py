@@ -98,6 +98,10 @@ class StitchConfig:
     Page:
       ink_threshold         alpha-averaged ink probability above which a page pixel is ink.
       min_component_px      ink specks smaller than this many pixels are removed from the page.
+      deskew_max_deg        the page is turned so its text lines run horizontally (row-profile
+                            sharpness searched within +- this); the page keeps the first frame's
+                            orientation otherwise. 0 turns it off.
+      deskew_min_deg        smaller skews are left alone (resampling blurs a little).
       min_views             page pixels seen by fewer frames than this stay paper (window borders
                             seen once would otherwise keep that frame's speckle).
       line_gap_px           a line's box spans its ink columns; a gap wider than this cuts off stray ink.
@@ -131,6 +135,8 @@ class StitchConfig:
     ink_threshold: float = 0.4
     min_component_px: int = 2
     min_views: int = 2
+    deskew_max_deg: float = 15.0
+    deskew_min_deg: float = 0.5
     line_gap_px: int = 30
 
     def __post_init__(self) -> None:
@@ -156,6 +162,7 @@ class Page:
     frames_used: int = 0
     frames_dropped: int = 0
     frame_positions: dict[int, tuple[float, float]] = field(default_factory=dict)  # frame_id -> top-left on the page
+    skew_deg: float = 0.0  # rotation applied to level the text lines (cv2.getRotationMatrix2D sense)
 
     def to_png_bytes(self) -> bytes:
         """Black ink on white, 8-bit grey PNG."""

@@ -73,6 +73,35 @@ def covered_box(seen: np.ndarray) -> tuple[int, int, int, int] | None:
     return int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1
 
 
+def rotation_to_fit(shape: tuple[int, int], angle_deg: float) -> tuple[np.ndarray, tuple[int, int]]:
+    """2x3 rotation of an image about its centre onto a canvas that holds all of it, and that
+    canvas's (width, height)."""
+    h, w = shape
+    turn = cv2.getRotationMatrix2D((w / 2.0, h / 2.0), float(angle_deg), 1.0)
+    corners = np.array([[0, 0, 1], [w, 0, 1], [0, h, 1], [w, h, 1]], dtype=np.float64) @ turn.T
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    turn[:, 2] -= low
+    size = np.ceil(high - low).astype(int)
+    return turn, (int(size[0]), int(size[1]))
+
+
+def estimate_skew(ink: np.ndarray, max_deg: float, step_deg: float = 0.5) -> float:
+    """Rotation (degrees, ``cv2.getRotationMatrix2D`` sense) that makes the text lines horizontal:
+    the one whose row profile is sharpest (largest variance), coarse then fine. 0 when off."""
+    if max_deg <= 0 or not ink.any():
+        return 0.0
+    small = cv2.resize(ink.astype(np.float32), None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA)
+
+    def sharpness(angle: float) -> float:
+        turn, size = rotation_to_fit(small.shape, angle)
+        return float(cv2.warpAffine(small, turn, size, flags=cv2.INTER_LINEAR).sum(axis=1).var())
+
+    coarse = np.arange(-max_deg, max_deg + 1e-9, step_deg)
+    best = float(coarse[int(np.argmax([sharpness(a) for a in coarse]))])
+    fine = np.arange(best - step_deg, best + step_deg + 1e-9, 0.1)
+    return float(fine[int(np.argmax([sharpness(a) for a in fine]))])
+
+
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
     return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))

@@ -13,6 +13,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from darkread.edge.stitch.dewarp import dewarp_strip
 from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
@@ -21,7 +22,9 @@ from darkread.edge.stitch.page import (
     assign_lines,
     binarize,
     covered_box,
+    estimate_skew,
     main_column_span,
+    rotation_to_fit,
     text_bands,
     union_box,
 )
@@ -37,11 +40,17 @@ class _FinishedLine:
     """What the page keeps of a line once its strip is composed in (the strip itself is freed)."""
 
     box: tuple[int, int, int, int]  # the strip's extent in page coordinates
-    gaze_row: float  # median gaze row in page coordinates
+    gaze_xy: tuple[float, float]  # median gaze in page coordinates
 
     @classmethod
     def of(cls, strip: LineStrip) -> _FinishedLine:
-        return cls(strip.canvas.box, float(np.median(strip.gaze_rows)))
+        x, y = np.median(np.asarray(strip.gaze_points), axis=0)
+        return cls(strip.canvas.box, (float(x), float(y)))
+
+
+def _apply(affine: np.ndarray, xy: tuple[float, float]) -> tuple[float, float]:
+    x, y = affine @ np.array([xy[0], xy[1], 1.0])
+    return float(x), float(y)
 
 
 def predict_correction(recent: Sequence[tuple[int, np.ndarray]], t_us: int) -> np.ndarray:
@@ -147,8 +156,8 @@ class PageStitcher:
             if search_roll:
                 self._rolls.append(float(np.clip(reg.angle_deg, -cfg.max_roll_deg, cfg.max_roll_deg)))
                 roll = float(np.median(self._rolls))
-        gaze_row = frame.gaze_px[1] + float(correction[1])
-        self._strip.add(mask, x, y, score, gaze_row, frame.frame_id, cfg, roll)
+        gaze_xy = (frame.gaze_px[0] + float(correction[0]), frame.gaze_px[1] + float(correction[1]))
+        self._strip.add(mask, x, y, score, gaze_xy, frame.frame_id, cfg, roll)
         self._positions[frame.frame_id] = (x, y)
         self._used += 1
 
@@ -163,24 +172,43 @@ class PageStitcher:
         box = union_box([ln.box for ln in lines])
         current = self._strip if self._strip is not None and not self._strip.empty else None
         avg, seen = self._page.reference(current, box)
+        views = self._page.views(current, box)
         cover = covered_box(seen)
         if cover is None:
             return Page(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
         cx0, cy0, cx1, cy1 = cover
-        views = self._page.views(current, box)
-        image = binarize(avg[cy0:cy1, cx0:cx1], cfg, views[cy0:cy1, cx0:cx1])
-        ox, oy = box[0] + cx0, box[1] + cy0  # page-coordinate origin of ``image``
-        boxes, images = self._line_boxes(lines, image, (ox, oy))
-        positions = {fid: (x - ox, y - oy) for fid, (x, y) in self._positions.items()}
-        return Page(image, boxes, images, self._used, self._dropped, positions)
+        avg, views = avg[cy0:cy1, cx0:cx1], views[cy0:cy1, cx0:cx1]
+        to_image = np.array([[1.0, 0.0, -(box[0] + cx0)], [0.0, 1.0, -(box[1] + cy0)]])  # page -> image
+        image = binarize(avg, cfg, views)
+        skew = estimate_skew(image, cfg.deskew_max_deg)
+        if abs(skew) >= cfg.deskew_min_deg:
+            turn, size = rotation_to_fit(image.shape, skew)
+            avg = cv2.warpAffine(avg, turn, size, flags=cv2.INTER_LINEAR)
+            views = cv2.warpAffine(views, turn, size, flags=cv2.INTER_NEAREST)
+            x0, y0, x1, y1 = covered_box(views > 0) or (0, 0, size[0], size[1])
+            avg, views = avg[y0:y1, x0:x1], views[y0:y1, x0:x1]
+            turn[:, 2] -= (x0, y0)
+            to_image = turn @ np.vstack([to_image, [0.0, 0.0, 1.0]])
+            image = binarize(avg, cfg, views)
+        boxes, images = self._line_boxes(lines, image, to_image)
+        positions = {fid: _apply(to_image, xy) for fid, xy in self._positions.items()}
+        return Page(
+            image,
+            boxes,
+            images,
+            self._used,
+            self._dropped,
+            positions,
+            skew_deg=skew if abs(skew) >= cfg.deskew_min_deg else 0.0,
+        )
 
     def _line_boxes(
-        self, lines: list[_FinishedLine], image: np.ndarray, origin: tuple[int, int]
+        self, lines: list[_FinishedLine], image: np.ndarray, to_image: np.ndarray
     ) -> tuple[list[tuple[int, int, int, int]], list[np.ndarray]]:
         """One box per text line that was read: the page's text bands that the strips' gaze ran
         along, each spanning the band's main run of ink columns."""
         bands = text_bands(image)
-        claims = assign_lines([ln.gaze_row - origin[1] for ln in lines], [c for _, _, c in bands])
+        claims = assign_lines([_apply(to_image, ln.gaze_xy)[1] for ln in lines], [c for _, _, c in bands])
         boxes, images = [], []
         for band in sorted({c for c in claims if c >= 0}):
             top, bottom, _ = bands[band]

@@ -67,7 +67,7 @@ class LineStrip:
 
     def __init__(self) -> None:
         self.canvas = Canvas(STRIP_LAYERS)
-        self.gaze_rows: list[float] = []  # gaze row of each frame in page coordinates
+        self.gaze_points: list[tuple[float, float]] = []  # gaze of each frame in page coordinates
         self.frame_ids: list[int] = []
 
     def add(
@@ -76,13 +76,13 @@ class LineStrip:
         x: float,
         y: float,
         score: float,
-        gaze_row: float,
+        gaze_xy: tuple[float, float],
         frame_id: int,
         cfg: StitchConfig,
         angle_deg: float = 0.0,
     ) -> None:
         accumulate(self.canvas, mask, x, y, score, cfg, angle_deg)
-        self.gaze_rows.append(gaze_row)
+        self.gaze_points.append(gaze_xy)
         self.frame_ids.append(frame_id)
 
     @property

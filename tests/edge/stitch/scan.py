@@ -46,6 +46,7 @@ class ScanParams:
     drift_amplitude_px: float = 30.0  # slow head drift (sum of two slow sinusoids per axis)
     tremor_px: float = 1.0  # per-frame head jitter (std)
     roll_deg: float = 0.4  # slow head roll amplitude (the page rotates in the sensor)
+    page_tilt_deg: float = 0.0  # constant rotation of the page in the sensor (page held askew)
     stroke_threshold: tuple[float, float] = (0.4, 0.6)  # per-frame binarisation level (stroke width varies)
     gaze_noise_px: float = 15.0  # per-sample gaze noise (std, per axis)
     fixation_bias_px: float = 8.0  # per-fixation systematic gaze offset (std, per axis)
@@ -65,7 +66,8 @@ class Reading:
     page: RenderedPage
     frames: list[StitchFrame]
     line_of_frame: list[int]  # true line index of each delivered frame
-    head_xy: list[tuple[int, int]]  # page top-left in the sensor at each delivered frame
+    head_xy: list[tuple[int, int]]  # page top-left in the sensor at each delivered frame (without rotation)
+    window_centres: list[tuple[float, float]]  # page coordinates of each delivered window's centre
     params: ScanParams = field(default_factory=ScanParams)
 
 
@@ -141,18 +143,26 @@ def _scanpath(rng: np.random.Generator, page: RenderedPage, params: ScanParams) 
     return fixations
 
 
-def _sample_window(page: RenderedPage, top_left: np.ndarray, roll_deg: float, hw: tuple[int, int]) -> np.ndarray:
-    """Ink coverage seen by a window whose top-left sits at sub-pixel ``top_left`` on the page,
-    rotated by the head roll about its centre."""
-    h, w = hw
-    c, s = np.cos(np.radians(roll_deg)), np.sin(np.radians(roll_deg))
-    centre = np.array([w / 2, h / 2])
+def _page_to_sensor(page: RenderedPage, head: np.ndarray, angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) with sensor = R @ page + t: the page turned by ``angle_deg`` about its centre, then
+    moved by the head offset."""
+    c, s = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
     rot = np.array([[c, -s], [s, c]])
-    shift = top_left + centre - rot @ centre
-    frame_to_page = np.hstack([rot, shift[:, None]]).astype(np.float64)
-    return cv2.warpAffine(
+    centre = np.array([page.mask.shape[1] / 2, page.mask.shape[0] / 2])
+    return rot, centre - rot @ centre + head
+
+
+def _sample_window(page: RenderedPage, origin: np.ndarray, rot: np.ndarray, shift: np.ndarray, hw: tuple[int, int]):
+    """Ink coverage seen by the window whose top-left is ``origin`` in the sensor, and the page
+    coordinates of its centre."""
+    h, w = hw
+    back = rot.T  # sensor -> page: back @ (sensor - shift)
+    frame_to_page = np.hstack([back, (back @ (origin - shift))[:, None]]).astype(np.float64)
+    window = cv2.warpAffine(
         page.coverage, frame_to_page, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderValue=0.0
     )
+    centre = frame_to_page @ np.array([(w - 1) / 2, (h - 1) / 2, 1.0])
+    return window, (float(centre[0]), float(centre[1]))
 
 
 def _degrade(rng: np.random.Generator, coverage: np.ndarray, params: ScanParams) -> np.ndarray:
@@ -175,6 +185,7 @@ def simulate_reading(page: RenderedPage | None = None, params: ScanParams = Scan
     frames: list[StitchFrame] = []
     lines: list[int] = []
     heads: list[tuple[int, int]] = []
+    centres: list[tuple[float, float]] = []
     t = 0
     frame_id = 0
     for fx, fy, li in _scanpath(rng, page, params):
@@ -182,9 +193,10 @@ def simulate_reading(page: RenderedPage | None = None, params: ScanParams = Scan
         for _ in range(int(rng.integers(params.frames_per_fixation[0], params.frames_per_fixation[1] + 1))):
             t += params.frame_dt_us + int(rng.integers(-5000, 5000))
             head, roll = head_at(t)
-            gaze = np.array([fx, fy]) + head + bias + rng.normal(0, params.gaze_noise_px, 2)
+            rot, shift = _page_to_sensor(page, head, params.page_tilt_deg + roll)
+            gaze = rot @ np.array([fx, fy]) + shift + bias + rng.normal(0, params.gaze_noise_px, 2)
             origin = np.round(gaze - [w / 2, h / 2]).astype(int)
-            window = _sample_window(page, origin - head, roll, (h, w))
+            window, centre = _sample_window(page, origin, rot, shift, (h, w))
             frame_id += 1
             if rng.random() < params.drop_prob:
                 continue
@@ -199,8 +211,9 @@ def simulate_reading(page: RenderedPage | None = None, params: ScanParams = Scan
             )
             lines.append(li)
             heads.append((round(head[0]), round(head[1])))
+            centres.append(centre)
         t += params.saccade_dt_us
-    return Reading(page, frames, lines, heads, params)
+    return Reading(page, frames, lines, heads, centres, params)
 
 
 def _f1_at(padded: np.ndarray, result: np.ndarray, truth_ink: int, near: tuple[int, int] | None, reach: int):

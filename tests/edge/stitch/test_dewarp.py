@@ -5,7 +5,11 @@ import numpy as np
 import pytest
 from darkread.edge.stitch import StitchConfig
 from darkread.edge.stitch.canvas import Canvas
-from darkread.edge.stitch.dewarp import apply_line_warp, dewarp_strip, estimate_line_warp
+from darkread.edge.stitch.dewarp import (
+    apply_line_warp,
+    dewarp_strip,
+    estimate_line_warp,
+)
 from darkread.edge.stitch.strip import STRIP_LAYERS
 
 

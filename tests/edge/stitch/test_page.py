@@ -2,8 +2,16 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 from darkread.edge.stitch import Page, StitchConfig
-from darkread.edge.stitch.page import assign_lines, binarize, main_column_span, text_bands
+from darkread.edge.stitch.page import (
+    assign_lines,
+    binarize,
+    estimate_skew,
+    main_column_span,
+    rotation_to_fit,
+    text_bands,
+)
 
 
 def test_text_bands_find_every_line_including_a_short_last_one(rendered_page) -> None:
@@ -57,3 +65,11 @@ def test_png_is_black_ink_on_white() -> None:
         1,
         1,
     )
+
+
+@pytest.mark.parametrize("angle", [-6.0, 0.0, 3.5])
+def test_skew_of_a_turned_page_is_found(rendered_page, angle: float) -> None:
+    turn, size = rotation_to_fit(rendered_page.mask.shape, -angle)
+    turned = (cv2.warpAffine(rendered_page.coverage, turn, size, flags=cv2.INTER_LINEAR) >= 0.5).astype(np.uint8)
+    assert abs(estimate_skew(turned, 15.0) - angle) <= 0.3
+    assert estimate_skew(turned, 0.0) == 0.0
