@@ -15,13 +15,14 @@ the sensor's noise rates (``background_events``).
 from __future__ import annotations
 
 import csv
+import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
-from darkread.edge.calibrate.cameras import Camera, PinholeCamera
+from darkread.edge.calibrate.cameras import Camera, Fisheye624Camera, PinholeCamera
 from darkread.edge.calibrate.markers import BoardSpec, save_board
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
 from darkread.edge.io.calibration import Calibration, save_calibration
@@ -226,7 +227,7 @@ class FlashCaptureSpec:
     flashes_per_pose: int = 1  # appear + disappear cycles per pose
     rgb_fps: float = 30.0
     rgb_exposure_us: float = 16000.0
-    rgb_camera: PinholeCamera = field(default_factory=lambda: PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5))
+    rgb_camera: Camera = field(default_factory=lambda: PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5))  # or Fisheye624Camera
     with_rgb: bool = True
     lux: float = 250.0
     distance_m: tuple[float, float] = (0.6, 0.7)
@@ -242,7 +243,7 @@ class FlashCapture:
     rgb_times_us: np.ndarray  # device clock, exposure middles
     rgb_exposure_us: float
     rgb_frames: list[np.ndarray]
-    rgb_camera: PinholeCamera
+    rgb_camera: Camera
     truth: Calibration  # true event intrinsics, T_event_cpf and clock offset
     T_rgb_cpf: np.ndarray
     T_cpf_board: list[np.ndarray]  # per pose
@@ -263,7 +264,8 @@ class FlashCapture:
         return Calibration(
             width=w, height=h, fx=1400.0, fy=1400.0, cx=w / 2, cy=h / 2, distortion=(0.0, 0.0, 0.0, 0.0),
             T_event_cpf=np.diag([-1.0, -1.0, 1.0, 1.0]), gaze_to_event_time_offset_us=0,
-            rgb_camera=rgb_camera_block(self.rgb_camera, self.T_rgb_cpf) if self.rgb_frames else None,
+            rgb_camera=rgb_camera_block(self.rgb_camera, self.T_rgb_cpf)
+            if self.rgb_frames and isinstance(self.rgb_camera, PinholeCamera) else None,
         )
 
 
@@ -364,7 +366,26 @@ def write_flash_capture(out: str | Path, capture: FlashCapture) -> Path:
                 cv2.imwrite(str(out / name), picture)
                 writer.writerow([int(t), int(capture.rgb_exposure_us), name])
     save_calibration(out / "calibration.json", capture.nominal_calibration())
+    if capture.rgb_frames and isinstance(capture.rgb_camera, Fisheye624Camera):
+        # an Aria-style device calibration; the synthetic device frame is the CPF
+        doc = {"CameraCalibrations": [{
+            "Label": "camera-rgb",
+            "Projection": {"Name": "FisheyeRadTanThinPrism", "Params": list(capture.rgb_camera.params)},
+            "T_Device_Camera": aria_pose(np.linalg.inv(capture.T_rgb_cpf)),
+            "ConfigData": {"ImageWidth": capture.rgb_camera.width, "ImageHeight": capture.rgb_camera.height},
+        }]}
+        (out / "device_calibration.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
+        (out / "T_device_cpf.json").write_text(json.dumps(np.eye(4).tolist()), encoding="utf-8")
     return out
+
+
+def aria_pose(T: np.ndarray) -> dict:
+    """4x4 -> ``{Translation, UnitQuaternion: [w, [x, y, z]]}`` as in Aria calibration files."""
+    rvec = cv2.Rodrigues(np.asarray(T[:3, :3], dtype=np.float64))[0].reshape(3)
+    angle = float(np.linalg.norm(rvec))
+    axis = rvec / angle if angle > 0 else np.zeros(3)
+    w, xyz = math.cos(angle / 2), axis * math.sin(angle / 2)
+    return {"Translation": [float(v) for v in T[:3, 3]], "UnitQuaternion": [w, [float(v) for v in xyz]]}
 
 
 def rgb_camera_block(camera: PinholeCamera, T_rgb_cpf: np.ndarray) -> dict:

@@ -87,3 +87,36 @@ def test_pose_from_both_cameras(posed_capture, intrinsics):
     result = extrinsics_from_views(pairs, event_camera, posed_capture.rgb_camera, posed_capture.T_rgb_cpf)
     assert rotation_deg(result.T_event_cpf[:3, :3], truth.T_event_cpf[:3, :3]) < 0.5
     assert np.linalg.norm(result.T_event_cpf[:3, 3] - truth.T_event_cpf[:3, 3]) < 0.01
+
+
+@pytest.mark.slow
+def test_pose_through_an_aria_fisheye_rgb_camera(tmp_path, capsys):
+    """RGB frames rendered through a Fisheye624 lens; poses from unprojected rays (library and CLI)."""
+    from darkread.cli import main
+    from darkread.edge.io.calibration import load_calibration, save_calibration
+    from darkread.models.synth.markers import write_flash_capture
+
+    from darkread.edge.calibrate.cameras import Fisheye624Camera
+    from darkread.models.synth.markers import FlashCaptureSpec, simulate_flash_capture
+
+    fisheye = Fisheye624Camera(1024, 1024, (650.0, 511.5, 511.5, 0.35, -0.3, 0.1, 0.2, -0.4, 0.2,
+                                            1e-4, -2e-4, 1e-4, -1e-5, 2e-4, -3e-5))
+    capture = simulate_flash_capture(FlashCaptureSpec(seed=4, device_seed=0, start_s=3.0, n_poses=3, rgb_camera=fisheye))
+    truth = capture.truth
+    pairs = paired_views(capture.events, find_bursts(capture.events), _frames(capture), truth.gaze_to_event_time_offset_us,
+                         capture.board, 1280, 720)
+    assert len(pairs) == 3
+    event_camera = PinholeCamera(1280, 720, truth.fx, truth.fy, truth.cx, truth.cy, truth.distortion)
+    result = extrinsics_from_views(pairs, event_camera, fisheye, capture.T_rgb_cpf)
+    assert max(result.rgb_rms_px) < 1.0
+    assert rotation_deg(result.T_event_cpf[:3, :3], truth.T_event_cpf[:3, :3]) < 0.5
+    assert np.linalg.norm(result.T_event_cpf[:3, 3] - truth.T_event_cpf[:3, 3]) < 0.005
+    folder = write_flash_capture(tmp_path / "fisheye", capture)
+    known = dataclasses.replace(truth, rgb_camera=None)  # intrinsics and clock from the earlier steps
+    save_calibration(folder / "known.json", known)
+    out = tmp_path / "calibration.json"
+    assert main(["calibrate", "extrinsics", str(folder), "--calibration", str(folder / "known.json"),
+                 "--aria-calibration", str(folder / "device_calibration.json"),
+                 "--T-device-cpf", str(folder / "T_device_cpf.json"), "--out", str(out)]) == 0
+    final = load_calibration(out)
+    assert rotation_deg(final.T_event_cpf[:3, :3], truth.T_event_cpf[:3, :3]) < 0.5
