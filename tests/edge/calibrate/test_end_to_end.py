@@ -92,12 +92,15 @@ def test_pose_from_both_cameras(posed_capture, intrinsics):
 @pytest.mark.slow
 def test_pose_through_an_aria_fisheye_rgb_camera(tmp_path, capsys):
     """RGB frames rendered through a Fisheye624 lens; poses from unprojected rays (library and CLI)."""
-    from darkread.cli import main
-    from darkread.edge.io.calibration import load_calibration, save_calibration
-    from darkread.models.synth.markers import write_flash_capture
-
     from darkread.edge.calibrate.cameras import Fisheye624Camera
-    from darkread.models.synth.markers import FlashCaptureSpec, simulate_flash_capture
+    from darkread.edge.io.calibration import load_calibration, save_calibration
+    from darkread.models.synth.markers import (
+        FlashCaptureSpec,
+        simulate_flash_capture,
+        write_flash_capture,
+    )
+
+    from darkread.cli import main
 
     fisheye = Fisheye624Camera(1024, 1024, (650.0, 511.5, 511.5, 0.35, -0.3, 0.1, 0.2, -0.4, 0.2,
                                             1e-4, -2e-4, 1e-4, -1e-5, 2e-4, -3e-5))
