@@ -1,6 +1,6 @@
 """Clock offset between the glasses (device clock) and the event camera: ``t_event = t_device + offset``.
 
-**Flash alignment.** A board flashes on a screen. Each switch shows up in the events as a burst
+**Flash alignment.** A board flashes on a screen (glasses still, or held still at a few poses). Each switch shows up in the events as a burst
 (onset on the event clock, or an edge on the external-trigger input when the screen's driver is
 wired to it) and in the RGB frames (device clock) as a change of brightness. A frame whose
 exposure spans a switch shows a blend whose level says *where* in the exposure the switch fell,
@@ -99,35 +99,74 @@ def load_rgb_frames(path: str | Path, *, max_side: int | None = 128, lazy: bool 
     return RgbFrames(np.asarray(times, dtype=np.int64)[order], np.asarray(exposures)[order], ordered)
 
 
-def linear_levels(images: list[np.ndarray], *, gamma: float = 2.2) -> np.ndarray:
-    """Per frame, the mean linear brightness of the pixels that change most over the capture.
+def _grey_stack(images: Sequence[np.ndarray], max_side: int = 128) -> np.ndarray:
+    """Frames as one uint8 stack at a common small size (the clock needs brightness only)."""
+    first = images[0]
+    scale = min(1.0, max_side / max(first.shape))
+    size = (max(1, round(first.shape[1] * scale)), max(1, round(first.shape[0] * scale)))
+    return np.stack([im if im.shape[::-1] == size else cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in images])
+
+
+def pose_segments(images: Sequence[np.ndarray], *, min_overlap: float = 0.8) -> np.ndarray:
+    """Segment id per frame: a new segment starts when the glasses have moved.
+
+    The screen is the bright region whether it shows the board or the blank page (Otsu threshold
+    of each frame; the board's dark squares are still far brighter than a dim room), so a drop of
+    its overlap with the previous frame's bright region marks a new pose.
+    """
+    stack = _grey_stack(images)
+    masks = [cv2.threshold(im, 0, 1, cv2.THRESH_BINARY + cv2.THRESH_OTSU)[1].astype(bool) for im in stack]
+    ids = np.zeros(len(masks), dtype=np.int64)
+    for i in range(1, len(masks)):
+        union = np.count_nonzero(masks[i] | masks[i - 1])
+        overlap = np.count_nonzero(masks[i] & masks[i - 1]) / max(union, 1)
+        ids[i] = ids[i - 1] + (overlap < min_overlap)
+    return ids
+
+
+def linear_levels(images: Sequence[np.ndarray], *, gamma: float = 2.2, segments: np.ndarray | None = None) -> np.ndarray:
+    """Per frame, the mean linear brightness of the pixels that change most within its pose.
 
     Frames are sRGB-like encoded, and exposures mix *light*, so levels are averaged after undoing
-    the gamma. Only the pixels whose brightness varies most (top 20 %) count: the screen, not
-    the room.
+    the gamma. Only the pixels whose brightness varies most (top 20 %) within a pose segment
+    count: the flashing screen, not the room.
     """
-    stack = np.stack([cv2.resize(im, images[0].shape[::-1]) if im.shape != images[0].shape else im for im in images])
-    linear = (stack.astype(np.float32) / 255.0) ** gamma
-    spread = linear.std(axis=0)
-    mask = spread >= np.percentile(spread, 80)
-    return linear[:, mask].mean(axis=1)
+    linear = (_grey_stack(images).astype(np.float32) / 255.0) ** gamma
+    seg = np.zeros(len(linear), dtype=np.int64) if segments is None else np.asarray(segments)
+    levels = np.empty(len(linear))
+    for s in np.unique(seg):
+        rows = np.flatnonzero(seg == s)
+        spread = linear[rows].std(axis=0)
+        mask = spread >= np.percentile(spread, 80)
+        levels[rows] = linear[rows][:, mask].mean(axis=1)
+    return levels
 
 
-def shown_fractions(levels: np.ndarray, *, window: int = 15, min_contrast: float = 0.05) -> np.ndarray:
+def shown_fractions(
+    levels: np.ndarray, *, window: int = 15, min_contrast: float = 0.05, segments: np.ndarray | None = None
+) -> np.ndarray:
     """Measured share of each exposure with the board shown (0..1); NaN where it cannot be told.
 
     Showing the board darkens the screen (dark squares on a white page), so within a window of
-    ``window`` frames either side the brightest level is "blank" and the darkest "shown". Local
-    windows keep this right when the glasses move between poses.
+    ``window`` frames either side (and within the frame's pose segment) the brightest level is
+    "blank" and the darkest "shown"; a segment that never shows both gives NaN.
     """
     n = levels.shape[0]
+    seg = np.zeros(n, dtype=np.int64) if segments is None else np.asarray(segments)
     out = np.full(n, np.nan)
     for i in range(n):  # a few hundred frames
         lo, hi = max(0, i - window), min(n, i + window + 1)
-        bright, dark = np.max(levels[lo:hi]), np.min(levels[lo:hi])
+        same = levels[lo:hi][seg[lo:hi] == seg[i]]
+        bright, dark = np.max(same), np.min(same)
         if bright - dark >= min_contrast * max(bright, 1e-9):
             out[i] = np.clip((bright - levels[i]) / (bright - dark), 0.0, 1.0)
     return out
+
+
+def measured_fractions(images: Sequence[np.ndarray]) -> np.ndarray:
+    """Shown fraction of every frame, poses told apart by ``pose_segments``."""
+    segments = pose_segments(images)
+    return shown_fractions(linear_levels(images, segments=segments), segments=segments)
 
 
 def predicted_fractions(switch_us: np.ndarray, shown_after: np.ndarray, t_mid: np.ndarray, exposure: np.ndarray) -> np.ndarray:
@@ -209,7 +248,7 @@ def fit_offset(
     """Offset (device -> event) that best predicts the frames' shown fractions from the switches."""
     if switch_event.size < 2:
         raise CalibrationError(f"need at least 2 switches of the flashing board, found {switch_event.size}")
-    measured = shown_fractions(linear_levels(frames.images))
+    measured = measured_fractions(frames.images)
     ok = np.isfinite(measured)
     t, e, m = frames.t_us[ok].astype(np.float64), frames.exposure_us[ok], measured[ok]
     if t.size < 4:

@@ -123,3 +123,14 @@ def test_pose_through_an_aria_fisheye_rgb_camera(tmp_path, capsys):
                  "--T-device-cpf", str(folder / "T_device_cpf.json"), "--out", str(out)]) == 0
     final = load_calibration(out)
     assert rotation_deg(final.T_event_cpf[:3, :3], truth.T_event_cpf[:3, :3]) < 0.5
+
+
+def test_clock_from_a_capture_with_pose_changes(posed_capture):
+    """The frames' brightness levels jump when the glasses move: pose segments keep them apart."""
+    from darkread.edge.calibrate.clock import pose_segments
+
+    frames = _frames(posed_capture, 128)
+    assert np.unique(pose_segments(frames.images)).size == 6
+    switches, shown = switches_from_bursts(find_bursts(posed_capture.events))
+    result = fit_offset(switches, shown, frames)
+    assert abs(result.offset_us - posed_capture.truth.gaze_to_event_time_offset_us) < 2000
