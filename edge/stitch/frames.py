@@ -88,9 +88,7 @@ class StitchConfig:
                             the fixated line counts most, neighbouring lines less.
     De-warp (KLT between a finished line and the page above it):
       dewarp_degree         polynomial degree in x of the line's displacement (0 = offset, 1 = offset
-                            + slope). Default 0: frames already register against the page above, and
-                            a slope fitted where strip and page overlap (mostly the neighbouring line)
-                            did not help on synthetic readings (see README.md).
+                            + slope, i.e. a small tilt of the whole line).
       dewarp_max_shift_px   larger corrections are distrusted and skipped.
       dewarp_min_points     tracked features needed to estimate a warp.
       dewarp_min_gain       the warp is undone only if the strip's correlation with the page where
@@ -128,7 +126,7 @@ class StitchConfig:
     improvement_tolerance: float = 0.15
     replace_margin: float = 0.3
     taper_sigma_rows: float = 22.0
-    dewarp_degree: int = 0
+    dewarp_degree: int = 1
     dewarp_max_shift_px: float = 8.0
     dewarp_min_points: int = 12
     dewarp_min_gain: float = 0.005
