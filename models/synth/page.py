@@ -53,7 +53,7 @@ def xheight_ratio(path: str) -> float:
     """x-height as a fraction of the font size (measured on the glyph 'x')."""
     size = 200
     font = _font(path, size)
-    left, top, right, bottom = font.getbbox("x", anchor="ls")
+    _, top, _, bottom = font.getbbox("x", anchor="ls")
     return (bottom - top) / size
 
 

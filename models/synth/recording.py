@@ -80,7 +80,10 @@ def gaze_pixels(session: Session, rows: dict[str, np.ndarray]) -> np.ndarray:
     return session.calib.project(session.calib.cpf_to_event(p_cpf))
 
 
-def reachable_region(uv: np.ndarray, fovea: FoveaConfig = FoveaConfig(), margin: int = REGION_MARGIN_PX) -> tuple[int, int, int, int]:
+FOVEA = FoveaConfig()
+
+
+def reachable_region(uv: np.ndarray, fovea: FoveaConfig = FOVEA, margin: int = REGION_MARGIN_PX) -> tuple[int, int, int, int]:
     """(x0, y0, w, h): every fovea window around ``uv`` plus a margin, clipped to the sensor."""
     ok = np.all(np.isfinite(uv), axis=1)
     if not ok.any():

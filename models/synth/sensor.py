@@ -252,7 +252,7 @@ class EventSensor:
         return self._events(pix, pol, t)
 
     def _events(self, pix: np.ndarray, pol: np.ndarray | int, t: np.ndarray) -> np.ndarray:
-        h, w = self.shape
+        w = self.shape[1]
         ev = np.empty(pix.size, dtype=EVENT_CD_DTYPE)
         ev["x"] = pix % w + self.origin[0]
         ev["y"] = pix // w + self.origin[1]
