@@ -49,3 +49,25 @@ def test_gaze_angles_follow_the_format_convention():
     tc = (np.tan(left) + np.tan(right)) / 2
     back = points_from_angles(np.arctan(tc), pitch, depth)
     np.testing.assert_allclose(back, p, atol=1e-12)
+
+
+def test_tracker_error_is_one_to_two_degrees_and_partly_constant():
+    from darkread.models.synth.gaze import TrackerModel, row_times_us, tracker_rows
+
+    rng = np.random.default_rng(3)
+    errors, biases = [], []
+    for _ in range(20):
+        model = TrackerModel.random(rng)
+        t = row_times_us(1_000_000, 5.0, model.rate_hz, model.missing_p, rng)
+        assert 0.9 * 5 * 60 < t.size <= 5 * 60 + 1 and np.all(np.diff(t) > 0)
+        truth = np.tile([[0.05, -0.03, 0.45]], (t.size, 1))
+        left, right, pitch, depth = tracker_rows(truth, t, np.zeros(t.size, bool), model, rng)
+        yaw = np.arctan((np.tan(left) + np.tan(right)) / 2)
+        err = np.degrees(np.hypot(yaw - np.arctan(0.05 / 0.45), pitch - np.arctan(-0.03 / 0.45)))
+        errors.append(np.sqrt(np.mean(err**2)))
+        biases.append(np.degrees(np.hypot(*model.bias_rad)))
+    assert 0.8 < np.median(errors) < 2.5
+    assert np.median(biases) > 0.5  # a constant part
+    blink = np.ones(5, bool)
+    _, _, pitch_b, _ = tracker_rows(np.tile([[0.0, 0.0, 0.4]], (5, 1)), np.arange(5) * 16_667, blink, model, rng)
+    assert np.all(np.degrees(np.abs(pitch_b)) > 5)  # blink rows are far off
