@@ -80,6 +80,12 @@ def _manifest(root: str | Path) -> dict[str, Any] | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
+def _families(fonts: Any) -> list[str]:
+    if isinstance(fonts, dict):
+        return list(fonts.get("families_in_this_set", []))
+    return list(fonts or [])
+
+
 def write_model_card(info: dict[str, Any], models_dir: str | Path = MODELS_DIR) -> Path:
     from darkread.models.train.card import write_card
 
@@ -128,7 +134,7 @@ def evaluate_and_card(
     info = {
         **exported, "report": report, "fit": fit_info, "latency": latency, "timings_s": timings,
         "train_manifest": train_manifest, "train_dir": str(train_dir), "val_dir": str(val_dir),
-        "train_fonts": (train_manifest or {}).get("fonts", []),
+        "train_fonts": _families((train_manifest or {}).get("fonts")),
     }
     (run / "evaluation.json").write_text(json.dumps(info, indent=1, default=str))
     write_model_card(info, models_dir)

@@ -67,10 +67,11 @@ def test_windows_of_a_recording_match_its_printed_page(shared_sample_recording) 
 
     if not default_model_path().is_file():
         pytest.skip("no shipped model")
-    voxels, meta, text = recording_windows(shared_sample_recording, max_windows=12)
+    voxels, meta, text = recording_windows(shared_sample_recording, max_windows=40)
     assert voxels.ndim == 4 and voxels.shape[1:] == (4, 100, 200) and len(voxels) > 0
     preds = Reconstructor(warmup=0)(voxels)
-    page = render_page_ink(text, float(meta.get("xheight_px", 10.0)), _font_for(meta))
+    xheight = float(meta.get("xheight_px", 10.0))
+    page = render_page_ink(text, xheight, _font_for(meta))
     kept_v, kept_t, scores = make_targets(voxels, preds, page)
     assert len(kept_v) >= 1 and min(scores) >= 0.35
     assert kept_t.shape[1:] == (100, 200)
