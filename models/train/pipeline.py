@@ -144,6 +144,7 @@ def evaluate_and_card(
 def reproduce(
     train_dir: str | Path, val_dir: str | Path, run_dir: str | Path = DEFAULT_RUN_DIR, *,
     config: FitConfig | None = None, train_samples: int = 30000, val_samples: int = 2000, workers: int = 2,
+    models_dir: str | Path = MODELS_DIR, figure: str | Path | None = FIGURE_PATH,
 ) -> dict[str, Any]:
     """Synthetic dataset (if absent) -> fit -> export -> int8 -> evaluate -> model card."""
     from darkread.models.train.data import shard_paths
@@ -163,7 +164,7 @@ def reproduce(
     fit(train_dir, run_dir, config)
     timings["fit"] = time.monotonic() - started
     log.info("fit config: %s", asdict(config))
-    return finish(run_dir, train_dir, val_dir, timings=timings)
+    return finish(run_dir, train_dir, val_dir, models_dir=models_dir, timings=timings, figure=figure)
 
 
 def generate_dataset(split: str, root: str | Path, samples: int, workers: int) -> None:

@@ -53,3 +53,9 @@ def fake_dataset(tmp_path: Path) -> Callable[..., Path]:
         return root
 
     return make
+
+
+@pytest.fixture
+def shard_writer() -> Callable[..., Path]:
+    """``write_fake_shard(path, n, seed)`` for tests that make datasets their own way."""
+    return write_fake_shard

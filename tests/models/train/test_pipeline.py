@@ -47,3 +47,25 @@ def test_cli_registers_train_steps_without_importing_torch() -> None:
     )
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
+
+
+@pytest.mark.slow
+def test_reproduce_synthesises_missing_sets_then_fits_and_writes_the_card(shard_writer, tmp_path: Path, monkeypatch) -> None:
+    import darkread.models.train.pipeline as pipeline
+
+    made: list[str] = []
+
+    def fake_generate(split: str, root, samples: int, workers: int) -> None:
+        Path(root).mkdir(parents=True)
+        shard_writer(Path(root) / "shard-00000.npz", samples, seed=len(made))
+        made.append(split)
+
+    monkeypatch.setattr(pipeline, "generate_dataset", fake_generate)
+    config = FitConfig(batch_size=8, warmup_steps=1, max_epochs=1, threads=1, validation_samples=4,
+                       net=NetConfig(widths=(4, 8, 8, 8), blocks=(1, 1, 1)).to_dict())
+    models = tmp_path / "models"
+    info = pipeline.reproduce(tmp_path / "train", tmp_path / "val", tmp_path / "run", config=config,
+                              train_samples=24, val_samples=6, models_dir=models, figure=None)
+    assert made == ["train", "val"]
+    assert set(info["timings_s"]) >= {"synthesise train (24 windows)", "synthesise val (6 windows)", "fit", "evaluate"}
+    assert (models / "MODEL_CARD.md").is_file() and (models / "binary_unet.onnx").is_file()
