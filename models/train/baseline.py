@@ -15,8 +15,6 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
-from darkread.models.train.metrics import ink_counts, scores_from_counts
-
 
 @dataclass(frozen=True)
 class BaselineParams:

@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-
 from darkread.models.train.net import INPUT_SHAPE, BinaryUNet
 
 log = logging.getLogger(__name__)
@@ -63,7 +62,12 @@ class _VoxelReader:
 
 def quantize_int8(fp32_path: str | Path, int8_path: str | Path, calibration_voxels: np.ndarray) -> Path:
     """Static QDQ int8 (uint8 activations, per-channel int8 weights), calibrated on ``calibration_voxels``."""
-    from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+    from onnxruntime.quantization import (
+        CalibrationDataReader,
+        QuantFormat,
+        QuantType,
+        quantize_static,
+    )
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
     if len(calibration_voxels) == 0:

@@ -46,10 +46,10 @@ def render_page_ink(text: str, xheight_px: float, font_path: str | Path | None =
     path = str(font_path) if font_path else _default_font()
     probe = ImageFont.truetype(path, 100)
     _, top, _, bottom = probe.getbbox("x", anchor="ls")
-    size = max(4, int(round(xheight_px * 100 / max(1, bottom - top))))
+    size = max(4, round(xheight_px * 100 / max(1, bottom - top)))
     font = ImageFont.truetype(path, size)
     lines = [line.rstrip() for line in text.splitlines()] or [""]
-    pitch = int(round(size * 1.4))
+    pitch = round(size * 1.4)
     width = int(max(font.getlength(line) for line in lines)) + 2 * margin_px
     height = pitch * len(lines) + 2 * margin_px
     image = Image.new("L", (width, height), 0)
@@ -73,7 +73,7 @@ def _font_for(meta: dict[str, Any]) -> str | None:
         from darkread.models.synth.fonts import face_by_name
 
         return str(face_by_name(str(name)).path)
-    except Exception:  # unknown name or synth component absent: the default face still matches roughly
+    except (ImportError, ValueError, OSError):  # unknown name or synth component absent: the default face still matches roughly
         return None
 
 
@@ -167,7 +167,6 @@ def finetune_arrays(
 ) -> list[float]:
     """Train ``model`` in place on (voxels, targets) for ``steps`` steps; returns the losses."""
     import torch
-
     from darkread.models.train.data import augment
     from darkread.models.train.fit import bce_dice_loss
 
@@ -199,7 +198,6 @@ def finetune_recordings(
 ) -> dict[str, Any]:
     """Targets from each recording's known page, then fine-tuning of ``checkpoint`` at ``lr_scale`` x its lr."""
     import torch
-
     from darkread.models.train.fit import load_model
 
     data = torch.load(checkpoint, map_location="cpu", weights_only=False)

@@ -18,8 +18,14 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
-
-from darkread.models.train.data import Shard, iterate_batches, load_shard, random_crop, shard_paths, split_mask
+from darkread.models.train.data import (
+    Shard,
+    iterate_batches,
+    load_shard,
+    random_crop,
+    shard_paths,
+    split_mask,
+)
 from darkread.models.train.metrics import ink_scores
 from darkread.models.train.net import BinaryUNet, NetConfig, count_parameters
 

@@ -1,9 +1,6 @@
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
-
 from darkread.models.train.data import (
     augment,
     is_validation_seed,

@@ -3,8 +3,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-
-from darkread.models.train.finetune import finetune_arrays, make_targets, match_target, render_page_ink
+from darkread.models.train.finetune import (
+    finetune_arrays,
+    make_targets,
+    match_target,
+    render_page_ink,
+)
 from darkread.models.train.net import BinaryUNet, NetConfig
 
 

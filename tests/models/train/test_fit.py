@@ -4,7 +4,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-
 from darkread.models.train.fit import FitConfig, fit, load_model
 from darkread.models.train.net import NetConfig
 

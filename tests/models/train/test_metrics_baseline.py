@@ -2,7 +2,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from darkread.models.train.baseline import BaselineParams, activity, predict, tune
 from darkread.models.train.metrics import ink_scores
 

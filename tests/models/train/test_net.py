@@ -2,8 +2,12 @@ from __future__ import annotations
 
 import pytest
 import torch
-
-from darkread.models.train.net import INPUT_SHAPE, BinaryUNet, NetConfig, count_parameters
+from darkread.models.train.net import (
+    INPUT_SHAPE,
+    BinaryUNet,
+    NetConfig,
+    count_parameters,
+)
 
 
 def test_output_is_one_logit_map_per_window() -> None:
