@@ -158,6 +158,19 @@ def backend_table(results: Sequence[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def sweep_subset(results: Sequence[dict[str, Any]], key: str, *, min_values: int = 3) -> tuple[list[dict[str, Any]], str]:
+    """The recordings of one (lux, motion, text kind) condition that vary ``key`` the most, so a sweep
+    is not confounded by the other axes; all recordings when no condition has ``min_values`` values."""
+    best: tuple[Any, list[dict[str, Any]]] | None = None
+    for condition, group in group_by(results, ("lux", "motion", "kind")).items():
+        if len({r.get(key) for r in group}) >= min_values and (best is None or len(group) > len(best[1])):
+            best = (condition, group)
+    if best is None:
+        return list(results), f"all {len(results)} recordings"
+    (lux, motion, kind), group = best
+    return group, f"{lux:g} lux, {motion} motion, {kind}: {len(group)} recordings"
+
+
 # -- bandwidth -------------------------------------------------------------------------------------
 
 
@@ -382,8 +395,9 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
     results = sorted(results, key=lambda r: str(r.get("name")))
     plot_cer_vs(results, "lux", out / "cer_vs_lux.png", xlabel="illuminance at the page (lux, log scale)", logx=True,
                 title="CER vs light: darkread and one RGB snapshot")
-    plot_cer_vs(results, "xheight_px", out / "cer_vs_xheight.png", xlabel="x-height (event-camera pixels)",
-                title="CER vs text size")
+    sizes, sizes_label = sweep_subset(results, "xheight_px")
+    plot_cer_vs(sizes, "xheight_px", out / "cer_vs_xheight.png", xlabel="x-height (event-camera pixels)",
+                title=f"CER vs text size ({sizes_label})")
     backends_png = plot_backends(results, out / "ocr_backends_by_kind.png")
     examples_png = plot_examples(results, out / "examples.png")
     (out / RESULTS_NAME).write_text(json.dumps(results, indent=1))
@@ -393,7 +407,7 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "# darkread evaluation",
         "",
         f"- date: {info.date}",
-        f"- commit: `{info.commit}`",
+        f"- commit: `{info.commit}`" + _run_commits(results, info.commit),
         f"- OCR backend (darkread and the RGB baseline): `{info.backend}`",
         f"- reconstruction model: {info.model or 'the shipped default'}",
         f"- suite: {info.suite or f'{len(results)} recordings'}",
@@ -427,7 +441,9 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "",
         "![CER vs x-height](cer_vs_xheight.png)",
         "",
-        *grouped_table(results, "xheight_px", "x-height (px)", lambda v: f"{v:g}"),
+        f"Text size, {sizes_label}:",
+        "",
+        *grouped_table(sizes, "xheight_px", "x-height (px)", lambda v: f"{v:g}"),
         "",
         "## OCR engines on the stitched pages",
         "",
@@ -482,3 +498,13 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
 
 def _held_out(results: Sequence[dict[str, Any]]) -> set[str]:
     return {str(r.get("font")) for r in results if r.get("held_out_font")}
+
+
+def _run_commits(results: Sequence[dict[str, Any]], report_commit: str) -> str:
+    """When the recordings were evaluated at other commits than the report's, say which and when."""
+    commits = sorted({str(r["commit"]) for r in results if r.get("commit")})
+    if not commits or commits == [report_commit]:
+        return ""
+    stamps = sorted(str(r["evaluated"]) for r in results if r.get("evaluated"))
+    span = f", {stamps[0]} to {stamps[-1]}" if stamps else ""
+    return f" (recordings evaluated at {', '.join(f'`{c}`' for c in commits)}{span})"

@@ -111,7 +111,10 @@ def evaluate_recording(
         return cache[name]
 
     reference = (recording_dir / "text.txt").read_text(encoding="utf-8")
-    result: dict[str, Any] = {**conditions(recording_dir), "backend": backend}
+    from darkread.eval.report import git_commit
+
+    result: dict[str, Any] = {**conditions(recording_dir), "backend": backend, "commit": git_commit(),
+                              "evaluated": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     read: dict[str, Any] = {}
 
     def run_darkread() -> dict[str, Any]:

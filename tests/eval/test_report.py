@@ -135,3 +135,24 @@ def test_engine_selection_skips_unconfigured_remote_engines(monkeypatch: pytest.
 def test_grouping_by_two_conditions() -> None:
     rows = grouped_table(fake_results(), ("lux", "motion"), "lux, motion", lambda v: f"{v[0]:g}, {v[1]}")
     assert [row.split(" | ")[0] for row in rows[2:]] == ["| 5, walking", "| 1000, still"]
+
+
+def test_size_sweep_uses_one_condition_when_the_suite_has_one() -> None:
+    from darkread.eval.report import sweep_subset
+
+    base = fake_results()[0]
+    sweep = [{**base, "name": f"s{x}", "xheight_px": float(x)} for x in (7, 9, 12)]
+    other = {**fake_results()[1], "xheight_px": 8.0}
+    subset, label = sweep_subset([*sweep, other], "xheight_px")
+    assert [r["name"] for r in subset] == ["s7", "s9", "s12"]
+    assert label == "1000 lux, still motion, pangram: 3 recordings"
+    everything, label = sweep_subset(fake_results(), "xheight_px")
+    assert len(everything) == 2 and label == "all 2 recordings"
+
+
+def test_report_names_the_commits_the_recordings_were_evaluated_at(tmp_path: Path) -> None:
+    results = [{**r, "commit": "1111111111", "evaluated": f"2026-01-01 00:0{i} UTC"} for i, r in enumerate(fake_results())]
+    md = write_report(results, tmp_path, ReportInfo(commit="2222222222")).read_text()
+    assert "- commit: `2222222222` (recordings evaluated at `1111111111`, 2026-01-01 00:00 UTC to 2026-01-01 00:01 UTC)" in md
+    md = write_report(results, tmp_path, ReportInfo(commit="1111111111")).read_text()
+    assert "- commit: `1111111111`\n" in md
