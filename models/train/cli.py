@@ -11,8 +11,8 @@ from pathlib import Path
 
 MODELS_DIR = Path(__file__).resolve().parent.parent  # the darkread.models package: the shipped .onnx files
 FIGURE_PATH = MODELS_DIR.parent / "docs" / "model_samples.png"
-DEFAULT_TRAIN = Path("/work/data/train_v1")
-DEFAULT_VAL = Path("/work/data/val_v1")
+DEFAULT_TRAIN = Path("runs/data/train")  # relative to the working directory (`make train` runs at the repo root)
+DEFAULT_VAL = Path("runs/data/val")
 
 
 def _fit_config(args: argparse.Namespace):  # -> FitConfig
