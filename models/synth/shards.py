@@ -190,6 +190,26 @@ def build_shard(args: tuple[Path, int, int, int, str, bool]) -> dict:
     return {"index": index, "count": len(metas), "seconds": time.perf_counter() - t0, "path": path.name}
 
 
+def category_counts(out_dir: str | Path, shard_names: list[str]) -> dict[str, dict[str, int]]:
+    """How many samples per font, motion level, text kind and lux band (read from the shards)."""
+    counts: dict[str, dict[str, int]] = {"font": {}, "motion": {}, "kind": {}, "lux": {}}
+    bands = np.array([0, 10, 30, 100, 300, 1e9])
+    labels = ["<10", "10-30", "30-100", "100-300", ">=300"]
+    for name in shard_names:
+        path = Path(out_dir) / name
+        if not path.is_file():
+            continue
+        with np.load(path, allow_pickle=False) as z:
+            for key in ("font", "motion", "kind"):
+                values, n = np.unique(z[key], return_counts=True)
+                for v, c in zip(values, n, strict=True):
+                    counts[key][str(v)] = counts[key].get(str(v), 0) + int(c)
+            idx = np.digitize(z["lux"], bands) - 1
+            for i, label in enumerate(labels):
+                counts["lux"][label] = counts["lux"].get(label, 0) + int((idx == i).sum())
+    return counts
+
+
 def build_dataset(
     out_dir: str | Path,
     samples: int,
@@ -259,6 +279,7 @@ def build_dataset(
             "samples_per_page": SAMPLES_PER_PAGE,
             "sensor": "see darkread.models.synth.sensor.random_sensor_params",
         },
+        "counts": category_counts(out, [f"shard-{i:05d}.npz" for i in range(n_shards)]),
         "generation_seconds": round(elapsed, 1),
         "samples_per_s": round(sum(r["count"] for r in results) / max(elapsed, 1e-9), 2),
     }

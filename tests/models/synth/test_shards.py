@@ -42,6 +42,7 @@ def test_shard_round_trip(tmp_path):
     assert manifest["samples"] == 5 and len(manifest["shards"]) == 2
     on_disk = json.loads((tmp_path / "dataset.json").read_text())
     assert on_disk["fonts"]["held_out_families"] == list(HELD_OUT_FAMILIES)
+    assert sum(on_disk["counts"]["motion"].values()) == 5 == sum(on_disk["counts"]["lux"].values())
     shards = list(iter_shards(tmp_path))
     assert [len(s) for s in shards] == [3, 2]
     with np.load(tmp_path / "shard-00000.npz") as z:
