@@ -45,6 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--work", metavar="DIR", help="per-recording outputs (default SUITE_DIR/eval_runs)")
     parser.add_argument("--force", action="store_true", help="re-evaluate recordings that already have results")
     parser.add_argument("--report-only", action="store_true", help="rebuild the report from stored results")
+    parser.add_argument("--note", action="append", default=[], metavar="TEXT", help="a line for the report's header (repeatable)")
     parser.add_argument("--small", action="store_true", help="make-suite: the small (CI) suite")
     parser.add_argument("--limit", type=int, metavar="N", help="make-suite: only the first N recordings")
     parser.set_defaults(func=_run)
@@ -87,6 +88,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         backend=args.backend,
         model=describe_model(args.model or default_model_path()),
         suite=_describe_suite(suite, results),
+        notes=list(args.note),
     )
     path = write_report(results, args.out, info)
     print(f"report: {path}")
