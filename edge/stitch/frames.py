@@ -103,6 +103,9 @@ class StitchConfig:
       min_views             page pixels seen by fewer frames than this stay paper (window borders
                             seen once would otherwise keep that frame's speckle).
       line_gap_px           a line's box spans its ink columns; a gap wider than this cuts off stray ink.
+      grey_saturation       the grey page (what OCR reads) is black where the ink probability reaches
+                            this, and shades below it: averaged strokes keep their sub-pixel shape,
+                            which a hard threshold of bold U-Net strokes loses (e/o, a/o, i/l).
     """
 
     sweep_min_px: float = 140.0
@@ -136,6 +139,7 @@ class StitchConfig:
     deskew_max_deg: float = 15.0
     deskew_min_deg: float = 0.5
     line_gap_px: int = 30
+    grey_saturation: float = 0.8
 
     def __post_init__(self) -> None:
         if self.sweep_confirm_frames < 0 or self.sweep_context_frames < 1 or self.min_line_frames < 1:
@@ -148,6 +152,14 @@ class StitchConfig:
             raise ValueError(f"search_radius_px must be >= 0, got {self.search_radius_px}")
         if not 0.0 <= self.alpha <= 1.0 or not 0.0 < self.ink_threshold < 1.0:
             raise ValueError("alpha must be in [0, 1] and ink_threshold in (0, 1)")
+        if not 0.0 < self.grey_saturation <= 1.0:
+            raise ValueError(f"grey_saturation must be in (0, 1], got {self.grey_saturation}")
+
+
+def ink_probability_to_paper(probability: np.ndarray, saturation: float = 0.8) -> np.ndarray:
+    """Ink probability in [0, 1] -> uint8 black (ink) on white (paper), saturating at ``saturation``."""
+    shade = np.clip(np.asarray(probability, np.float32) / saturation, 0.0, 1.0)
+    return np.round(255.0 * (1.0 - shade)).astype(np.uint8)
 
 
 @dataclass
@@ -161,6 +173,18 @@ class Page:
     frames_dropped: int = 0
     frame_positions: dict[int, tuple[float, float]] = field(default_factory=dict)  # frame_id -> top-left on the page
     skew_deg: float = 0.0  # rotation applied to level the text lines (cv2.getRotationMatrix2D sense)
+    # alpha-averaged ink probability behind ``image`` (float32, same shape); None when not stitched
+    ink_probability: np.ndarray | None = None
+    grey_saturation: float = 0.8
+
+    def to_grey(self) -> np.ndarray:
+        """Black-on-white uint8 page with shades where frames disagreed: what OCR should read.
+
+        Falls back to the binary page when no probability is known.
+        """
+        if self.ink_probability is None:
+            return np.where(self.image > 0, 0, 255).astype(np.uint8)
+        return ink_probability_to_paper(self.ink_probability, self.grey_saturation)
 
     def to_png_bytes(self) -> bytes:
         """Black ink on white, 8-bit grey PNG."""

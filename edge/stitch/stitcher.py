@@ -200,6 +200,8 @@ class PageStitcher:
             self._dropped,
             positions,
             skew_deg=skew if abs(skew) >= cfg.deskew_min_deg else 0.0,
+            ink_probability=np.where(views >= cfg.min_views, avg, 0.0).astype(np.float32),
+            grey_saturation=cfg.grey_saturation,
         )
 
     def _line_boxes(

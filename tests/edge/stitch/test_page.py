@@ -73,3 +73,13 @@ def test_skew_of_a_turned_page_is_found(rendered_page, angle: float) -> None:
     turned = (cv2.warpAffine(rendered_page.coverage, turn, size, flags=cv2.INTER_LINEAR) >= 0.5).astype(np.uint8)
     assert abs(estimate_skew(turned, 15.0) - angle) <= 0.3
     assert estimate_skew(turned, 0.0) == 0.0
+
+
+def test_grey_page_keeps_the_averaged_ink_probability() -> None:
+    from darkread.edge.stitch.frames import Page, ink_probability_to_paper
+
+    probability = np.array([[0.0, 0.4, 0.8, 1.0]], np.float32)
+    assert ink_probability_to_paper(probability, 0.8).tolist() == [[255, 128, 0, 0]]
+    binary = (probability > 0.4).astype(np.uint8)
+    assert Page(binary, [], []).to_grey().tolist() == [[255, 255, 0, 0]]  # no probability: the binary page
+    assert Page(binary, [], [], ink_probability=probability).to_grey()[0, 1] == 128
