@@ -17,6 +17,8 @@ $(STAMP): pyproject.toml setup.py
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip "setuptools>=69" wheel
 	$(PIP) install -q -e ".[$(EXTRAS)]"
+	# test oracle for the Aria gaze conventions; its own dependencies (1.6 GB) are not needed
+	$(PIP) install -q --no-deps "projectaria-tools==2.3.0"
 	touch $(STAMP)
 
 venv: $(STAMP)  ## create .venv and install darkread with all extras
