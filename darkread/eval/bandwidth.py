@@ -159,10 +159,10 @@ def measure_bandwidth(
     events. ``page_ink`` is the stitched page; without it the page figure is 0.
     """
     from darkread.edge.gaze import GazeMapper
+    from darkread.edge.io.evt3_encode import encode_evt3
     from darkread.edge.io.gaze_csv import read_gaze_csv
     from darkread.edge.io.raw import read_raw
     from darkread.edge.io.recording import open_recording
-    from darkread.edge.io.evt3_encode import encode_evt3
     from darkread.edge.pipeline import PipelineSettings
 
     recording = open_recording(recording_dir)

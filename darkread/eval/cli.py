@@ -71,7 +71,12 @@ def _make_suite(args: argparse.Namespace) -> int:
 
 def _evaluate(args: argparse.Namespace) -> int:
     from darkread.edge.reconstruct import default_model_path
-    from darkread.eval.report import ReportInfo, describe_model, git_commit, write_report
+    from darkread.eval.report import (
+        ReportInfo,
+        describe_model,
+        git_commit,
+        write_report,
+    )
     from darkread.eval.runner import evaluate_suite, load_results
 
     suite = Path(args.target)

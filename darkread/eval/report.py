@@ -18,7 +18,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from darkread.eval.bandwidth import JPEG_QUALITIES, PAPER_FOVEATION_REMOVED, PAPER_FRAMES_VS_RGB, PAPER_PAGE_VS_RGB
+from darkread.eval.bandwidth import (
+    JPEG_QUALITIES,
+    PAPER_FOVEATION_REMOVED,
+    PAPER_FRAMES_VS_RGB,
+    PAPER_PAGE_VS_RGB,
+)
 
 SYSTEMS: tuple[tuple[str, str], ...] = (("darkread", "darkread (event camera)"), ("rgb", "RGB snapshot baseline"))
 REPORT_NAME = "README.md"
@@ -29,7 +34,7 @@ RESULTS_NAME = "results.json"
 class ReportInfo:
     """What the report states about how it was made."""
 
-    date: str = field(default_factory=lambda: dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))
+    date: str = field(default_factory=lambda: dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"))
     commit: str = "unknown"
     backend: str = "local"
     model: str = ""
@@ -41,7 +46,7 @@ def git_commit(repo: str | Path | None = None) -> str:
     """Short hash of HEAD, ``unknown`` outside a git checkout."""
     cwd = Path(repo) if repo else Path(__file__).resolve().parent
     try:
-        out = subprocess.run(["git", "rev-parse", "--short=10", "HEAD"], cwd=cwd, capture_output=True, text=True, timeout=10)
+        out = subprocess.run(["git", "rev-parse", "--short=10", "HEAD"], check=False, cwd=cwd, capture_output=True, text=True, timeout=10)
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "unknown"
@@ -52,7 +57,7 @@ def describe_model(path: str | Path) -> str:
     if not path.is_file():
         return f"{path.name} (missing)"
     digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
-    stamp = dt.datetime.fromtimestamp(path.stat().st_mtime, dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    stamp = dt.datetime.fromtimestamp(path.stat().st_mtime, dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     return f"{path.name} (sha256 {digest}, {path.stat().st_size:,} bytes, {stamp})"
 
 
@@ -192,8 +197,8 @@ def bandwidth_table(results: Sequence[dict[str, Any]]) -> list[str]:
 
     png = med(lambda b: b["rgb"]["png"])
     lines = [
-        f"Medians over {len(rows)} recordings. A recording is one page; streams are also given per second. "
-        "The RGB snapshot is one full 2880 x 2880 image (the baseline's camera model).",
+        (f"Medians over {len(rows)} recordings. A recording is one page; streams are also given per second. "
+        "The RGB snapshot is one full 2880 x 2880 image (the baseline's camera model)."),
         "",
         "| what is sent | per page | per second | RGB PNG / this |",
         "|---|---:|---:|---:|",
@@ -231,9 +236,9 @@ def bandwidth_table(results: Sequence[dict[str, Any]]) -> list[str]:
         f"| one RGB image (PNG) / stitched page | {_ratio(page_vs_png)} | ~{PAPER_PAGE_VS_RGB:.0f}x |",
         f"| one RGB image (JPEG q80) / stitched page | {_ratio(page_vs_jpeg)} | |",
         "",
-        f"Frame figures measured on a real edge run for {measured} of {len(rows)} recordings (the rest: one "
+        (f"Frame figures measured on a real edge run for {measured} of {len(rows)} recordings (the rest: one "
         "frame per 1600 foveated events). Page bytes: the cloud-stitched page of the run, encoded as the "
-        "`Page` message the glasses send in mode `pages`.",
+        "`Page` message the glasses send in mode `pages`."),
     ]
     return lines
 
@@ -413,11 +418,11 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         f"- suite: {info.suite or f'{len(results)} recordings'}",
         *[f"- {note}" for note in info.notes],
         "",
-        f"Over all {len(results)} recordings: darkread mean CER {_pct(dk)} (WER {_pct(mean(rate(r, 'darkread', 'wer') for r in results))}), "
+        (f"Over all {len(results)} recordings: darkread mean CER {_pct(dk)} (WER {_pct(mean(rate(r, 'darkread', 'wer') for r in results))}), "
         f"RGB snapshot mean CER {_pct(rgb)} (WER {_pct(mean(rate(r, 'rgb', 'wer') for r in results))}). "
         "CER/WER: jiwer after NFKC and whitespace collapse; case and punctuation count; per-recording rates "
         "clipped at 100 % before averaging. The paper reports CER 2.5 % / WER 8.3 % at 30 lux with GPT-4o "
-        "on real recordings; these are synthetic recordings read with the offline engine.",
+        "on real recordings; these are synthetic recordings read with the offline engine."),
         "",
         "## CER vs light",
         "",
@@ -425,8 +430,8 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "",
         *grouped_table(results, "lux", "lux", lambda v: f"{v:g}"),
         "",
-        *(["What the OCR saw, one recording per light level (left: the RGB snapshot's page crop; right: the "
-           "page darkread stitched from binary frames):", "", "![examples](examples.png)", ""] if examples_png else []),
+        *([("What the OCR saw, one recording per light level (left: the RGB snapshot's page crop; right: the "
+           "page darkread stitched from binary frames):"), "", "![examples](examples.png)", ""] if examples_png else []),
         "## By motion, text kind, font and x-height",
         "",
         *grouped_table(results, "motion", "motion"),
@@ -447,8 +452,8 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "",
         "## OCR engines on the stitched pages",
         "",
-        "Each engine reads the same page image darkread stitched (offline engines; remote ones only when "
-        "configured through `DARKREAD_*` settings).",
+        ("Each engine reads the same page image darkread stitched (offline engines; remote ones only when "
+        "configured through `DARKREAD_*` settings)."),
         "",
         *backend_table(results),
         "",
@@ -459,29 +464,29 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "",
         "## The RGB baseline",
         "",
-        "One snapshot of the same synthetic scene from the glasses' RGB camera, taken in the middle of the "
+        ("One snapshot of the same synthetic scene from the glasses' RGB camera, taken in the middle of the "
         "recording and read by the same OCR engine after cropping the region around the page "
         "(`darkread/eval/rgb_baseline.py`): 2880 x 2880 rectified pinhole at 26 px/deg; auto-exposure "
         "metered on the paper, lengthening up to 1/30 s, then analogue gain up to 16x; motion blur from "
         "the session's head and page motion during the exposure; Poisson shot noise (about 100 e-/s per "
-        "lux on white paper per channel), 2.5 e- read noise, sRGB, 8 bits; no ISP denoising.",
+        "lux on white paper per channel), 2.5 e- read noise, sRGB, 8 bits; no ISP denoising."),
         "",
         *_camera_lines(results),
         "",
         "## Reading these numbers",
         "",
-        "- The recordings are synthetic (`darkread.models.synth`): one printed page, a reading scanpath, "
+        ("- The recordings are synthetic (`darkread.models.synth`): one printed page, a reading scanpath, "
         "head and page motion, a low-light event sensor model. Only the part of the sensor the gaze can "
         "reach sees the page; the rest of the sensor produces noise events only, so foveation removes a "
         "smaller share of events than on real scenes, where the whole field of view is textured (the "
-        "paper's ~98 %).",
-        "- The RGB baseline is a best case: exposure metered on the page, a lossless image, the crop around "
+        "paper's ~98 %)."),
+        ("- The RGB baseline is a best case: exposure metered on the page, a lossless image, the crop around "
         "the page handed to the OCR, no ISP denoising or compression artefacts, no rolling shutter. Its "
-        "failures come from motion blur and noise alone.",
-        "- `paragraph` and `words` texts come from the training part of the corpus (the recording writer "
-        "draws from it); the held-out font family was never seen in training.",
-        "- x-heights are in event-camera pixels at the start of a recording; the RGB camera's resolution "
-        "per degree is about the same (26 vs ~25.6 px/deg).",
+        "failures come from motion blur and noise alone."),
+        ("- `paragraph` and `words` texts come from the training part of the corpus (the recording writer "
+        "draws from it); the held-out font family was never seen in training."),
+        ("- x-heights are in event-camera pixels at the start of a recording; the RGB camera's resolution "
+        "per degree is about the same (26 vs ~25.6 px/deg)."),
         "",
         "## Per recording",
         "",

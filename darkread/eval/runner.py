@@ -53,7 +53,7 @@ def available_backends(names: Sequence[str] | None = None) -> list[str]:
                 ready.append(name)
             else:
                 logger.info("OCR engine %s is not available; left out of the comparison", name)
-        except Exception as exc:  # a misconfigured engine must not stop the evaluation
+        except Exception as exc:  # noqa: BLE001 - a misconfigured engine must not stop the evaluation
             logger.info("OCR engine %s left out: %s", name, exc)
     return ready
 
@@ -80,7 +80,7 @@ def conditions(recording_dir: Path) -> dict[str, Any]:
 def _guard(label: str, func: Callable[[], dict[str, Any]]) -> dict[str, Any]:
     try:
         return func()
-    except Exception as exc:  # one failing stage is recorded, the others still run
+    except Exception as exc:  # noqa: BLE001 - one failing stage is recorded, the others still run
         logger.warning("%s failed: %s", label, exc)
         logger.debug("%s", traceback.format_exc())
         return {"error": f"{type(exc).__name__}: {exc}"}
@@ -153,7 +153,7 @@ def evaluate_recording(
         out = {}
         for name in compare:
             started = time.perf_counter()
-            text = _guard(f"{name} on the page", lambda: {"text": engine(name).read(page).text})
+            text = _guard(f"{name} on the page", lambda name=name: {"text": engine(name).read(page).text})
             if "text" in text:
                 rates = error_rates(reference, text["text"])
                 text.update(cer=rates.cer, wer=rates.wer, seconds=round(time.perf_counter() - started, 2))

@@ -6,8 +6,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-
 from darkread.edge.io.evt3_encode import encode_evt3
+from darkread.proto.messages import Frame, encode, pack_mask
+
 from darkread.eval.bandwidth import (
     Bandwidth,
     foveate_along_gaze,
@@ -16,7 +17,6 @@ from darkread.eval.bandwidth import (
     measure_bandwidth,
     page_message_bytes,
 )
-from darkread.proto.messages import Frame, encode, pack_mask
 
 
 def _inside(events: np.ndarray, x0: int, y0: int) -> np.ndarray:

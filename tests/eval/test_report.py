@@ -7,7 +7,13 @@ from typing import Any
 import pytest
 from PIL import Image
 
-from darkread.eval.report import ReportInfo, bandwidth_table, grouped_table, rate, write_report
+from darkread.eval.report import (
+    ReportInfo,
+    bandwidth_table,
+    grouped_table,
+    rate,
+    write_report,
+)
 
 
 def _bandwidth(png: int, frames_bytes: int, page: int) -> dict[str, Any]:

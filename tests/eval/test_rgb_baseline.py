@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from darkread.models.synth.recording import RecordingSpec
+from darkread.models.synth.session import Session
 
 from darkread.eval.metrics import error_rates
 from darkread.eval.rgb_baseline import (
@@ -18,8 +20,6 @@ from darkread.eval.rgb_baseline import (
     snapshot_for_recording,
     take_snapshot,
 )
-from darkread.models.synth.recording import RecordingSpec
-from darkread.models.synth.session import Session
 
 CAMERA = RgbCameraModel()
 

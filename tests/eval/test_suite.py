@@ -5,6 +5,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
 
 from darkread.eval.suite import (
     FONTS,
@@ -17,7 +18,6 @@ from darkread.eval.suite import (
     make_suite,
     suite_entries,
 )
-from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
 
 
 @pytest.mark.parametrize("small", [True, False])
