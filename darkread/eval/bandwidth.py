@@ -116,6 +116,7 @@ class Bandwidth:
     frame_stream_bytes: int
     page_bytes: int
     frames_measured: bool = False  # frame figures come from a real edge run (else: estimated)
+    rgb_wh: list[int] | None = None  # width, height of the RGB snapshot
 
     @property
     def foveation_removed(self) -> float:
@@ -192,4 +193,5 @@ def measure_bandwidth(
         frame_stream_bytes=int(frame_stream_bytes),
         page_bytes=page_message_bytes(page_ink) if page_ink is not None else 0,
         frames_measured=measured,
+        rgb_wh=[int(rgb_image.shape[1]), int(rgb_image.shape[0])],
     )

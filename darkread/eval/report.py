@@ -198,7 +198,7 @@ def bandwidth_table(results: Sequence[dict[str, Any]]) -> list[str]:
     png = med(lambda b: b["rgb"]["png"])
     lines = [
         (f"Medians over {len(rows)} recordings. A recording is one page; streams are also given per second. "
-        "The RGB snapshot is one full 2880 x 2880 image (the baseline's camera model)."),
+        f"The RGB snapshot is one full image of {_sizes(rows)} pixels."),
         "",
         "| what is sent | per page | per second | RGB PNG / this |",
         "|---|---:|---:|---:|",
@@ -241,6 +241,11 @@ def bandwidth_table(results: Sequence[dict[str, Any]]) -> list[str]:
         "`Page` message the glasses send in mode `pages`."),
     ]
     return lines
+
+
+def _sizes(rows: Sequence[dict[str, Any]]) -> str:
+    sizes = sorted({tuple(b["rgb_wh"]) for b in rows if b.get("rgb_wh")})
+    return " or ".join(f"{w} x {h}" for w, h in sizes) if sizes else "unknown size"
 
 
 # -- plots -----------------------------------------------------------------------------------------
@@ -352,7 +357,7 @@ def plot_examples(results: Sequence[dict[str, Any]], path: str | Path, *, motion
 def _camera_lines(results: Sequence[dict[str, Any]]) -> list[str]:
     lines = ["| lux | n | exposure | gain | paper signal | blur (median) |", "|---:|---:|---:|---:|---:|---:|"]
     for lux, group in group_by(results, "lux").items():
-        snaps = [r["rgb"] for r in group if isinstance(r.get("rgb"), dict) and "exposure_ms" in r["rgb"]]
+        snaps = [r["rgb"] for r in group if isinstance(r.get("rgb"), dict) and "blur_px" in r["rgb"]]
         if not snaps:
             continue
         lines.append(
@@ -469,7 +474,8 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "(`darkread/eval/rgb_baseline.py`): 2880 x 2880 rectified pinhole at 26 px/deg; auto-exposure "
         "metered on the paper, lengthening up to 1/30 s, then analogue gain up to 16x; motion blur from "
         "the session's head and page motion during the exposure; Poisson shot noise (about 100 e-/s per "
-        "lux on white paper per channel), 2.5 e- read noise, sRGB, 8 bits; no ISP denoising."),
+        "lux on white paper per channel), 2.5 e- read noise, sRGB, 8 bits; no ISP denoising. Recordings "
+        "that were not made by `darkread eval make-suite` (real ones) use their own `rgb.png`, read whole."),
         "",
         *_camera_lines(results),
         "",

@@ -272,6 +272,50 @@ def snapshot_for_recording(
     return take_snapshot(session, spec.seconds / 2, rng, camera, full_frame=full_frame)
 
 
+def recorded_snapshot(recording_dir: str | Path) -> RgbSnapshot | None:
+    """The recording's own ``rgb.png`` (the format's optional RGB snapshot) as a snapshot, or None.
+
+    For recordings not made by a suite (real ones): nothing to re-create, so the OCR reads the whole
+    recorded image; exposure comes from ``calibration.json``'s ``rgb_camera`` block when present.
+    """
+    import cv2
+
+    recording_dir = Path(recording_dir)
+    path = recording_dir / "rgb.png"
+    if not path.is_file():
+        return None
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise ValueError(f"{path}: not a readable image")
+    image = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    rgb_camera: dict[str, Any] = {}
+    calibration = recording_dir / "calibration.json"
+    if calibration.is_file():
+        rgb_camera = json.loads(calibration.read_text(encoding="utf-8")).get("rgb_camera") or {}
+    meta = recording_dir / "meta.json"
+    lux = json.loads(meta.read_text(encoding="utf-8")).get("lux", math.nan) if meta.is_file() else math.nan
+    h, w = image.shape[:2]
+    return RgbSnapshot(
+        crop=image, crop_xywh=(0, 0, w, h), lux=float(lux) if lux is not None else math.nan, t_s=math.nan,
+        exposure_s=float(rgb_camera.get("exposure_us", math.nan)) * 1e-6, gain=math.nan, paper_electrons=math.nan,
+        blur_px=math.nan, subframes=0, full=image,
+    )
+
+
+def baseline_snapshot(recording_dir: str | Path, camera: RgbCameraModel = RgbCameraModel()) -> tuple[RgbSnapshot, str]:
+    """The snapshot the baseline reads, and where it comes from: re-simulated for suite recordings
+    (``spec.json``), else the recording's own ``rgb.png``."""
+    recording_dir = Path(recording_dir)
+    if (recording_dir / SPEC_NAME).is_file():
+        return snapshot_for_recording(recording_dir, camera, full_frame=True), "simulated"
+    recorded = recorded_snapshot(recording_dir)
+    if recorded is None:
+        raise FileNotFoundError(
+            f"{recording_dir}: no RGB snapshot (neither {SPEC_NAME} from `darkread eval make-suite` nor rgb.png)"
+        )
+    return recorded, "recorded rgb.png"
+
+
 @dataclass
 class RgbReading:
     text: str

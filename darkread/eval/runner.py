@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -98,7 +99,7 @@ def evaluate_recording(
     """Everything the report needs about one recording (errors are recorded per stage)."""
     from darkread.eval.bandwidth import measure_bandwidth, page_ink_from_png
     from darkread.eval.metrics import error_rates
-    from darkread.eval.rgb_baseline import read_snapshot, snapshot_for_recording
+    from darkread.eval.rgb_baseline import baseline_snapshot, read_snapshot
     from darkread.read import read_recording
 
     recording_dir, run_dir = Path(recording_dir), Path(run_dir)
@@ -133,13 +134,14 @@ def evaluate_recording(
     def run_rgb() -> dict[str, Any]:
         import cv2
 
-        snap = snapshot_for_recording(recording_dir, full_frame=True)
+        snap, source = baseline_snapshot(recording_dir)
         snapshot["snap"] = snap
         crop_png = run_dir / "rgb_crop.png"
         cv2.imwrite(str(crop_png), cv2.cvtColor(snap.crop, cv2.COLOR_RGB2BGR))
         text = read_snapshot(snap, engine(backend))
         rates = error_rates(reference, text)
-        return {"text": text, "cer": rates.cer, "wer": rates.wer, **snap.describe(), "crop_png": str(crop_png)}
+        described = {k: v for k, v in snap.describe().items() if not (isinstance(v, float) and math.isnan(v))}
+        return {"text": text, "cer": rates.cer, "wer": rates.wer, "source": source, **described, "crop_png": str(crop_png)}
 
     result["rgb"] = _guard(f"{recording_dir.name}: RGB baseline", run_rgb)
 

@@ -23,6 +23,7 @@ def _bandwidth(png: int, frames_bytes: int, page: int) -> dict[str, Any]:
                 "jpeg40": png // 30, "jpeg20": png // 40},
         "events": 1_000_000, "evt3_bytes": 4_000_000, "events_foveated": 20_000, "foveated_evt3_bytes": 90_000,
         "frames": 300, "frame_stream_bytes": frames_bytes, "page_bytes": page, "frames_measured": True,
+        "rgb_wh": [2880, 2880],
     }
 
 
@@ -61,6 +62,7 @@ def test_grouped_table_means_per_lux() -> None:
 
 def test_bandwidth_table_medians_and_paper_ratios() -> None:
     text = "\n".join(bandwidth_table(fake_results()))
+    assert "one full image of 2880 x 2880 pixels" in text
     # medians: PNG 19 MB; frames 1.5 MB per page = 750 kB/s; page 9 kB
     assert "| RGB snapshot, PNG | 19.0 MB | – | 1.0x |" in text
     assert "| binary frames as sent (Frame messages, mode `frames`) | 1.50 MB | 750 kB | 25x |" in text

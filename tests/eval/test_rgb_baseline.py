@@ -132,3 +132,21 @@ def test_ocr_fails_on_a_walking_snapshot_at_5_lux(walking: Session, ocr) -> None
     assert min(s.blur_px for s in snaps) > 5.0
     cers = [error_rates(dark.page.text, read_snapshot(s, ocr)).cer for s in snaps]
     assert np.mean(cers) > 0.5
+
+
+def test_a_recording_without_a_suite_spec_falls_back_to_its_own_rgb_png(tmp_path: Path) -> None:
+    import cv2
+
+    from darkread.eval.rgb_baseline import baseline_snapshot
+
+    with pytest.raises(FileNotFoundError, match="rgb.png"):
+        baseline_snapshot(tmp_path)
+    image = np.zeros((30, 40, 3), dtype=np.uint8)
+    image[..., 0] = 200  # red in RGB order
+    cv2.imwrite(str(tmp_path / "rgb.png"), image[..., ::-1])
+    (tmp_path / "calibration.json").write_text(json.dumps({"rgb_camera": {"exposure_us": 32000}}))
+    (tmp_path / "meta.json").write_text(json.dumps({"lux": 100.0}))
+    snap, source = baseline_snapshot(tmp_path)
+    assert source == "recorded rgb.png"
+    assert np.array_equal(snap.crop, image) and snap.full is snap.crop
+    assert snap.exposure_s == pytest.approx(0.032) and snap.lux == 100.0
