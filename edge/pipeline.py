@@ -169,6 +169,7 @@ class Pipeline:
         self._new_foveated = 0
         self._new_events = 0
         self._last_arrival = 0.0
+        self._period_t0: int | None = None  # lossless mode: event time of the last period start
         self._started_at = 0.0
         self._ring_dropped = 0
         self._history = MIN_HISTORY_EVENTS
@@ -194,11 +195,22 @@ class Pipeline:
             self._new_events += int(events.shape[0])
             self._last_arrival = time.monotonic()
             due = self._new_foveated >= self.settings.n_events
-            if due and not self.settings.lossless:
+            if self.settings.lossless:
+                due = due or self._event_period_due(int(events["t"][-1]))
+            elif due:
                 self._cond.notify()
         if due and self.settings.lossless:
             # no clock to keep up with: reconstruct right here, so the reader waits for inference
             self._process(self._take())
+
+    def _event_period_due(self, t_newest: int) -> bool:
+        """Lossless mode's ``period_ms``, counted on the event clock so a replay is reproducible."""
+        if self._period_t0 is None:
+            self._period_t0 = t_newest
+        if self._new_foveated > 0 and t_newest - self._period_t0 >= self.settings.period_ms * 1e3:
+            self._period_t0 = t_newest
+            return True
+        return False
 
     # -- lifecycle ----------------------------------------------------------------------------
     def start(self) -> None:
@@ -242,6 +254,8 @@ class Pipeline:
                 final = self._source_done.is_set()
             if self.watchdog is not None and self._alive():
                 self.watchdog()
+            if lossless and not final:
+                continue  # the reader makes every frame (on the event clock); the timer only feeds the watchdog
             self._process(self._take())
             if final:
                 return
