@@ -15,7 +15,7 @@ help:  ## list the targets
 
 $(STAMP): pyproject.toml setup.py
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PIP) install -q --upgrade pip "setuptools>=69" wheel
+	$(PIP) install -q --upgrade pip "setuptools>=77" wheel
 	$(PIP) install -q -e ".[$(EXTRAS)]"
 	# test oracle for the Aria gaze conventions; its own dependencies (1.6 GB) are not needed
 	$(PIP) install -q --no-deps "projectaria-tools==2.3.0"

@@ -6,8 +6,12 @@ one table and writes ``bench.json`` (one key per figure, the unit in the key).
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 # Benchmark modules, in the order of the data flow.
 BENCH_MODULES: tuple[str, ...] = (
@@ -41,3 +45,21 @@ class BenchContext:
     scratch: Path
     quick: bool = False
     notes: list[str] = field(default_factory=list)
+
+
+def best_median_s(call: Callable[[], object], runs: int, repeats: int = 3, warmup: int = 5) -> float:
+    """Best of ``repeats`` medians of ``runs`` timed calls, in seconds.
+
+    The host may be shared: the best median is the figure that repeats from run to run.
+    """
+    for _ in range(warmup):
+        call()
+    best = float("inf")
+    for _ in range(repeats):
+        times = np.empty(runs)
+        for i in range(runs):
+            start = time.perf_counter()
+            call()
+            times[i] = time.perf_counter() - start
+        best = min(best, float(np.median(times)))
+    return best

@@ -11,12 +11,11 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 
 import numpy as np
 
-from darkread.bench import BenchContext, Figure
+from darkread.bench import BenchContext, Figure, best_median_s
 from darkread.edge.events import EVENT_CD_DTYPE
 from darkread.edge.fovea import FoveaConfig, crop
 from darkread.edge.voxel import VoxelConfig, voxel_grid
@@ -26,18 +25,7 @@ X0, Y0 = 540, 310
 
 
 def best_median_us(call: Callable[[], object], runs: int, repeats: int = 3) -> float:
-    """Best of ``repeats`` medians (the host is shared; the best median is the stable figure)."""
-    for _ in range(5):
-        call()
-    best = float("inf")
-    for _ in range(repeats):
-        times = np.empty(runs)
-        for i in range(runs):
-            start = time.perf_counter()
-            call()
-            times[i] = time.perf_counter() - start
-        best = min(best, float(np.median(times)))
-    return best * 1e6
+    return best_median_s(call, runs, repeats) * 1e6
 
 
 def _events(n: int, width: int, height: int, x0: int = 0, y0: int = 0, seed: int = 0) -> np.ndarray:

@@ -6,13 +6,12 @@ torch is installed (the training stack), else the naive count-image baseline (nu
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from darkread.bench import BenchContext, Figure
+from darkread.bench import BenchContext, Figure, best_median_s
 
 INT8_FILENAME = "binary_unet_int8.onnx"
 
@@ -25,18 +24,7 @@ def example_voxel(seed: int = 0) -> np.ndarray:
 
 
 def median_ms(call: Callable[[], object], runs: int, repeats: int = 3, warmup: int = 5) -> float:
-    """Best of ``repeats`` medians of ``runs`` timed calls (the host is shared: best median is the stable figure)."""
-    for _ in range(warmup):
-        call()
-    best = float("inf")
-    for _ in range(repeats):
-        times = np.empty(runs)
-        for i in range(runs):
-            start = time.perf_counter()
-            call()
-            times[i] = time.perf_counter() - start
-        best = min(best, float(np.median(times)))
-    return best * 1e3
+    return best_median_s(call, runs, repeats, warmup) * 1e3
 
 
 def onnx_latency_ms(model_path: str | Path, runs: int = 60, repeats: int = 3) -> float:
