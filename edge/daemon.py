@@ -207,6 +207,9 @@ class EdgeService:
         cfg = self.config
         calibration, gaze_track = self._open_source()
         gaze = self._open_gaze(calibration, gaze_track)
+        from darkread.edge.io.evt3 import warm_up as warm_up_decoder
+
+        warm_up_decoder()  # READY only once the first chunk can be decoded without a JIT pause
         reconstructor = Reconstructor(cfg.pipeline.model or None, threads=cfg.pipeline.threads)
         fovea = FoveaConfig(height=cfg.pipeline.fovea_height, width=cfg.pipeline.fovea_width)
         spool = Spool(cfg.uplink.spool_dir or None, max_bytes=int(cfg.uplink.spool_max_mb * 1024 * 1024))

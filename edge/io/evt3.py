@@ -181,3 +181,15 @@ def decode_evt3(data: bytes, width: int = 1280, height: int = 720, **kw: object)
     events, triggers = decoder.decode(data)
     decoder.finish()
     return events, triggers
+
+
+# A TIME_HIGH, a TIME_LOW, a row and one event: enough to run every branch the JIT compiles.
+_WARM_UP_WORDS = bytes.fromhex("0180" "0060" "0500" "0a20")
+
+
+def warm_up() -> None:
+    """Compile (or load from the cache) the decoder now, so the first live chunk is not late.
+
+    A daemon calls this before it reports ready; without numba it costs nothing.
+    """
+    decode_evt3(_WARM_UP_WORDS)

@@ -306,3 +306,11 @@ def test_backend_choice() -> None:
     assert Evt3Decoder().backend == ("numba" if HAVE_NUMBA else "numpy")
     with pytest.raises(ValueError, match="sensor size"):
         Evt3Decoder(0, 720)
+
+
+def test_warm_up_decodes_its_own_words() -> None:
+    from darkread.edge.io.evt3 import _WARM_UP_WORDS, warm_up
+
+    events, triggers = decode_evt3(_WARM_UP_WORDS)
+    assert events[["x", "y", "p", "t"]].tolist() == [(10, 5, 0, 4096)] and len(triggers) == 0
+    warm_up()  # compiles or loads the cached decoder; must not raise
