@@ -11,21 +11,21 @@ OTHERS (0xE), CONTINUED (0xF) and reserved types are skipped and counted.
 
 from __future__ import annotations
 
-import logging
 
 import numpy as np
 
-from darkread.edge.errors import CorruptRawError
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE, Events
-from darkread.edge.io.evt3 import DecodeStats, Triggers
-
-log = logging.getLogger(__name__)
+from darkread.edge.io.evt3 import Triggers
+from darkread.edge.io.word_stream import WordStreamDecoder
 
 CD_OFF, CD_ON, TIME_HIGH, EXT_TRIGGER = 0x0, 0x1, 0x8, 0xA
 
 
-class Evt2Decoder:
+class Evt2Decoder(WordStreamDecoder):
     """Streaming EVT 2.0 decoder with the same interface as :class:`Evt3Decoder`."""
+
+    FORMAT = "EVT2"
+    WORD_DTYPE = "<u4"
 
     def __init__(
         self,
@@ -38,14 +38,9 @@ class Evt2Decoder:
         strict: bool = False,
         byte_offset: int = 0,
     ) -> None:
-        if not (0 < width <= 2048 and 0 < height <= 2048):
-            raise ValueError(f"sensor size {width}x{height} is outside 1..2048")
-        self.width, self.height = width, height
-        self.time_shift, self.path, self.strict = time_shift, path, strict
-        self.y_range = (0, height) if y_range is None else (max(0, y_range[0]), min(height, y_range[1]))
-        self.stats = DecodeStats()
-        self._pending = b""
-        self._offset = byte_offset
+        super().__init__(
+            width, height, time_shift=time_shift, path=path, y_range=y_range, strict=strict, byte_offset=byte_offset
+        )
         self._high = -1  # last TIME_HIGH in force (-1: none yet, or dropping after a step back)
         self._max_high = -1
         self._first_high: int | None = None
@@ -56,12 +51,8 @@ class Evt2Decoder:
         return self._first_high << 6 if self._first_high is not None else 0
 
     def decode(self, chunk: bytes | memoryview) -> tuple[Events, Triggers]:
-        data = self._pending + bytes(chunk) if self._pending else chunk
-        n_words = len(data) // 4
-        self._pending = bytes(data[4 * n_words :])
-        self._offset += len(chunk)
-        words = np.frombuffer(data, dtype="<u4", count=n_words)
-        self.stats.words += n_words
+        words = self._whole_words(chunk)
+        self.stats.words += len(words)
         words = self._skip_until_time_high(words)
         types = (words >> 28).astype(np.uint8)
         is_cd, is_high, is_trigger = types <= CD_ON, types == TIME_HIGH, types == EXT_TRIGGER
@@ -69,21 +60,7 @@ class Evt2Decoder:
         self.stats.skipped_other += len(words) - int(np.count_nonzero(is_cd | is_high | is_trigger))
         events = self._events(words, np.flatnonzero(is_cd), high_at)
         triggers = self._triggers(words, np.flatnonzero(is_trigger), high_at)
-        if self.time_shift:
-            events["t"] -= self.time_shift_us
-            triggers["t"] -= self.time_shift_us
-        return events, triggers
-
-    def finish(self) -> None:
-        """End of stream: a partial word is counted (``strict=True``: CorruptRawError)."""
-        if not self._pending:
-            return
-        offset, n = self._offset - len(self._pending), len(self._pending)
-        self._pending = b""
-        self.stats.trailing_bytes += n
-        if self.strict:
-            raise CorruptRawError("EVT2 data ends inside a 32-bit word (file cut short?)", self.path, offset)
-        log.warning("%s: EVT2 data ends inside a 32-bit word at byte %d; ignored", self.path or "<bytes>", offset)
+        return self._shifted(events, triggers)
 
     def _skip_until_time_high(self, words: np.ndarray) -> np.ndarray:
         if self._first_high is not None:

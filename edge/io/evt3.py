@@ -28,44 +28,23 @@ naming the file and byte offset, with ``strict=True``), so a recording cut short
 from __future__ import annotations
 
 import functools
-import logging
-from dataclasses import dataclass, fields
 from types import ModuleType
 
 import numpy as np
 
-from darkread.edge.errors import CorruptRawError
 from darkread.edge.events import Events
 from darkread.edge.io.evt3_encode import Triggers, encode_evt3
 from darkread.edge.io.evt3_numpy import DecoderState, decode_words
-
-log = logging.getLogger(__name__)
+from darkread.edge.io.word_stream import DecodeStats, WordStreamDecoder
 
 __all__ = ["DecodeStats", "Evt3Decoder", "Triggers", "decode_evt3", "encode_evt3"]
 
 
-@dataclass
-class DecodeStats:
-    """Counters a user can read after decoding (they add up over all chunks)."""
-
-    words: int = 0
-    events: int = 0
-    triggers: int = 0
-    skipped_before_time_high: int = 0
-    skipped_other: int = 0  # OTHERS, CONTINUED and reserved words
-    non_monotonic_time_high: int = 0
-    vectors_out_of_range: int = 0
-    trailing_bytes: int = 0
-    events_out_of_range: int = 0  # pixels outside the sensor (corrupt data), dropped
-    dropped_non_monotonic: int = 0  # events and triggers dropped after a non-monotonic TIME_HIGH
-
-    def add(self, other: DecodeStats) -> None:
-        for f in fields(self):
-            setattr(self, f.name, getattr(self, f.name) + getattr(other, f.name))
-
-
-class Evt3Decoder:
+class Evt3Decoder(WordStreamDecoder):
     """Streaming EVT 3.0 decoder: feed chunks of any size; the state carries across calls."""
+
+    FORMAT = "EVT3"
+    WORD_DTYPE = "<u2"
 
     def __init__(
         self,
@@ -79,17 +58,12 @@ class Evt3Decoder:
         byte_offset: int = 0,
         backend: str = "auto",
     ) -> None:
-        if not (0 < width <= 2048 and 0 < height <= 2048):
-            raise ValueError(f"sensor size {width}x{height} is outside 1..2048")
+        super().__init__(
+            width, height, time_shift=time_shift, path=path, y_range=y_range, strict=strict, byte_offset=byte_offset
+        )
         self.backend = _resolve_backend(backend)
         self._decode_words = _decode_words_jit if self.backend == "numba" else decode_words
-        self.width, self.height = width, height
-        self.time_shift, self.path, self.strict = time_shift, path, strict
-        self.y_range = (0, height) if y_range is None else (max(0, y_range[0]), min(height, y_range[1]))
-        self.stats = DecodeStats()
         self._state = DecoderState()
-        self._pending = b""
-        self._offset = byte_offset  # file offset of the next byte fed
 
     @property
     def time_shift_us(self) -> int:
@@ -98,32 +72,12 @@ class Evt3Decoder:
         return max(first - 1, 0) << 12 if first is not None else 0
 
     def decode(self, chunk: bytes | memoryview) -> tuple[Events, Triggers]:
-        data = bytes(chunk) if self._pending else chunk
-        if self._pending:
-            data = self._pending + data
-        n_words = len(data) // 2
-        self._pending = bytes(data[2 * n_words :])
-        self._offset += len(chunk)
-        words = np.frombuffer(data, dtype="<u2", count=n_words)
+        words = self._whole_words(chunk)
         events, triggers = self._decode_words(words, self._state, self.stats, self.width, self.height)
         lo, hi = self.y_range
         if lo > 0 or hi < self.height:
             events = events[(events["y"] >= lo) & (events["y"] < hi)]
-        if self.time_shift:
-            events["t"] -= self.time_shift_us
-            triggers["t"] -= self.time_shift_us
-        return events, triggers
-
-    def finish(self) -> None:
-        """End of stream: a dangling odd byte is counted (``strict=True``: CorruptRawError)."""
-        if not self._pending:
-            return
-        offset = self._offset - len(self._pending)
-        self._pending = b""
-        self.stats.trailing_bytes += 1
-        if self.strict:
-            raise CorruptRawError("EVT3 data ends inside a 16-bit word (file cut short?)", self.path, offset)
-        log.warning("%s: EVT3 data ends inside a 16-bit word at byte %d; ignored", self.path or "<bytes>", offset)
+        return self._shifted(events, triggers)
 
 
 BACKENDS = ("auto", "numba", "numpy")
