@@ -28,11 +28,6 @@ class PageImage:
     lines: list[Box]
 
 
-def ink_to_paper(mask: np.ndarray) -> np.ndarray:
-    """Ink mask (nonzero = ink) -> uint8 black-on-white image, as OCR engines expect."""
-    return np.where(mask != 0, 0, 255).astype(np.uint8)
-
-
 def stitch_frames(frames: list[StoredFrame], page_id: str) -> PageImage:
     """Stored frames -> the stitched page (the same stitcher the glasses run)."""
     try:

@@ -32,6 +32,7 @@ import cv2
 import msgpack
 import numpy as np
 
+from darkread.edge.stitch.frames import ink_mask_to_paper
 from darkread.proto.messages import Frame, Gaze, Hello, Page
 
 log = logging.getLogger(__name__)
@@ -118,7 +119,7 @@ class WriteResult:
 
 def mask_to_png(mask: np.ndarray) -> bytes:
     """Ink mask (nonzero = ink) -> PNG bytes, black text on white."""
-    ok, png = cv2.imencode(".png", np.where(mask != 0, 0, 255).astype(np.uint8))
+    ok, png = cv2.imencode(".png", ink_mask_to_paper(mask))
     if not ok:
         raise StoreError("PNG encoding failed")
     return png.tobytes()

@@ -156,6 +156,11 @@ class StitchConfig:
             raise ValueError(f"grey_saturation must be in (0, 1], got {self.grey_saturation}")
 
 
+def ink_mask_to_paper(mask: np.ndarray) -> np.ndarray:
+    """Ink mask (nonzero = ink) -> uint8 black (0) on white (255), as OCR engines and people read it."""
+    return np.where(np.asarray(mask) != 0, 0, 255).astype(np.uint8)
+
+
 def ink_probability_to_paper(probability: np.ndarray, saturation: float = 0.8) -> np.ndarray:
     """Ink probability in [0, 1] -> uint8 black (ink) on white (paper), saturating at ``saturation``."""
     shade = np.clip(np.asarray(probability, np.float32) / saturation, 0.0, 1.0)
@@ -183,12 +188,12 @@ class Page:
         Falls back to the binary page when no probability is known.
         """
         if self.ink_probability is None:
-            return np.where(self.image > 0, 0, 255).astype(np.uint8)
+            return ink_mask_to_paper(self.image)
         return ink_probability_to_paper(self.ink_probability, self.grey_saturation)
 
     def to_png_bytes(self) -> bytes:
         """Black ink on white, 8-bit grey PNG."""
-        grey = np.where(self.image > 0, 0, 255).astype(np.uint8)
+        grey = ink_mask_to_paper(self.image)
         if grey.size == 0:
             grey = np.full((1, 1), 255, np.uint8)
         ok, buf = cv2.imencode(".png", grey)
