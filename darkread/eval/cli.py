@@ -11,10 +11,12 @@ logger = logging.getLogger(__name__)
 EVAL_HELP = """\
 Two forms:
 
-  darkread eval make-suite OUT [--small]
+  darkread eval make-suite OUT [--small] [--jobs N]
       write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
       text kinds, three font families incl. one held out of training, x-heights 7-12, motion
-      still/normal/walking). --small: 17 short recordings, one axis varied at a time (CI-sized).
+      still/normal/walking, and nine 30-lux paragraphs). Each recording ends when the page has been
+      read once; texts come from the corpus part never used for training. --small: 17 short
+      recordings, one axis varied at a time (CI-sized).
 
   darkread eval SUITE_DIR [--out docs/eval] [--backend local]
       read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
@@ -48,6 +50,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--note", action="append", default=[], metavar="TEXT", help="a line for the report's header (repeatable)")
     parser.add_argument("--small", action="store_true", help="make-suite: the small (CI) suite")
     parser.add_argument("--limit", type=int, metavar="N", help="make-suite: only the first N recordings")
+    parser.add_argument("--jobs", type=int, default=1, metavar="N",
+                        help="worker processes (make-suite and evaluation; default 1)")
     parser.set_defaults(func=_run)
 
 
@@ -64,7 +68,7 @@ def _make_suite(args: argparse.Namespace) -> int:
 
     if not args.make_suite_out:
         raise ValueError("give the output folder: darkread eval make-suite OUT [--small]")
-    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit)
+    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
     return 0
 

@@ -12,8 +12,13 @@ head motion), through a simple physical camera model:
   limit; beyond that the image gets darker;
 * motion blur: the scene is rendered at sub-frame times spread over the exposure (head and page
   motion of the session) and averaged, at most half a pixel of motion between sub-frames;
-* photon shot noise (Poisson in electrons), read noise (Gaussian), gain, sRGB gamma, 8 bits, three
-  colour channels with independent noise; no ISP denoising;
+* optics: a Gaussian lens blur of ``lens_psf_sigma_px`` (1 px: edges in the reference recording's
+  ``rgb.png`` measure sigma ~1.25 px including its motion);
+* a Bayer colour filter (RGGB): each photosite counts the electrons of one colour (a third of the
+  light a three-plane model would collect), with photon shot noise (Poisson) and read noise
+  (Gaussian); bilinear demosaicing on the linear raw image, gain, sRGB gamma, 8 bits; no ISP
+  denoising;
+* JPEG at ``jpeg_quality`` (Aria stores its RGB frames as JPEG);
 * the OCR sees a grey crop around the page (the channels averaged), a fair start for the engine.
 
 Electrons per lux are set from photometry of a small phone-class pixel (about 100 e-/s per lux on
@@ -56,6 +61,9 @@ class RgbCameraModel:
     paper_level: float = 0.5  # linear output level (0..1) the auto-exposure puts the paper at
     max_subframe_step_px: float = 0.5
     max_subframes: int = 64
+    lens_psf_sigma_px: float = 1.0  # 0: a perfect lens
+    bayer: bool = True  # False: three full colour planes with independent noise (no mosaic)
+    jpeg_quality: int | None = 90  # None: the raw 8-bit image, no compression
 
     @property
     def focal_px(self) -> float:
@@ -160,16 +168,37 @@ def expose(
     exposure: Exposure,
     rng: np.random.Generator,
     camera: RgbCameraModel = RgbCameraModel(),
-    *,
-    channels: int = 3,
 ) -> np.ndarray:
-    """Reflectance [h, w] -> 8-bit sRGB image [h, w, channels] with shot and read noise."""
-    mean_e = camera.electrons_per_lux_s * lux * exposure.exposure_s * np.asarray(reflectance, dtype=np.float64)
-    shape = mean_e.shape + (channels,)
-    electrons = rng.poisson(np.broadcast_to(mean_e[..., None], shape)).astype(np.float32)
-    electrons += rng.normal(0.0, camera.read_noise_electrons, shape).astype(np.float32)
-    linear = electrons * np.float32(exposure.gain * camera.paper_level / camera.target_electrons)
-    return np.round(srgb_encode(linear) * 255.0).astype(np.uint8)
+    """Reflectance [h, w] -> the 8-bit sRGB image [h, w, 3] the camera delivers."""
+    import cv2
+
+    reflect = np.asarray(reflectance, dtype=np.float32)
+    if camera.lens_psf_sigma_px > 0:
+        reflect = cv2.GaussianBlur(reflect, (0, 0), camera.lens_psf_sigma_px, borderType=cv2.BORDER_REFLECT)
+    mean_e = camera.electrons_per_lux_s * lux * exposure.exposure_s * reflect.astype(np.float64)
+    to_linear = np.float32(exposure.gain * camera.paper_level / camera.target_electrons)
+    if camera.bayer:  # one colour per photosite, then demosaicing (on the linear raw image, as an ISP does)
+        electrons = rng.poisson(mean_e).astype(np.float32)
+        electrons += rng.normal(0.0, camera.read_noise_electrons, mean_e.shape).astype(np.float32)
+        raw = np.round(np.clip(electrons * to_linear, 0.0, 1.0) * 65535.0).astype(np.uint16)
+        linear = cv2.cvtColor(raw, cv2.COLOR_BayerRG2RGB).astype(np.float32) / np.float32(65535.0)
+    else:
+        shape = mean_e.shape + (3,)
+        electrons = rng.poisson(np.broadcast_to(mean_e[..., None], shape)).astype(np.float32)
+        electrons += rng.normal(0.0, camera.read_noise_electrons, shape).astype(np.float32)
+        linear = electrons * to_linear
+    image = np.round(srgb_encode(linear) * 255.0).astype(np.uint8)
+    return jpeg_round_trip(image, camera.jpeg_quality) if camera.jpeg_quality is not None else image
+
+
+def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
+    """The image as a JPEG decoder sees it after encoding at ``quality`` (RGB in, RGB out)."""
+    import cv2
+
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise RuntimeError("JPEG encoding failed")
+    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:
@@ -249,13 +278,10 @@ def recording_spec(recording_dir: str | Path) -> RecordingSpec:
 
 def session_for(spec: RecordingSpec) -> Session:
     """The session ``write_recording(spec)`` simulated (same spec, same seed -> same scene)."""
-    from darkread.models.synth.session import SessionSpec, make_session
+    from darkread.models.synth.recording import session_spec
+    from darkread.models.synth.session import make_session
 
-    session_spec = SessionSpec(
-        split="train", lux=spec.lux, motion=spec.motion, kind=spec.kind, font=spec.font,
-        xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
-    )
-    return make_session(session_spec, spec.seed)
+    return make_session(session_spec(spec), spec.seed)
 
 
 def snapshot_for_recording(
@@ -268,8 +294,10 @@ def snapshot_for_recording(
     text_path = recording_dir / "text.txt"
     if text_path.is_file() and text_path.read_text(encoding="utf-8") != session.page.text:
         raise ValueError(f"{recording_dir}: {SPEC_NAME} does not re-create this recording's page (text differs)")
+    from darkread.models.synth.recording import recording_seconds
+
     rng = np.random.default_rng([spec.seed, 7])
-    return take_snapshot(session, spec.seconds / 2, rng, camera, full_frame=full_frame)
+    return take_snapshot(session, recording_seconds(spec, session) / 2, rng, camera, full_frame=full_frame)
 
 
 def recorded_snapshot(recording_dir: str | Path) -> RgbSnapshot | None:

@@ -7,8 +7,13 @@ fixed ``RecordingSpec`` (nothing left to chance but the seeded generator), plus 
 Axes: lux 1000/100/30/10/5; text kinds letters/words/pangram/paragraph; font families DejaVu Sans
 and STIX General (training) and Roboto (held out of training); x-heights 7-12 event pixels;
 motion still/normal/walking. The full suite crosses lux x motion x kind (fonts and x-heights
-rotate through that grid) and adds an x-height x font sweep; ``small`` varies one axis at a time
-around a base condition, for CI and quick looks.
+rotate through that grid), adds an x-height x font sweep and a block of 30-lux paragraphs (the
+paper's headline condition); ``small`` varies one axis at a time around a base condition, for CI
+and quick looks.
+
+Every recording ends when the reader has read the page once (``read_once``; ``seconds`` is only
+the upper bound), so the text the recording shows is exactly ``text.txt``, and words and
+paragraphs come from the corpus part never used for training (``split="val"``).
 """
 
 from __future__ import annotations
@@ -45,6 +50,8 @@ class SuiteEntry:
     n_lines: int
     line_chars: int
     seed: int
+    read_once: bool = True
+    split: str = "val"
 
     def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
         from darkread.models.synth.recording import RecordingSpec
@@ -52,12 +59,16 @@ class SuiteEntry:
         return RecordingSpec(
             lux=self.lux, motion=self.motion, kind=self.kind, seconds=self.seconds, seed=self.seed, font=self.font,
             xheight_px=self.xheight_px, n_lines=self.n_lines, line_chars=self.line_chars,
-            description=f"darkread evaluation suite: {self.name}",
+            description=f"darkread evaluation suite: {self.name}", split=self.split, read_once=self.read_once,
         )
 
 
+SECONDS_PER_LINE_CAP = 2.5  # the upper bound of a read-once recording; readers need ~1-1.5 s per line
+
+
 def _entry(index: int, lux: float, motion: str, kind: str, font: str, xheight: float, *, small: bool) -> SuiteEntry:
-    seconds, n_lines, line_chars = (2.5, 3, 20) if small else (4.0, 4, 28)
+    n_lines, line_chars = (3, 20) if small else ((4, 28) if kind == "paragraph" else (3, 28))
+    seconds = 1.0 + SECONDS_PER_LINE_CAP * n_lines
     slug = font.lower().replace(" ", "")
     name = f"{index:03d}_lux{lux:g}_{motion}_{kind}_{slug}_xh{xheight:g}"
     return SuiteEntry(name, float(lux), motion, kind, font, float(xheight), seconds, n_lines, line_chars, BASE_SEED + index)
@@ -81,14 +92,30 @@ def suite_entries(*, small: bool = False) -> list[SuiteEntry]:
                     conditions.append((lux, motion, kind, FONTS[k % len(FONTS)], XHEIGHTS_PX[(k * 5) % len(XHEIGHTS_PX)]))
                     k += 1
         conditions += [(100.0, "normal", "paragraph", font, xh) for font in FONTS for xh in XHEIGHTS_PX]
+        conditions += [(30.0, motion, "paragraph", font, 10.0) for motion in MOTIONS for font in FONTS]
     return [_entry(i, *c, small=small) for i, c in enumerate(conditions)]
 
 
-def make_suite(out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None) -> list[SuiteEntry]:
-    """Write the suite under ``out``; recordings already complete (their ``spec.json`` matches) are kept."""
-    from tqdm import tqdm
-
+def _write_entry(out: Path, entry: SuiteEntry) -> str:
+    """Write one recording unless it is already complete; its name when written (worker-safe)."""
     from darkread.models.synth.recording import write_recording
+
+    folder = out / entry.name
+    spec_doc = asdict(entry.recording_spec())
+    spec_path = folder / SPEC_NAME
+    if spec_path.is_file() and json.loads(spec_path.read_text()) == spec_doc and (folder / "meta.json").is_file():
+        return ""
+    write_recording(folder, entry.recording_spec(), progress=False)
+    spec_path.write_text(json.dumps(spec_doc, indent=1))  # last: marks the recording complete
+    return entry.name
+
+
+def make_suite(
+    out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1
+) -> list[SuiteEntry]:
+    """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
+    ``spec.json`` matches) are kept, so an interrupted run resumes."""
+    from tqdm import tqdm
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -97,14 +124,19 @@ def make_suite(out: str | Path, *, small: bool = False, progress: bool = True, o
         json.dumps({"small": small, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )
-    for entry in tqdm(entries, desc="recordings", unit="rec", disable=not progress):
-        folder = out / entry.name
-        spec_doc = asdict(entry.recording_spec())
-        spec_path = folder / SPEC_NAME
-        if spec_path.is_file() and json.loads(spec_path.read_text()) == spec_doc and (folder / "meta.json").is_file():
-            continue
-        write_recording(folder, entry.recording_spec(), progress=False)
-        spec_path.write_text(json.dumps(spec_doc, indent=1))  # last: marks the recording complete
+    bar = tqdm(total=len(entries), desc="recordings", unit="rec", disable=not progress)
+    if jobs <= 1:
+        for entry in entries:
+            _write_entry(out, entry)
+            bar.update()
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for future in as_completed([pool.submit(_write_entry, out, e) for e in entries]):
+                future.result()  # a failed recording stops the run with its error
+                bar.update()
+    bar.close()
     return entries
 
 

@@ -30,7 +30,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     rec.add_argument("--lux", type=float, default=100.0, help="illuminance at the page (5..1000; default 100)")
     rec.add_argument("--motion", choices=MOTIONS, default="normal", help="head / page motion level")
     rec.add_argument("--kind", choices=KINDS, default="paragraph", help="what is printed")
-    rec.add_argument("--seconds", type=float, default=10.0, help="duration of the recording (s)")
+    rec.add_argument("--seconds", type=float, default=10.0,
+                     help="duration of the recording (s); with --read-once the longest it may last")
+    rec.add_argument("--read-once", action="store_true",
+                     help="end the recording when the reader has read the last line (no re-reading)")
+    rec.add_argument("--text-split", choices=("train", "val"), default="train",
+                     help="val: texts never used for training (for evaluation)")
     rec.add_argument("--seed", type=int, default=0, help="random seed (same seed, same recording)")
     rec.add_argument("--font", default=None, help="font face, e.g. 'DejaVu Sans' (default: random training font)")
     rec.add_argument("--xheight", type=float, default=None, help="x-height in event pixels (5..16; default random)")
@@ -85,6 +90,8 @@ def _recording(args: argparse.Namespace) -> int:
         xheight_px=args.xheight,
         n_lines=args.lines,
         line_chars=args.line_chars,
+        split=args.text_split,
+        read_once=args.read_once,
     )
     meta = write_recording(args.out, spec)
     print(f"{args.out}: {meta['event_count']} events over {meta['duration_s']} s ({meta['event_rate_hz']:.0f} ev/s)")

@@ -47,6 +47,14 @@ class Scanpath:
         out = np.stack([np.interp(t.ravel(), self.t, self.xy[:, 0]), np.interp(t.ravel(), self.t, self.xy[:, 1])], 1)
         return out[0] if t.ndim == 0 else out
 
+    def first_pass_end_s(self) -> float:
+        """When the reader leaves the last line for the first time (the page read once), or inf."""
+        last = max(f.line for f in self.fixations)
+        for before, after in zip(self.fixations, self.fixations[1:]):
+            if before.line == last and after.kind == "sweep":
+                return before.t1_s
+        return math.inf
+
     def in_blink(self, t_s: np.ndarray) -> np.ndarray:
         t = np.asarray(t_s, dtype=np.float64)
         inside = np.zeros(t.shape, dtype=bool)

@@ -33,6 +33,7 @@ log = logging.getLogger(__name__)
 
 REGION_MARGIN_PX = 16
 WRAP_US = 1 << 24
+READ_ONCE_TAIL_S = 0.3  # kept after the last line was read, as a reader pauses before looking away
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,23 @@ class RecordingSpec:
     n_lines: int | None = None
     line_chars: int | None = None
     description: str = "synthetic reading session"
+    split: str = "train"  # "val": texts never used for training (evaluation)
+    read_once: bool = False  # stop once the page was read (``seconds`` is then the upper bound)
+
+
+def session_spec(spec: RecordingSpec) -> SessionSpec:
+    """The session a recording spec simulates (also how the RGB baseline re-creates its scene)."""
+    return SessionSpec(
+        split=spec.split, lux=spec.lux, motion=spec.motion, kind=spec.kind, font=spec.font,
+        xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
+    )
+
+
+def recording_seconds(spec: RecordingSpec, session: Session) -> float:
+    """How long the recording lasts: ``seconds``, or less when it ends after one reading of the page."""
+    if not spec.read_once:
+        return float(spec.seconds)
+    return float(min(spec.seconds, session.scanpath.first_pass_end_s() + READ_ONCE_TAIL_S))
 
 
 def _cpf_points(session: Session, tex_xy: np.ndarray, t_s: np.ndarray) -> np.ndarray:
@@ -144,18 +162,10 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     t_wall = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    session_spec = SessionSpec(
-        split="train",
-        lux=spec.lux,
-        motion=spec.motion,
-        kind=spec.kind,
-        font=spec.font,
-        xheight_px=spec.xheight_px,
-        n_lines=spec.n_lines,
-        line_chars=spec.line_chars,
-        duration_s=spec.seconds,
-    )
-    session = make_session(session_spec, spec.seed)
+    if spec.split not in ("train", "val"):
+        raise ValueError(f"split {spec.split!r}: use 'train' or 'val'")
+    session = make_session(session_spec(spec), spec.seed)
+    seconds = recording_seconds(spec, session)
     rng = np.random.default_rng([spec.seed, 2])
 
     event_t0 = int(rng.integers(0, WRAP_US))
@@ -164,13 +174,13 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     written_offset = true_offset + int(round(rng.normal(0.0, 2000.0)))
     calib = replace(session.calib, gaze_to_event_time_offset_us=int(written_offset))
 
-    rows = gaze_rows(session, device_t0, spec.seconds, rng)
+    rows = gaze_rows(session, device_t0, seconds, rng)
     uv = gaze_pixels(session, {k: v[~rows["blink"]] for k, v in rows.items()})
     x0, y0, w, h = reachable_region(uv)
     region = Region.of(session.calib, x0, y0, w, h)
     log.info("simulating region x=%d..%d y=%d..%d (%d px)", x0, x0 + w, y0, y0 + h, w * h)
-    signal = simulate_region(session, region, spec.seconds, rng, progress=progress)
-    background = background_events(session.sensor, 0, int(spec.seconds * 1e6), SENSOR_WH, (x0, y0, w, h), rng)
+    signal = simulate_region(session, region, seconds, rng, progress=progress)
+    background = background_events(session.sensor, 0, int(seconds * 1e6), SENSOR_WH, (x0, y0, w, h), rng)
     events = drop_same_time_duplicates(concat_events([signal, background]))
     events["t"] += event_t0
 
@@ -207,7 +217,7 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     )
     save_calibration(out / "calibration.json", calib)
     (out / "text.txt").write_text(session.page.text, encoding="ascii")
-    duration = float(spec.seconds)
+    duration = round(seconds, 3)
     face_family = session.page.font.removesuffix(" Bold")
     meta = {
         "description": spec.description,
@@ -220,6 +230,7 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         "xheight_px_measured_t0": round(session.scene.xheight_px(0.0), 2),
         "duration_s": duration,
         "text_source": CORPUS_SOURCE if session.kind in ("paragraph", "words") else f"generated ({session.kind})",
+        "text_split": spec.split,
         "n_lines": len(session.page.lines),
         "event_count": int(events.size),
         "event_rate_hz": round(events.size / duration, 1),

@@ -14,11 +14,13 @@ from darkread.eval.rgb_baseline import (
     RgbCameraModel,
     auto_exposure,
     expose,
+    jpeg_round_trip,
     read_snapshot,
     recording_spec,
     session_for,
     snapshot_for_recording,
     take_snapshot,
+    to_grey,
 )
 
 CAMERA = RgbCameraModel()
@@ -74,14 +76,42 @@ def test_darker_means_longer_exposure_more_blur_and_more_noise(walking: Session)
 def test_noise_follows_the_signal_in_electrons() -> None:
     flat = np.full((200, 200), 0.8, dtype=np.float32)
     rng = np.random.default_rng(2)
+    raw = RgbCameraModel(jpeg_quality=None)
     for lux in (1000.0, 30.0):
         exposure = auto_exposure(lux, 0.8)
-        image = expose(flat, lux, exposure, rng, channels=1)[..., 0].astype(np.float64)
+        image = expose(flat, lux, exposure, rng, raw)[..., 1].astype(np.float64)
         assert image.mean() == pytest.approx(255 * 0.7354, rel=0.03)  # paper at linear 0.5 -> sRGB 0.735
         assert image.std() > 0
-    bright = expose(flat, 1000.0, auto_exposure(1000.0, 0.8), rng, channels=1).std()
-    dark = expose(flat, 30.0, auto_exposure(30.0, 0.8), rng, channels=1).std()
+    bright = expose(flat, 1000.0, auto_exposure(1000.0, 0.8), rng, raw).std()
+    dark = expose(flat, 30.0, auto_exposure(30.0, 0.8), rng, raw).std()
     assert dark > 2 * bright  # ~12x fewer electrons at 30 lux: sqrt(12) ~ 3.5x the relative noise
+
+
+def test_a_bayer_sensor_is_noisier_in_grey_than_three_full_colour_planes() -> None:
+    flat = np.full((200, 200), 0.8, dtype=np.float32)
+    exposure = auto_exposure(30.0, 0.8)
+    mosaic = RgbCameraModel(jpeg_quality=None, lens_psf_sigma_px=0.0)
+    planes = replace(mosaic, bayer=False)
+    greys = [to_grey(expose(flat, 30.0, exposure, np.random.default_rng(4), cam)).astype(float) for cam in (mosaic, planes)]
+    block_noise = [g.reshape(25, 8, 25, 8).mean(axis=(1, 3)).std() for g in greys]
+    # one colour per photosite collects a third of the light: sqrt(3) the noise over any patch
+    # (demosaicing hides it per pixel by interpolating, so compare 8x8 patches)
+    assert block_noise[0] > 1.4 * block_noise[1]
+
+
+def test_lens_blur_softens_an_edge_and_jpeg_is_lossy() -> None:
+    edge = np.zeros((64, 64), dtype=np.float32)
+    edge[:, 32:] = 0.8
+    exposure = auto_exposure(1000.0, 0.8)
+    sharp = RgbCameraModel(jpeg_quality=None, lens_psf_sigma_px=0.0, bayer=False)
+    soft = replace(sharp, lens_psf_sigma_px=1.5)
+    rows = [to_grey(expose(edge, 1000.0, exposure, np.random.default_rng(5), cam)).astype(float).mean(axis=0)
+            for cam in (sharp, soft)]
+    assert rows[1][30] > rows[0][30] + 20 and rows[1][33] < rows[0][33] - 10  # light spreads across the edge
+    image = expose(edge, 1000.0, exposure, np.random.default_rng(5), sharp)
+    decoded = jpeg_round_trip(image, 40)
+    assert decoded.shape == image.shape and decoded.dtype == np.uint8
+    assert 0 < np.abs(decoded.astype(int) - image).mean() < 10
 
 
 def test_snapshot_is_reproducible_and_frames_the_page(still: Session) -> None:

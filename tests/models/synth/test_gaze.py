@@ -71,3 +71,16 @@ def test_tracker_error_is_one_to_two_degrees_and_partly_constant():
     blink = np.ones(5, bool)
     _, _, pitch_b, _ = tracker_rows(np.tile([[0.0, 0.0, 0.4]], (5, 1)), np.arange(5) * 16_667, blink, model, rng)
     assert np.all(np.degrees(np.abs(pitch_b)) > 5)  # blink rows are far off
+
+
+def test_first_pass_ends_when_the_reader_leaves_the_last_line():
+    page, sp = _scanpath(2)
+    end = sp.first_pass_end_s()
+    last = len(page.lines) - 1
+    before = [f for f in sp.fixations if f.t1_s <= end]
+    assert {f.line for f in before} == set(range(len(page.lines)))  # every line was looked at
+    assert before[-1].line == last
+    after = [f for f in sp.fixations if f.t0_s > end]
+    assert after and after[0].line == 0 and after[0].kind == "sweep"  # the re-reading starts over
+    page1 = render_page(["one line only"], FACES[0], 12.0, 1e-4)
+    assert 0.2 < reading_scanpath(page1, 5.0, 0.05, np.random.default_rng(0)).first_pass_end_s() < 2.0

@@ -71,3 +71,21 @@ def test_recording_is_deterministic_for_a_seed(tmp_path):
     write_recording(tmp_path / "b", spec, progress=False)
     for name in ("events.raw", "general_eye_gaze.csv", "calibration.json", "text.txt"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+
+
+def test_read_once_recording_ends_after_the_last_line_on_unseen_text(tmp_path):
+    from dataclasses import replace
+
+    from darkread.models.synth.recording import READ_ONCE_TAIL_S, recording_seconds, session_spec
+    from darkread.models.synth.text import paragraphs_for
+
+    spec = RecordingSpec(lux=200.0, motion="still", kind="paragraph", seconds=30.0, seed=3, xheight_px=8.0,
+                         n_lines=2, line_chars=16, split="val", read_once=True)
+    session = make_session(session_spec(spec), spec.seed)
+    seconds = recording_seconds(spec, session)
+    assert seconds == session.scanpath.first_pass_end_s() + READ_ONCE_TAIL_S < 5.0
+    assert recording_seconds(replace(spec, read_once=False), session) == 30.0
+    first_words = session.page.lines[0].split()[:2]
+    assert any(" ".join(first_words) in " ".join(p.split()) for p in paragraphs_for("val"))
+    meta = write_recording(tmp_path, replace(spec, seconds=0.5), progress=False)  # the cap bounds a read-once recording
+    assert meta["text_split"] == "val" and meta["duration_s"] == 0.5
