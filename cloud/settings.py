@@ -37,6 +37,9 @@ class Settings(BaseSettings):
 
     # OCR. "local" is the embedded rapidocr engine.
     ocr_backend: OcrBackendName = "local"
+    ocr_lexicon: bool = Field(
+        True, description="correct offline engines' misread glyphs (e/o, i/l) with an English word list"
+    )
     ocr_timeout_s: float = Field(60.0, gt=0)
 
     google_base_url: str = "https://vision.googleapis.com"

@@ -71,6 +71,7 @@ def read_recording(
     model: str | None = None,
     out_dir: str | Path | None = None,
     drain_timeout_s: float = 60.0,
+    lexicon: bool = True,
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says."""
     import httpx
@@ -88,7 +89,8 @@ def read_recording(
     out = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix="darkread-read-"))
     out.mkdir(parents=True, exist_ok=True)
     api_key = secrets.token_urlsafe(16)
-    settings = Settings(data_dir=out / "cloud", api_key=SecretStr(api_key), ocr_backend=backend)  # type: ignore[arg-type]
+    settings = Settings(data_dir=out / "cloud", api_key=SecretStr(api_key), ocr_backend=backend,  # type: ignore[arg-type]
+                        ocr_lexicon=lexicon)
     stages: dict[str, float] = {}
     with serve_in_thread(create_app(settings)) as server:
         stages["cloud_start"] = time.perf_counter() - started
@@ -160,6 +162,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
                         help="OCR backend (default: local, the embedded offline engine); remote ones read DARKREAD_* settings")
     parser.add_argument("--mode", default="frames", choices=["frames", "pages"], help="stream frames (default) or stitch on the glasses")
+    parser.add_argument("--no-lexicon", dest="lexicon", action="store_false",
+                        help="report the offline engine's text as read, without the dictionary correction")
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
     parser.add_argument("--out", metavar="DIR", help="keep the page image, spool and cloud data here (default: a temp dir)")
     parser.add_argument("--json", action="store_true", help="print one JSON object with the text and per-stage figures")
@@ -175,7 +179,8 @@ def _run(args: argparse.Namespace) -> int:
         path = Path(args.recording)
     else:
         raise ValueError("give a RECORDING directory, or --demo for the shipped sample")
-    result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out)
+    result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out,
+                           lexicon=args.lexicon)
     if args.json:
         print(json.dumps(result.to_json(), indent=1))
         return 0

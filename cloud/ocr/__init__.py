@@ -13,16 +13,27 @@ __all__ = ["OcrBackend", "OcrError", "OcrLine", "OcrResult", "OcrUnavailableErro
 
 
 def create_backend(settings: Settings) -> OcrBackend:
-    """The configured engine. Engines import their libraries lazily, so unused ones cost nothing."""
+    """The configured engine. Engines import their libraries lazily, so unused ones cost nothing.
+
+    Offline engines read without a language model; unless ``ocr_lexicon`` is off, their text goes
+    through the dictionary correction (``lexicon.LexiconCorrected``). Remote engines have their own.
+    """
     name = settings.ocr_backend
-    if name in ("local", "rapidocr"):
-        from .rapid import RapidOcrBackend
+    if name in ("local", "rapidocr", "tesseract"):
+        engine: OcrBackend
+        if name == "tesseract":
+            from .tesseract import TesseractBackend
 
-        return RapidOcrBackend()
-    if name == "tesseract":
-        from .tesseract import TesseractBackend
+            engine = TesseractBackend()
+        else:
+            from .rapid import RapidOcrBackend
 
-        return TesseractBackend()
+            engine = RapidOcrBackend()
+        if not settings.ocr_lexicon:
+            return engine
+        from .lexicon import LexiconCorrected
+
+        return LexiconCorrected(engine)
     if name == "google":
         from .google_vision import GoogleVisionBackend
 

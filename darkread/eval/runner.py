@@ -18,16 +18,20 @@ from typing import Any
 
 logger = logging.getLogger(__name__)
 
-OFFLINE_BACKENDS: tuple[str, ...] = ("rapidocr", "tesseract")
+OFFLINE_BACKENDS: tuple[str, ...] = ("rapidocr", "rapidocr-raw", "tesseract", "tesseract-raw")
+RAW_SUFFIX = "-raw"  # an offline engine without the dictionary correction
 REMOTE_BACKENDS: tuple[str, ...] = ("google", "openai")
 RESULT_NAME = "result.json"
 
 
 def make_ocr_backend(name: str) -> Any:
-    """An OCR engine by name, configured from ``DARKREAD_*`` settings like the cloud service."""
+    """An OCR engine by name, configured from ``DARKREAD_*`` settings like the cloud service;
+    ``<engine>-raw``: an offline engine without the dictionary correction."""
     from darkread.cloud.ocr import create_backend
     from darkread.cloud.settings import Settings
 
+    if name.endswith(RAW_SUFFIX):
+        return create_backend(Settings(ocr_backend=name.removesuffix(RAW_SUFFIX), ocr_lexicon=False))  # type: ignore[arg-type]
     return create_backend(Settings(ocr_backend=name))  # type: ignore[arg-type]
 
 

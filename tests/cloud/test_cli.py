@@ -41,7 +41,7 @@ def test_serve_starts_and_is_ready(tmp_path: Path) -> None:
                 if process.poll() is not None or time.monotonic() > deadline:
                     raise
                 time.sleep(0.1)
-        assert ready == {"status": "ready", "checks": {"store": True, "ocr:rapidocr": True}}
+        assert ready == {"status": "ready", "checks": {"store": True, "ocr:rapidocr+lexicon": True}}
         assert (tmp_path / "d" / "darkread.sqlite3").is_file()
     finally:
         process.terminate()

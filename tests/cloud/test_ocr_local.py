@@ -111,8 +111,10 @@ def test_reading_order_is_top_to_bottom_then_left_to_right() -> None:
 
 
 def test_backend_selection(tmp_path: object) -> None:
-    assert create_backend(Settings(_env_file=None, ocr_backend="local")).name == "rapidocr"  # type: ignore[call-arg]
-    assert create_backend(Settings(_env_file=None, ocr_backend="tesseract")).name == "tesseract"  # type: ignore[call-arg]
+    assert create_backend(Settings(_env_file=None, ocr_backend="local")).name == "rapidocr+lexicon"  # type: ignore[call-arg]
+    assert create_backend(Settings(_env_file=None, ocr_backend="tesseract")).name == "tesseract+lexicon"  # type: ignore[call-arg]
+    raw = Settings(_env_file=None, ocr_backend="local", ocr_lexicon=False)  # type: ignore[call-arg]
+    assert create_backend(raw).name == "rapidocr"
     with pytest.raises(OcrError, match="GOOGLE_API_KEY"):
         create_backend(Settings(_env_file=None, ocr_backend="google"))  # type: ignore[call-arg]
     openai = create_backend(Settings(_env_file=None, ocr_backend="openai", openai_base_url="http://127.0.0.1:9/v1"))  # type: ignore[call-arg]

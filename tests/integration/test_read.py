@@ -37,7 +37,7 @@ def test_read_recovers_the_printed_text(tmp_path: Path) -> None:
     assert 0 < result.events_foveated < result.events_in
     assert 0 < result.bytes_sent < result.raw_bytes
     assert Path(result.page_png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert result.backend == "rapidocr"
+    assert result.backend == "rapidocr+lexicon"
 
 
 def test_read_json_has_the_per_stage_figures(tmp_path: Path) -> None:

@@ -1,0 +1,182 @@
+"""Dictionary correction of an offline engine's text: the language prior an LLM reader has built in.
+
+Reconstructed strokes at 6-10 px x-height confuse a few glyph pairs (e/o, i/l, a/o, c/e); an
+engine without a language model reports them as read ("aro then buslest"), where GPT-4o would
+read "are then busiest". The correction is deliberately conservative, because a general spelling
+corrector "fixes" rare words that were read right (tardiest -> hardiest):
+
+* only lines that read as language are touched: at least ``min_known_fraction`` of their words
+  must already be dictionary words (words of two letters or more; random letters, codes and part numbers stay as read);
+* only alphabetic words of at least ``min_length`` letters that are *not* in the dictionary are
+  replaced, and only by a dictionary word that differs from them in confusable glyphs alone
+  (``CONFUSABLE``: same length, or one lost ``i``/``l``/``t`` stem), the most frequent one first;
+  words with no such candidate stay as read;
+* a short word with a capital I inside a sentence ("busiest In seducing") is lowered when the
+  lower-case word is a dictionary word (longer ones may be names: Italy, Ionia);
+* capitalisation (lower, Capitalised, UPPER) and surrounding punctuation are kept.
+
+The word list is SymSpell's English frequency dictionary (82,765 words, MIT licence), shipped
+inside the ``symspellpy`` package; no network is needed.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .base import OcrLine, OcrResult, OcrUnavailableError
+
+if TYPE_CHECKING:
+    from symspellpy import SymSpell
+
+    from .base import OcrBackend
+
+logger = logging.getLogger(__name__)
+
+_TOKEN = re.compile(r"^(?P<lead>[^A-Za-z]*)(?P<word>[A-Za-z]+)(?P<trail>[^A-Za-z]*)$")
+_CONFUSABLE_GROUPS = ("eoac", "ilt", "nu", "hb", "rt", "vy")
+CONFUSABLE: frozenset[tuple[str, str]] = frozenset(
+    (a, b) for group in _CONFUSABLE_GROUPS for a in group for b in group if a != b
+)
+DROPPED_STEMS = frozenset("ilt")  # thin strokes a reconstruction can lose entirely
+_SENTENCE_END = (".", "!", "?", ":", ";")
+
+
+def glyph_confusion(read: str, word: str) -> bool:
+    """Whether ``word`` becomes ``read`` through confusable glyphs alone (lower case)."""
+    if len(read) == len(word):
+        return all(a == b or (a, b) in CONFUSABLE for a, b in zip(read, word))
+    if len(word) == len(read) + 1:  # one thin stem lost: "frst" for "first"
+        for k, ch in enumerate(word):
+            if ch in DROPPED_STEMS and word[:k] + word[k + 1 :] == read:
+                return True
+            if k < len(read) and read[k] != ch:
+                return False
+    return False
+
+
+@lru_cache(maxsize=2)
+def _dictionary(max_distance: int) -> SymSpell:
+    """SymSpell loaded with its bundled English frequency list (about 1 s, once per process)."""
+    try:
+        from importlib.resources import files
+
+        from symspellpy import SymSpell
+    except ImportError as exc:
+        raise OcrUnavailableError(
+            "dictionary correction needs symspellpy (pip install symspellpy)", backend="lexicon"
+        ) from exc
+    speller = SymSpell(max_dictionary_edit_distance=max_distance, prefix_length=7)
+    path = files("symspellpy") / "frequency_dictionary_en_82_765.txt"
+    if not speller.load_dictionary(str(path), term_index=0, count_index=1):
+        raise OcrUnavailableError(f"could not load the word list {path}", backend="lexicon")
+    return speller
+
+
+def _with_case_of(template: str, word: str) -> str:
+    if template.isupper() and len(template) > 1:
+        return word.upper()
+    if template[:1].isupper():
+        return word[:1].upper() + word[1:]
+    return word
+
+
+@dataclass
+class LexiconCorrector:
+    """Corrects words of prose lines that are not in the dictionary (see the module docstring)."""
+
+    max_distance: int = 2
+    min_length: int = 3
+    min_known_fraction: float = 0.3
+    _speller: SymSpell | None = field(default=None, init=False, repr=False)
+
+    def _words(self) -> SymSpell:
+        if self._speller is None:
+            self._speller = _dictionary(self.max_distance)
+        return self._speller
+
+    def known(self, word: str) -> bool:
+        return word.lower() in self._words().words
+
+    def correct_word(self, word: str, *, in_sentence: bool = False) -> str:
+        """The most frequent dictionary word ``word`` may be a misreading of, in its case; else ``word``."""
+        from symspellpy import Verbosity
+
+        if in_sentence and 1 < len(word) <= 3 and word[0] == "I" and word[1:].islower():
+            if self.known("i" + word[1:]):
+                return "i" + word[1:]  # "In", "It", "Is" inside a sentence: an i read as I
+        if len(word) < self.min_length or self.known(word):
+            return word
+        read = word.lower()
+        suggestions = self._words().lookup(read, Verbosity.ALL, max_edit_distance=self.max_distance)
+        for suggestion in sorted(suggestions, key=lambda s: (s.distance, -s.count)):
+            if glyph_confusion(read, suggestion.term):
+                return _with_case_of(word, suggestion.term)
+        return word
+
+    def correct_line(self, line: str, *, after_sentence_end: bool = True) -> str:
+        """``after_sentence_end``: whether the text before this line ended a sentence (or there is none)."""
+        tokens = line.split(" ")
+        parsed = [_TOKEN.match(t) for t in tokens]
+        words = [m.group("word") for m in parsed if m is not None and len(m.group("word")) > 1]
+        if not words:
+            return line
+        known = sum(self.known(w) for w in words) / len(words)
+        if known < self.min_known_fraction:
+            return line  # not prose: leave letters, codes and numbers as read
+        out = []
+        sentence_start = after_sentence_end
+        for token, match in zip(tokens, parsed):
+            if match is None:
+                out.append(token)
+            else:
+                in_sentence = not sentence_start and not match.group("lead")
+                out.append(match.group("lead") + self.correct_word(match.group("word"), in_sentence=in_sentence)
+                           + match.group("trail"))
+            sentence_start = token.endswith(_SENTENCE_END) if token else sentence_start
+        return " ".join(out)
+
+    def correct(self, text: str) -> str:
+        out: list[str] = []
+        ended = True
+        for line in text.split("\n"):
+            out.append(self.correct_line(line, after_sentence_end=ended))
+            if line.strip():
+                ended = line.rstrip().endswith(_SENTENCE_END)
+        return "\n".join(out)
+
+
+class LexiconCorrected:
+    """An engine whose text goes through ``LexiconCorrector`` (line boxes and confidences kept)."""
+
+    def __init__(self, engine: OcrBackend, corrector: LexiconCorrector | None = None) -> None:
+        self.engine = engine
+        self.corrector = corrector or LexiconCorrector()
+        self.name = f"{engine.name}+lexicon"
+
+    def __getattr__(self, attribute: str) -> object:  # close(), timeouts, ... of the wrapped engine
+        if attribute == "engine":
+            raise AttributeError(attribute)
+        return getattr(self.engine, attribute)
+
+    def ready(self) -> bool:
+        if not self.engine.ready():
+            return False
+        try:
+            self.corrector.known("the")
+        except OcrUnavailableError as exc:
+            logger.warning("%s", exc)
+            return False
+        return True
+
+    def read(self, image: np.ndarray) -> OcrResult:
+        result = self.engine.read(image)
+        text = self.corrector.correct(result.text)
+        corrected = dict(zip(result.text.split("\n"), text.split("\n")))
+        lines = [OcrLine(corrected.get(line.text, line.text), line.box, line.confidence) for line in result.lines]
+        return OcrResult(text, lines, result.truncated)

@@ -1,0 +1,85 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("symspellpy")
+
+from darkread.cloud.ocr import create_backend  # noqa: E402
+from darkread.cloud.ocr.base import OcrLine, OcrResult  # noqa: E402
+from darkread.cloud.ocr.lexicon import LexiconCorrected, LexiconCorrector, glyph_confusion  # noqa: E402
+from darkread.cloud.settings import Settings  # noqa: E402
+from darkread.eval.metrics import error_rates  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def corrector() -> LexiconCorrector:
+    return LexiconCorrector()
+
+
+def test_glyph_confusion_allows_only_lookalike_glyphs() -> None:
+    assert glyph_confusion("aro", "are") and glyph_confusion("buslest", "busiest")
+    assert glyph_confusion("frst", "first")  # a lost i stem
+    assert not glyph_confusion("tardiest", "hardiest")  # t and h do not look alike
+    assert not glyph_confusion("sectaries", "secretaries")  # two letters more is not a misreading
+    assert not glyph_confusion("cat", "cats")
+
+
+def test_misread_prose_is_corrected_in_its_case_and_punctuation(corrector: LexiconCorrector) -> None:
+    reference = "not untrue that many\nsectaries and false teachers\nare then busiest in\nseducing; but yet more true"
+    read = "not untrue that many\nsectaries and folse teachers\naro then buslest In\nseducing; but yet more true"
+    corrected = corrector.correct(read)
+    assert corrected == reference
+    assert error_rates(reference, read).cer > 0.03 and error_rates(reference, corrected).cer == 0.0
+    assert corrector.correct("should be Oxtirpato, and") == "should be Extirpate, and"
+
+
+def test_words_read_right_stay_as_they_are(corrector: LexiconCorrector) -> None:
+    clean = [
+        "among the tardiest, and the sectaries of Italy,",  # rare words and names
+        "In the beginning. It was",  # sentence starts keep their capitals
+        "the quick brown fox jumps over the lazy dog.",
+    ]
+    for line in clean:
+        assert corrector.correct(line) == line
+
+
+def test_random_letters_and_codes_are_not_prose(corrector: LexiconCorrector) -> None:
+    for line in ("qXvb Lkmt zrpw hh", "A7-33 kq9 zx", "fOOLza Wt vbbq"):
+        assert corrector.correct_line(line) == line
+
+
+class _Engine:
+    name = "engine"
+
+    def __init__(self, text: str) -> None:
+        self.text = text
+        self.closed = False
+
+    def ready(self) -> bool:
+        return True
+
+    def read(self, image: np.ndarray) -> OcrResult:
+        lines = [OcrLine(t, (0, 10 * k, 50, 10 * k + 8), 0.9) for k, t in enumerate(self.text.split("\n"))]
+        return OcrResult(self.text, lines)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_wrapper_corrects_text_and_lines_and_keeps_the_engine_reachable() -> None:
+    engine = _Engine("tell us voinly of new\nopinions, whon this very")
+    wrapped = LexiconCorrected(engine)
+    result = wrapped.read(np.full((20, 20), 255, np.uint8))
+    assert result.text == "tell us vainly of new\nopinions, when this very"
+    assert [line.text for line in result.lines] == result.text.split("\n")
+    assert result.lines[1].box == (0, 10, 50, 18) and result.lines[1].confidence == 0.9
+    assert wrapped.ready() and wrapped.name == "engine+lexicon"
+    wrapped.close()  # type: ignore[attr-defined]
+    assert engine.closed
+
+
+def test_settings_switch_the_correction() -> None:
+    on = create_backend(Settings(_env_file=None, ocr_backend="tesseract"))  # type: ignore[call-arg]
+    off = create_backend(Settings(_env_file=None, ocr_backend="tesseract", ocr_lexicon=False))  # type: ignore[call-arg]
+    assert isinstance(on, LexiconCorrected) and not isinstance(off, LexiconCorrected)
