@@ -53,20 +53,29 @@ def _apply(affine: np.ndarray, xy: tuple[float, float]) -> tuple[float, float]:
     return float(x), float(y)
 
 
-def predict_correction(recent: Sequence[tuple[int, np.ndarray]], t_us: int) -> np.ndarray:
-    """Head-motion correction expected at ``t_us`` from recent measurements: a straight line
-    through them (drift is slow and smooth; the fit averages tremor out), evaluated at ``t_us``;
-    their median while there are too few, or too old, to fit a velocity."""
+def predict_correction(
+    recent: Sequence[tuple[int, np.ndarray]],
+    t_us: int,
+    min_span_us: int = 100_000,
+    max_ahead_us: int = 200_000,
+) -> np.ndarray:
+    """Head-motion correction expected at ``t_us`` from recent measurements (in time order).
+
+    A straight line through them (drift is slow and smooth; the fit averages tremor out), evaluated
+    at ``t_us`` but at most ``max_ahead_us`` past the newest one, when they span at least
+    ``min_span_us``; their median otherwise. Frames come every 3 to 40 ms: a velocity fitted over a
+    few milliseconds is registration jitter, and carried across a saccade's 100-150 ms gap it
+    throws the prediction a line pitch off, out of the search window.
+    """
     if not recent:
         return np.zeros(2)
     times = np.array([t for t, _ in recent], dtype=np.float64)
-    values = np.array([c for _, c in recent])
-    if len(recent) < 3 or np.ptp(times) <= 0 or t_us - times[-1] > 1_000_000:
+    values = np.array([c for _, c in recent], dtype=np.float64)
+    if len(recent) < 3 or float(np.ptp(times)) < min_span_us or t_us - times[-1] > 1_000_000:
         return np.median(values, axis=0)
     centre = times.mean()
     slope, intercept = np.polyfit(times - centre, values, 1)
-    # extrapolate at most half a second ahead
-    return intercept + slope * min(t_us - centre, float(np.ptp(times)) / 2 + 500_000)
+    return intercept + slope * (min(float(t_us), times[-1] + max_ahead_us) - centre)
 
 
 class PageStitcher:
@@ -132,6 +141,8 @@ class PageStitcher:
             self._strip = LineStrip()
         h, w = mask.shape
         r = cfg.search_radius_px
+        while self._corrections and frame.t_us - self._corrections[0][0] > cfg.drift_window_us:
+            self._corrections.popleft()
         correction = predict_correction(self._corrections, frame.t_us)
         px, py = np.round(np.asarray(frame.origin_xy) + correction).astype(int).tolist()
         x, y = float(px), float(py)

@@ -21,6 +21,12 @@ def rendered_page():
 
 
 @pytest.fixture(scope="session")
+def short_page():
+    """Five short lines: a quick page for the readings that deliver many frames."""
+    return scan.render_page(scan.PARAGRAPH[:140], width_chars=30)
+
+
+@pytest.fixture(scope="session")
 def reading(rendered_page):
     return scan.simulate_reading(rendered_page, seed=0)
 

@@ -191,7 +191,8 @@ def simulate_reading(page: RenderedPage | None = None, params: ScanParams = Scan
     for fx, fy, li in _scanpath(rng, page, params):
         bias = rng.normal(0, params.fixation_bias_px, 2)
         for _ in range(int(rng.integers(params.frames_per_fixation[0], params.frames_per_fixation[1] + 1))):
-            t += params.frame_dt_us + int(rng.integers(-5000, 5000))
+            jitter = min(5000, params.frame_dt_us // 2)  # frames stay in time order
+            t += params.frame_dt_us + int(rng.integers(-jitter, jitter))
             head, roll = head_at(t)
             rot, shift = _page_to_sensor(page, head, params.page_tilt_deg + roll)
             gaze = rot @ np.array([fx, fy]) + shift + bias + rng.normal(0, params.gaze_noise_px, 2)
