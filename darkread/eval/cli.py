@@ -91,7 +91,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             raise FileNotFoundError(f"{work}: no stored results; run `darkread eval {suite}` first")
     else:
         results = evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model,
-                                 force=args.force)
+                                 force=args.force, jobs=args.jobs)
     info = ReportInfo(
         commit=git_commit(),
         backend=args.backend,

@@ -186,6 +186,11 @@ def evaluate_recording(
     return result
 
 
+def _evaluate_one(folder: Path, run_dir: Path, backend: str, compare: list[str], model: str | None) -> dict[str, Any]:
+    """One recording in a worker process (its own OCR engines)."""
+    return evaluate_recording(folder, run_dir, backend=backend, compare=compare, model=model)
+
+
 def evaluate_suite(
     suite_dir: str | Path,
     work_dir: str | Path | None = None,
@@ -195,8 +200,10 @@ def evaluate_suite(
     model: str | None = None,
     force: bool = False,
     progress: bool = True,
+    jobs: int = 1,
 ) -> list[dict[str, Any]]:
-    """Evaluate every recording of a suite; stored results are reused unless ``force``.
+    """Evaluate every recording of a suite with ``jobs`` worker processes; stored results are reused
+    unless ``force``.
 
     Per-recording outputs (page image, RGB crop, cloud data, ``result.json``) go to ``work_dir``
     (default: ``SUITE_DIR/eval_runs``), one folder per recording.
@@ -209,15 +216,31 @@ def evaluate_suite(
     runs = Path(work_dir) if work_dir is not None else Path(suite_dir) / "eval_runs"
     engines = available_backends(compare)
     logger.info("%d recordings; OCR comparison on the stitched page with: %s", len(folders), ", ".join(engines) or "none")
-    cache: dict[str, Any] = {}
-    results = []
-    for folder in tqdm(folders, desc="evaluating", unit="rec", disable=not progress):
+    by_name: dict[str, dict[str, Any]] = {}
+    todo = []
+    for folder in folders:
         stored = runs / folder.name / RESULT_NAME
         if stored.is_file() and not force:
-            results.append(json.loads(stored.read_text()))
-            continue
-        results.append(evaluate_recording(folder, runs / folder.name, backend=backend, compare=engines, model=model, ocr_cache=cache))
-    return results
+            by_name[folder.name] = json.loads(stored.read_text())
+        else:
+            todo.append(folder)
+    bar = tqdm(total=len(folders), initial=len(by_name), desc="evaluating", unit="rec", disable=not progress)
+    if jobs <= 1:
+        cache: dict[str, Any] = {}
+        for folder in todo:
+            by_name[folder.name] = evaluate_recording(folder, runs / folder.name, backend=backend, compare=engines,
+                                                      model=model, ocr_cache=cache)
+            bar.update()
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = {pool.submit(_evaluate_one, f, runs / f.name, backend, engines, model): f for f in todo}
+            for future in as_completed(futures):
+                by_name[futures[future].name] = future.result()
+                bar.update()
+    bar.close()
+    return [by_name[f.name] for f in folders]
 
 
 def load_results(work_dir: str | Path) -> list[dict[str, Any]]:

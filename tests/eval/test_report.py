@@ -11,6 +11,7 @@ from darkread.eval.report import (
     ReportInfo,
     bandwidth_table,
     grouped_table,
+    headline_table,
     rate,
     write_report,
 )
@@ -84,10 +85,24 @@ def test_report_on_a_two_recording_suite(tmp_path: Path) -> None:
                      "darkread mean CER 4.0%", "RGB snapshot mean CER 50.0%", "## Failures", "001_dark: OCR engine tesseract: OcrError: boom"):
         assert expected in md, expected
     assert "| pangram | 2 | 4.0% | 10.0% |" in md  # engine comparison: tesseract's failure is left out of its mean
-    for name in ("cer_vs_lux.png", "cer_vs_xheight.png", "ocr_backends_by_kind.png"):
+    assert "No 30-lux paragraph recordings" in md
+    for name in ("cer_vs_lux.png", "cer_vs_lux_by_motion.png", "cer_vs_xheight.png", "ocr_backends_by_kind.png"):
         with Image.open(tmp_path / name) as image:
             assert image.format == "PNG" and image.size[0] > 300
     assert json.loads((tmp_path / "results.json").read_text())[1]["name"] == "001_dark"
+
+
+def test_headline_compares_30_lux_paragraphs_with_the_paper() -> None:
+    base = fake_results()[0]
+    runs = [{**base, "name": f"p{k}", "lux": 30.0, "kind": "paragraph", "motion": motion,
+             "darkread": {"cer": cer, "wer": 0.05}, "rgb": {"cer": 0.5, "wer": 0.9}}
+            for k, (motion, cer) in enumerate([("still", 0.0), ("normal", 0.02), ("walking", 0.04)])]
+    text = "\n".join(headline_table(runs + fake_results()))
+    assert "| still | 1 | 0.0% | 0.0% | 0.0% | 5.0% | 50.0% | 90.0% |" in text
+    assert "| **all** | 3 | 2.0% | 2.0% | 4.0% | 5.0% | 50.0% | 90.0% |" in text
+    assert "is 2.0%: at or below the paper's 2.5%" in text
+    runs[0]["darkread"]["cer"] = 0.2
+    assert "above the paper's" in "\n".join(headline_table(runs))
 
 
 def test_cli_rebuilds_the_report_from_stored_results(tmp_path: Path) -> None:
