@@ -64,6 +64,14 @@ class StitchConfig:
                             followed); frames come every 3 ms (busy text) to 40 ms, so the window
                             is a time, not a frame count.
       drift_window_frames   ... at most this many of them (bounds the fit's cost).
+      wide_search_px        a frame whose best match lies on the rim of the search window, or scores
+                            ``weak_match_drop`` below the recent matches' median, is searched again
+                            this far around the prediction (the head moved more than predicted, and
+                            the usual search found the neighbouring line); 0 turns it off.
+      ambiguity_rows        ... where matches at least this many rows from the peak are the
+                            neighbouring lines' (text lines look alike to a correlation) ...
+      ambiguity_margin      ... which the peak must beat by this much; otherwise the frame is dropped
+                            rather than risk blending it a line pitch off.
       min_match_score       normalised correlation (TM_CCOEFF_NORMED) below which a frame is dropped.
       min_overlap_fraction  share of the frame that must overlap what the page already shows for a
                             correlation to be trusted; otherwise the frame goes to its predicted place.
@@ -120,6 +128,10 @@ class StitchConfig:
     search_radius_px: int = 16
     drift_window_us: int = 250_000
     drift_window_frames: int = 64
+    wide_search_px: int = 40
+    weak_match_drop: float = 0.2
+    ambiguity_rows: int = 10
+    ambiguity_margin: float = 0.1
     min_match_score: float = 0.25
     min_overlap_fraction: float = 0.1
     roll_step_deg: float = 0.5

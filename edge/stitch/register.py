@@ -25,6 +25,11 @@ class Registration:
     overlap: float  # share of the frame that overlapped known content
     subpixel_xy: tuple[float, float] = (0.0, 0.0)  # parabolic refinement of the peak, within +-0.5 px
     angle_deg: float = 0.0  # rotation of the frame (about its centre) that matches best
+    # the peak lies on (or a pixel from) the edge of the search window: the true match may lie beyond
+    on_rim: bool = False
+    # how much the peak beats the best match at least ``separation_px`` rows above or below it:
+    # text lines look alike, so a small margin means the vertical offset is ambiguous
+    vertical_margin: float = 2.0
 
 
 def _parabola_vertex(left: float, centre: float, right: float) -> float:
@@ -74,6 +79,13 @@ def _match(search: np.ndarray, sub: np.ndarray, radius: int) -> np.ndarray:
     return scores - _prior(scores.shape, radius) if radius > 0 else scores
 
 
+def _runner_up(scores: np.ndarray, row: int, separation: int) -> float:
+    """Best score in the rows at least ``separation`` away from ``row`` (-1 when there are none)."""
+    rows = scores.max(axis=1)
+    far = np.abs(np.arange(rows.size) - row) >= separation
+    return float(rows[far].max()) if far.any() else -1.0
+
+
 def register_frame(
     reference: np.ndarray,
     known: np.ndarray,
@@ -82,6 +94,7 @@ def register_frame(
     blur_sigma: float = 1.2,
     min_overlap_fraction: float = 0.1,
     angles_deg: Sequence[float] = (0.0,),
+    separation_px: int = 10,
 ) -> Registration | None:
     """Best shift (and rotation among ``angles_deg``) of ``template`` inside ``reference``,
     ``radius`` px around the centre.
@@ -89,7 +102,8 @@ def register_frame(
     ``reference``/``known`` cover the predicted box grown by ``radius`` on every side (shape
     h + 2r, w + 2r): the ink probability seen so far and where anything was seen. With three or
     more equally spaced angles the best one is refined by a parabola. Returns None when too little
-    of the frame overlaps known content to trust a correlation.
+    of the frame overlaps known content to trust a correlation. ``on_rim`` and ``vertical_margin``
+    (judged with the centre prior) tell how far the peak can be trusted.
     """
     h, w = template.shape
     if reference.shape != (h + 2 * radius, w + 2 * radius) or known.shape != reference.shape:
@@ -120,8 +134,11 @@ def register_frame(
         step = (angles_deg[best + 1] - angles_deg[best - 1]) / 2.0
         angle += step * _parabola_vertex(peaks[best - 1][0], peaks[best][0], peaks[best + 1][0])
     by, bx = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    # within a pixel of the edge: the centre prior holds a peak that lies beyond back by a pixel
+    on_rim = radius > 1 and not (1 < by < scores.shape[0] - 2 and 1 < bx < scores.shape[1] - 2)
+    margin = float(scores[by, bx]) - _runner_up(scores, int(by), separation_px)
     dx, dy = int(bx) - radius, int(by) - radius
     peak = float(scores[by, bx]) + _CENTRE_PRIOR * (dx * dx + dy * dy) / float(max(1, radius) ** 2)
     sx = _parabola_vertex(*scores[by, bx - 1 : bx + 2]) if _interior(scores, by, bx, 0) else 0.0
     sy = _parabola_vertex(*scores[by - 1 : by + 2, bx]) if _interior(scores, by, bx, 1) else 0.0
-    return Registration((dx, dy), peak, overlap, (sx, sy), angle)
+    return Registration((dx, dy), peak, overlap, (sx, sy), angle, on_rim, margin)

@@ -28,7 +28,7 @@ from darkread.edge.stitch.page import (
     text_bands,
     union_box,
 )
-from darkread.edge.stitch.register import register_frame
+from darkread.edge.stitch.register import Registration, register_frame
 from darkread.edge.stitch.segment import LineSegmenter
 from darkread.edge.stitch.strip import LineStrip
 
@@ -94,6 +94,7 @@ class PageStitcher:
         # (t_us, page position - sensor position) of recent frames: the head motion, sub-pixel
         self._corrections: deque[tuple[int, np.ndarray]] = deque(maxlen=cfg.drift_window_frames)
         self._rolls: deque[float] = deque(maxlen=cfg.roll_window)  # frame rotation vs the page
+        self._scores: deque[float] = deque(maxlen=cfg.drift_window_frames)  # recent match scores
         self._registered = 0
         self._used = 0
         self._dropped = 0
@@ -151,6 +152,11 @@ class PageStitcher:
         search_roll = cfg.roll_step_deg > 0 and self._registered % cfg.roll_every_frames == 0
         angles = (roll - cfg.roll_step_deg, roll, roll + cfg.roll_step_deg) if search_roll else (roll,)
         reg = register_frame(reference, seen, mask, r, cfg.blur_sigma_px, cfg.min_overlap_fraction, angles)
+        if reg is not None and cfg.wide_search_px > r and (reg.on_rim or self._weak(reg.score)):
+            reg = self._search_wide(frame, px, py, roll)
+            if reg is None:
+                self._dropped += 1
+                return
         if reg is None:
             score = 0.0  # nothing to compare with yet: placed as predicted, first to be replaced
         elif reg.score < cfg.min_match_score:
@@ -163,6 +169,7 @@ class PageStitcher:
             y = py + reg.shift_xy[1] + (reg.subpixel_xy[1] if cfg.subpixel else 0.0)
             correction = np.array([x, y]) - np.asarray(frame.origin_xy)
             self._corrections.append((frame.t_us, correction))
+            self._scores.append(score)
             self._registered += 1
             if search_roll:
                 self._rolls.append(float(np.clip(reg.angle_deg, -cfg.max_roll_deg, cfg.max_roll_deg)))
@@ -171,6 +178,28 @@ class PageStitcher:
         self._strip.add(mask, x, y, score, gaze_xy, frame.frame_id, cfg, roll)
         self._positions[frame.frame_id] = (x, y)
         self._used += 1
+
+    def _weak(self, score: float) -> bool:
+        """A match well below the recent ones: likely the neighbouring line (one pitch off, a frame's
+        lines meet other words), as when the head moved more than predicted."""
+        return len(self._scores) >= 3 and score < float(np.median(self._scores)) - self.cfg.weak_match_drop
+
+    def _search_wide(self, frame: StitchFrame, px: int, py: int, roll: float) -> Registration | None:
+        """Registration over ``wide_search_px`` around the prediction for a frame whose best match lay
+        on the rim of the usual search or was weak (the head moved more than predicted); None, and
+        the frame is dropped, unless the peak is a true maximum that beats every match a line above or below
+        it by ``ambiguity_margin`` (a wide search reaches the neighbouring lines)."""
+        cfg = self.cfg
+        h, w = frame.mask.shape
+        wide = cfg.wide_search_px
+        reference, seen = self._page.reference(self._strip, (px - wide, py - wide, px + w + wide, py + h + wide))
+        reg = register_frame(
+            reference, seen, frame.mask, wide, cfg.blur_sigma_px, cfg.min_overlap_fraction, (roll,), cfg.ambiguity_rows
+        )
+        if reg is None or reg.on_rim or reg.vertical_margin < cfg.ambiguity_margin:
+            log.debug("frame %d dropped: no unambiguous match within %d px", frame.frame_id, wide)
+            return None
+        return reg
 
     def page(self) -> Page:
         """The page so far: finished lines plus the line being read."""

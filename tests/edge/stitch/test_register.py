@@ -66,3 +66,28 @@ def test_recovers_a_small_rotation_of_the_frame(rendered_page, roll: float) -> N
     assert reg is not None
     assert abs(reg.angle_deg - roll) < 0.25
     assert reg.shift_xy == (0, 0)
+
+
+def test_a_match_beyond_the_search_is_flagged_on_the_rim(rendered_page) -> None:
+    r = 10
+    px, py = 200, 130
+    reference = _crop(rendered_page.mask, px - r, py - r, 100 + 2 * r, 200 + 2 * r).astype(np.float32)
+    inside = register_frame(reference, np.ones_like(reference, bool), _crop(rendered_page.mask, px + 2, py + 3), r)
+    beyond = register_frame(reference, np.ones_like(reference, bool), _crop(rendered_page.mask, px, py + 18), r)
+    assert inside is not None and not inside.on_rim and inside.shift_xy == (2, 3)
+    assert beyond is not None and beyond.on_rim
+
+
+def test_the_vertical_margin_tells_the_true_line_from_its_neighbours(rendered_page) -> None:
+    r = 40  # reaches the lines above and below (pitch 28 px)
+    px, py = 200, 130
+    reference = _crop(rendered_page.mask, px - r, py - r, 100 + 2 * r, 200 + 2 * r).astype(np.float32)
+    reg = register_frame(reference, np.ones_like(reference, bool), _crop(rendered_page.mask, px + 3, py - 5), r)
+    assert reg is not None and reg.shift_xy == (3, -5)
+    assert reg.vertical_margin > 0.3  # other words on the neighbouring lines
+    # a page of identical lines: one pitch up or down matches as well
+    line = rendered_page.mask[py + 10 : py + 10 + rendered_page.pitch_px]
+    striped = np.tile(line, (12, 1))[:, :600]
+    reference = striped[50 - r : 50 + 100 + r, 100 - r : 100 + 200 + r].astype(np.float32)
+    reg = register_frame(reference, np.ones_like(reference, bool), striped[50:150, 100:300].copy(), r)
+    assert reg is not None and reg.vertical_margin < 0.05
