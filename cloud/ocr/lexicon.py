@@ -8,11 +8,12 @@ corrector "fixes" rare words that were read right (tardiest -> hardiest):
 * only lines that read as language are touched: at least ``min_known_fraction`` of their words
   must already be dictionary words (words of two letters or more; random letters, codes and part numbers stay as read);
 * only alphabetic words of at least ``min_length`` letters that are *not* in the dictionary are
-  replaced, and only by a dictionary word that differs from them in confusable glyphs alone
-  (``CONFUSABLE``: same length, or one lost ``i``/``l``/``t`` stem), the most frequent one first;
-  words with no such candidate stay as read;
-* a short word with a capital I inside a sentence ("busiest In seducing") is lowered when the
-  lower-case word is a dictionary word (longer ones may be names: Italy, Ionia);
+  replaced, and only by a dictionary word that differs from them in lookalike glyphs alone
+  (``CONFUSABLE``; at most 1, 2 or 3 of them for words of up to 4, 7 or more letters), or by one
+  lost ``i``/``l``/``t`` stem; fewest changes first, then the most frequent word; words with no
+  such candidate stay as read;
+* a capital I inside a sentence ("busiest In seducing", "so Itsalf") is read as i when the word
+  is short or not a dictionary word (longer known ones may be names: Italy, Ionia);
 * capitalisation (lower, Capitalised, UPPER) and surrounding punctuation are kept.
 
 The word list is SymSpell's English frequency dictionary (82,765 words, MIT licence), shipped
@@ -23,8 +24,10 @@ from __future__ import annotations
 
 import logging
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import lru_cache
+from itertools import combinations, product
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -43,7 +46,10 @@ _CONFUSABLE_GROUPS = ("eoac", "ilt", "nu", "hb", "rt", "vy")
 CONFUSABLE: frozenset[tuple[str, str]] = frozenset(
     (a, b) for group in _CONFUSABLE_GROUPS for a in group for b in group if a != b
 )
-DROPPED_STEMS = frozenset("ilt")  # thin strokes a reconstruction can lose entirely
+_ALTERNATIVES: dict[str, str] = {
+    ch: "".join(sorted({b for a, b in CONFUSABLE if a == ch})) for ch in {a for a, _ in CONFUSABLE}
+}
+DROPPED_STEMS = "ilt"  # thin strokes a reconstruction can lose entirely
 _SENTENCE_END = (".", "!", "?", ":", ";")
 
 
@@ -58,6 +64,23 @@ def glyph_confusion(read: str, word: str) -> bool:
             if k < len(read) and read[k] != ch:
                 return False
     return False
+
+
+def misreadings(read: str, substitutions: int) -> Iterator[str]:
+    """Words ``read`` (lower case) may be a misreading of with exactly ``substitutions`` lookalike
+    glyphs swapped; with 0, the words it becomes when one lost thin stem is put back."""
+    if substitutions == 0:
+        for k in range(1, len(read) + 1):
+            for stem in DROPPED_STEMS:
+                yield read[:k] + stem + read[k:]
+        return
+    positions = [k for k, ch in enumerate(read) if ch in _ALTERNATIVES]
+    for chosen in combinations(positions, substitutions):
+        for letters in product(*(_ALTERNATIVES[read[k]] for k in chosen)):
+            word = list(read)
+            for k, ch in zip(chosen, letters):
+                word[k] = ch
+            yield "".join(word)
 
 
 @lru_cache(maxsize=2)
@@ -90,14 +113,14 @@ def _with_case_of(template: str, word: str) -> str:
 class LexiconCorrector:
     """Corrects words of prose lines that are not in the dictionary (see the module docstring)."""
 
-    max_distance: int = 2
+    max_substitutions: int = 3
     min_length: int = 3
     min_known_fraction: float = 0.3
     _speller: SymSpell | None = field(default=None, init=False, repr=False)
 
     def _words(self) -> SymSpell:
         if self._speller is None:
-            self._speller = _dictionary(self.max_distance)
+            self._speller = _dictionary(0)  # only its word list and counts are used
         return self._speller
 
     def known(self, word: str) -> bool:
@@ -105,18 +128,22 @@ class LexiconCorrector:
 
     def correct_word(self, word: str, *, in_sentence: bool = False) -> str:
         """The most frequent dictionary word ``word`` may be a misreading of, in its case; else ``word``."""
-        from symspellpy import Verbosity
-
-        if in_sentence and 1 < len(word) <= 3 and word[0] == "I" and word[1:].islower():
-            if self.known("i" + word[1:]):
-                return "i" + word[1:]  # "In", "It", "Is" inside a sentence: an i read as I
+        i_read_as_capital = in_sentence and len(word) > 1 and word[0] == "I" and word[1:].islower()
+        if i_read_as_capital and len(word) <= 3 and self.known("i" + word[1:]):
+            return "i" + word[1:]  # "In", "It", "Is" inside a sentence
         if len(word) < self.min_length or self.known(word):
-            return word
+            return word  # longer known words with a capital may be names: Italy, Ionia
+        if i_read_as_capital:
+            word = "i" + word[1:]  # an unknown word: its capital I was a misread i
         read = word.lower()
-        suggestions = self._words().lookup(read, Verbosity.ALL, max_edit_distance=self.max_distance)
-        for suggestion in sorted(suggestions, key=lambda s: (s.distance, -s.count)):
-            if glyph_confusion(read, suggestion.term):
-                return _with_case_of(word, suggestion.term)
+        counts = self._words().words
+        most = 1 if len(read) <= 4 else (2 if len(read) <= 7 else self.max_substitutions)
+        for level in [1, 0, *range(2, most + 1)]:  # one swap, one lost stem, then more swaps
+            if level > most:
+                continue
+            found = {w for w in misreadings(read, level) if w in counts}
+            if found:
+                return _with_case_of(word, max(sorted(found), key=counts.__getitem__))
         return word
 
     def correct_line(self, line: str, *, after_sentence_end: bool = True) -> str:

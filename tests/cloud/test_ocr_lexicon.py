@@ -32,6 +32,16 @@ def test_misread_prose_is_corrected_in_its_case_and_punctuation(corrector: Lexic
     assert corrected == reference
     assert error_rates(reference, read).cer > 0.03 and error_rates(reference, corrected).cer == 0.0
     assert corrector.correct("should be Oxtirpato, and") == "should be Extirpate, and"
+    assert corrector.correct("rollglons and civil\nsupremacies, so Itsalf") == "religions and civil\nsupremacies, so itself"
+
+
+def test_misreadings_swap_only_lookalike_glyphs() -> None:
+    from darkread.cloud.ocr.lexicon import misreadings
+
+    one = set(misreadings("aro", 1))
+    assert "are" in one and "arc" in one and "aro" not in one and "bro" not in one
+    assert "first" in set(misreadings("frst", 0))  # a lost stem put back
+    assert "religions" in set(misreadings("rollglons", 3)) and "religions" not in set(misreadings("rollglons", 2))
 
 
 def test_words_read_right_stay_as_they_are(corrector: LexiconCorrector) -> None:
