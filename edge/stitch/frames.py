@@ -59,11 +59,10 @@ class StitchConfig:
       search_radius_px      correlation search around the predicted position (head tremor and the
                             drift change between two frames stay well inside; half a line pitch
                             would allow locking on the neighbouring line).
-      drift_window_us       a line through the head-motion corrections of the frames of this recent
-                            time (µs) predicts the next frame's place (tremor averages out, drift is
-                            followed); frames come every 3 ms (busy text) to 40 ms, so the window
-                            is a time, not a frame count.
-      drift_window_frames   ... at most this many of them (bounds the fit's cost).
+      drift_window_frames   a line through the head-motion corrections of this many recent frames
+                            predicts the next frame's place (tremor averages out, drift is followed)
+                            once they span 60 ms; frames 3 ms apart (busy text) give their median
+                            (a slope over a few ms is jitter, not drift).
       wide_search_px        a frame whose best match lies on the rim of the search window, or scores
                             ``weak_match_drop`` below the recent matches' median, is searched again
                             this far around the prediction (the head moved more than predicted, and
@@ -126,8 +125,7 @@ class StitchConfig:
     sweep_confirm_frames: int = 2
     min_line_frames: int = 4
     search_radius_px: int = 16
-    drift_window_us: int = 250_000
-    drift_window_frames: int = 64
+    drift_window_frames: int = 6
     wide_search_px: int = 40
     weak_match_drop: float = 0.2
     ambiguity_rows: int = 10
@@ -162,8 +160,8 @@ class StitchConfig:
             raise ValueError("sweep_confirm_frames must be >= 0, sweep_context_frames and min_line_frames >= 1")
         if self.roll_every_frames < 1 or self.roll_window < 1:
             raise ValueError("roll_every_frames and roll_window must be >= 1")
-        if self.drift_window_frames < 1 or self.drift_window_us < 1:
-            raise ValueError("drift_window_frames and drift_window_us must be >= 1")
+        if self.drift_window_frames < 1:
+            raise ValueError(f"drift_window_frames must be >= 1, got {self.drift_window_frames}")
         if self.search_radius_px < 0:
             raise ValueError(f"search_radius_px must be >= 0, got {self.search_radius_px}")
         if not 0.0 <= self.alpha <= 1.0 or not 0.0 < self.ink_threshold < 1.0:

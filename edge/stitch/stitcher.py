@@ -56,16 +56,16 @@ def _apply(affine: np.ndarray, xy: tuple[float, float]) -> tuple[float, float]:
 def predict_correction(
     recent: Sequence[tuple[int, np.ndarray]],
     t_us: int,
-    min_span_us: int = 100_000,
+    min_span_us: int = 60_000,
     max_ahead_us: int = 200_000,
 ) -> np.ndarray:
     """Head-motion correction expected at ``t_us`` from recent measurements (in time order).
 
     A straight line through them (drift is slow and smooth; the fit averages tremor out), evaluated
     at ``t_us`` but at most ``max_ahead_us`` past the newest one, when they span at least
-    ``min_span_us``; their median otherwise. Frames come every 3 to 40 ms: a velocity fitted over a
-    few milliseconds is registration jitter, and carried across a saccade's 100-150 ms gap it
-    throws the prediction a line pitch off, out of the search window.
+    ``min_span_us``; their median otherwise. Frames come every 3 ms (busy text) to 40 ms: a velocity
+    fitted over a few milliseconds is registration jitter, and carried across a saccade's 100-150 ms
+    gap it throws the prediction a line pitch off, out of the search window.
     """
     if not recent:
         return np.zeros(2)
@@ -142,8 +142,6 @@ class PageStitcher:
             self._strip = LineStrip()
         h, w = mask.shape
         r = cfg.search_radius_px
-        while self._corrections and frame.t_us - self._corrections[0][0] > cfg.drift_window_us:
-            self._corrections.popleft()
         correction = predict_correction(self._corrections, frame.t_us)
         px, py = np.round(np.asarray(frame.origin_xy) + correction).astype(int).tolist()
         x, y = float(px), float(py)
