@@ -8,6 +8,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 Box = tuple[int, int, int, int]  # x0, y0, x1, y1 in image pixels
+Quad = tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]]
 
 
 class OcrError(Exception):
@@ -28,6 +29,7 @@ class OcrLine:
     text: str
     box: Box | None = None  # None when the engine reports no geometry (LLMs)
     confidence: float | None = None
+    quad: Quad | None = None  # corners clockwise from the top-left, when the engine reports a rotated box
 
 
 @dataclass(frozen=True)
@@ -57,23 +59,52 @@ def check_image(image: np.ndarray, backend: str) -> np.ndarray:
 
 
 def reading_order(lines: list[OcrLine]) -> list[OcrLine]:
-    """Top-to-bottom, then left-to-right; lines whose vertical centres are within half a line
-    height of each other count as one row."""
+    """Top-to-bottom, then left-to-right; lines whose vertical positions are within half a line
+    height of each other count as one row.
+
+    When every line has a rotated box (``quad``), positions are measured across the text's own
+    direction (the median slope of the boxes' top edges), so a tilted page, whose lines' upright
+    boxes overlap and interleave, still reads line after line."""
     boxed = [line for line in lines if line.box is not None]
     if not boxed:
         return list(lines)
-    heights = sorted(max(1, line.box[3] - line.box[1]) for line in boxed)  # type: ignore[index]
+    if all(line.quad is not None for line in boxed):
+        return _rows([(_across_text(line.quad, _median_slope(boxed)), _quad_height(line.quad), line.quad[0][0], line)  # type: ignore[arg-type]
+                      for line in boxed])
+    return _rows([((line.box[1] + line.box[3]) / 2, max(1, line.box[3] - line.box[1]), line.box[0], line)  # type: ignore[index]
+                  for line in boxed])
+
+
+def _median_slope(lines: list[OcrLine]) -> float:
+    slopes = sorted(
+        (q[1][1] - q[0][1]) / (q[1][0] - q[0][0]) for q in (line.quad for line in lines) if q is not None and q[1][0] != q[0][0]
+    )
+    return slopes[len(slopes) // 2] if slopes else 0.0
+
+
+def _across_text(quad: Quad, slope: float) -> float:
+    """Where the line's centre line meets x = 0, following the text direction."""
+    cx = sum(p[0] for p in quad) / 4
+    cy = sum(p[1] for p in quad) / 4
+    return cy - slope * cx
+
+
+def _quad_height(quad: Quad) -> float:
+    return max(1.0, ((quad[3][0] - quad[0][0]) ** 2 + (quad[3][1] - quad[0][1]) ** 2) ** 0.5)
+
+
+def _rows(keyed: list[tuple[float, float, float, OcrLine]]) -> list[OcrLine]:
+    """(vertical position, height, left x, line) -> lines in reading order."""
+    heights = sorted(height for _, height, _, _ in keyed)
     tolerance = heights[len(heights) // 2] / 2
-    by_centre = sorted(boxed, key=lambda line: (line.box[1] + line.box[3]) / 2)  # type: ignore[index]
-    rows: list[list[OcrLine]] = []
-    row_centre = None
-    for line in by_centre:
-        centre = (line.box[1] + line.box[3]) / 2  # type: ignore[index]
-        if row_centre is None or centre - row_centre > tolerance:
+    rows: list[list[tuple[float, float, float, OcrLine]]] = []
+    row_position = None
+    for item in sorted(keyed, key=lambda item: item[0]):
+        if row_position is None or item[0] - row_position > tolerance:
             rows.append([])
-            row_centre = centre
-        rows[-1].append(line)
-    return [line for row in rows for line in sorted(row, key=lambda line: line.box[0])]  # type: ignore[index]
+            row_position = item[0]
+        rows[-1].append(item)
+    return [item[3] for row in rows for item in sorted(row, key=lambda item: item[2])]
 
 
 def join_lines(lines: list[OcrLine]) -> str:

@@ -25,14 +25,14 @@ from __future__ import annotations
 import logging
 import re
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from itertools import combinations, product
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .base import OcrLine, OcrResult, OcrUnavailableError
+from .base import OcrResult, OcrUnavailableError
 
 if TYPE_CHECKING:
     from symspellpy import SymSpell
@@ -205,5 +205,5 @@ class LexiconCorrected:
         result = self.engine.read(image)
         text = self.corrector.correct(result.text)
         corrected = dict(zip(result.text.split("\n"), text.split("\n")))
-        lines = [OcrLine(corrected.get(line.text, line.text), line.box, line.confidence) for line in result.lines]
+        lines = [replace(line, text=corrected.get(line.text, line.text)) for line in result.lines]
         return OcrResult(text, lines, result.truncated)

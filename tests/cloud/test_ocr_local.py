@@ -120,3 +120,25 @@ def test_backend_selection(tmp_path: object) -> None:
     openai = create_backend(Settings(_env_file=None, ocr_backend="openai", openai_base_url="http://127.0.0.1:9/v1"))  # type: ignore[call-arg]
     assert openai.name == "openai" and not openai.ready()
     openai.close()  # type: ignore[attr-defined]
+
+
+def _tilted(text: str, x0: float, y0: float, length: float, slope: float = 0.12, height: float = 14.0) -> OcrLine:
+    """A text line starting at (x0, y0) (top-left), running ``length`` px along a tilted baseline."""
+    quad = ((x0, y0), (x0 + length, y0 + slope * length), (x0 + length, y0 + slope * length + height), (x0, y0 + height))
+    xs, ys = [p[0] for p in quad], [p[1] for p in quad]
+    return OcrLine(text, (int(min(xs)), int(min(ys)), int(max(xs)) + 1, int(max(ys)) + 1), 0.9, quad)  # type: ignore[arg-type]
+
+
+def test_reading_order_follows_a_tilted_page_line_by_line() -> None:
+    lines = [
+        _tilted("liberty, Lords and Commons,", 45, 45, 290),  # long line: its upright box reaches far down
+        _tilted("which your own", 45, 72, 140),
+        _tilted("valorous and", 195, 72 + 0.12 * 150, 100),  # the same row, detected as a second piece
+        _tilted("happy counsels have", 45, 99, 200),
+        _tilted("purchased us, liberty which", 45, 126, 270),
+    ]
+    expected = ["liberty, Lords and Commons,", "which your own", "valorous and", "happy counsels have",
+                "purchased us, liberty which"]
+    assert [line.text for line in reading_order(lines[::-1])] == expected
+    upright = [OcrLine(line.text, line.box, line.confidence) for line in lines]  # the same boxes without their tilt
+    assert [line.text for line in reading_order(upright)] != expected  # why the rotated boxes matter
