@@ -14,15 +14,21 @@ corrector "fixes" rare words that were read right (tardiest -> hardiest):
   such candidate stay as read;
 * a capital I inside a sentence ("busiest In seducing", "so Itsalf") is read as i when the word
   is short or not a dictionary word (longer known ones may be names: Italy, Ionia);
+* a misreading can also be a real word ("will toll us", "unless tho printer's"): a lower-case word
+  is swapped for a lookalike one only when it forms no known word pair with its neighbours, the
+  lookalike does, and that pair outweighs the odds of a glyph swap (``swap_probability``);
 * capitalisation (lower, Capitalised, UPPER) and surrounding punctuation are kept.
 
-The word list is SymSpell's English frequency dictionary (82,765 words, MIT licence), shipped
-inside the ``symspellpy`` package; no network is needed.
+The word and word-pair lists are SymSpell's English frequency dictionaries (82,765 words, 242,342
+pairs; MIT licence), shipped inside the ``symspellpy`` package; no network is needed. On clean
+prose from the corpus 1 % of 28-character lines gain a one-letter change (archaic words: ere ->
+are, lest -> lost), while it removes a third to a half of the errors on reconstructed pages.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -51,6 +57,7 @@ _ALTERNATIVES: dict[str, str] = {
 }
 DROPPED_STEMS = "ilt"  # thin strokes a reconstruction can lose entirely
 _SENTENCE_END = (".", "!", "?", ":", ";")
+_CORE = re.compile(r"[A-Za-z]+")
 
 
 def glyph_confusion(read: str, word: str) -> bool:
@@ -98,6 +105,9 @@ def _dictionary(max_distance: int) -> SymSpell:
     path = files("symspellpy") / "frequency_dictionary_en_82_765.txt"
     if not speller.load_dictionary(str(path), term_index=0, count_index=1):
         raise OcrUnavailableError(f"could not load the word list {path}", backend="lexicon")
+    bigrams = files("symspellpy") / "frequency_bigramdictionary_en_243_342.txt"
+    if not speller.load_bigram_dictionary(str(bigrams), term_index=0, count_index=2):
+        raise OcrUnavailableError(f"could not load the word-pair list {bigrams}", backend="lexicon")
     return speller
 
 
@@ -116,7 +126,9 @@ class LexiconCorrector:
     max_substitutions: int = 3
     min_length: int = 3
     min_known_fraction: float = 0.3
+    swap_probability: float = 1e-4  # prior of one lookalike-glyph swap, against the context's evidence
     _speller: SymSpell | None = field(default=None, init=False, repr=False)
+    _total: float = field(default=0.0, init=False, repr=False)
 
     def _words(self) -> SymSpell:
         if self._speller is None:
@@ -133,8 +145,14 @@ class LexiconCorrector:
             return "i" + word[1:]  # "In", "It", "Is" inside a sentence
         if len(word) < self.min_length or self.known(word):
             return word  # longer known words with a capital may be names: Italy, Ionia
-        if i_read_as_capital:
-            word = "i" + word[1:]  # an unknown word: its capital I was a misread i
+        if i_read_as_capital:  # an unknown word: its capital I may be a misread i ("so Itsalf")
+            lowered = "i" + word[1:]
+            corrected = self._closest(lowered)
+            return corrected if corrected != lowered else word  # no such word: perhaps a name (Irenaeus)
+        return self._closest(word)
+
+    def _closest(self, word: str) -> str:
+        """The most frequent dictionary word the unknown ``word`` may be a misreading of, or ``word``."""
         read = word.lower()
         counts = self._words().words
         most = 1 if len(read) <= 4 else (2 if len(read) <= 7 else self.max_substitutions)
@@ -148,14 +166,18 @@ class LexiconCorrector:
 
     def correct_line(self, line: str, *, after_sentence_end: bool = True) -> str:
         """``after_sentence_end``: whether the text before this line ended a sentence (or there is none)."""
+        return self._correct_line(line, after_sentence_end)[0]
+
+    def _correct_line(self, line: str, after_sentence_end: bool) -> tuple[str, bool]:
+        """The line with its unknown words corrected, and whether it reads as prose."""
         tokens = line.split(" ")
         parsed = [_TOKEN.match(t) for t in tokens]
         words = [m.group("word") for m in parsed if m is not None and len(m.group("word")) > 1]
         if not words:
-            return line
+            return line, False
         known = sum(self.known(w) for w in words) / len(words)
         if known < self.min_known_fraction:
-            return line  # not prose: leave letters, codes and numbers as read
+            return line, False  # not prose: leave letters, codes and numbers as read
         out = []
         sentence_start = after_sentence_end
         for token, match in zip(tokens, parsed):
@@ -166,16 +188,79 @@ class LexiconCorrector:
                 out.append(match.group("lead") + self.correct_word(match.group("word"), in_sentence=in_sentence)
                            + match.group("trail"))
             sentence_start = token.endswith(_SENTENCE_END) if token else sentence_start
-        return " ".join(out)
+        return " ".join(out), True
 
     def correct(self, text: str) -> str:
-        out: list[str] = []
+        lines: list[str] = []
+        prose: list[bool] = []
         ended = True
         for line in text.split("\n"):
-            out.append(self.correct_line(line, after_sentence_end=ended))
+            corrected, is_prose = self._correct_line(line, ended)
+            lines.append(corrected)
+            prose.append(is_prose)
             if line.strip():
                 ended = line.rstrip().endswith(_SENTENCE_END)
-        return "\n".join(out)
+        return "\n".join(self._in_context(lines, prose))
+
+    # -- known words that are likely misreadings in their context ("will toll us", "tho printer") --
+
+    def _context_score(self, word: str, before: str | None, after: str | None) -> float:
+        """log of a stupid-backoff bigram score of ``word`` between its neighbours."""
+        speller = self._words()
+        counts, pairs = speller.words, speller.bigrams
+        if not self._total:
+            self._total = float(sum(counts.values()))
+        own = max(counts.get(word, 0), 1)
+        score = 0.0
+        if before is not None and before in counts:
+            pair = pairs.get(f"{before} {word}")
+            score += math.log(pair / counts[before] if pair else 0.4 * own / self._total)
+        else:
+            score += math.log(own / self._total)
+        if after is not None and after in counts:
+            pair = pairs.get(f"{word} {after}")
+            score += math.log(pair / own if pair else 0.4 * counts[after] / self._total)
+        return score
+
+    def _in_a_pair(self, word: str, before: str | None, after: str | None) -> bool:
+        pairs = self._words().bigrams
+        return (before is not None and f"{before} {word}" in pairs) or (after is not None and f"{word} {after}" in pairs)
+
+    def _in_context(self, lines: list[str], prose: list[bool]) -> list[str]:
+        """Swap a lower-case known word for a lookalike one when it forms no known word pair with its
+        neighbours, the lookalike does, and the pair makes it far likelier (by more than the odds of
+        a glyph swap). Capitalised words (names, sentence starts) and lines that are not prose stay
+        as they are."""
+        tokens = [(k, t) for k, line in enumerate(lines) for t in line.split(" ")]
+        cores = []
+        for _, token in tokens:
+            found = _CORE.search(token)
+            cores.append(found.group(0).lower() if found else None)
+        counts = self._words().words
+        log_swap = math.log(self.swap_probability)
+        out = [token for _, token in tokens]
+        for i, (k, token) in enumerate(tokens):
+            match = _TOKEN.match(token)
+            if not prose[k] or match is None or not match.group("word").islower():
+                continue
+            word = match.group("word")
+            candidates = sorted({c for c in misreadings(word, 1) if c in counts})
+            if not candidates:
+                continue
+            before = cores[i - 1] if i > 0 else None
+            after = cores[i + 1] if i + 1 < len(cores) else None
+            if self._in_a_pair(word, before, after):
+                continue  # the words around it know this word: keep it
+            best = max(candidates, key=lambda c: self._context_score(c, before, after))
+            if not self._in_a_pair(best, before, after):
+                continue  # no evidence beyond word frequency, which would flatten rare words
+            if self._context_score(best, before, after) + log_swap > self._context_score(word, before, after):
+                out[i] = match.group("lead") + best + match.group("trail")
+                cores[i] = best
+        joined: list[list[str]] = [[] for _ in lines]
+        for (k, _), token in zip(tokens, out):
+            joined[k].append(token)
+        return [" ".join(parts) for parts in joined]
 
 
 class LexiconCorrected:

@@ -107,10 +107,15 @@ def _evaluate(args: argparse.Namespace) -> int:
 def _describe_suite(suite: Path, results: list[dict]) -> str:
     import json
 
-    seconds = sorted({r.get("duration_s") for r in results if r.get("duration_s")})
+    seconds = sorted(r["duration_s"] for r in results if r.get("duration_s"))
     kind = ""
     doc = suite / "suite.json"
     if doc.is_file():
         kind = "small suite, " if json.loads(doc.read_text()).get("small") else "full suite, "
-    span = ", ".join(f"{s:g}" for s in seconds)
-    return f"{len(results)} synthetic recordings ({kind}{span} s each; `darkread eval make-suite`, fixed seeds)"
+    if not seconds:
+        span = "durations unknown"
+    elif seconds[0] == seconds[-1]:
+        span = f"{seconds[0]:g} s each"
+    else:
+        span = f"{seconds[0]:.1f}-{seconds[-1]:.1f} s each, {sum(seconds) / 60:.1f} min in all"
+    return f"{len(results)} synthetic recordings ({kind}{span}; `darkread eval make-suite`, fixed seeds)"

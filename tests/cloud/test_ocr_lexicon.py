@@ -35,6 +35,13 @@ def test_misread_prose_is_corrected_in_its_case_and_punctuation(corrector: Lexic
     assert corrector.correct("rollglons and civil\nsupremacies, so Itsalf") == "religions and civil\nsupremacies, so itself"
 
 
+def test_real_words_misread_for_others_are_judged_by_their_neighbours(corrector: LexiconCorrector) -> None:
+    assert corrector.correct("will toll us more at large.") == "will tell us more at large."
+    assert corrector.correct("unless tho printer's and the") == "unless the printer's and the"
+    for line in ("pay the toll of the bridge", "far more than that", "the quick fox"):
+        assert corrector.correct(line) == line
+
+
 def test_misreadings_swap_only_lookalike_glyphs() -> None:
     from darkread.cloud.ocr.lexicon import misreadings
 
