@@ -8,7 +8,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 EXTRAS ?= edge,cloud,dev,train
 
-.PHONY: help venv test test-fast bench demo train clean system-deps
+.PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
@@ -39,6 +39,14 @@ bench: $(STAMP)  ## benchmarks; prints a table and writes bench.json
 
 demo: $(STAMP)  ## read the shipped sample recording and compare with its printed text
 	$(VENV)/bin/darkread read --demo
+
+eval: $(STAMP)  ## the full evaluation suite (87 recordings, ~30 min on 2 cores) and its report in docs/eval
+	$(VENV)/bin/darkread eval make-suite runs/eval_suite --jobs 2
+	$(VENV)/bin/darkread eval runs/eval_suite --out docs/eval --jobs 2
+
+eval-small: $(STAMP)  ## the small suite (17 recordings, a few minutes); report in runs/eval_small_report
+	$(VENV)/bin/darkread eval make-suite runs/eval_small --small --jobs 2
+	$(VENV)/bin/darkread eval runs/eval_small --out runs/eval_small_report --jobs 2
 
 train: $(STAMP)  ## reproduce the shipped model from scratch
 	$(VENV)/bin/darkread train all
