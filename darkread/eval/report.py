@@ -288,6 +288,15 @@ def _pyplot() -> Any:
     return plt
 
 
+def _lux_axis(ax: Any, levels: list[float]) -> None:
+    """Log scale, darker to the right, a tick at every light level of the suite."""
+    ax.set_xscale("log")
+    if levels:
+        ax.set_xticks(levels, [f"{v:g}" for v in levels])
+        ax.minorticks_off()
+    ax.invert_xaxis()
+
+
 def plot_cer_vs(results: Sequence[dict[str, Any]], key: str, path: str | Path, *, xlabel: str, logx: bool = False,
                 title: str = "") -> Path:
     """Mean CER per value of ``key`` for darkread and the RGB baseline, each recording as a faint dot."""
@@ -306,8 +315,7 @@ def plot_cer_vs(results: Sequence[dict[str, Any]], key: str, path: str | Path, *
         if xs:
             ax.plot(xs, ys, marker=marker, color=colour, label=label)
     if logx:
-        ax.set_xscale("log")
-        ax.invert_xaxis()
+        _lux_axis(ax, [float(v) for v in group_by(results, key) if v is not None])
     ax.set_xlabel(xlabel)
     ax.set_ylabel("character error rate (mean; dots: recordings)")
     ax.set_ylim(-0.03, 1.05)
@@ -335,8 +343,7 @@ def plot_cer_vs_lux_by_motion(results: Sequence[dict[str, Any]], path: str | Pat
             points = [(x, y) for x, y in points if y is not None]
             if points:
                 ax.plot(*zip(*points), marker="o", label=str(motion), color=colours.get(str(motion)))
-        ax.set_xscale("log")
-        ax.invert_xaxis()
+        _lux_axis(ax, [float(v) for v in group_by(results, "lux") if v is not None])
         ax.set_xlabel("illuminance at the page (lux, log scale)")
         ax.set_title(label, fontsize=10)
         ax.grid(True, alpha=0.3)
