@@ -71,6 +71,17 @@ class StitchConfig:
                             neighbouring lines' (text lines look alike to a correlation) ...
       ambiguity_margin      ... which the peak must beat by this much; otherwise the frame is dropped
                             rather than risk blending it a line pitch off.
+      anchor_search_px      a frame that found no match near the prediction (no overlap there, a
+                            rejected re-search, or a score below ``anchor_trigger_score`` or
+                            ``weak_match_drop`` under the recent ones) is matched whole against
+                            everything seen this far around it: walking bobs the head tens of pixels
+                            between frames, and a frame placed at a prediction that missed would
+                            start a second copy of lines already stitched. 0 turns it off.
+      anchor_min_score      ... that place is taken if it scores at least this, beats the match near
+      anchor_gain           the prediction by ``anchor_gain`` and every place a line above or below
+                            by ``ambiguity_margin``;
+      anchor_known_fraction ... and only places where this share of the frame lies on seen content
+                            (and the page there holds about as much ink variation) are considered.
       min_match_score       normalised correlation (TM_CCOEFF_NORMED) below which a frame is dropped.
       min_overlap_fraction  share of the frame that must overlap what the page already shows for a
                             correlation to be trusted; otherwise the frame goes to its predicted place.
@@ -130,6 +141,11 @@ class StitchConfig:
     drift_window_frames: int = 6
     wide_search_px: int = 40
     weak_match_drop: float = 0.2
+    anchor_search_px: int = 200
+    anchor_trigger_score: float = 0.5
+    anchor_min_score: float = 0.5
+    anchor_gain: float = 0.1
+    anchor_known_fraction: float = 0.5
     ambiguity_rows: int = 10
     ambiguity_margin: float = 0.1
     min_match_score: float = 0.25

@@ -16,6 +16,8 @@ import numpy as np
 # Tie-breaker towards the predicted place: text repeats itself (letters, lines), and among near-equal
 # peaks the one needing less head motion is the likelier.
 _CENTRE_PRIOR = 0.03
+# a page stretch whose ink varies less than this fraction of the frame's (std) is no place for it
+_MIN_SPREAD_RATIO = 0.5
 
 
 @dataclass(frozen=True)
@@ -142,3 +144,60 @@ def register_frame(
     sx = _parabola_vertex(*scores[by, bx - 1 : bx + 2]) if _interior(scores, by, bx, 0) else 0.0
     sy = _parabola_vertex(*scores[by - 1 : by + 2, bx]) if _interior(scores, by, bx, 1) else 0.0
     return Registration((dx, dy), peak, overlap, (sx, sy), angle, on_rim, margin)
+
+
+def locate_frame(
+    reference: np.ndarray,
+    known: np.ndarray,
+    template: np.ndarray,
+    radius: int,
+    blur_sigma: float = 1.2,
+    min_known_fraction: float = 0.5,
+    angle_deg: float = 0.0,
+    separation_px: int = 10,
+) -> Registration | None:
+    """Where the whole of ``template`` matches ``reference`` best, anywhere within ``radius`` px of
+    the centre, among the places where at least ``min_known_fraction`` of it lies on known content.
+
+    Unlike ``register_frame`` this does not need the prediction to overlap anything: it finds a
+    frame again after the head moved farther than any prediction (walking). Unknown page pixels
+    count as paper. None when no place is known enough or the frame holds no ink.
+    """
+    h, w = template.shape
+    if reference.shape != (h + 2 * radius, w + 2 * radius) or known.shape != reference.shape:
+        raise ValueError(f"reference {reference.shape} must be the template {template.shape} grown by {radius} px")
+    blurred = blur(template, blur_sigma)
+    if angle_deg:
+        blurred = cv2.warpAffine(blurred, frame_transform((h, w), angle_deg), (w, h), flags=cv2.INTER_LINEAR)
+    if float(blurred.std()) < 1e-3:
+        return None
+    search = blur(reference, blur_sigma)
+    scores = np.nan_to_num(
+        cv2.matchTemplate(search, np.ascontiguousarray(blurred), cv2.TM_CCOEFF_NORMED),
+        nan=-1.0,
+        posinf=-1.0,
+        neginf=-1.0,
+    )
+    rows, cols = scores.shape
+
+    def window_mean(image: np.ndarray) -> np.ndarray:
+        """Mean of ``image`` over the frame-sized window at every offset (top-left anchored)."""
+        mean = cv2.boxFilter(image, -1, (w, h), anchor=(0, 0), normalize=True, borderType=cv2.BORDER_CONSTANT)
+        return mean[:rows, :cols]
+
+    share = window_mean(known.astype(np.float32))
+    # a nearly blank stretch of page correlates with anything: it must hold about as much ink
+    # variation as the frame
+    spread = window_mean(search * search) - window_mean(search) ** 2
+    usable = (share >= min_known_fraction) & (spread >= _MIN_SPREAD_RATIO**2 * float(blurred.var()))
+    scores = np.where(usable, np.clip(scores, -1.0, 1.0), -1.0) - _prior(scores.shape, radius)
+    by, bx = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    if not usable[by, bx]:
+        return None
+    on_rim = radius > 1 and not (1 < by < scores.shape[0] - 2 and 1 < bx < scores.shape[1] - 2)
+    margin = float(scores[by, bx]) - _runner_up(scores, int(by), separation_px)
+    dx, dy = int(bx) - radius, int(by) - radius
+    peak = float(scores[by, bx]) + _CENTRE_PRIOR * (dx * dx + dy * dy) / float(max(1, radius) ** 2)
+    sx = _parabola_vertex(*scores[by, bx - 1 : bx + 2]) if _interior(scores, by, bx, 0) else 0.0
+    sy = _parabola_vertex(*scores[by - 1 : by + 2, bx]) if _interior(scores, by, bx, 1) else 0.0
+    return Registration((dx, dy), peak, float(share[by, bx]), (sx, sy), angle_deg, on_rim, margin)

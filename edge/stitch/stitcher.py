@@ -28,7 +28,7 @@ from darkread.edge.stitch.page import (
     text_bands,
     union_box,
 )
-from darkread.edge.stitch.register import Registration, register_frame
+from darkread.edge.stitch.register import Registration, locate_frame, register_frame
 from darkread.edge.stitch.segment import LineSegmenter
 from darkread.edge.stitch.strip import LineStrip
 
@@ -150,11 +150,17 @@ class PageStitcher:
         search_roll = cfg.roll_step_deg > 0 and self._registered % cfg.roll_every_frames == 0
         angles = (roll - cfg.roll_step_deg, roll, roll + cfg.roll_step_deg) if search_roll else (roll,)
         reg = register_frame(reference, seen, mask, r, cfg.blur_sigma_px, cfg.min_overlap_fraction, angles)
+        rejected = False  # a wide search found no unambiguous match
         if reg is not None and cfg.wide_search_px > r and (reg.on_rim or self._weak(reg.score)):
             reg = self._search_wide(frame, px, py, roll)
-            if reg is None:
-                self._dropped += 1
-                return
+            rejected = reg is None
+        if (reg is None or reg.score < cfg.anchor_trigger_score or self._weak(reg.score)) and not self._page_empty():
+            found = self._search_anchor(frame, px, py, roll, reg)
+            if found is not None:
+                reg, rejected = found, False
+        if rejected:
+            self._dropped += 1
+            return
         if reg is None:
             score = 0.0  # nothing to compare with yet: placed as predicted, first to be replaced
         elif reg.score < cfg.min_match_score:
@@ -181,6 +187,34 @@ class PageStitcher:
         """A match well below the recent ones: likely the neighbouring line (one pitch off, a frame's
         lines meet other words), as when the head moved more than predicted."""
         return len(self._scores) >= 3 and score < float(np.median(self._scores)) - self.cfg.weak_match_drop
+
+    def _page_empty(self) -> bool:
+        return self._page.canvas.empty and (self._strip is None or self._strip.empty)
+
+    def _search_anchor(
+        self, frame: StitchFrame, px: int, py: int, roll: float, current: Registration | None
+    ) -> Registration | None:
+        """The whole frame matched against everything seen within ``anchor_search_px`` of the
+        prediction, for a frame that found no good match near it: under walking the head bobs tens
+        of pixels between frames and across a saccade, a prediction can miss the page by several
+        lines, and a frame placed there would start a second copy of text already stitched. The
+        place is taken only if it scores ``anchor_min_score``, beats ``current`` by ``anchor_gain``
+        and beats every place a line above or below by ``ambiguity_margin``."""
+        cfg = self.cfg
+        if cfg.anchor_search_px <= 0:
+            return None
+        h, w = frame.mask.shape
+        a = cfg.anchor_search_px
+        reference, seen = self._page.reference(self._strip, (px - a, py - a, px + w + a, py + h + a))
+        found = locate_frame(
+            reference, seen, frame.mask, a, cfg.blur_sigma_px, cfg.anchor_known_fraction, roll, cfg.ambiguity_rows
+        )
+        if found is None or found.score < cfg.anchor_min_score or found.vertical_margin < cfg.ambiguity_margin:
+            return None
+        if current is not None and found.score < current.score + cfg.anchor_gain:
+            return None
+        log.debug("frame %d re-anchored %s px from its prediction", frame.frame_id, found.shift_xy)
+        return found
 
     def _search_wide(self, frame: StitchFrame, px: int, py: int, roll: float) -> Registration | None:
         """Registration over ``wide_search_px`` around the prediction for a frame whose best match lay

@@ -91,3 +91,32 @@ def test_the_vertical_margin_tells_the_true_line_from_its_neighbours(rendered_pa
     reference = striped[50 - r : 50 + 100 + r, 100 - r : 100 + 200 + r].astype(np.float32)
     reg = register_frame(reference, np.ones_like(reference, bool), striped[50:150, 100:300].copy(), r)
     assert reg is not None and reg.vertical_margin < 0.05
+
+
+@pytest.mark.parametrize("shift", [(0, 0), (-70, 95), (110, -60)])
+def test_locate_frame_finds_a_crop_far_from_the_prediction(rendered_page, shift: tuple[int, int]) -> None:
+    from darkread.edge.stitch.register import locate_frame
+
+    rng = np.random.default_rng(1)
+    radius = 120
+    px, py = 200, 130
+    reference = _crop(rendered_page.mask, px - radius, py - radius, 100 + 2 * radius, 200 + 2 * radius).astype(np.float32)
+    frame = _crop(rendered_page.mask, px + shift[0], py + shift[1])
+    frame = (frame.astype(bool) & (rng.random(frame.shape) > 0.15)) | (rng.random(frame.shape) < 0.01)
+    found = locate_frame(reference, np.ones_like(reference, bool), frame.astype(np.uint8), radius)
+    assert found is not None
+    assert found.shift_xy == shift
+    assert found.score > 0.5
+
+
+def test_locate_frame_needs_known_content_with_ink(rendered_page) -> None:
+    from darkread.edge.stitch.register import locate_frame
+
+    radius = 60
+    frame = _crop(rendered_page.mask, 200, 130)
+    blank = np.zeros((100 + 2 * radius, 200 + 2 * radius), np.float32)
+    assert locate_frame(blank, np.ones_like(blank, bool), frame, radius) is None  # paper only
+    reference = _crop(rendered_page.mask, 200 - radius, 130 - radius, 100 + 2 * radius, 200 + 2 * radius).astype(np.float32)
+    assert locate_frame(reference, np.zeros_like(reference, bool), frame, radius) is None  # nothing seen
+    with pytest.raises(ValueError):
+        locate_frame(reference[1:], np.ones_like(reference[1:], bool), frame, radius)

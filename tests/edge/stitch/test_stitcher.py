@@ -188,7 +188,7 @@ def test_a_head_jump_beyond_the_search_finds_the_right_line_not_the_neighbour(sh
         )
         for i, f in enumerate(reading.frames)
     ]
-    narrow = stitch_page(jumped, StitchConfig(wide_search_px=0))
+    narrow = stitch_page(jumped, StitchConfig(wide_search_px=0, anchor_search_px=0))
     page = stitch_page(jumped)
     narrow_f1, _ = ink_f1_aligned(narrow.image, short_page.mask, tolerance_px=1)
     f1, _ = ink_f1_aligned(page.image, short_page.mask, tolerance_px=1)
@@ -227,3 +227,32 @@ def test_a_page_held_askew_comes_out_level(rendered_page) -> None:
     f1, _ = ink_f1_aligned(page.image, rendered_page.mask, tolerance_px=1)
     assert f1 > 0.97  # measured 0.999
     assert len(page.lines) == len(rendered_page.text_lines)
+
+
+@pytest.mark.parametrize(("seed", "jump_px"), [(0, 100), (3, 140), (5, 70)])
+def test_a_walking_head_jump_registers_to_the_lines_already_read_not_a_second_copy(
+    short_page, seed: int, jump_px: int
+) -> None:
+    # walking: from a few frames into the third line on, the page sits 2.5-5 pitches lower in the
+    # sensor than predicted, beyond the +-40 px re-search; frames placed at the prediction (or on a
+    # weak match there) start a second, partial copy of the lines below
+    reading = simulate_reading(short_page, seed=seed)
+    start = int(np.flatnonzero(np.asarray(reading.line_of_frame) == 2)[3])
+    jumped = [
+        f
+        if i < start
+        else dataclasses.replace(
+            f, origin_xy=(f.origin_xy[0], f.origin_xy[1] + jump_px), gaze_px=(f.gaze_px[0], f.gaze_px[1] + jump_px)
+        )
+        for i, f in enumerate(reading.frames)
+    ]
+    truth = stitch_page(reading.frames)
+    blind = stitch_page(jumped, StitchConfig(anchor_search_px=0))
+    page = stitch_page(jumped)
+    blind_f1, _ = ink_f1_aligned(blind.image, short_page.mask, tolerance_px=1)
+    f1, _ = ink_f1_aligned(page.image, short_page.mask, tolerance_px=1)
+    assert blind_f1 < 0.8  # measured 0.63-0.74: a duplicated block below the page
+    assert blind.image.shape[0] > truth.image.shape[0] + short_page.pitch_px
+    assert f1 > 0.98  # measured 0.998-1.000
+    assert abs(page.image.shape[0] - truth.image.shape[0]) <= 4
+    assert page.frames_used >= 0.95 * len(jumped)
