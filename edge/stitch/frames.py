@@ -81,7 +81,11 @@ class StitchConfig:
       anchor_gain           the prediction by ``anchor_gain`` and every place a line above or below
                             by ``ambiguity_margin``;
       anchor_known_fraction ... and only places where this share of the frame lies on seen content
-                            (and the page there holds about as much ink variation) are considered.
+                            (and the page there holds about as much ink variation) are considered;
+      anchor_slack_px       ... and the place must lie within the head's reach of the last registered
+      max_head_speed_px_s   frame: this slack plus this speed times the time since (a walking bob
+                            moves the page up to ~400 px/s in the sensor; noise in low light matches
+                            a stretch 150 px away 50 ms later).
       min_match_score       normalised correlation (TM_CCOEFF_NORMED) below which a frame is dropped.
       min_overlap_fraction  share of the frame that must overlap what the page already shows for a
                             correlation to be trusted; otherwise the frame goes to its predicted place.
@@ -146,6 +150,8 @@ class StitchConfig:
     anchor_min_score: float = 0.5
     anchor_gain: float = 0.1
     anchor_known_fraction: float = 0.5
+    anchor_slack_px: float = 24.0
+    max_head_speed_px_s: float = 400.0
     ambiguity_rows: int = 10
     ambiguity_margin: float = 0.1
     min_match_score: float = 0.25
@@ -182,6 +188,8 @@ class StitchConfig:
             raise ValueError(f"drift_window_frames must be >= 1, got {self.drift_window_frames}")
         if self.search_radius_px < 0:
             raise ValueError(f"search_radius_px must be >= 0, got {self.search_radius_px}")
+        if self.anchor_search_px < 0 or self.max_head_speed_px_s < 0 or self.anchor_slack_px < 0:
+            raise ValueError("anchor_search_px, anchor_slack_px and max_head_speed_px_s must be >= 0")
         if not 0.0 <= self.alpha <= 1.0 or not 0.0 < self.ink_threshold < 1.0:
             raise ValueError("alpha must be in [0, 1] and ink_threshold in (0, 1)")
         if not 0.0 < self.grey_saturation <= 1.0:

@@ -213,7 +213,21 @@ class PageStitcher:
             return None
         if current is not None and found.score < current.score + cfg.anchor_gain:
             return None
-        log.debug("frame %d re-anchored %s px from its prediction", frame.frame_id, found.shift_xy)
+        if self._corrections:  # the head cannot have moved faster than it does
+            t_last, last = self._corrections[-1]
+            moved = np.array([px + found.shift_xy[0], py + found.shift_xy[1]]) - np.asarray(frame.origin_xy) - last
+            reach = cfg.anchor_slack_px + cfg.max_head_speed_px_s * max(0, frame.t_us - t_last) / 1e6
+            if float(np.hypot(*moved)) > reach:
+                log.debug("frame %d: a match %s px away is beyond the head's reach", frame.frame_id, found.shift_xy)
+                return None
+        log.debug(
+            "frame %d re-anchored %s px from its prediction: score %.2f (near it %s, recent %s)",
+            frame.frame_id,
+            found.shift_xy,
+            found.score,
+            "none" if current is None else f"{current.score:.2f}",
+            f"{np.median(self._scores):.2f}" if self._scores else "none",
+        )
         return found
 
     def _search_wide(self, frame: StitchFrame, px: int, py: int, roll: float) -> Registration | None:
