@@ -100,7 +100,8 @@ def test_locate_frame_finds_a_crop_far_from_the_prediction(rendered_page, shift:
     rng = np.random.default_rng(1)
     radius = 120
     px, py = 200, 130
-    reference = _crop(rendered_page.mask, px - radius, py - radius, 100 + 2 * radius, 200 + 2 * radius).astype(np.float32)
+    size = (100 + 2 * radius, 200 + 2 * radius)
+    reference = _crop(rendered_page.mask, px - radius, py - radius, *size).astype(np.float32)
     frame = _crop(rendered_page.mask, px + shift[0], py + shift[1])
     frame = (frame.astype(bool) & (rng.random(frame.shape) > 0.15)) | (rng.random(frame.shape) < 0.01)
     found = locate_frame(reference, np.ones_like(reference, bool), frame.astype(np.uint8), radius)
@@ -116,7 +117,8 @@ def test_locate_frame_needs_known_content_with_ink(rendered_page) -> None:
     frame = _crop(rendered_page.mask, 200, 130)
     blank = np.zeros((100 + 2 * radius, 200 + 2 * radius), np.float32)
     assert locate_frame(blank, np.ones_like(blank, bool), frame, radius) is None  # paper only
-    reference = _crop(rendered_page.mask, 200 - radius, 130 - radius, 100 + 2 * radius, 200 + 2 * radius).astype(np.float32)
+    size = (100 + 2 * radius, 200 + 2 * radius)
+    reference = _crop(rendered_page.mask, 200 - radius, 130 - radius, *size).astype(np.float32)
     assert locate_frame(reference, np.zeros_like(reference, bool), frame, radius) is None  # nothing seen
     with pytest.raises(ValueError):
         locate_frame(reference[1:], np.ones_like(reference[1:], bool), frame, radius)
