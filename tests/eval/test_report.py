@@ -100,7 +100,9 @@ def test_headline_compares_30_lux_paragraphs_with_the_paper() -> None:
     text = "\n".join(headline_table(runs + fake_results()))
     assert "| still | 1 | 0.0% | 0.0% | 0.0% | 5.0% | 50.0% | 90.0% |" in text
     assert "| **all** | 3 | 2.0% | 2.0% | 4.0% | 5.0% | 50.0% | 90.0% |" in text
-    assert "is 2.0%: at or below the paper's 2.5%" in text
+    assert "| still + normal | 2 | 1.0% | 1.0% | 2.0% | 5.0% | 50.0% | 90.0% |" in text
+    assert "paragraphs: 2.0% over 3 recordings, at or below the paper's 2.5%" in text
+    assert "normal head motion: 1.0% over 2 recordings, at or below" in text
     runs[0]["darkread"]["cer"] = 0.2
     assert "above the paper's" in "\n".join(headline_table(runs))
 
