@@ -394,11 +394,15 @@ def plot_backends(results: Sequence[dict[str, Any]], path: str | Path) -> Path |
     return path
 
 
-def plot_examples(results: Sequence[dict[str, Any]], path: str | Path, *, motion: str = "normal") -> Path | None:
-    """One row per lux level: the RGB snapshot crop next to the page darkread stitched (same scene)."""
+def plot_examples(
+    results: Sequence[dict[str, Any]], path: str | Path, *, motion: str = "normal", kind: str = "paragraph"
+) -> Path | None:
+    """One row per lux level: the RGB snapshot crop next to the page darkread stitched (same scene);
+    a ``kind`` recording with ``motion`` where there is one."""
     chosen = []
     for lux, group in sorted(group_by(results, "lux").items(), key=lambda kv: -float(kv[0] or 0)):
-        pick = [r for r in group if r.get("motion") == motion] or group
+        pick = ([r for r in group if r.get("motion") == motion and r.get("kind") == kind]
+                or [r for r in group if r.get("motion") == motion] or group)
         r = pick[0]
         crop, page = (r.get("rgb") or {}).get("crop_png"), (r.get("darkread") or {}).get("page_png")
         if crop and page and Path(crop).is_file() and Path(page).is_file():
@@ -516,8 +520,9 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "",
         "![CER vs lux by motion](cer_vs_lux_by_motion.png)",
         "",
-        *([("What the OCR saw, one recording per light level (left: the RGB snapshot's page crop; right: the "
-           "page darkread stitched from binary frames):"), "", "![examples](examples.png)", ""] if examples_png else []),
+        *([("What the OCR saw, one paragraph recording with normal head motion per light level (left: the RGB "
+           "snapshot's page crop; right: the page darkread stitched from binary frames):"), "", "![examples](examples.png)", ""]
+          if examples_png else []),
         "## By motion, text kind, font and x-height",
         "",
         *grouped_table(results, "motion", "motion"),
