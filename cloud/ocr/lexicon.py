@@ -47,7 +47,7 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-_TOKEN = re.compile(r"^(?P<lead>[^A-Za-z]*)(?P<word>[A-Za-z]+)(?P<trail>[^A-Za-z]*)$")
+_TOKEN = re.compile(r"^(?P<lead>[^A-Za-z]*)(?P<word>[A-Za-z]+)(?P<trail>(?:'[A-Za-z]{1,2})?[^A-Za-z]*)$")  # author's
 _CONFUSABLE_GROUPS = ("eoac", "ilt", "nu", "hb", "rt", "vy")
 CONFUSABLE: frozenset[tuple[str, str]] = frozenset(
     (a, b) for group in _CONFUSABLE_GROUPS for a in group for b in group if a != b

@@ -32,6 +32,7 @@ def test_misread_prose_is_corrected_in_its_case_and_punctuation(corrector: Lexic
     assert corrected == reference
     assert error_rates(reference, read).cer > 0.03 and error_rates(reference, corrected).cer == 0.0
     assert corrector.correct("should be Oxtirpato, and") == "should be Extirpate, and"
+    assert corrector.correct("the outhor's name, or at least") == "the author's name, or at least"
     assert corrector.correct("rollglons and civil\nsupremacies, so Itsalf") == "religions and civil\nsupremacies, so itself"
 
 
