@@ -136,10 +136,17 @@ def register_frame(
         step = (angles_deg[best + 1] - angles_deg[best - 1]) / 2.0
         angle += step * _parabola_vertex(peaks[best - 1][0], peaks[best][0], peaks[best + 1][0])
     by, bx = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    return _registration_at(scores, int(by), int(bx), radius, separation_px, overlap, angle)
+
+
+def _registration_at(
+    scores: np.ndarray, by: int, bx: int, radius: int, separation_px: int, overlap: float, angle: float
+) -> Registration:
+    """The registration of the score map's peak at (``by``, ``bx``), the centre prior taken back out."""
     # within a pixel of the edge: the centre prior holds a peak that lies beyond back by a pixel
     on_rim = radius > 1 and not (1 < by < scores.shape[0] - 2 and 1 < bx < scores.shape[1] - 2)
-    margin = float(scores[by, bx]) - _runner_up(scores, int(by), separation_px)
-    dx, dy = int(bx) - radius, int(by) - radius
+    margin = float(scores[by, bx]) - _runner_up(scores, by, separation_px)
+    dx, dy = bx - radius, by - radius
     peak = float(scores[by, bx]) + _CENTRE_PRIOR * (dx * dx + dy * dy) / float(max(1, radius) ** 2)
     sx = _parabola_vertex(*scores[by, bx - 1 : bx + 2]) if _interior(scores, by, bx, 0) else 0.0
     sy = _parabola_vertex(*scores[by - 1 : by + 2, bx]) if _interior(scores, by, bx, 1) else 0.0
@@ -194,10 +201,4 @@ def locate_frame(
     by, bx = np.unravel_index(int(np.argmax(scores)), scores.shape)
     if not usable[by, bx]:
         return None
-    on_rim = radius > 1 and not (1 < by < scores.shape[0] - 2 and 1 < bx < scores.shape[1] - 2)
-    margin = float(scores[by, bx]) - _runner_up(scores, int(by), separation_px)
-    dx, dy = int(bx) - radius, int(by) - radius
-    peak = float(scores[by, bx]) + _CENTRE_PRIOR * (dx * dx + dy * dy) / float(max(1, radius) ** 2)
-    sx = _parabola_vertex(*scores[by, bx - 1 : bx + 2]) if _interior(scores, by, bx, 0) else 0.0
-    sy = _parabola_vertex(*scores[by - 1 : by + 2, bx]) if _interior(scores, by, bx, 1) else 0.0
-    return Registration((dx, dy), peak, float(share[by, bx]), (sx, sy), angle_deg, on_rim, margin)
+    return _registration_at(scores, int(by), int(bx), radius, separation_px, float(share[by, bx]), angle_deg)
