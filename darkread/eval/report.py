@@ -578,7 +578,7 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "handed to the OCR, no ISP denoising smear, no rolling shutter. Its failures come from motion blur "
         "and noise."),
         ("- Both readers use the same OCR: `local` is the embedded engine (rapidocr) followed by the dictionary "
-        "correction of lookalike glyphs on prose lines (`cloud/ocr/lexicon.py`); the engine comparison below "
+        "correction of lookalike glyphs on prose lines (`cloud/ocr/lexicon.py`); the engine comparison above "
         "lists each engine with it and without it (`-raw`)."),
         ("- Each recording ends once the page has been read (no re-reading); `paragraph` and `words` texts "
         "come from the part of the corpus never used for training, and the held-out font family was never "
