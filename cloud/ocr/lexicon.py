@@ -60,19 +60,6 @@ _SENTENCE_END = (".", "!", "?", ":", ";")
 _CORE = re.compile(r"[A-Za-z]+")
 
 
-def glyph_confusion(read: str, word: str) -> bool:
-    """Whether ``word`` becomes ``read`` through confusable glyphs alone (lower case)."""
-    if len(read) == len(word):
-        return all(a == b or (a, b) in CONFUSABLE for a, b in zip(read, word))
-    if len(word) == len(read) + 1:  # one thin stem lost: "frst" for "first"
-        for k, ch in enumerate(word):
-            if ch in DROPPED_STEMS and word[:k] + word[k + 1 :] == read:
-                return True
-            if k < len(read) and read[k] != ch:
-                return False
-    return False
-
-
 def misreadings(read: str, substitutions: int) -> Iterator[str]:
     """Words ``read`` (lower case) may be a misreading of with exactly ``substitutions`` lookalike
     glyphs swapped; with 0, the words it becomes when one lost thin stem is put back."""
@@ -90,9 +77,10 @@ def misreadings(read: str, substitutions: int) -> Iterator[str]:
             yield "".join(word)
 
 
-@lru_cache(maxsize=2)
-def _dictionary(max_distance: int) -> SymSpell:
-    """SymSpell loaded with its bundled English frequency list (about 1 s, once per process)."""
+@lru_cache(maxsize=1)
+def _dictionary() -> SymSpell:
+    """SymSpell's bundled English word and word-pair counts (about 2 s, once per process); its
+    spelling search is not used (lookalike glyphs decide the candidates), so no edit index is built."""
     try:
         from importlib.resources import files
 
@@ -101,7 +89,7 @@ def _dictionary(max_distance: int) -> SymSpell:
         raise OcrUnavailableError(
             "dictionary correction needs symspellpy (pip install symspellpy)", backend="lexicon"
         ) from exc
-    speller = SymSpell(max_dictionary_edit_distance=max_distance, prefix_length=7)
+    speller = SymSpell(max_dictionary_edit_distance=0, prefix_length=7)
     path = files("symspellpy") / "frequency_dictionary_en_82_765.txt"
     if not speller.load_dictionary(str(path), term_index=0, count_index=1):
         raise OcrUnavailableError(f"could not load the word list {path}", backend="lexicon")
@@ -121,7 +109,8 @@ def _with_case_of(template: str, word: str) -> str:
 
 @dataclass
 class LexiconCorrector:
-    """Corrects words of prose lines that are not in the dictionary (see the module docstring)."""
+    """Corrects the misread words of prose lines: unknown ones by lookalike glyphs, known ones by
+    their neighbours (see the module docstring)."""
 
     max_substitutions: int = 3
     min_length: int = 3
@@ -132,7 +121,7 @@ class LexiconCorrector:
 
     def _words(self) -> SymSpell:
         if self._speller is None:
-            self._speller = _dictionary(0)  # only its word list and counts are used
+            self._speller = _dictionary()
         return self._speller
 
     def known(self, word: str) -> bool:

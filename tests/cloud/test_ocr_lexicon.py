@@ -7,7 +7,7 @@ pytest.importorskip("symspellpy")
 
 from darkread.cloud.ocr import create_backend  # noqa: E402
 from darkread.cloud.ocr.base import OcrLine, OcrResult  # noqa: E402
-from darkread.cloud.ocr.lexicon import LexiconCorrected, LexiconCorrector, glyph_confusion  # noqa: E402
+from darkread.cloud.ocr.lexicon import LexiconCorrected, LexiconCorrector  # noqa: E402
 from darkread.cloud.settings import Settings  # noqa: E402
 from darkread.eval.metrics import error_rates  # noqa: E402
 
@@ -17,12 +17,17 @@ def corrector() -> LexiconCorrector:
     return LexiconCorrector()
 
 
-def test_glyph_confusion_allows_only_lookalike_glyphs() -> None:
-    assert glyph_confusion("aro", "are") and glyph_confusion("buslest", "busiest")
-    assert glyph_confusion("frst", "first")  # a lost i stem
-    assert not glyph_confusion("tardiest", "hardiest")  # t and h do not look alike
-    assert not glyph_confusion("sectaries", "secretaries")  # two letters more is not a misreading
-    assert not glyph_confusion("cat", "cats")
+def test_candidates_differ_in_lookalike_glyphs_only() -> None:
+    from darkread.cloud.ocr.lexicon import misreadings
+
+    def reachable(read: str) -> set[str]:
+        return {w for k in range(4) for w in misreadings(read, k)}
+
+    assert "are" in reachable("aro") and "busiest" in reachable("buslest")
+    assert "first" in reachable("frst")  # a lost i stem
+    assert "hardiest" not in reachable("tardiest")  # t and h do not look alike
+    assert "secretaries" not in reachable("sectaries")  # two letters more is not a misreading
+    assert "cats" not in reachable("cat")
 
 
 def test_misread_prose_is_corrected_in_its_case_and_punctuation(corrector: LexiconCorrector) -> None:
