@@ -186,11 +186,6 @@ def evaluate_recording(
     return result
 
 
-def _evaluate_one(folder: Path, run_dir: Path, backend: str, compare: list[str], model: str | None) -> dict[str, Any]:
-    """One recording in a worker process (its own OCR engines)."""
-    return evaluate_recording(folder, run_dir, backend=backend, compare=compare, model=model)
-
-
 def evaluate_suite(
     suite_dir: str | Path,
     work_dir: str | Path | None = None,
@@ -235,7 +230,8 @@ def evaluate_suite(
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_evaluate_one, f, runs / f.name, backend, engines, model): f for f in todo}
+            futures = {pool.submit(evaluate_recording, f, runs / f.name, backend=backend, compare=engines, model=model): f
+                       for f in todo}  # each worker makes its own OCR engines
             for future in as_completed(futures):
                 by_name[futures[future].name] = future.result()
                 bar.update()

@@ -96,18 +96,17 @@ def suite_entries(*, small: bool = False) -> list[SuiteEntry]:
     return [_entry(i, *c, small=small) for i, c in enumerate(conditions)]
 
 
-def _write_entry(out: Path, entry: SuiteEntry) -> str:
-    """Write one recording unless it is already complete; its name when written (worker-safe)."""
+def _write_entry(out: Path, entry: SuiteEntry) -> None:
+    """Write one recording unless it is already complete (runs in a worker process)."""
     from darkread.models.synth.recording import write_recording
 
     folder = out / entry.name
     spec_doc = asdict(entry.recording_spec())
     spec_path = folder / SPEC_NAME
     if spec_path.is_file() and json.loads(spec_path.read_text()) == spec_doc and (folder / "meta.json").is_file():
-        return ""
+        return
     write_recording(folder, entry.recording_spec(), progress=False)
     spec_path.write_text(json.dumps(spec_doc, indent=1))  # last: marks the recording complete
-    return entry.name
 
 
 def make_suite(
