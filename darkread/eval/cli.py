@@ -18,7 +18,7 @@ Two forms:
       read once; texts come from the corpus part never used for training. --small: 17 short
       recordings, one axis varied at a time (CI-sized).
 
-  darkread eval SUITE_DIR [--out docs/eval] [--backend local]
+  darkread eval SUITE_DIR [--out docs/eval] [--backend local] [--jobs N]
       read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
       snapshot of the same scene, compare OCR engines on the stitched pages, measure bandwidth, and
       write the Markdown report with PNG plots to --out. Results are kept per recording under
@@ -32,7 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
         description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small]",
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small] [--jobs N]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
@@ -42,7 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="OCR engine for darkread and the RGB baseline (default: local)")
     parser.add_argument("--compare", nargs="*", metavar="ENGINE", default=None,
                         help="OCR engines to compare on the stitched pages (default: every installed offline "
-                             "engine, plus remote ones when configured; --compare alone: no comparison)")
+                             "engine with and without the word-list correction, e.g. rapidocr and rapidocr-raw, plus "
+                             "remote ones when configured; --compare alone: no comparison)")
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
     parser.add_argument("--work", metavar="DIR", help="per-recording outputs (default SUITE_DIR/eval_runs)")
     parser.add_argument("--force", action="store_true", help="re-evaluate recordings that already have results")
