@@ -69,7 +69,8 @@ def reading_order(lines: list[OcrLine]) -> list[OcrLine]:
     if not boxed:
         return list(lines)
     if all(line.quad is not None for line in boxed):
-        return _rows([(_across_text(line.quad, _median_slope(boxed)), _quad_height(line.quad), line.quad[0][0], line)  # type: ignore[arg-type]
+        slope = _median_slope(boxed)
+        return _rows([(_across_text(line.quad, slope), _quad_height(line.quad), line.quad[0][0], line)  # type: ignore[arg-type]
                       for line in boxed])
     return _rows([((line.box[1] + line.box[3]) / 2, max(1, line.box[3] - line.box[1]), line.box[0], line)  # type: ignore[index]
                   for line in boxed])

@@ -177,16 +177,14 @@ def expose(
         reflect = cv2.GaussianBlur(reflect, (0, 0), camera.lens_psf_sigma_px, borderType=cv2.BORDER_REFLECT)
     mean_e = camera.electrons_per_lux_s * lux * exposure.exposure_s * reflect.astype(np.float64)
     to_linear = np.float32(exposure.gain * camera.paper_level / camera.target_electrons)
-    if camera.bayer:  # one colour per photosite, then demosaicing (on the linear raw image, as an ISP does)
-        electrons = rng.poisson(mean_e).astype(np.float32)
-        electrons += rng.normal(0.0, camera.read_noise_electrons, mean_e.shape).astype(np.float32)
-        raw = np.round(np.clip(electrons * to_linear, 0.0, 1.0) * 65535.0).astype(np.uint16)
+    # a Bayer sensor counts one colour per photosite; otherwise three full planes
+    mean = mean_e if camera.bayer else np.broadcast_to(mean_e[..., None], mean_e.shape + (3,))
+    electrons = rng.poisson(mean).astype(np.float32)
+    electrons += rng.normal(0.0, camera.read_noise_electrons, mean.shape).astype(np.float32)
+    linear = electrons * to_linear
+    if camera.bayer:  # demosaicing on the linear raw image, as an ISP does
+        raw = np.round(np.clip(linear, 0.0, 1.0) * 65535.0).astype(np.uint16)
         linear = cv2.cvtColor(raw, cv2.COLOR_BayerRG2RGB).astype(np.float32) / np.float32(65535.0)
-    else:
-        shape = mean_e.shape + (3,)
-        electrons = rng.poisson(np.broadcast_to(mean_e[..., None], shape)).astype(np.float32)
-        electrons += rng.normal(0.0, camera.read_noise_electrons, shape).astype(np.float32)
-        linear = electrons * to_linear
     image = np.round(srgb_encode(linear) * 255.0).astype(np.uint8)
     return jpeg_round_trip(image, camera.jpeg_quality) if camera.jpeg_quality is not None else image
 
