@@ -26,12 +26,33 @@ from darkread.bench import BenchContext, Figure
 from darkread.paths import SAMPLE_RECORDING
 
 
+SMOKE_SECONDS = 0.3
+
+
 def _recording(ctx: BenchContext) -> Path | None:
     if (SAMPLE_RECORDING / "events.raw").is_file():
-        return SAMPLE_RECORDING
-    if ctx.shared_data is not None and (ctx.shared_data / "sample_recording" / "events.raw").is_file():
-        return ctx.shared_data / "sample_recording"
-    return None
+        found = SAMPLE_RECORDING
+    elif ctx.shared_data is not None and (ctx.shared_data / "sample_recording" / "events.raw").is_file():
+        found = ctx.shared_data / "sample_recording"
+    else:
+        return None
+    return _first_seconds(found, ctx.scratch / "smoke_recording", SMOKE_SECONDS) if ctx.smoke else found
+
+
+def _first_seconds(recording: Path, out: Path, seconds: float) -> Path:
+    """A copy of ``recording`` cut to its first ``seconds`` of events (the smoke run's input)."""
+    import shutil
+
+    from darkread.edge.io.raw import read_raw, write_raw
+
+    out.mkdir(parents=True, exist_ok=True)
+    for name in ("general_eye_gaze.csv", "calibration.json", "text.txt"):
+        if (recording / name).is_file():
+            shutil.copy(recording / name, out / name)
+    raw = read_raw(recording / "events.raw")
+    t = raw.events["t"]
+    write_raw(out / "events.raw", raw.events[t < t[0] + int(seconds * 1e6)], width=raw.header.width, height=raw.header.height)
+    return out
 
 
 def _model(ctx: BenchContext) -> Path | None:
@@ -182,7 +203,7 @@ def run(ctx: BenchContext) -> list[Figure]:
         return []
     model = _model(ctx)
     meta = open_recording(recording).meta
-    repeats = 1 if ctx.quick else 3
+    repeats = ctx.runs(3, 1)
 
     def encode_only(frame, arrival):  # noqa: ANN001, ANN202
         encode(frame.to_message())

@@ -64,7 +64,7 @@ def add_at_voxel_grid(events: np.ndarray, x0: int, y0: int, cfg: VoxelConfig = V
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    runs = 50 if ctx.quick else 300
+    runs = ctx.runs(300, 50, 3)
     sensor_slice = _events(SLICE_EVENTS, 1280, 720, seed=1)
     window = _events(PipelineConfig().n_events, 200, 100, X0, Y0, seed=2)
 
