@@ -6,16 +6,14 @@
   is shared; the wall-clock factor is printed beside it. Reference: decoding
   the same file alone (``RawReader``), the ceiling of any replay.
 * Event-to-wire latency: replay paced at wall-clock speed through the real uplink to a local
-  websocket server that acknowledges every frame; from the arrival of a window's newest event to
+  websocket server that acknowledges every frame (``ack_server.AckServer``); from the arrival of a window's newest event to
   the frame handed to the socket. Reference: inference alone in the same run.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import os
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from darkread.bench import BenchContext, Figure
+from darkread.bench.ack_server import AckServer
 from darkread.paths import SAMPLE_RECORDING
 
 
@@ -141,42 +140,6 @@ def _run_edge(
     return wall, cpu, edge.source, edge.metrics
 
 
-class _AckServer:
-    """A local websocket endpoint that speaks just enough of the protocol to ack every message."""
-
-    def __init__(self) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
-        self.port = asyncio.run_coroutine_threadsafe(self._start(), self.loop).result(10)
-
-    async def _start(self) -> int:
-        from websockets.asyncio.server import serve
-
-        self.server = await serve(self._handle, "127.0.0.1", 0)
-        return int(self.server.sockets[0].getsockname()[1])
-
-    async def _handle(self, ws) -> None:  # noqa: ANN001
-        from darkread.proto.messages import Ack, Welcome, decode, encode
-
-        hello = decode(await ws.recv(), max_bytes=1 << 22)
-        await ws.send(encode(Welcome(session_id=hello.session_id, last_acked_seq=-1, max_message_bytes=1 << 22)))
-        async for data in ws:
-            seq = getattr(decode(data, max_bytes=1 << 22), "seq", None)
-            if seq is not None:
-                await ws.send(encode(Ack(seq=seq)))
-
-    def close(self) -> None:
-        async def stop() -> None:
-            self.server.close()
-            await self.server.wait_closed()
-
-        asyncio.run_coroutine_threadsafe(stop(), self.loop).result(10)
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(10)
-        self.loop.close()
-
-
 def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
     """Bytes of one 2880x2880 RGB PNG: the recording's snapshot upscaled and encoded, or the estimate."""
     from darkread.edge.metrics import RGB_FRAME_BYTES_ESTIMATE
@@ -218,9 +181,9 @@ def run(ctx: BenchContext) -> list[Figure]:
     if not pinned:
         ctx.notes.append("edge: could not pin to one core; the real-time factor used all cores")
 
-    server = _AckServer()
+    server = AckServer()
     try:
-        _, _, _, paced = _run_edge(recording, model, 1.0, uplink_url=f"ws://127.0.0.1:{server.port}/v1/stream")
+        _, _, _, paced = _run_edge(recording, model, 1.0, uplink_url=server.url)
     finally:
         server.close()
     sent_kb_s = paced.totals["bytes_sent"] / 1e3 / span_s

@@ -3,66 +3,19 @@
 from __future__ import annotations
 
 import socket
-import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 from factories import sum_bins_model, synthetic_recording
 
+from darkread.bench.ack_server import AckServer
 from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon
 from darkread.edge.errors import ModelError
 from darkread.edge.notify import Notifier
 from darkread.edge.spool import Spool
-
-
-class AckingCloud:
-    """Acks every message and remembers the hellos and the seqs it stored, per session."""
-
-    def __init__(self) -> None:
-        import asyncio
-
-        from websockets.asyncio.server import serve
-
-        from darkread.proto.messages import Ack, Welcome, decode, encode
-
-        self.stored: dict[str, list[int]] = {}
-        self.hellos: list = []
-
-        async def handler(ws) -> None:  # noqa: ANN001
-            hello = decode(await ws.recv(), max_bytes=1 << 22)
-            self.hellos.append(hello)
-            seqs = self.stored.setdefault(hello.session_id, [])
-            await ws.send(encode(Welcome(session_id=hello.session_id, last_acked_seq=seqs[-1] if seqs else -1,
-                                         max_message_bytes=1 << 22)))
-            async for data in ws:
-                message = decode(data, max_bytes=1 << 22)
-                if hasattr(message, "seq"):
-                    seqs.append(message.seq)
-                    await ws.send(encode(Ack(seq=message.seq)))
-
-        async def start():  # noqa: ANN202
-            return await serve(handler, "127.0.0.1", 0)
-
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
-        self.server = asyncio.run_coroutine_threadsafe(start(), self.loop).result(5)
-        self.url = f"ws://127.0.0.1:{self.server.sockets[0].getsockname()[1]}/v1/stream"
-
-    def close(self) -> None:
-        import asyncio
-
-        async def stop() -> None:
-            self.server.close()
-            await self.server.wait_closed()
-
-        asyncio.run_coroutine_threadsafe(stop(), self.loop).result(5)
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(5)
-        self.loop.close()
 
 
 def replay_config(recording: Path, model: Path, url: str, spool: Path, **uplink: object):  # noqa: ANN201
@@ -76,7 +29,7 @@ def replay_config(recording: Path, model: Path, url: str, spool: Path, **uplink:
 
 @pytest.mark.slow  # a whole edge: decoder start-up, model load, websocket
 def test_the_daemon_replays_a_recording_into_the_cloud(tmp_path: Path, notify_socket) -> None:
-    cloud = AckingCloud()
+    cloud = AckServer()
     try:
         config = replay_config(synthetic_recording(tmp_path / "rec"), sum_bins_model(tmp_path / "m.onnx"),
                                cloud.url, tmp_path / "spool")
@@ -99,7 +52,7 @@ def test_the_daemon_replays_a_recording_into_the_cloud(tmp_path: Path, notify_so
 @pytest.mark.slow
 def test_a_model_with_another_window_size_sets_the_fovea_everywhere(tmp_path: Path) -> None:
     """The window and the bins come from the model: frames, their origin and the hello follow it."""
-    cloud = AckingCloud()
+    cloud = AckServer()
     try:
         recording = synthetic_recording(tmp_path / "rec", box_xywh=(640 - 48, 360 - 32, 96, 64))
         config = replay_config(recording, sum_bins_model(tmp_path / "small.onnx", (2, 64, 96)), cloud.url, tmp_path / "spool")
