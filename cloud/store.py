@@ -32,8 +32,10 @@ import cv2
 import msgpack
 import numpy as np
 
-from darkread.edge.stitch.frames import ink_mask_to_paper
 from darkread.proto.messages import Frame, Gaze, Hello, Page
+from darkread.stitch.stitched_page import ink_mask_to_paper
+
+from .errors import StoreError
 
 log = logging.getLogger(__name__)
 
@@ -65,10 +67,6 @@ CREATE TABLE IF NOT EXISTS gaze (
     PRIMARY KEY (session_id, seq)
 );
 """
-
-
-class StoreError(Exception):
-    """The store could not persist or read something (disk full, database locked, closed)."""
 
 
 @dataclass(frozen=True)

@@ -15,9 +15,11 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from darkread.edge.stitch.dewarp import dewarp_strip
-from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
-from darkread.edge.stitch.page import (
+from darkread.stitch.dewarp import dewarp_strip
+from darkread.stitch.config import StitchConfig
+from darkread.stitch.frame import StitchFrame
+from darkread.stitch.stitched_page import StitchedPage
+from darkread.stitch.page import (
     PageCanvas,
     assign_lines,
     binarize,
@@ -28,9 +30,9 @@ from darkread.edge.stitch.page import (
     text_bands,
     union_box,
 )
-from darkread.edge.stitch.register import Registration, locate_frame, register_frame
-from darkread.edge.stitch.segment import LineSegmenter
-from darkread.edge.stitch.strip import LineStrip
+from darkread.stitch.register import Registration, locate_frame, register_frame
+from darkread.stitch.segment import LineSegmenter
+from darkread.stitch.strip import LineStrip
 
 log = logging.getLogger(__name__)
 
@@ -247,21 +249,21 @@ class PageStitcher:
             return None
         return reg
 
-    def page(self) -> Page:
+    def page(self) -> StitchedPage:
         """The page so far: finished lines plus the line being read."""
         cfg = self.cfg
         lines = list(self._lines)
         if self._strip is not None and not self._strip.empty:
             lines.append(_FinishedLine.of(self._strip))
         if not lines:
-            return Page(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
+            return StitchedPage(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
         box = union_box([ln.box for ln in lines])
         current = self._strip if self._strip is not None and not self._strip.empty else None
         avg, seen = self._page.reference(current, box)
         views = self._page.views(current, box)
         cover = covered_box(seen)
         if cover is None:
-            return Page(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
+            return StitchedPage(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
         cx0, cy0, cx1, cy1 = cover
         avg, views = avg[cy0:cy1, cx0:cx1], views[cy0:cy1, cx0:cx1]
         to_image = np.array([[1.0, 0.0, -(box[0] + cx0)], [0.0, 1.0, -(box[1] + cy0)]])  # page -> image
@@ -278,7 +280,7 @@ class PageStitcher:
             image = binarize(avg, cfg, views)
         boxes, images = self._line_boxes(lines, image, to_image)
         positions = {fid: _apply(to_image, xy) for fid, xy in self._positions.items()}
-        return Page(
+        return StitchedPage(
             image,
             boxes,
             images,
@@ -308,7 +310,7 @@ class PageStitcher:
         return boxes, images
 
 
-def stitch_page(frames: Sequence[StitchFrame], cfg: StitchConfig = StitchConfig()) -> Page:
+def stitch_page(frames: Sequence[StitchFrame], cfg: StitchConfig = StitchConfig()) -> StitchedPage:
     """Stitch a whole reading pass (frames are taken in time order)."""
     stitcher = PageStitcher(cfg)
     for frame in sorted(frames, key=lambda f: f.t_us):

@@ -13,7 +13,8 @@ from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
-from darkread.edge.stitch.frames import StitchConfig, StitchFrame
+from darkread.stitch.config import StitchConfig
+from darkread.stitch.frame import StitchFrame
 
 LAUNCH_PCT = 75
 CONFIRM_FRAC = 1.0

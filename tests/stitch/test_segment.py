@@ -2,8 +2,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from darkread.edge.stitch import LineSegmenter, StitchConfig, StitchFrame, segment_lines
-from stitch_scan import ScanParams, simulate_reading
+from darkread.stitch import LineSegmenter, StitchConfig, StitchFrame, segment_lines
+from reading_factory import ScanParams, simulate_reading
 
 
 def _frames(gaze: list[tuple[float, float]]) -> list[StitchFrame]:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from darkread.edge.stitch import StitchFrame
+from darkread.stitch import StitchFrame
 from PIL import Image, ImageDraw, ImageFont
 
 PARAGRAPH = (

@@ -4,14 +4,14 @@ import dataclasses
 
 import numpy as np
 import pytest
-from darkread.edge.stitch import (
+from darkread.stitch import (
     PageStitcher,
     StitchConfig,
     StitchFrame,
     naive_page,
     stitch_page,
 )
-from stitch_scan import ink_f1_aligned, simulate_reading
+from reading_factory import ink_f1_aligned, simulate_reading
 
 
 def test_stitched_page_matches_the_truth(rendered_page, stitched) -> None:
@@ -90,7 +90,7 @@ def test_blank_and_corrupt_frames_are_dropped_not_stitched(rendered_page, readin
 
 @pytest.mark.parametrize("seed", [1, 2])
 def test_other_readings_with_stronger_head_drift(rendered_page, seed: int) -> None:
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     reading = simulate_reading(rendered_page, ScanParams(drift_amplitude_px=45.0, tremor_px=2.0), seed=seed)
     page = stitch_page(reading.frames)
@@ -116,7 +116,7 @@ def test_frames_and_config_validate_their_input() -> None:
 
 
 def test_head_motion_is_predicted_from_recent_corrections() -> None:
-    from darkread.edge.stitch.stitcher import predict_correction
+    from darkread.stitch.stitcher import predict_correction
 
     assert np.array_equal(predict_correction([], 0), np.zeros(2))
     two = [(0, np.array([1.0, 2.0])), (40_000, np.array([3.0, 2.0]))]
@@ -126,7 +126,7 @@ def test_head_motion_is_predicted_from_recent_corrections() -> None:
 
 
 def test_a_velocity_from_a_few_milliseconds_is_not_carried_across_a_saccade() -> None:
-    from darkread.edge.stitch.stitcher import predict_correction
+    from darkread.stitch.stitcher import predict_correction
 
     # frames 3 ms apart (busy text) with 1 px registration jitter: over 15 ms that looks like a
     # drift of ~100 px/s, which over the next 150 ms gap would move the prediction by a line pitch
@@ -143,7 +143,7 @@ def test_a_velocity_from_a_few_milliseconds_is_not_carried_across_a_saccade() ->
 def _dense_reading(rendered_page, seed: int):
     """A reading as the event camera delivers it on busy text: a frame every 3 ms during a
     fixation, none during the ~150 ms of a saccade."""
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     params = ScanParams(
         frame_dt_us=3_000,
@@ -198,7 +198,7 @@ def test_a_head_jump_beyond_the_search_finds_the_right_line_not_the_neighbour(sh
 
 
 def test_head_roll_is_tracked_and_undone(rendered_page) -> None:
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     reading = simulate_reading(rendered_page, ScanParams(roll_deg=1.5), seed=3)
     with_roll = stitch_page(reading.frames)
@@ -209,7 +209,7 @@ def test_head_roll_is_tracked_and_undone(rendered_page) -> None:
 
 
 def test_other_window_sizes_stitch_too(rendered_page) -> None:
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     reading = simulate_reading(rendered_page, ScanParams(frame_hw=(80, 160)), seed=4)
     assert reading.frames[0].mask.shape == (80, 160)
@@ -219,7 +219,7 @@ def test_other_window_sizes_stitch_too(rendered_page) -> None:
 
 
 def test_a_page_held_askew_comes_out_level(rendered_page) -> None:
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     reading = simulate_reading(rendered_page, ScanParams(page_tilt_deg=6.0), seed=1)
     page = stitch_page(reading.frames)
