@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING, Any
 import httpx
 import numpy as np
 
-from .base import OcrError, OcrLine, OcrResult, OcrUnavailableError, check_image, encode_png, join_lines, reading_order
+from ..errors import OcrError, OcrUnavailableError
+from .base import OcrLine, OcrResult, check_image, encode_png, join_lines, reading_order
 
 if TYPE_CHECKING:
     from darkread.cloud.settings import Settings

@@ -16,7 +16,8 @@ import cv2
 import httpx
 import numpy as np
 
-from .base import OcrError, OcrLine, OcrResult, OcrUnavailableError, check_image, encode_png
+from ..errors import OcrError, OcrUnavailableError
+from .base import OcrLine, OcrResult, check_image, encode_png
 from .google_vision import RETRYABLE_STATUS
 
 if TYPE_CHECKING:
