@@ -32,6 +32,8 @@ import cv2
 import msgpack
 import numpy as np
 
+from darkread.frame_record import FrameRecord
+from darkread.mask_bits import unpack_bits
 from darkread.proto.messages import Frame, Gaze, Hello, Page
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
@@ -84,13 +86,10 @@ class SessionInfo:
 
 
 @dataclass(frozen=True)
-class StoredFrame:
+class StoredFrame(FrameRecord):
+    """A frame record as the session stored it, with the sequence number it arrived under."""
+
     seq: int
-    frame_id: int
-    t_us: int
-    origin: tuple[int, int]
-    gaze_px: tuple[float, float]
-    mask: np.ndarray  # uint8, ink = 1
 
 
 @dataclass(frozen=True)
@@ -375,8 +374,8 @@ class Store:
             ).fetchall()
         frames = []
         for seq, frame_id, t_us, x0, y0, u, v, rows_, cols, bits in reversed(rows):
-            flat = np.unpackbits(np.frombuffer(bits, np.uint8), count=rows_ * cols)
-            frames.append(StoredFrame(seq, frame_id, t_us, (x0, y0), (u, v), flat.reshape(rows_, cols)))
+            mask = unpack_bits((rows_, cols), bits)
+            frames.append(StoredFrame(frame_id, t_us, mask, (x0, y0), (u, v), seq=seq))
         return frames
 
     def latest_page(self, session_id: str) -> StoredPage | None:

@@ -8,7 +8,6 @@ correlation (``register``) and accumulated with an alpha channel and an improvem
 """
 
 from darkread.stitch.config import StitchConfig
-from darkread.stitch.frame import StitchFrame
 from darkread.stitch.page import naive_page
 from darkread.stitch.register import Registration, register_frame
 from darkread.stitch.segment import LineSegmenter, segment_lines
@@ -20,7 +19,6 @@ __all__ = [
     "PageStitcher",
     "Registration",
     "StitchConfig",
-    "StitchFrame",
     "StitchedPage",
     "naive_page",
     "register_frame",

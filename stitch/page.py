@@ -6,9 +6,9 @@ from collections.abc import Sequence
 
 import cv2
 import numpy as np
+from darkread.frame_record import FrameRecord
 from darkread.stitch.canvas import Canvas
 from darkread.stitch.config import StitchConfig
-from darkread.stitch.frame import StitchFrame
 from darkread.stitch.stitched_page import StitchedPage
 from darkread.stitch.strip import LineStrip
 
@@ -218,12 +218,12 @@ def _monotone_assignment(rows: np.ndarray, centres: np.ndarray, jump_cost: float
     return path[::-1]
 
 
-def naive_page(frames: Sequence[StitchFrame], average: bool = False, cfg: StitchConfig = StitchConfig()) -> StitchedPage:
-    """Reference without registration: every frame pasted at its sensor position (``origin_xy``),
+def naive_page(frames: Sequence[FrameRecord], average: bool = False, cfg: StitchConfig = StitchConfig()) -> StitchedPage:
+    """Reference without registration: every frame pasted at its sensor position (``origin``),
     later frames over earlier ones; with ``average``, averaged and thresholded instead."""
     canvas = Canvas(("sum", "count"))
     for f in frames:
-        x, y = f.origin_xy
+        x, y = f.origin
         h, w = f.mask.shape
         canvas.ensure(x, y, x + w, y + h)
         if average:

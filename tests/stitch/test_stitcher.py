@@ -4,10 +4,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+from darkread.frame_record import FrameRecord
 from darkread.stitch import (
     PageStitcher,
     StitchConfig,
-    StitchFrame,
     naive_page,
     stitch_page,
 )
@@ -106,10 +106,10 @@ def test_empty_input_gives_an_empty_page() -> None:
 
 def test_frames_and_config_validate_their_input() -> None:
     with pytest.raises(ValueError, match="2-D"):
-        StitchFrame(1, 0, np.zeros(10, np.uint8), (0, 0), (0.0, 0.0))
+        FrameRecord(1, 0, np.zeros(10, np.uint8), (0, 0), (0.0, 0.0))
     with pytest.raises(ValueError, match="uint8"):
-        StitchFrame(1, 0, np.zeros((10, 10), np.float32), (0, 0), (0.0, 0.0))
-    frame = StitchFrame(1, 0, np.full((10, 10), 255, np.uint8), (0, 0), (0.0, 0.0))
+        FrameRecord(1, 0, np.zeros((10, 10), np.float32), (0, 0), (0.0, 0.0))
+    frame = FrameRecord(1, 0, np.full((10, 10), 255, np.uint8), (0, 0), (0.0, 0.0))
     assert frame.mask.max() == 1
     with pytest.raises(ValueError):
         StitchConfig(search_radius_px=-1)
@@ -184,7 +184,7 @@ def test_a_head_jump_beyond_the_search_finds_the_right_line_not_the_neighbour(sh
         f
         if i < start
         else dataclasses.replace(
-            f, origin_xy=(f.origin_xy[0], f.origin_xy[1] + 24), gaze_px=(f.gaze_px[0], f.gaze_px[1] + 24)
+            f, origin=(f.origin[0], f.origin[1] + 24), gaze_px=(f.gaze_px[0], f.gaze_px[1] + 24)
         )
         for i, f in enumerate(reading.frames)
     ]
@@ -243,7 +243,7 @@ def test_a_walking_head_jump_registers_to_the_lines_already_read_not_a_second_co
         f
         if i < start
         else dataclasses.replace(
-            f, origin_xy=(f.origin_xy[0], f.origin_xy[1] + jump_px), gaze_px=(f.gaze_px[0], f.gaze_px[1] + jump_px)
+            f, origin=(f.origin[0], f.origin[1] + jump_px), gaze_px=(f.gaze_px[0], f.gaze_px[1] + jump_px)
         )
         for i, f in enumerate(reading.frames)
         if not start <= i < start + 6
