@@ -8,12 +8,12 @@ import time
 from dataclasses import asdict
 from typing import Annotated
 
+from darkread.image_codec import encode_png
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Response, status
 from pydantic import BaseModel, Field
 
 from .context import AppContext, get_context, require_api_key
 from .errors import NoPageError, OcrError, OcrUnavailableError
-from .ocr.base import encode_png
 from .pages import PageImage
 from .store import SessionInfo
 

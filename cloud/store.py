@@ -28,11 +28,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import msgpack
 import numpy as np
 
 from darkread.frame_record import FrameRecord
+from darkread.image_codec import ImageCodecError, encode_png, read_image
 from darkread.mask_bits import unpack_bits
 from darkread.proto.messages import Frame, Gaze, Hello, Page
 from darkread.stitch.stitched_page import ink_mask_to_paper
@@ -102,10 +102,10 @@ class StoredPage:
 
     def image(self) -> np.ndarray:
         """The page as uint8 black-on-white (0 = ink, 255 = paper)."""
-        image = cv2.imread(str(self.png_path), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            raise StoreError(f"page image {self.png_path} is missing or unreadable")
-        return image
+        try:
+            return read_image(self.png_path)
+        except ImageCodecError as exc:
+            raise StoreError(f"page image {self.png_path} is missing or unreadable") from exc
 
 
 @dataclass(frozen=True)
@@ -116,10 +116,7 @@ class WriteResult:
 
 def mask_to_png(mask: np.ndarray) -> bytes:
     """Ink mask (nonzero = ink) -> PNG bytes, black text on white."""
-    ok, png = cv2.imencode(".png", ink_mask_to_paper(mask))
-    if not ok:
-        raise StoreError("PNG encoding failed")
-    return png.tobytes()
+    return encode_png(ink_mask_to_paper(mask))
 
 
 def _fsync_write(path: Path, data: bytes) -> None:

@@ -16,6 +16,7 @@ Each component keeps its own errors in its own ``errors.py``::
      │    └── TreuzellError            edge/sources/evk4/treuzell.py: the EVK4's control protocol failed
      │         └── CommandFailedError  the camera answered a command with an error status
      ├── ModelError                    edge/errors.py: the ONNX model is missing or has the wrong shape
+     ├── ImageCodecError               darkread/image_codec.py: an image that cannot be encoded or decoded
      ├── ProtocolError                 proto/errors.py: a wire message that cannot be accepted (close 4400)
      │    ├── MessageTooLargeError     more bytes than the receiver allows (1009)
      │    ├── MalformedMessageError    not msgpack, trailing bytes, or not a map (4400)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
+
+from darkread.image_codec import encode_png
 
 
 def ink_mask_to_paper(mask: np.ndarray) -> np.ndarray:
@@ -48,7 +49,4 @@ class StitchedPage:
         grey = ink_mask_to_paper(self.image)
         if grey.size == 0:
             grey = np.full((1, 1), 255, np.uint8)
-        ok, buf = cv2.imencode(".png", grey)
-        if not ok:
-            raise ValueError(f"cannot encode a page of shape {grey.shape} as PNG")
-        return buf.tobytes()
+        return encode_png(grey)

@@ -98,7 +98,7 @@ def test_the_drawn_tree_is_the_real_tree() -> None:
 
     import darkread.errors
 
-    modules = ["darkread.errors", "darkread.edge.errors", "darkread.edge.sources.evk4.treuzell",
+    modules = ["darkread.errors", "darkread.image_codec", "darkread.edge.errors", "darkread.edge.sources.evk4.treuzell",
                "darkread.proto.errors", "darkread.cloud.errors"]
     known = {name: obj for m in modules for name, obj in vars(importlib.import_module(m)).items() if isinstance(obj, type)}
     parents: list[tuple[int, type]] = []

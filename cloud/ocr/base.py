@@ -100,11 +100,3 @@ def _rows(keyed: list[tuple[float, float, float, OcrLine]]) -> list[OcrLine]:
 def join_lines(lines: list[OcrLine]) -> str:
     return "\n".join(line.text for line in lines if line.text)
 
-
-def encode_png(image: np.ndarray) -> bytes:
-    import cv2
-
-    ok, png = cv2.imencode(".png", image)
-    if not ok:
-        raise OcrError("PNG encoding failed", backend="png")
-    return png.tobytes()

@@ -50,10 +50,9 @@ def _ocr_reader():
     engine = RapidOCR(params=params)
 
     def read(png: bytes) -> str:
-        import cv2
-        import numpy as np
+        from darkread.image_codec import decode_image
 
-        result = engine(cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR))
+        result = engine(decode_image(png, colour=True))
         return re.sub(r"\s+", " ", " ".join(result.txts or ())).strip()
 
     return read

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from darkread.image_codec import read_image, write_png
 from darkread.models.synth.rgb_camera import (
     SPEC_NAME,
     RgbCameraModel,
@@ -27,16 +28,11 @@ def recorded_snapshot(recording_dir: str | Path) -> RgbSnapshot | None:
     For recordings not made by a suite (real ones): nothing to re-create, so the OCR reads the whole
     recorded image; exposure comes from ``calibration.json``'s ``rgb_camera`` block when present.
     """
-    import cv2
-
     recording_dir = Path(recording_dir)
     path = recording_dir / "rgb.png"
     if not path.is_file():
         return None
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if bgr is None:
-        raise ValueError(f"{path}: not a readable image")
-    image = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    image = read_image(path, colour=True)
     rgb_camera: dict[str, Any] = {}
     calibration = recording_dir / "calibration.json"
     if calibration.is_file():
@@ -83,9 +79,7 @@ def rgb_baseline(recording_dir: str | Path, backend: OcrBackend, *, save_crop: s
 
     snap = snapshot_for_recording(recording_dir)
     if save_crop is not None:
-        import cv2
-
-        cv2.imwrite(str(save_crop), cv2.cvtColor(snap.crop, cv2.COLOR_RGB2BGR))
+        write_png(save_crop, snap.crop)
     text = read_snapshot(snap, backend)
     reference = (Path(recording_dir) / "text.txt").read_text(encoding="utf-8")
     rates = error_rates(reference, text)

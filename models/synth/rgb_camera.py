@@ -37,6 +37,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from darkread.image_codec import decode_image, encode_jpeg
+
 if TYPE_CHECKING:
     from darkread.models.synth.recording import RecordingSpec
     from darkread.models.synth.scene import Region, Scene
@@ -191,12 +193,7 @@ def expose(
 
 def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
     """The image as a JPEG decoder sees it after encoding at ``quality`` (RGB in, RGB out)."""
-    import cv2
-
-    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    if not ok:
-        raise RuntimeError("JPEG encoding failed")
-    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    return decode_image(encode_jpeg(image, quality), colour=True)
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:
