@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 
 from darkread.edge.pipeline import FrameResult
-from darkread.edge.stitch import PageStitcher, StitchFrame
+from darkread.stitch import PageStitcher
 from darkread.proto.messages import Page, pack_mask
 
 
@@ -27,9 +27,8 @@ class PageBuilder:
         self._last = clock()
 
     def add(self, frame: FrameResult) -> None:
-        stitch_frame = StitchFrame(frame.frame_id, frame.t_us, frame.mask, frame.origin, frame.gaze_px)
         with self._lock:
-            self._stitcher.add(stitch_frame)
+            self._stitcher.add(frame)  # a FrameResult is the frame record the stitcher reads
 
     def due(self) -> bool:
         return self._clock() - self._last >= self.every_s

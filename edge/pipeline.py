@@ -33,6 +33,7 @@ from darkread.edge.metrics import EdgeMetrics
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
 from darkread.edge.voxel import VoxelConfig, voxel_grid
+from darkread.frame_record import FrameRecord
 
 if TYPE_CHECKING:
     from darkread.proto.messages import Frame
@@ -47,31 +48,22 @@ Infer = Callable[[np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
-class FrameResult:
-    """One reconstructed foveal window.
+class FrameResult(FrameRecord):
+    """The frame record of one reconstructed foveal window, with how it was made.
 
     ``t_us`` is the frame's one timestamp (event clock): the newest event when it was made, the
     time its gaze was looked up and the last time its events may have.
     """
 
-    frame_id: int
-    t_us: int
-    origin: tuple[int, int]  # (x0, y0) sensor pixels
-    gaze_px: tuple[float, float]  # (u, v)
-    gaze_rad: tuple[float, float]  # (yaw, pitch)
+    gaze_rad: tuple[float, float]  # (yaw, pitch), radians
     events_used: int
-    mask: np.ndarray  # uint8 [H, W], 1 = ink
     inference_ms: float
 
     def to_message(self) -> Frame:
         """The wire message (``seq`` is assigned by the uplink)."""
-        from darkread.proto.messages import Frame, pack_mask  # lazily: the core needs no msgpack
+        from darkread.proto.messages import Frame  # lazily: the core needs no msgpack
 
-        shape, bits = pack_mask(self.mask)
-        return Frame(
-            seq=0, frame_id=self.frame_id, t_us=self.t_us, origin=self.origin, gaze_px=self.gaze_px,
-            gaze_rad=self.gaze_rad, events_used=self.events_used, shape=shape, bits=bits,
-        )
+        return Frame.of(self, gaze_rad=self.gaze_rad, events_used=self.events_used)
 
 
 # -- the pure core -------------------------------------------------------------------------------

@@ -15,17 +15,21 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# folder -> component; the stitcher lived in edge/stitch before it became its own package
+# folder -> component
 FOLDERS = {"proto": "proto", "stitch": "stitch", "edge": "edge", "cloud": "cloud", "models": "models", "darkread": "app"}
+# the small pure modules of the darkread package every component shares: the version, the error
+# tree's base, the frame record, the mask bit layout, the image codec
+CORE = {"darkread", "darkread.errors", "darkread.frame_record", "darkread.mask_bits", "darkread.image_codec"}
 
-# component -> the darkread components it may import ("root" is the darkread package's __init__: its version)
+# component -> the darkread components it may import
 ALLOWED: dict[str, set[str]] = {
-    "proto": {"proto"},
-    "stitch": {"stitch"},
-    "edge": {"edge", "proto", "stitch", "root"},
-    "cloud": {"cloud", "proto", "stitch", "root"},
-    "models": {"models", "edge", "proto", "stitch", "root", "app"},
-    "app": {"app", "root", "proto", "stitch", "edge", "cloud", "models"},
+    "core": {"core"},
+    "proto": {"proto", "core"},
+    "stitch": {"stitch", "core"},
+    "edge": {"edge", "proto", "stitch", "core"},
+    "cloud": {"cloud", "proto", "stitch", "core"},
+    "models": {"models", "edge", "proto", "stitch", "core", "app"},  # app: darkread.paths, the latency benchmark
+    "app": {"app", "core", "proto", "stitch", "edge", "cloud", "models"},
 }
 
 # third-party packages a component must not import, whatever extras are installed here
@@ -37,6 +41,7 @@ FORBIDDEN: dict[str, set[str]] = {
 }
 # pure components: the standard library and these only
 PURE_THIRD_PARTY: dict[str, set[str]] = {
+    "core": {"numpy", "cv2"},
     "proto": {"msgpack", "numpy"},
     "stitch": {"numpy", "cv2"},
 }
@@ -44,8 +49,9 @@ PURE_THIRD_PARTY: dict[str, set[str]] = {
 
 def component_of_file(path: Path) -> str:
     rel = path.relative_to(ROOT)
-    if rel.parts[:2] == ("edge", "stitch"):
-        return "stitch"
+    if rel.parts[0] == "darkread":
+        module = ".".join(rel.with_suffix("").parts).removesuffix(".__init__")
+        return "core" if module in CORE else "app"
     return FOLDERS[rel.parts[0]]
 
 
@@ -54,10 +60,8 @@ def component_of_module(module: str) -> str | None:
     parts = module.split(".")
     if parts[0] != "darkread":
         return None
-    if len(parts) == 1:
-        return "root"
-    if parts[1:3] == ["edge", "stitch"]:
-        return "stitch"
+    if ".".join(parts[:2]) in CORE:
+        return "core"
     return parts[1] if parts[1] in FOLDERS and parts[1] != "darkread" else "app"
 
 
@@ -108,7 +112,8 @@ def test_the_rules_see_every_component() -> None:
 @pytest.mark.parametrize(
     ("source", "module", "allowed"),
     [("edge", "darkread.cloud.app", False), ("cloud", "darkread.edge.sources.evk4.camera", False),
-     ("cloud", "darkread.stitch", True), ("proto", "darkread.edge.events", False), ("edge", "darkread.proto", True)],
+     ("cloud", "darkread.stitch", True), ("proto", "darkread.edge.events", False), ("edge", "darkread.proto", True),
+     ("stitch", "darkread.frame_record", True), ("proto", "darkread.cli", False), ("edge", "darkread.errors", True)],
 )
 def test_the_rules_themselves(source: str, module: str, allowed: bool) -> None:
     assert (component_of_module(module) in ALLOWED[source]) is allowed
