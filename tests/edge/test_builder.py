@@ -106,7 +106,8 @@ def test_pages_are_built_from_frames_and_sent_when_due() -> None:
     text = (rng.random((100, 2000)) < 0.2).astype(np.uint8)  # a line of "ink" the gaze sweeps along
     for i in range(40):
         x = 40 * i
-        pages.add(FrameResult(i, 1_000 * i, (300 + x, 300), (400.0 + x, 350.0), (0.0, 0.0), 1600, text[:, x : x + 200], 1.0))
+        pages.add(FrameResult(frame_id=i, t_us=1_000 * i, mask=text[:, x : x + 200], origin=(300 + x, 300),
+                              gaze_px=(400.0 + x, 350.0), gaze_rad=(0.0, 0.0), events_used=1600, inference_ms=1.0))
     now[0] = 5.0
     assert pages.due()
     message = pages.message(t_us=99, final=True)
