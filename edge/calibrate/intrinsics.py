@@ -22,6 +22,7 @@ from darkread.edge.calibrate.event_image import (
 )
 from darkread.edge.calibrate.markers import BoardSpec, Detection, detect_board
 from darkread.edge.errors import CalibrationError
+from darkread.edge.io.intrinsics import Intrinsics
 
 logger = logging.getLogger(__name__)
 
@@ -36,24 +37,16 @@ class View:
     detection: Detection | None
 
 
-@dataclass
-class IntrinsicsResult:
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    distortion: tuple[float, float, float, float]
+@dataclass(frozen=True, eq=False)
+class IntrinsicsResult(Intrinsics):
+    """The fitted camera, and how well it fits the board corners."""
+
     rms_px: float  # RMS reprojection error over all corners of all used views
     std: dict[str, float]  # standard deviations of fx, fy, cx, cy, k1, k2, p1, p2 (from the fit's Jacobian)
     per_view_rms_px: list[float]
     n_views: int
     n_corners: int
     poses: list[np.ndarray] = field(repr=False, default_factory=list)  # T_event_board per used view
-
-    def camera_matrix(self) -> np.ndarray:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     def to_dict(self) -> dict:
         return {
