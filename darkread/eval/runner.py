@@ -102,7 +102,7 @@ def evaluate_recording(
 ) -> dict[str, Any]:
     """Everything the report needs about one recording (errors are recorded per stage)."""
     from darkread.eval.bandwidth import measure_bandwidth, page_ink_from_png
-    from darkread.eval.metrics import error_rates
+    from darkread.eval.error_rates import error_rates
     from darkread.eval.rgb_baseline import baseline_snapshot, read_snapshot
     from darkread.image_codec import read_image, write_png
     from darkread.read import read_recording

@@ -12,7 +12,7 @@ from darkread.models.synth.recording import RecordingSpec
 from darkread.models.synth.rgb_camera import session_for, take_snapshot
 from darkread.models.synth.session import Session
 
-from darkread.eval.metrics import error_rates
+from darkread.eval.error_rates import error_rates
 from darkread.eval.rgb_baseline import read_snapshot
 
 
