@@ -22,7 +22,7 @@ from darkread.edge.calibrate.event_image import (
 )
 from darkread.edge.calibrate.markers import BoardSpec, Detection, detect_board
 from darkread.edge.errors import CalibrationError
-from darkread.edge.io.intrinsics import Intrinsics
+from darkread.edge.io.intrinsics import RADTAN_KEYS, Intrinsics
 
 logger = logging.getLogger(__name__)
 
@@ -51,7 +51,7 @@ class IntrinsicsResult(Intrinsics):
     def to_dict(self) -> dict:
         return {
             "fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy,
-            "distortion": dict(zip(("k1", "k2", "p1", "p2"), self.distortion)),
+            "distortion": dict(zip(RADTAN_KEYS, self.distortion)),
             "rms_px": self.rms_px, "std": self.std, "n_views": self.n_views, "n_corners": self.n_corners,
         }
 
@@ -114,7 +114,7 @@ def calibrate_intrinsics(
         cy=float(K[1, 2]),
         distortion=(float(dist[0]), float(dist[1]), float(dist[2]), float(dist[3])),
         rms_px=float(rms),
-        std=dict(zip(("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"), (float(v) for v in std[:8]))),
+        std=dict(zip(("fx", "fy", "cx", "cy", *RADTAN_KEYS), (float(v) for v in std[:8]))),
         per_view_rms_px=per_view,
         n_views=len(used),
         n_corners=int(sum(len(d) for d in used)),

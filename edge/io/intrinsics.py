@@ -106,7 +106,6 @@ def radtan_from_dict(block: Any, name: str, source: str) -> Distortion:
 
 def intrinsics_to_dict(camera: Intrinsics) -> dict[str, Any]:
     """The JSON block of a camera (``event_camera`` of ``calibration.json``, the camera part of ``rgb_camera``)."""
-    k1, k2, p1, p2 = (float(c) for c in camera.distortion)
     return {
         "width": int(camera.width),
         "height": int(camera.height),
@@ -114,7 +113,7 @@ def intrinsics_to_dict(camera: Intrinsics) -> dict[str, Any]:
         "fy": float(camera.fy),
         "cx": float(camera.cx),
         "cy": float(camera.cy),
-        "distortion": {"model": "radtan", "k1": k1, "k2": k2, "p1": p1, "p2": p2},
+        "distortion": {"model": "radtan", **{k: float(c) for k, c in zip(RADTAN_KEYS, camera.distortion)}},
     }
 
 
