@@ -19,7 +19,7 @@ from typing import Any
 from darkread.edge.config import EdgeConfig, GazeConfig, SourceConfig
 from darkread.edge.gaze import GazeLookup
 from darkread.edge.io.calibration import Calibration
-from darkread.edge.metrics import EdgeMetrics, MetricsServer
+from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.pipeline import FrameHandler, FrameResult, Pipeline
 from darkread.edge.reconstruct import Reconstructor
 from darkread.edge.sources.base import EventSource
