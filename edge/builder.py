@@ -14,43 +14,34 @@ import dataclasses
 import logging
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 from darkread.edge.config import EdgeConfig, GazeConfig, SourceConfig
 from darkread.edge.gaze import GazeLookup
 from darkread.edge.io.calibration import Calibration
-from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.pipeline import FrameHandler, FrameResult, Pipeline
 from darkread.edge.reconstruct import Reconstructor
 from darkread.edge.sources.base import EventSource
+from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 
 logger = logging.getLogger(__name__)
 
 
+@dataclass
 class Edge:
     """The wired edge: source, gaze, reconstructor, pipeline and where frames go (uplink, pages, or a caller)."""
 
-    def __init__(
-        self,
-        config: EdgeConfig,
-        source: EventSource,
-        pipeline: Pipeline,
-        reconstructor: Reconstructor,
-        metrics: EdgeMetrics,
-        uplink: Any = None,
-        pages: Any = None,
-        feeds: list[Any] | None = None,
-    ) -> None:
-        self.config = config
-        self.source = source
-        self.pipeline = pipeline
-        self.reconstructor = reconstructor
-        self.metrics = metrics
-        self.uplink = uplink
-        self.pages = pages
-        self.feeds = feeds or []
-        self._metrics_server: MetricsServer | None = None
-        self._last_log = time.monotonic()
+    config: EdgeConfig
+    source: EventSource
+    pipeline: Pipeline
+    reconstructor: Reconstructor
+    metrics: EdgeMetrics
+    uplink: Any = None  # None when frames go to the caller
+    pages: Any = None  # pages mode: the PageBuilder
+    feeds: list[Any] = field(default_factory=list)  # live gaze feeds, started and stopped with the edge
+    _metrics_server: MetricsServer | None = field(default=None, init=False)
+    _last_log: float = field(default_factory=time.monotonic, init=False)
 
     # -- the Service the daemon runs ---------------------------------------------------------
     def startup(self, wait_connected_s: float = 0.0) -> str:

@@ -25,8 +25,8 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
 from darkread.edge.config import UplinkConfig
-from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.spool import Spool
+from darkread.edge.telemetry import EdgeMetrics
 from darkread.proto.errors import CloseCode, ProtocolError
 from darkread.proto.messages import (
     DEFAULT_MAX_MESSAGE_BYTES,
