@@ -44,8 +44,12 @@ class Daemon:
         tick_s: float = 0.1,
         status_every_s: float = 5.0,
         shutdown_timeout_s: float = 10.0,
+        handle_signals: bool = True,
     ) -> None:
+        """``handle_signals`` False leaves SIGINT/SIGTERM to the caller (``darkread read`` keeps Ctrl-C a
+        KeyboardInterrupt; the shutdown still drains)."""
         self.service = service
+        self.handle_signals = handle_signals
         self.notifier = notifier or Notifier()
         self.tick_s = tick_s
         self.status_every_s = status_every_s
@@ -80,7 +84,7 @@ class Daemon:
 
     @contextlib.contextmanager
     def capture_signals(self) -> Iterator[None]:
-        if threading.current_thread() is not threading.main_thread():
+        if not self.handle_signals or threading.current_thread() is not threading.main_thread():
             yield  # signals can only be handled in the main thread
             return
         original = {sig: signal.signal(sig, self.handle_exit) for sig in HANDLED_SIGNALS}

@@ -57,3 +57,24 @@ def test_sigterm_stops_the_daemon_gracefully() -> None:
     threading.Timer(0.05, os.kill, args=(os.getpid(), 15)).start()
     assert daemon.run() == 0
     assert service.calls == ["startup", "shutdown 10.0"]
+
+
+def test_signals_can_stay_with_the_caller() -> None:
+    """``darkread read`` keeps Ctrl-C a KeyboardInterrupt: the daemon installs no handler, yet drains."""
+    import signal
+
+    seen = []
+
+    class Recording(FakeService):
+        def tick(self) -> str | None:
+            seen.append(signal.getsignal(signal.SIGINT))
+            return super().tick()
+
+    service = Recording(ticks_until_finished=2)
+    before = signal.getsignal(signal.SIGINT)
+    assert Daemon(service, Notifier({}), tick_s=0.001, handle_signals=False).run() == 0
+    assert seen and all(handler is before for handler in seen)
+    assert service.calls == ["startup", "shutdown 10.0"]
+    handled = Recording(ticks_until_finished=1)
+    Daemon(handled, Notifier({}), tick_s=0.001).run()
+    assert seen[-1] is not before  # by default the daemon handles SIGINT itself
