@@ -26,12 +26,14 @@ from darkread.proto.errors import (
     AuthenticationError,
     BadMaskError,
     CloseCode,
+    ForbiddenError,
     MalformedMessageError,
     ProtocolError,
     UnexpectedMessageError,
 )
 from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, Message, Page, Welcome, decode, encode
 
+from .auth import Principal, Scope
 from .context import AppContext
 from .store import StoreError, WriteResult
 
@@ -69,9 +71,10 @@ def close_reason(message: str) -> str:
 class StreamConnection:
     """Protocol state of one websocket: bytes in, things to send out. No socket I/O here."""
 
-    def __init__(self, context: AppContext, *, authenticated: bool) -> None:
+    def __init__(self, context: AppContext, *, principal: Principal | None, client_host: str | None = None) -> None:
         self.context = context
-        self.authenticated = authenticated
+        self.principal = principal  # None: not yet authenticated (the key may come in hello.token)
+        self.client_host = client_host
         self.state = StreamState.AWAIT_HELLO
         self.hello: Hello | None = None
 
@@ -87,8 +90,14 @@ class StreamConnection:
     async def _on_hello(self, message: Message) -> Welcome:
         if not isinstance(message, Hello):
             raise UnexpectedMessageError(f"expected hello as the first message, got {message.TYPE}")
-        if not self.authenticated and not self.context.key_matches(message.token):
+        if self.principal is None:
+            self.principal = self.context.authenticate(message.token, client_host=self.client_host)
+        if self.principal is None:
             raise AuthenticationError("missing or wrong API key (X-API-Key header, ?key= or hello.token)")
+        if not self.principal.can(Scope.STREAM):
+            raise ForbiddenError("this key lacks the 'stream' scope")
+        if self.principal.device is not None and self.principal.device != message.device_id:
+            raise ForbiddenError(f"this key belongs to device {self.principal.device!r}, not {message.device_id!r}")
         last_seq = await self.context.store.open_session(message)
         self.hello = message
         self.state = StreamState.STREAMING
@@ -125,7 +134,9 @@ async def stream_endpoint(websocket: WebSocket) -> None:
     context: AppContext = websocket.app.state.context
     metrics = context.metrics
     supplied = websocket.headers.get("x-api-key") or websocket.query_params.get("key")
-    if supplied is not None and not context.key_matches(supplied):
+    client_host = websocket.client.host if websocket.client else None
+    principal = context.authenticate(supplied, client_host=client_host) if supplied is not None else None
+    if supplied is not None and principal is None:
         metrics.denied.inc()
         metrics.errors.labels(code=str(int(CloseCode.POLICY_VIOLATION))).inc()
         await websocket.close(code=CloseCode.POLICY_VIOLATION, reason="wrong API key")  # before accept: HTTP 403
@@ -133,7 +144,9 @@ async def stream_endpoint(websocket: WebSocket) -> None:
     await websocket.accept()
     metrics.connections.inc()
     metrics.active.inc()
-    connection = StreamConnection(context, authenticated=supplied is not None or context.settings.api_key is None)
+    if principal is None and not context.auth_configured():
+        principal = context.authenticate(None, client_host=client_host)  # loopback without keys
+    connection = StreamConnection(context, principal=principal, client_host=client_host)
     outbox: asyncio.Queue[_Outgoing | None] = asyncio.Queue(maxsize=context.settings.max_in_flight)
     sender = asyncio.create_task(_send_loop(websocket, outbox, context))
     try:
