@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import secrets
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader, APIKeyQuery
@@ -28,6 +28,7 @@ class AppContext:
     ocr: OcrBackend
     pages: PageAssembler
     keys: KeyRing
+    live: dict[str, Any] = field(default_factory=dict)  # session id -> its StreamConnection
 
     def auth_configured(self) -> bool:
         return self.settings.api_key is not None or bool(self.keys)

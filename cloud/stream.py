@@ -1,5 +1,13 @@
 """``WS /v1/stream``: authenticated ingest of frames and pages, acknowledged after commit.
 
+A session belongs to the stream that opened it (device id, and the ``hello.stream_id`` naming
+its spool, i.e. its seq space). While a connection streams a session, a hello from another
+stream is refused (4423 SESSION_BUSY); a hello from the same stream (a reconnect after a
+half-open drop) takes the session over and the old connection is closed with 4408 TAKEN_OVER.
+After the owner left, another device or stream is refused (4403), and no hello may change the
+session's mode or geometry (4412). Seqs continue contiguously from ``welcome.last_acked_seq``:
+a gap or a wild value closes with 4416 and is never stored.
+
 Each connection is an explicit state machine::
 
     AWAIT_HELLO --hello--> STREAMING --frame/page/gaze/heartbeat--> STREAMING
@@ -29,13 +37,16 @@ from darkread.proto.errors import (
     ForbiddenError,
     MalformedMessageError,
     ProtocolError,
+    SeqGapError,
+    SessionBusyError,
+    SessionMismatchError,
     UnexpectedMessageError,
 )
 from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, Message, Page, Welcome, decode, encode
 
 from .auth import Principal, Scope
 from .context import AppContext
-from .store import StoreError, WriteResult
+from .store import SessionOwnedError, SessionShapeError, StoreError, WriteResult
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +88,27 @@ class StreamConnection:
         self.client_host = client_host
         self.state = StreamState.AWAIT_HELLO
         self.hello: Hello | None = None
+        self.high_water = -1  # highest seq handed to the store on this connection (contiguity)
+        self.receiver: asyncio.Task[None] | None = None  # cancelled when another connection takes over
+        self.taken_over = False
+
+    def release(self) -> None:
+        """The connection ended: the session is free for its next connection."""
+        if self.hello is not None and self.context.live.get(self.hello.session_id) is self:
+            del self.context.live[self.hello.session_id]
+
+    def _claim(self, hello: Hello) -> None:
+        """Become the session's live connection: refuse another stream, take over from our own."""
+        live = self.context.live.get(hello.session_id)
+        if live is not None and live is not self:
+            assert live.hello is not None  # noqa: S101 - only connections past hello are live
+            if (live.hello.device_id, live.hello.stream_id) != (hello.device_id, hello.stream_id):
+                raise SessionBusyError(f"session {hello.session_id!r} is being streamed by another connection")
+            live.taken_over = True
+            if live.receiver is not None:
+                live.receiver.cancel()
+            log.info("session %s: a newer connection of stream %s takes over", hello.session_id, hello.stream_id)
+        self.context.live[hello.session_id] = self
 
     async def handle(self, data: bytes) -> _Outgoing | None:
         metrics = self.context.metrics
@@ -98,8 +130,20 @@ class StreamConnection:
             raise ForbiddenError("this key lacks the 'stream' scope")
         if self.principal.device is not None and self.principal.device != message.device_id:
             raise ForbiddenError(f"this key belongs to device {self.principal.device!r}, not {message.device_id!r}")
-        last_seq = await self.context.store.open_session(message)
+        self._claim(message)
         self.hello = message
+        try:
+            last_seq = await self.context.store.open_session(message)
+        except SessionOwnedError as exc:
+            self.release()
+            raise ForbiddenError(str(exc)) from None
+        except SessionShapeError as exc:
+            self.release()
+            raise SessionMismatchError(str(exc)) from None
+        except BaseException:
+            self.release()
+            raise
+        self.high_water = last_seq
         self.state = StreamState.STREAMING
         log.info("session %s from %s: %s mode, resuming after seq %d", message.session_id, message.device_id,
                  message.mode, last_seq)  # fmt: skip
@@ -109,9 +153,19 @@ class StreamConnection:
             max_message_bytes=self.context.settings.max_message_bytes,
         )
 
+    def _contiguous(self, seq: int) -> None:
+        """A seq after the high-water mark must be the next one; at or below it is a duplicate."""
+        expected = self.high_water + 1
+        if seq > expected:
+            raise SeqGapError(f"seq {seq} does not follow seq {self.high_water}: expected {expected} "
+                              "(seqs continue contiguously from welcome.last_acked_seq)")
+        self.high_water = max(self.high_water, seq)
+
     def _on_streaming(self, message: Message) -> _Pending | None:
         assert self.hello is not None  # noqa: S101 - state invariant, not input validation
         store, session_id = self.context.store, self.hello.session_id
+        if isinstance(message, Frame | Page | Gaze):
+            self._contiguous(message.seq)
         if isinstance(message, Frame):
             if self.hello.mode != "frames":
                 raise UnexpectedMessageError("frame received but hello.mode is 'pages'")
@@ -149,9 +203,16 @@ async def stream_endpoint(websocket: WebSocket) -> None:
     connection = StreamConnection(context, principal=principal, client_host=client_host)
     outbox: asyncio.Queue[_Outgoing | None] = asyncio.Queue(maxsize=context.settings.max_in_flight)
     sender = asyncio.create_task(_send_loop(websocket, outbox, context))
+    connection.receiver = asyncio.create_task(_receive_loop(websocket, connection, outbox))
     try:
-        await _receive_loop(websocket, connection, outbox)
+        try:
+            await connection.receiver
+        except asyncio.CancelledError:
+            if not connection.taken_over or asyncio.current_task().cancelling():  # type: ignore[union-attr]
+                raise
+            await outbox.put(_Close(CloseCode.TAKEN_OVER, "a newer connection of this stream took the session over"))
     finally:
+        connection.release()
         connection.state = StreamState.CLOSED
         if not sender.done():  # a sender that died cannot drain a full outbox
             await outbox.put(None)

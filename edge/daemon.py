@@ -109,6 +109,7 @@ class Service(Protocol):
     def tick(self) -> str | None: ...  # periodic duty; returns a status line or None
     def finished(self) -> bool: ...  # e.g. a replay reached its end
     def shutdown(self, timeout_s: float) -> bool: ...  # drain + flush; True when nothing was lost
+    def verify(self) -> None: ...  # after a run that ended by itself: raise if it did not do its job
 
 
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -141,8 +142,10 @@ class Daemon:
                 self.notifier.ready(status)
                 logger.info("ready: %s", status)
                 last_status = time.monotonic()
-                while not self.should_exit.is_set() and not self.service.finished():
-                    line = self.service.tick()
+                while not self.should_exit.is_set():
+                    line = self.service.tick()  # first: it raises what failed, also when that ended the run
+                    if self.service.finished():
+                        break
                     if line and time.monotonic() - last_status >= self.status_every_s:
                         self.notifier.status(line)
                         last_status = time.monotonic()
@@ -151,6 +154,8 @@ class Daemon:
                 self.notifier.stopping()
                 self.notifier.status("draining")
                 clean = self.service.shutdown(0.0 if self.force_exit else self.shutdown_timeout_s)
+        if not self.should_exit.is_set():
+            self.service.verify()
         logger.info("stopped (%s)", "clean" if clean else "messages left in the spool")
         return 0 if clean else 3
 
@@ -219,7 +224,7 @@ class EdgeService:
                 session_id=cfg.uplink.session_id, mode=cfg.uplink.mode,
                 sensor_wh=(self.source.width, self.source.height), fovea_hw=(fovea.height, fovea.width),
                 backoff_initial_s=cfg.uplink.backoff_initial_s, backoff_max_s=cfg.uplink.backoff_max_s,
-                max_in_flight=cfg.uplink.max_in_flight,
+                max_in_flight=cfg.uplink.max_in_flight, ack_timeout_s=cfg.uplink.ack_timeout_s,
             ),
             spool,
             self.metrics,
@@ -251,10 +256,14 @@ class EdgeService:
         )
 
     def tick(self) -> str | None:
+        from darkread.edge.errors import RunError
+
         if self.pipeline.error is not None:
-            raise RuntimeError(f"reconstruction loop failed: {self.pipeline.error}") from self.pipeline.error
+            raise RunError(f"reconstruction loop failed: {self.pipeline.error}") from self.pipeline.error
         if getattr(self.source, "error", None) is not None:
-            raise RuntimeError(f"event source failed: {self.source.error}") from self.source.error
+            raise RunError(f"event source failed: {self.source.error}") from self.source.error
+        if self.uplink.fatal_error:
+            raise RunError(self.uplink.fatal_error)
         if self._pages is not None and time.monotonic() - self._last_page >= self.config.uplink.page_every_s:
             self._send_page()
         if time.monotonic() - self._last_log < self.config.metrics.log_every_s:
@@ -268,6 +277,21 @@ class EdgeService:
     def finished(self) -> bool:
         finished = getattr(self.source, "finished", None)
         return bool(finished is not None and finished.is_set()) or not self.pipeline.running
+
+    def verify(self) -> None:
+        """A replay that reached its end must have made frames (else the recording is unusable)."""
+        from darkread.edge.errors import RunError
+
+        self.tick()  # what failed while draining
+        totals = self.metrics.totals
+        if self.config.source.kind == "replay" and totals["frames"] == 0:
+            if totals["events_in"] == 0:
+                why = "no events decoded"
+            elif totals["events_foveated"] == 0:
+                why = f"{int(totals['events_in']):,} events, none inside the gaze window (no valid gaze on the sensor?)"
+            else:
+                why = f"{int(totals['events_foveated']):,} events inside the gaze window, too few for a frame"
+            raise RunError(f"the replay of {self.config.source.path} produced no frames: {why}")
 
     def shutdown(self, timeout_s: float) -> bool:
         if self.pipeline is not None:

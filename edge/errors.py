@@ -7,7 +7,9 @@
      │    ├── GazeCsvError         eye-gaze CSV missing columns or malformed (names file and line)
      │    └── CalibrationError     calibration.json missing keys or impossible values
      ├── DeviceError               the event camera cannot be opened or answers wrongly
-     └── ModelError                the ONNX model is missing or has the wrong shape
+     ├── ModelError                the ONNX model is missing or has the wrong shape
+     └── RunError                  the edge ran but failed: the cloud refused the stream, the
+                                   replay or reconstruction loop crashed, a replay made no frames
 
 Built-in exceptions are used where their meaning fits (FileNotFoundError, ValueError for bad
 arguments).
@@ -52,3 +54,7 @@ class DeviceError(DarkreadError):
 
 class ModelError(DarkreadError):
     """The reconstruction model cannot be loaded or run."""
+
+
+class RunError(DarkreadError):
+    """The edge daemon could not do its job; the message says why (frames stay in the spool)."""
