@@ -46,7 +46,8 @@ from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, M
 
 from .auth import Principal, Scope
 from .context import AppContext
-from .store import SessionOwnedError, SessionShapeError, StoreError, WriteResult
+from .errors import SessionOwnedError, SessionShapeError, StoreError
+from .store import WriteResult
 
 log = logging.getLogger(__name__)
 

@@ -1,26 +1,15 @@
-"""Errors of the wire protocol and the websocket close codes they map to, in one place.
+"""Errors of the wire protocol and the websocket close codes they map to.
 
-    ProtocolError                  any message that cannot be accepted (close code 4400)
-     ├── MessageTooLargeError      more bytes than the receiver allows (1009)
-     ├── MalformedMessageError     not msgpack, trailing bytes, or not a map (4400)
-     ├── UnknownMessageTypeError   ``type`` missing or not one we know (4400)
-     ├── InvalidFieldError         a field missing, of the wrong type or out of range (4400)
-     │    └── BadMaskError         mask ``shape``/``bits`` inconsistent (4422)
-     ├── VersionMismatchError      ``hello.v`` is not our PROTOCOL_VERSION (4409)
-     ├── UnexpectedMessageError    valid, but not allowed now, e.g. frame before hello (4401)
-     ├── AuthenticationError       missing or wrong API key in ``hello.token`` (1008)
-     ├── ForbiddenError            the key lacks the scope, or names another device (4403)
-     ├── SessionMismatchError      hello changes an existing session's mode or geometry (4412)
-     ├── SeqGapError               seq not contiguous after the last one (4416)
-     └── SessionBusyError          another stream is connected to the session (4423)
-
-Every error carries ``close_code`` so the server can close the websocket with the right code
-and the error's message as the reason.
+Every error carries ``close_code`` so the server can close the websocket with the right code and
+the error's message as the reason. They sit under ``DarkreadError``; the whole tree, with each
+error's close code, is drawn in ``darkread/errors.py``.
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
+
+from darkread.errors import DarkreadError
 
 
 class CloseCode(IntEnum):
@@ -42,7 +31,7 @@ class CloseCode(IntEnum):
     SESSION_BUSY = 4423  # another stream is connected to this session
 
 
-class ProtocolError(Exception):
+class ProtocolError(DarkreadError):
     """A message that cannot be accepted; ``close_code`` tells the server how to close."""
 
     close_code: CloseCode = CloseCode.MALFORMED
