@@ -313,6 +313,8 @@ class Store:
                 raise StoreError(f"unknown session {session_id!r}")
             if seq <= last:
                 return WriteResult(stored=False, last_seq=last)
+            if seq != last + 1:  # an earlier message of the stream failed: never leave a hole
+                raise StoreError(f"seq {seq} of session {session_id!r} does not follow the stored seq {last}")
             insert(conn)
             conn.execute(
                 "UPDATE sessions SET last_seq = ?, updated_s = ? WHERE session_id = ?", (seq, time.time(), session_id)

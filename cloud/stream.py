@@ -46,7 +46,7 @@ from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, M
 
 from .auth import Principal, Scope
 from .context import AppContext
-from .errors import SessionOwnedError, SessionShapeError, StoreError
+from .errors import SessionOwnedError, SessionShapeError
 from .store import WriteResult
 
 log = logging.getLogger(__name__)
@@ -73,6 +73,14 @@ class _Close:
 
 
 _Outgoing = Message | _Pending | _Close
+
+
+def store_failure(context: AppContext, kind: str, exc: BaseException) -> str:
+    """Count and log (once) a failed store path; the close reason naming it."""
+    name = type(exc).__name__
+    context.metrics.store_failures.labels(error=name).inc()
+    log.error("closing stream (%d): could not store %s: %s: %s", CloseCode.INTERNAL_ERROR, kind, name, exc)
+    return f"could not store {kind}: {name}: {exc}"
 
 
 def close_reason(message: str) -> str:
@@ -203,7 +211,7 @@ async def stream_endpoint(websocket: WebSocket) -> None:
         principal = context.authenticate(None, client_host=client_host)  # loopback without keys
     connection = StreamConnection(context, principal=principal, client_host=client_host)
     outbox: asyncio.Queue[_Outgoing | None] = asyncio.Queue(maxsize=context.settings.max_in_flight)
-    sender = asyncio.create_task(_send_loop(websocket, outbox, context))
+    sender = asyncio.create_task(_send_loop(websocket, outbox, connection))
     connection.receiver = asyncio.create_task(_receive_loop(websocket, connection, outbox))
     try:
         try:
@@ -215,10 +223,12 @@ async def stream_endpoint(websocket: WebSocket) -> None:
     finally:
         connection.release()
         connection.state = StreamState.CLOSED
-        if not sender.done():  # a sender that died cannot drain a full outbox
-            await outbox.put(None)
-        await sender
-        metrics.active.dec()
+        try:
+            if not sender.done():  # a sender that died cannot drain a full outbox
+                await outbox.put(None)
+            await sender
+        finally:
+            metrics.active.dec()
 
 
 async def _receive_loop(
@@ -236,8 +246,8 @@ async def _receive_loop(
             return
         except (WebSocketDisconnect, RuntimeError):
             return
-        if event["type"] == "websocket.disconnect":
-            return
+        if event["type"] == "websocket.disconnect" or connection.state is StreamState.CLOSED:
+            return  # the client left, or a store failure closed the connection meanwhile
         data = event.get("bytes")
         try:
             if data is None:
@@ -247,15 +257,16 @@ async def _receive_loop(
             log.info("closing stream (%d): %s", exc.close_code, exc)
             await outbox.put(_Close(int(exc.close_code), str(exc)))
             return
-        except StoreError as exc:
-            await outbox.put(_Close(CloseCode.INTERNAL_ERROR, f"could not open the session: {exc}"))
+        except Exception as exc:  # noqa: BLE001 - any failure of the store path ends this connection
+            await outbox.put(_Close(CloseCode.INTERNAL_ERROR, store_failure(connection.context, "message", exc)))
             return
         if outgoing is not None:
             await outbox.put(outgoing)
 
 
-async def _send_loop(websocket: WebSocket, outbox: asyncio.Queue[_Outgoing | None], context: AppContext) -> None:
+async def _send_loop(websocket: WebSocket, outbox: asyncio.Queue[_Outgoing | None], connection: StreamConnection) -> None:
     """Send welcome/acks in arrival order; after a close, keep draining so commits are awaited."""
+    context = connection.context
     metrics = context.metrics
     open_ = True
     while (item := await outbox.get()) is not None:
@@ -263,8 +274,12 @@ async def _send_loop(websocket: WebSocket, outbox: asyncio.Queue[_Outgoing | Non
         if isinstance(item, _Pending):
             try:
                 result = await item.result
-            except StoreError as exc:
-                reply = _Close(CloseCode.INTERNAL_ERROR, f"could not store {item.kind}: {exc}")
+            except Exception as exc:  # noqa: BLE001 - not only StoreError: IntegrityError, OSError, ...
+                if connection.state is not StreamState.CLOSED:
+                    connection.state = StreamState.CLOSED  # the receiver hands nothing more to the store
+                    reply = _Close(CloseCode.INTERNAL_ERROR, store_failure(context, item.kind, exc))
+                else:
+                    continue  # a later message of a connection that already failed
             else:
                 if result.stored:
                     if item.kind == "frame":

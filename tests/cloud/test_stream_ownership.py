@@ -29,7 +29,7 @@ async def closed_with(ws: Any) -> tuple[int | None, str]:
     message = ""
     try:
         while True:
-            reply = decode(await ws.recv(), max_bytes=LIMIT)
+            reply = decode(await asyncio.wait_for(ws.recv(), 5), max_bytes=LIMIT)
             if isinstance(reply, Error):
                 message = reply.message
     except ConnectionClosed:
