@@ -14,6 +14,7 @@ from prometheus_client import make_asgi_app
 
 from darkread import __version__
 
+from . import datadir
 from .auth import KeyRing, Scope, install_log_redaction
 from .context import AppContext
 from .metrics import Metrics
@@ -47,7 +48,8 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         install_log_redaction()
-        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        datadir.check_data_dir(settings.data_dir)
+        held = datadir.acquire(settings.data_dir)
         store = Store(settings.data_dir)
         engine = ocr or create_backend(settings)
         context = AppContext(
@@ -69,7 +71,8 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
             close = getattr(engine, "close", None)
             if callable(close):
                 close()
-            store.close()
+            store.close(timeout_s=settings.shutdown_timeout_s)
+            datadir.release(held)
 
     docs = settings.api_docs
     app = FastAPI(

@@ -115,8 +115,16 @@ def _serve(args: argparse.Namespace) -> int:
 
     import uvicorn
 
+    from darkread.cloud import datadir
     from darkread.cloud.app import create_app
+    from darkread.cloud.errors import DataDirError
 
+    try:  # before uvicorn: a bad data dir is one line, not a start-up traceback
+        datadir.check_data_dir(settings.data_dir)  # type: ignore[attr-defined]
+        held = datadir.acquire(settings.data_dir)  # type: ignore[attr-defined]
+    except DataDirError as exc:
+        print(f"darkread cloud: error: {exc}", file=sys.stderr)
+        return 1
     app = create_app(settings)  # type: ignore[arg-type]
     # uvicorn refuses larger websocket messages itself (close 1009); leave room so that our own
     # check answers first with an error message naming the limit.
@@ -127,7 +135,9 @@ def _serve(args: argparse.Namespace) -> int:
         ws_max_size=settings.max_message_bytes + 64 * 1024,  # type: ignore[attr-defined]
         log_level=logging.getLevelName(logging.getLogger().getEffectiveLevel()).lower(),  # follows -v / -q
         access_log=False,
+        timeout_graceful_shutdown=settings.shutdown_timeout_s,  # type: ignore[attr-defined]
     )
+    datadir.release(held)
     return 0
 
 

@@ -28,6 +28,11 @@ class NoPageError(CloudError):
     """The session has nothing to read yet (no frames or pages stored)."""
 
 
+class DataDirError(CloudError):
+    """The data directory cannot be used: a file, not writable, a corrupt database, or held by
+    another service process."""
+
+
 class ServiceStartError(CloudError):
     """The service did not come up (it exited during start-up, or did not listen in time)."""
 

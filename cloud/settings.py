@@ -37,6 +37,9 @@ class Settings(BaseSettings):
     max_message_bytes: int = Field(DEFAULT_MAX_MESSAGE_BYTES, ge=1024, le=64 * 1024 * 1024)
     max_in_flight: int = Field(64, ge=1, description="unacked messages per connection before reading pauses")
     hello_timeout_s: float = Field(10.0, gt=0, description="time a client has to send hello")
+    shutdown_timeout_s: float = Field(
+        10.0, gt=0, description="graceful shutdown deadline: then open connections are cancelled and the store let go"
+    )
 
     # Page assembly.
     max_frames_per_page: int = Field(4000, ge=1, description="most recent frames stitched into a page")

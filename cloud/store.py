@@ -272,11 +272,15 @@ class Store:
             raise outcome["error"]
         return outcome["value"]
 
-    def close(self) -> None:
+    def close(self, timeout_s: float = 30.0) -> None:
+        """Finish queued writes; a writer stuck longer than ``timeout_s`` (a locked database) is
+        left behind (a daemon thread) so that shutdown keeps its deadline."""
         if not self._closed:
             self._closed = True
             self._jobs.put(None)
-            self._writer.join(timeout=30)
+            self._writer.join(timeout=timeout_s)
+            if self._writer.is_alive():
+                log.error("store writer still busy after %g s; leaving it (uncommitted writes are not acked)", timeout_s)
 
     # --- writes (run in the writer thread) ----------------------------------------------------
 

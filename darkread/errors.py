@@ -37,6 +37,7 @@ Each component keeps its own errors in its own ``errors.py``::
           │    ├── SessionOwnedError   the session belongs to another device or stream
           │    └── SessionShapeError   a hello with another mode or geometry than the session's
           ├── NoPageError              the session has nothing to read yet
+          ├── DataDirError             the data directory is unusable or held by another process
           ├── ServiceStartError        the service did not come up
           └── OcrError                 an OCR engine failed (``retryable`` says whether to try again)
                └── OcrUnavailableError the engine is not installed or not configured
