@@ -17,7 +17,7 @@ from darkread import __version__
 from . import datadir
 from .auth import KeyRing, Scope, install_log_redaction
 from .context import AppContext
-from .metrics import Metrics
+from .prometheus import Metrics
 from .ocr import OcrBackend, create_backend
 from .pages import PageAssembler
 from .routes import api, public

@@ -11,7 +11,7 @@ from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader, APIKeyQuery
 
 from .auth import ENVIRONMENT_ADMIN, LOOPBACK_DEVELOPER, KeyRing, Principal, Scope, is_loopback
-from .metrics import Metrics
+from .prometheus import Metrics
 from .pages import PageAssembler
 from .settings import Settings
 from .store import Store

@@ -184,7 +184,7 @@ class EdgeService:
     """Source + gaze + reconstructor + pipeline + uplink + metrics, built from an ``EdgeConfig``."""
 
     def __init__(self, config: EdgeConfig, notifier: Notifier | None = None) -> None:
-        from darkread.edge.metrics import EdgeMetrics
+        from darkread.edge.telemetry import EdgeMetrics
 
         self.config = config
         self.notifier = notifier or Notifier()
@@ -203,7 +203,7 @@ class EdgeService:
     # -- Service -----------------------------------------------------------------------------
     def startup(self) -> str:
         from darkread.edge.fovea import FoveaConfig
-        from darkread.edge.metrics import MetricsServer
+        from darkread.edge.telemetry import MetricsServer
         from darkread.edge.pipeline import Pipeline, PipelineSettings
         from darkread.edge.reconstruct import Reconstructor
         from darkread.edge.spool import Spool

@@ -23,7 +23,7 @@ import numpy as np
 
 from darkread.edge.events import Events
 from darkread.edge.fovea import FoveaConfig, crop, window_origin
-from darkread.edge.metrics import EdgeMetrics
+from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
 from darkread.edge.voxel import VoxelConfig, voxel_grid
