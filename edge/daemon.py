@@ -283,6 +283,9 @@ class EdgeService:
         from darkread.edge.errors import RunError
 
         self.tick()  # what failed while draining
+        problems = getattr(self.source, "problems", [])
+        if problems:
+            raise RunError(f"{self.config.source.path} does not look like a valid recording: {'; '.join(problems)}")
         totals = self.metrics.totals
         if self.config.source.kind == "replay" and totals["frames"] == 0:
             if totals["events_in"] == 0:
@@ -330,6 +333,10 @@ class EdgeService:
                 )
             recording = open_recording(cfg.path, gaze=cfg.gaze_csv or None, calibration=cfg.calibration or None)
             self.source = ReplaySource(recording.raw_path, speed=cfg.speed or None)
+            calibrated = (recording.calibration.width, recording.calibration.height)
+            if calibrated != (self.source.width, self.source.height):
+                logger.warning("%s: calibration is for %dx%d but the RAW header says %dx%d: gaze lands in the wrong place",
+                               cfg.path, *calibrated, self.source.width, self.source.height)
             n_events = recording.meta.get("event_count")
             if isinstance(n_events, int) and n_events > 0:  # the bandwidth ratio against this very stream
                 self.metrics.raw_bytes_per_event = recording.raw_path.stat().st_size / n_events

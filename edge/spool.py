@@ -50,7 +50,12 @@ class Spool:
             self.path: Path | None = None
             target = ":memory:"
         else:
-            Path(directory).mkdir(parents=True, exist_ok=True)
+            if Path(directory).exists() and not Path(directory).is_dir():
+                raise ValueError(f"spool {directory} is a file, not a directory")
+            try:
+                Path(directory).mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise ValueError(f"spool directory {directory} cannot be created: {exc.strerror or exc}") from None
             self.path = Path(directory) / SPOOL_FILE
             target = str(self.path)
         self._lock = threading.Lock()

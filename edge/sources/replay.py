@@ -12,10 +12,12 @@ import threading
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from darkread.edge.events import Events, empty_events
+from darkread.edge.io.plausibility import TimeCheck
 from darkread.edge.io.raw_header import read_raw_header
 from darkread.edge.sources.base import EventSink
 
@@ -57,6 +59,9 @@ class ReplaySource:
         self.chunk_bytes = int(chunk_bytes)
         self.finished = threading.Event()
         self.error: BaseException | None = None
+        self.problems: list[str] = []  # what makes the stream implausible (set when the replay ends)
+        self._reader: Any = None
+        self._time_check = TimeCheck()
         self._roi: tuple[int, int, int, int] | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -102,7 +107,19 @@ class ReplaySource:
     def _slice_iter(self) -> Iterable[Events]:
         from darkread.edge.io.raw import RawReader
 
-        return time_slices(RawReader(self.raw_path, chunk_bytes=self.chunk_bytes), self.slice_us)
+        self._reader = RawReader(self.raw_path, chunk_bytes=self.chunk_bytes)
+        return time_slices(self._reader, self.slice_us)
+
+    def _judge(self) -> None:
+        """After the replay: name what makes the stream implausible (``problems``)."""
+        from darkread.edge.io.plausibility import problems
+
+        if self._reader is None:
+            return
+        header = self._reader.header
+        self.problems = problems(self._reader.stats, header.format, header.width, header.height, self._time_check)
+        for problem in self.problems:
+            logger.warning("%s: %s", self.raw_path, problem)
 
     def _apply_roi(self, events: Events) -> Events:
         if self._roi is None:
@@ -124,6 +141,7 @@ class ReplaySource:
                 if self.speed is not None and not self._wait_until(events):
                     break
                 self._last_t = int(events["t"][-1])
+                self._time_check.add(events["t"])
                 events = self._apply_roi(events)
                 if events.shape[0] == 0:
                     continue
@@ -134,6 +152,8 @@ class ReplaySource:
             logger.exception("replay of %s failed", self.raw_path)
         finally:
             self._wall_s = time.perf_counter() - started
+            if self.error is None and not self._stop.is_set():
+                self._judge()
             self.finished.set()
             logger.info("replay of %s ended: %s", self.raw_path.name, {k: round(v, 3) for k, v in self.stats.items()})
 
