@@ -17,7 +17,7 @@ import pytest
 
 from darkread.paths import SAMPLE_RECORDING
 
-from .test_edge_to_cloud import tiny_model
+from factories import sum_bins_model as tiny_model
 
 pytestmark = pytest.mark.slow
 
