@@ -213,6 +213,28 @@ def headline_table(results: Sequence[dict[str, Any]], *, lux: float = 30.0, kind
     return lines
 
 
+def scanpath_table(model: Sequence[dict[str, Any]], human: Sequence[dict[str, Any]], kind: str = "paragraph") -> list[str]:
+    """CER of the recordings replaying a real reader's fixations next to the reading model's, per
+    light level and motion (the other tables hold the reading model's recordings only)."""
+    if not human:
+        return ["No recordings with a real reader's scanpath in these results (`darkread eval make-suite` adds six)."]
+    lines = [
+        "The same pages read by a real reader's fixation sequence (one reader of the oz data, EyeLink, replayed line "
+        "by line onto the page with its durations, regressions, skips, sweep undershoot and vertical drift; "
+        "`darkread synth recording --scanpath human`) and by the reading model.",
+        "",
+        "| lux | motion | real scanpath: n | CER (mean) | worst | reading model: n | CER (mean) |",
+        "|---:|---|---:|---:|---:|---:|---:|",
+    ]
+    for (lux, motion), members in sorted(group_by(human, ("lux", "motion")).items(), key=lambda kv: _sort_key(kv[0])):
+        same = [r for r in model if r.get("lux") == lux and r.get("motion") == motion and r.get("kind") == kind]
+        cers = [rate(r, "darkread") for r in members]
+        worst = max((c for c in cers if c is not None), default=None)
+        lines.append(f"| {lux:g} | {motion} | {len(members)} | {_pct(mean(cers))} | {_pct(worst)} | {len(same)} | "
+                     f"{_pct(mean(rate(r, 'darkread') for r in same))} |")
+    return lines
+
+
 # -- bandwidth -------------------------------------------------------------------------------------
 
 
@@ -478,7 +500,9 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
     """Write ``README.md``, ``results.json`` and the PNG plots into ``out_dir``; returns the Markdown path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    results = sorted(results, key=lambda r: str(r.get("name")))
+    every = sorted(results, key=lambda r: str(r.get("name")))
+    results = [r for r in every if r.get("scanpath", "model") == "model"]  # the tables below: the reading model
+    human = [r for r in every if r.get("scanpath", "model") != "model"]
     plot_cer_vs(results, "lux", out / "cer_vs_lux.png", xlabel="illuminance at the page (lux, log scale)", logx=True,
                 title="CER vs light: darkread and one RGB snapshot")
     sizes, sizes_label = sweep_subset(results, "xheight_px")
@@ -487,7 +511,7 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
     plot_cer_vs_lux_by_motion(results, out / "cer_vs_lux_by_motion.png")
     backends_png = plot_backends(results, out / "ocr_backends_by_kind.png")
     examples_png = plot_examples(results, out / "examples.png")
-    (out / RESULTS_NAME).write_text(json.dumps(results, indent=1))
+    (out / RESULTS_NAME).write_text(json.dumps(every, indent=1))
 
     dk, rgb = mean(rate(r, "darkread") for r in results), mean(rate(r, "rgb") for r in results)
     md = [
@@ -509,6 +533,10 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "## Paragraphs at 30 lux (the paper's headline)",
         "",
         *headline_table(results),
+        "",
+        "## Real readers' scanpaths",
+        "",
+        *scanpath_table(results, human),
         "",
         "## CER vs light",
         "",
