@@ -29,6 +29,7 @@ class Service(Protocol):
     def tick(self) -> str | None: ...  # periodic duty; returns a status line or None
     def finished(self) -> bool: ...  # e.g. a replay reached its end
     def shutdown(self, timeout_s: float) -> bool: ...  # drain + flush; True when nothing was lost
+    def verify(self) -> None: ...  # after a run that ended by itself: raise if it did not do its job
 
 
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -44,8 +45,12 @@ class Daemon:
         tick_s: float = 0.1,
         status_every_s: float = 5.0,
         shutdown_timeout_s: float = 10.0,
+        handle_signals: bool = True,
     ) -> None:
+        """``handle_signals`` False leaves SIGINT/SIGTERM to the caller (``darkread read`` keeps Ctrl-C a
+        KeyboardInterrupt; the shutdown still drains)."""
         self.service = service
+        self.handle_signals = handle_signals
         self.notifier = notifier or Notifier()
         self.tick_s = tick_s
         self.status_every_s = status_every_s
@@ -60,8 +65,10 @@ class Daemon:
                 self.notifier.ready(status)
                 logger.info("ready: %s", status)
                 last_status = time.monotonic()
-                while not self.should_exit.is_set() and not self.service.finished():
-                    line = self.service.tick()
+                while not self.should_exit.is_set():
+                    line = self.service.tick()  # first: it raises what failed, also when that ended the run
+                    if self.service.finished():
+                        break
                     if line and time.monotonic() - last_status >= self.status_every_s:
                         self.notifier.status(line)
                         last_status = time.monotonic()
@@ -70,6 +77,8 @@ class Daemon:
                 self.notifier.stopping()
                 self.notifier.status("draining")
                 clean = self.service.shutdown(0.0 if self.force_exit else self.shutdown_timeout_s)
+        if not self.should_exit.is_set():
+            self.service.verify()
         logger.info("stopped (%s)", "clean" if clean else "messages left in the spool")
         return 0 if clean else 3
 
@@ -80,7 +89,7 @@ class Daemon:
 
     @contextlib.contextmanager
     def capture_signals(self) -> Iterator[None]:
-        if threading.current_thread() is not threading.main_thread():
+        if not self.handle_signals or threading.current_thread() is not threading.main_thread():
             yield  # signals can only be handled in the main thread
             return
         original = {sig: signal.signal(sig, self.handle_exit) for sig in HANDLED_SIGNALS}

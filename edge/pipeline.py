@@ -38,9 +38,9 @@ from darkread.edge.config import PipelineConfig
 from darkread.edge.events import Events
 from darkread.edge.fovea import FoveaConfig, in_window, window_origin
 from darkread.edge.gaze import GazeLookup, GazeSample
-from darkread.edge.metrics import EdgeMetrics
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
+from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.view_fusion import ViewFuser, ViewRecord
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
 from darkread.edge.voxel import VoxelConfig, voxel_grid

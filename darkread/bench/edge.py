@@ -142,7 +142,7 @@ def _run_edge(
 
 def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
     """Bytes of one 2880x2880 RGB PNG: the recording's snapshot upscaled and encoded, or the estimate."""
-    from darkread.edge.metrics import RGB_FRAME_BYTES_ESTIMATE
+    from darkread.edge.telemetry import RGB_FRAME_BYTES_ESTIMATE
 
     rgb = recording / "rgb.png"
     if rgb.is_file():

@@ -14,9 +14,9 @@ from darkread.edge.config import PipelineConfig
 from darkread.edge.events import EVENT_CD_DTYPE, Events, empty_events
 from darkread.edge.fovea import FoveaConfig, window_events, window_origin
 from darkread.edge.gaze import GazeSample
-from darkread.edge.metrics import EdgeMetrics, MetricsServer
 from darkread.edge.pipeline import FrameResult, Pipeline, count_in_window, make_frame
 from darkread.edge.sources.base import EventSource
+from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.voxel import VoxelConfig
 from darkread.proto.messages import decode, encode
 
