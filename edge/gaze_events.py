@@ -59,13 +59,13 @@ class GazeEventConfig:
     """Thresholds; ``for_rate`` sets the tracker's nominal rate, from which row counts follow."""
 
     rate_hz: float = 60.0
-    lookahead_ms: float = 80.0  # rows held back before a change is decided: the detection delay
-    z: float = 4.0  # step test, in standard deviations of a difference of means
+    lookahead_ms: float = 120.0  # rows held back before a change is decided: the detection delay
+    z: float = 3.5  # step test, in standard deviations of a difference of means
     min_step_deg: float = 0.3  # never split on a smaller move, whatever the noise estimate
     noise_deg: float = 0.35  # first guess of the per-row noise (per axis), refined online
     min_noise_deg: float = 0.02
     noise_rows: int = 240  # recent row-to-row differences that make the noise estimate
-    min_fixation_ms: float = 50.0  # shorter runs are part of a saccade
+    min_fixation_ms: float = 70.0  # shorter runs are part of a saccade
     blink_gap_ms: float = 75.0  # longer gaps between valid rows are blinks (at least 2.5 rows)
     centre_ms: float = 230.0  # recent rows that make a fixation's centre (it follows slow tracker drift)
     sweep_min_deg: float = 4.0

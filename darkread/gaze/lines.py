@@ -19,14 +19,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from darkread.edge.stitch.frames import StitchConfig, StitchFrame
-from darkread.edge.stitch.page import assign_lines
-from darkread.edge.stitch.segment import segment_lines
+from darkread.frame_record import FrameRecord
+from darkread.stitch.config import StitchConfig
+from darkread.stitch.page import assign_lines
+from darkread.stitch.segment import segment_lines
 
 EYEKIT_METHODS: tuple[str, ...] = ("chain", "cluster", "merge", "regress", "segment", "slice", "split", "stretch", "warp")
 STITCHER = "stitcher"  # the stitcher's own logic (return sweeps + monotone assignment)
 DEFAULT_METHOD: tuple[str, ...] = ("slice", "warp", "stretch")  # eyekit's vote of three methods
-_BLANK = np.zeros((8, 8), dtype=np.uint8)
+_BLANK = np.zeros((1, 1), dtype=np.uint8)  # fixations carry no image
 
 
 def segment_config(line_pitch_px: float, cfg: StitchConfig = StitchConfig()) -> StitchConfig:
@@ -37,7 +38,7 @@ def segment_config(line_pitch_px: float, cfg: StitchConfig = StitchConfig()) -> 
 
 def read_lines(x: np.ndarray, y: np.ndarray, cfg: StitchConfig = StitchConfig()) -> np.ndarray:
     """Read-line number of every fixation (0, 1, ... in reading order), split at return sweeps."""
-    frames = [StitchFrame(i, i, _BLANK, (0, 0), (float(xi), float(yi))) for i, (xi, yi) in enumerate(zip(x, y))]
+    frames = [FrameRecord(i, i, _BLANK, (0, 0), (float(xi), float(yi))) for i, (xi, yi) in enumerate(zip(x, y))]
     out = np.empty(len(frames), dtype=np.int64)
     for k, line in enumerate(segment_lines(frames, cfg)):
         for f in line:
