@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from dataclasses import asdict
 from typing import Annotated
@@ -12,8 +13,10 @@ from darkread.image_codec import encode_png
 from fastapi import APIRouter, Body, Depends, HTTPException, Path, Response, status
 from pydantic import BaseModel, Field
 
-from .context import AppContext, get_context, require_api_key
+from .auth import Principal, Scope
+from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
+from .ocr.base import OcrResult
 from .pages import PageImage
 from .store import SessionInfo
 
@@ -65,8 +68,10 @@ class Health(BaseModel):
 
 
 public = APIRouter(tags=["health"])
-api = APIRouter(prefix="/v1", tags=["sessions"], dependencies=[Depends(require_api_key)])
+api = APIRouter(prefix="/v1", tags=["sessions"])
 Context = Annotated[AppContext, Depends(get_context)]
+Reader = Annotated[Principal, Depends(require(Scope.READ))]
+Admin = Annotated[Principal, Depends(require(Scope.ADMIN))]
 
 
 @public.get("/healthz", summary="Liveness: the process answers", response_model=Health)
@@ -90,9 +95,10 @@ async def readyz(context: Context, response: Response) -> Health:
     return Health(status="ready", checks=checks)
 
 
-async def _session(context: AppContext, session_id: str) -> SessionInfo:
+async def _session(context: AppContext, session_id: str, principal: Principal) -> SessionInfo:
+    """The session, 404 also when it belongs to another device (its existence is not revealed)."""
     info = await asyncio.to_thread(context.store.session, session_id)
-    if info is None:
+    if info is None or not principal.owns(info.device_id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     return info
 
@@ -105,8 +111,9 @@ async def _page(context: AppContext, info: SessionInfo) -> PageImage:
 
 
 @api.get("/sessions", summary="List sessions, most recently active first", response_model=list[SessionModel])
-async def list_sessions(context: Context) -> list[SessionModel]:
-    return [SessionModel.of(info) for info in await asyncio.to_thread(context.store.sessions)]
+async def list_sessions(context: Context, principal: Reader) -> list[SessionModel]:
+    infos = await asyncio.to_thread(context.store.sessions)
+    return [SessionModel.of(info) for info in infos if principal.owns(info.device_id)]
 
 
 @api.get(
@@ -115,20 +122,21 @@ async def list_sessions(context: Context) -> list[SessionModel]:
     response_model=SessionModel,
     responses={404: {"description": "unknown session"}},
 )
-async def get_session(session_id: SessionId, context: Context) -> SessionModel:
-    return SessionModel.of(await _session(context, session_id))
+async def get_session(session_id: SessionId, context: Context, principal: Reader) -> SessionModel:
+    return SessionModel.of(await _session(context, session_id, principal))
 
 
 @api.delete(
     "/sessions/{session_id}",
-    summary="Delete a session with its frames and pages",
+    summary="Delete a session with its frames and pages (admin keys)",
     status_code=status.HTTP_204_NO_CONTENT,
-    responses={404: {"description": "unknown session"}},
+    responses={403: {"description": "not an admin key"}, 404: {"description": "unknown session"}},
 )
-async def delete_session(session_id: SessionId, context: Context) -> Response:
+async def delete_session(session_id: SessionId, context: Context, principal: Admin) -> Response:
     if not await asyncio.to_thread(context.store.delete_session, session_id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     context.pages.forget(session_id)
+    context.asks.forget(session_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
@@ -142,8 +150,10 @@ async def delete_session(session_id: SessionId, context: Context) -> Response:
         409: {"description": "nothing stored yet"},
     },
 )
-async def page_png(session_id: SessionId, context: Context) -> Response:
-    page = await _page(context, await _session(context, session_id))
+async def page_png(session_id: SessionId, context: Context, principal: Reader) -> Response:
+    info = await _session(context, session_id, principal)
+    _rate_limit(context, principal)
+    page = await _page(context, info)
     return Response(encode_png(page.image), media_type="image/png", headers={"X-Page-Id": page.page_id})
 
 
@@ -160,11 +170,49 @@ async def page_png(session_id: SessionId, context: Context) -> Response:
     },
 )
 async def ask(
-    session_id: SessionId, context: Context, request: Annotated[AskRequest | None, Body()] = None
+    session_id: SessionId, context: Context, principal: Reader, request: Annotated[AskRequest | None, Body()] = None
 ) -> AskResponse:
     question = (request or AskRequest()).question
     started = time.perf_counter()
-    page = await _page(context, await _session(context, session_id))
+    info = await _session(context, session_id, principal)
+    _rate_limit(context, principal)
+    reading = context.asks.run(session_id, (info.mode, info.last_seq), lambda: _read(context, info))
+    limit = context.settings.ask_timeout_s
+    try:
+        page, result = await asyncio.wait_for(asyncio.shield(reading), limit)
+    except TimeoutError:  # the reading goes on for the next ask of this page
+        context.metrics.ask_errors.labels(reason="ask_timeout").inc()
+        raise HTTPException(
+            status.HTTP_503_SERVICE_UNAVAILABLE, headers={"Retry-After": str(max(1, round(limit)))},
+            detail=f"reading the page takes longer than the {limit:g} s limit; it goes on: ask again shortly",
+        ) from None
+    latency_ms = (time.perf_counter() - started) * 1000
+    log.info("session %s: read %s with %s in %.0f ms", session_id, page.page_id, context.ocr.name, latency_ms)
+    return AskResponse(
+        text=result.text,
+        backend=context.ocr.name,
+        page_id=page.page_id,
+        latency_ms=round(latency_ms, 1),
+        lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines],
+        question=question,
+        truncated=result.truncated,
+    )
+
+
+def _rate_limit(context: AppContext, principal: Principal) -> None:
+    assert context.limiter is not None  # noqa: S101 - set in AppContext.__post_init__
+    wait_s = context.limiter.take(principal.key_id)
+    if wait_s > 0:
+        context.metrics.ask_errors.labels(reason="rate_limited").inc()
+        raise HTTPException(
+            status.HTTP_429_TOO_MANY_REQUESTS, headers={"Retry-After": str(max(1, math.ceil(wait_s)))},
+            detail=f"too many requests for this key ({context.settings.ask_rate_per_min:g} per minute)",
+        )
+
+
+async def _read(context: AppContext, info: SessionInfo) -> tuple[PageImage, OcrResult]:
+    """The session's page and what the OCR engine reads on it (shared by concurrent asks)."""
+    page = await _page(context, info)
     backend = context.ocr
     try:
         with context.metrics.ocr_seconds.labels(backend=backend.name).time():
@@ -181,14 +229,4 @@ async def ask(
         context.metrics.ask_errors.labels(reason="retryable" if exc.retryable else "failed").inc()
         code = status.HTTP_503_SERVICE_UNAVAILABLE if exc.retryable else status.HTTP_502_BAD_GATEWAY
         raise HTTPException(code, detail=str(exc)) from None
-    latency_ms = (time.perf_counter() - started) * 1000
-    log.info("session %s: read %s with %s in %.0f ms", session_id, page.page_id, backend.name, latency_ms)
-    return AskResponse(
-        text=result.text,
-        backend=backend.name,
-        page_id=page.page_id,
-        latency_ms=round(latency_ms, 1),
-        lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines],
-        question=question,
-        truncated=result.truncated,
-    )
+    return page, result
