@@ -1,0 +1,190 @@
+"""The live session page in a real headless Chromium, against a real cloud fed by a real edge.
+
+uvicorn serves the cloud on 127.0.0.1; ``darkread edge run --replay`` streams the shipped sample
+recording at wall-clock pace; Chromium (Debian's, driven by its chromedriver through Selenium)
+opens the page with the key in the URL fragment, follows the session by keyboard, waits for the
+text to appear, presses Ask and Speak, and axe-core checks the page. The screenshot goes to
+docs/ui.png.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pydantic import SecretStr
+
+from darkread.cloud.app import create_app
+from darkread.cloud.server import serve_in_thread
+from darkread.cloud.settings import Settings
+from darkread.edge.io.recording import open_recording
+from darkread.eval.metrics import error_rates
+from darkread.paths import SAMPLE_RECORDING
+
+pytestmark = pytest.mark.slow
+
+API_KEY = "live-page-key-31c9"
+SESSION = "live-page"
+REPO = Path(__file__).resolve().parents[2]
+AXE = REPO / "tests" / "vendor" / "axe-core" / "axe.min.js"
+SCREENSHOT = REPO / "docs" / "ui.png"
+MAX_CER = 0.05  # the bar of the read test: the page must read the sample as `darkread read` does
+CHROMIUM_FLAGS = (
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--disable-dev-shm-usage", "--mute-audio", "--autoplay-policy=no-user-gesture-required",
+)
+
+
+def chromium_paths() -> tuple[str, str]:
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    driver = shutil.which("chromedriver")
+    if browser is None or driver is None:
+        pytest.skip("Chromium or chromedriver is not installed (make browser-deps installs them when run as root)")
+    pytest.importorskip("selenium", reason="selenium is not installed (the dev extra has it)")
+    return browser, driver
+
+
+@pytest.fixture
+def browser(tmp_path: Path) -> Iterator[Any]:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    binary, driver = chromium_paths()
+    options = webdriver.ChromeOptions()
+    options.binary_location = binary
+    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'chromium-profile'}", "--window-size=1280,1000"):
+        options.add_argument(flag)
+    chrome = webdriver.Chrome(options=options, service=Service(executable_path=driver, log_output=str(tmp_path / "chromedriver.log")))
+    chrome.set_script_timeout(60)
+    try:
+        yield chrome
+    finally:
+        chrome.quit()
+
+
+@pytest.fixture
+def cloud(tmp_path: Path) -> Iterator[Any]:
+    settings = Settings(_env_file=None, data_dir=tmp_path / "cloud", api_key=SecretStr(API_KEY))  # type: ignore[call-arg]
+    with serve_in_thread(create_app(settings)) as server:
+        yield server
+
+
+def start_edge(ws_url: str, spool: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "darkread", "edge", "run", "--replay", str(SAMPLE_RECORDING), "--cloud", ws_url,
+         "--speed", "1", "--lossless", "--spool", str(spool), "--session", SESSION, "--drain-timeout", "60"],
+        env=dict(os.environ, DARKREAD_EDGE_UPLINK_API_KEY=API_KEY), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        text=True,
+    )
+
+
+def wait_for(condition: Callable[[], Any], timeout_s: float, what: str) -> Any:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        time.sleep(0.2)
+    raise AssertionError(f"timed out after {timeout_s:g} s waiting for {what}")
+
+
+def serious_violations(chrome: Any) -> list[str]:
+    """axe-core's serious and critical findings on the page as it is now."""
+    chrome.execute_script(AXE.read_text())
+    result = chrome.execute_async_script(
+        "const done = arguments[arguments.length - 1];"
+        "axe.run(document, {resultTypes: ['violations']}).then(r => done(JSON.stringify(r.violations)), e => done(String(e)));"
+    )
+    violations = json.loads(result)
+    return [
+        f"{v['id']} ({v['impact']}): {v['help']} at {[n['target'] for n in v['nodes']]}"
+        for v in violations if v["impact"] in ("serious", "critical")
+    ]
+
+
+def test_live_page_follows_a_session_reads_and_speaks(browser: Any, cloud: Any, tmp_path: Path) -> None:
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    if shutil.which("espeak-ng") is None:
+        pytest.skip("espeak-ng is not installed (make speech-deps installs it when run as root)")
+    printed = open_recording(SAMPLE_RECORDING).text
+    assert printed
+
+    browser.get(f"{cloud.url}/#key={API_KEY}")
+    wait_for(lambda: browser.find_element(By.ID, "view").is_displayed(), 20, "the page to accept the key")
+    assert "key=" not in browser.current_url  # the key left the address bar (and the history)
+    assert serious_violations(browser) == []
+
+    edge = start_edge(cloud.ws_url, tmp_path / "spool")
+    try:
+        # Keyboard only: Tab from the top of the page to the session's link, Enter to open it.
+        link = wait_for(lambda: browser.find_elements(By.CSS_SELECTOR, f'[data-session="{SESSION}"]'), 60, "the session in the list")[0]
+        body = browser.find_element(By.TAG_NAME, "body")
+        body.send_keys(Keys.TAB)  # the skip link
+        for _ in range(10):
+            if browser.switch_to.active_element == link:
+                break
+            browser.switch_to.active_element.send_keys(Keys.TAB)
+        assert browser.switch_to.active_element == link, "the session link is not reachable with Tab"
+        link.send_keys(Keys.ENTER)
+        wait_for(lambda: browser.current_url.endswith(f"/sessions/{SESSION}"), 10, "the session page")
+
+        widths = []
+
+        def text_shown() -> str:
+            width = browser.execute_script("const i = document.getElementById('page-image'); return i.hidden ? 0 : i.naturalWidth;")
+            if width and (not widths or widths[-1] != width):
+                widths.append(width)
+            return str(browser.find_element(By.ID, "text").text)
+
+        wait_for(text_shown, 120, "the text read so far")
+        out, _ = edge.communicate(timeout=180)
+        assert edge.returncode == 0, out[-2000:]
+    finally:
+        if edge.poll() is None:
+            edge.kill()
+            edge.wait(10)
+    wait_for(lambda: (text_shown(), len(widths) and widths[-1] == browser.execute_script(
+        "return document.getElementById('page-image').naturalWidth"))[1], 10, "the final page image")
+
+    ask = browser.find_element(By.ID, "ask")
+    ask.send_keys(Keys.ENTER)  # a native button: Enter presses it
+    wait_for(lambda: browser.find_element(By.ID, "answer").get_attribute("data-state") == "done", 120, "the answer")
+    answer = browser.find_element(By.ID, "answer-text").text
+    rates = error_rates(printed, answer)
+    assert rates.cer <= MAX_CER, f"the page answered {answer!r} (CER {rates.cer:.1%})"
+    assert error_rates(printed, browser.find_element(By.ID, "text").text).cer <= MAX_CER
+
+    browser.find_element(By.ID, "speak").send_keys(Keys.ENTER)
+    seconds = wait_for(lambda: browser.execute_script(
+        "const v = document.getElementById('voice'); return v.hidden || !(v.duration > 0) ? 0 : v.duration;"), 120, "the spoken answer")
+    words = len(answer.split())
+    assert 0.6 * 60 / 140 <= seconds / words <= 1.4 * 60 / 140, f"{seconds:.2f} s for {words} words"
+
+    assert serious_violations(browser) == []
+    print(f"live page: page widths seen {widths}, answer {answer!r} (CER {rates.cer:.1%}), spoken {seconds:.2f} s")
+    browser.execute_script("document.activeElement.blur(); window.scrollTo(0, 0);")
+    whole_page(browser, 1280, SCREENSHOT)
+    # On a phone: one column, nothing wider than the screen.
+    overflow = whole_page(browser, 390, SCREENSHOT.with_name("ui-phone.png"))
+    assert overflow <= 0
+
+
+def whole_page(chrome: Any, width: int, path: Path) -> int:
+    """Screenshot of the whole page at a viewport ``width`` (CSS px); returns the horizontal overflow."""
+    chrome.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {"width": width, "height": 800, "deviceScaleFactor": 1, "mobile": width < 600})
+    height = chrome.execute_script("return document.documentElement.scrollHeight;")
+    chrome.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": width < 600})
+    path.parent.mkdir(exist_ok=True)
+    chrome.save_screenshot(str(path))
+    return int(chrome.execute_script("return document.documentElement.scrollWidth - document.documentElement.clientWidth;"))
