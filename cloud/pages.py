@@ -8,17 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from darkread.stitch import stitch_page
+
+from .errors import NoPageError
 from .store import Store, StoredFrame
 
 Box = tuple[int, int, int, int]
-
-
-class NoPageError(Exception):
-    """The session has nothing to read yet (no frames or pages stored)."""
-
-
-class StitchUnavailableError(Exception):
-    """The stitcher (``darkread.edge.stitch``) is not installed in this deployment."""
 
 
 @dataclass(frozen=True)
@@ -30,14 +25,7 @@ class PageImage:
 
 def stitch_frames(frames: list[StoredFrame], page_id: str) -> PageImage:
     """Stored frames -> the stitched page (the same stitcher the glasses run)."""
-    try:
-        from darkread.edge.stitch import StitchFrame, stitch_page
-    except ImportError as exc:
-        raise StitchUnavailableError(
-            "page stitching (darkread.edge.stitch) is not installed; install darkread with its core package"
-        ) from exc
-    stitch_frames_ = [StitchFrame(f.frame_id, f.t_us, f.mask, f.origin, f.gaze_px) for f in frames]
-    page = stitch_page(stitch_frames_)
+    page = stitch_page(frames)
     if page.image.size == 0:
         raise NoPageError("the frames stored so far did not stitch into a page (blank or unregistered)")
     lines: list[Box] = [(int(x0), int(y0), int(x1), int(y1)) for x0, y0, x1, y1 in page.lines]

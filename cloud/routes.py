@@ -8,12 +8,13 @@ import time
 from dataclasses import asdict
 from typing import Annotated, Literal
 
+from darkread.image_codec import encode_png
 from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
 from .context import AppContext, get_context, require_api_key
-from .ocr.base import OcrError, OcrUnavailableError, encode_png
-from .pages import NoPageError, PageImage, StitchUnavailableError
+from .errors import NoPageError, OcrError, OcrUnavailableError
+from .pages import PageImage
 from .speech import WAV_MEDIA_TYPE, wants_wav
 from .speech_http import require_speech_engine, speak
 from .store import SessionInfo
@@ -103,8 +104,6 @@ async def _page(context: AppContext, info: SessionInfo) -> PageImage:
         return await asyncio.to_thread(context.pages.current_page, info.session_id, info.mode, info.last_seq)
     except NoPageError as exc:
         raise HTTPException(status.HTTP_409_CONFLICT, detail=str(exc)) from None
-    except StitchUnavailableError as exc:
-        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=str(exc)) from None
 
 
 @api.get("/sessions", summary="List sessions, most recently active first", response_model=list[SessionModel])

@@ -15,6 +15,8 @@ import subprocess
 import wave
 from dataclasses import dataclass
 
+from .errors import SpeechError, SpeechUnavailableError
+
 WAV_MEDIA_TYPE = "audio/wav"
 NOTHING_READ = "I could not read any text on the page yet."
 
@@ -22,14 +24,6 @@ NOTHING_READ = "I could not read any text on the page yet."
 VOICE_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$"
 WAV_TYPES = frozenset({"audio/wav", "audio/x-wav", "audio/wave", "audio/vnd.wave"})
 _HYPHENATED_BREAK = re.compile(r"(\w)-\n(\w)")
-
-
-class SpeechUnavailableError(Exception):
-    """The speech engine is not installed (or not executable) on this machine."""
-
-
-class SpeechError(Exception):
-    """The speech engine ran but failed or timed out."""
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING
 
 from fastapi import HTTPException, Response, status
 
-from .speech import WAV_MEDIA_TYPE, SpeechError, SpeechUnavailableError, engine_path, spoken_text, synthesize, wav_info
+from .errors import SpeechError, SpeechUnavailableError
+from .speech import WAV_MEDIA_TYPE, engine_path, spoken_text, synthesize, wav_info
 
 if TYPE_CHECKING:
     from .routes import AskResponse

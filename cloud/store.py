@@ -28,12 +28,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import msgpack
 import numpy as np
 
-from darkread.edge.stitch.frames import ink_mask_to_paper
+from darkread.frame_record import FrameRecord
+from darkread.image_codec import ImageCodecError, encode_png, read_image
+from darkread.mask_bits import unpack_bits
 from darkread.proto.messages import Frame, Gaze, Hello, Page
+from darkread.stitch.stitched_page import ink_mask_to_paper
+
+from .errors import StoreError
 
 log = logging.getLogger(__name__)
 
@@ -67,10 +71,6 @@ CREATE TABLE IF NOT EXISTS gaze (
 """
 
 
-class StoreError(Exception):
-    """The store could not persist or read something (disk full, database locked, closed)."""
-
-
 @dataclass(frozen=True)
 class SessionInfo:
     session_id: str
@@ -86,13 +86,10 @@ class SessionInfo:
 
 
 @dataclass(frozen=True)
-class StoredFrame:
+class StoredFrame(FrameRecord):
+    """A frame record as the session stored it, with the sequence number it arrived under."""
+
     seq: int
-    frame_id: int
-    t_us: int
-    origin: tuple[int, int]
-    gaze_px: tuple[float, float]
-    mask: np.ndarray  # uint8, ink = 1
 
 
 @dataclass(frozen=True)
@@ -105,10 +102,10 @@ class StoredPage:
 
     def image(self) -> np.ndarray:
         """The page as uint8 black-on-white (0 = ink, 255 = paper)."""
-        image = cv2.imread(str(self.png_path), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            raise StoreError(f"page image {self.png_path} is missing or unreadable")
-        return image
+        try:
+            return read_image(self.png_path)
+        except ImageCodecError as exc:
+            raise StoreError(f"page image {self.png_path} is missing or unreadable") from exc
 
 
 @dataclass(frozen=True)
@@ -119,10 +116,7 @@ class WriteResult:
 
 def mask_to_png(mask: np.ndarray) -> bytes:
     """Ink mask (nonzero = ink) -> PNG bytes, black text on white."""
-    ok, png = cv2.imencode(".png", ink_mask_to_paper(mask))
-    if not ok:
-        raise StoreError("PNG encoding failed")
-    return png.tobytes()
+    return encode_png(ink_mask_to_paper(mask))
 
 
 def _fsync_write(path: Path, data: bytes) -> None:
@@ -377,8 +371,8 @@ class Store:
             ).fetchall()
         frames = []
         for seq, frame_id, t_us, x0, y0, u, v, rows_, cols, bits in reversed(rows):
-            flat = np.unpackbits(np.frombuffer(bits, np.uint8), count=rows_ * cols)
-            frames.append(StoredFrame(seq, frame_id, t_us, (x0, y0), (u, v), flat.reshape(rows_, cols)))
+            mask = unpack_bits((rows_, cols), bits)
+            frames.append(StoredFrame(frame_id, t_us, mask, (x0, y0), (u, v), seq=seq))
         return frames
 
     def latest_page(self, session_id: str) -> StoredPage | None:

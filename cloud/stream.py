@@ -33,7 +33,8 @@ from darkread.proto.errors import (
 from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, Message, Page, Welcome, decode, encode
 
 from .context import AppContext
-from .store import StoreError, WriteResult
+from .errors import StoreError
+from .store import WriteResult
 
 log = logging.getLogger(__name__)
 

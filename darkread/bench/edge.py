@@ -157,11 +157,13 @@ def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
     if rgb.is_file():
         import cv2
 
-        image = cv2.imread(str(rgb), cv2.IMREAD_COLOR)
-        if image is not None:
-            ok, png = cv2.imencode(".png", cv2.resize(image, (2880, 2880), interpolation=cv2.INTER_CUBIC))
-            if ok:
-                return int(png.size), "measured"
+        from darkread.image_codec import ImageCodecError, encode_png, read_image
+
+        try:
+            image = read_image(rgb, colour=True)
+            return len(encode_png(cv2.resize(image, (2880, 2880), interpolation=cv2.INTER_CUBIC))), "measured"
+        except ImageCodecError:
+            pass
     return RGB_FRAME_BYTES_ESTIMATE, "estimated"
 
 

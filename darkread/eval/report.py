@@ -557,7 +557,7 @@ def write_report(results: Sequence[dict[str, Any]], out_dir: str | Path, info: R
         "",
         ("One snapshot of the same synthetic scene from the glasses' RGB camera, taken in the middle of the "
         "recording and read by the same OCR engine after cropping the region around the page "
-        "(`darkread/eval/rgb_baseline.py`): 2880 x 2880 rectified pinhole at 26 px/deg; auto-exposure "
+        "(`models/synth/rgb_camera.py`, read by `darkread/eval/rgb_baseline.py`): 2880 x 2880 rectified pinhole at 26 px/deg; auto-exposure "
         "metered on the paper, lengthening up to 1/30 s, then analogue gain up to 16x; motion blur from "
         "the session's head and page motion during the exposure; lens blur (sigma 1 px); an RGGB Bayer "
         "mosaic with Poisson shot noise (about 100 e-/s per lux on white paper per photosite), 2.5 e- "

@@ -104,6 +104,7 @@ def evaluate_recording(
     from darkread.eval.bandwidth import measure_bandwidth, page_ink_from_png
     from darkread.eval.metrics import error_rates
     from darkread.eval.rgb_baseline import baseline_snapshot, read_snapshot
+    from darkread.image_codec import read_image, write_png
     from darkread.read import read_recording
 
     recording_dir, run_dir = Path(recording_dir), Path(run_dir)
@@ -136,12 +137,9 @@ def evaluate_recording(
     snapshot: dict[str, Any] = {}
 
     def run_rgb() -> dict[str, Any]:
-        import cv2
-
         snap, source = baseline_snapshot(recording_dir)
         snapshot["snap"] = snap
-        crop_png = run_dir / "rgb_crop.png"
-        cv2.imwrite(str(crop_png), cv2.cvtColor(snap.crop, cv2.COLOR_RGB2BGR))
+        crop_png = write_png(run_dir / "rgb_crop.png", snap.crop)
         text = read_snapshot(snap, engine(backend))
         rates = error_rates(reference, text)
         described = {k: v for k, v in snap.describe().items() if not (isinstance(v, float) and math.isnan(v))}
@@ -150,12 +148,10 @@ def evaluate_recording(
     result["rgb"] = _guard(f"{recording_dir.name}: RGB baseline", run_rgb)
 
     def run_compare() -> dict[str, Any]:
-        import cv2
-
         page_png = result["darkread"].get("page_png")
         if not page_png:
             raise RuntimeError("no stitched page to read")
-        page = cv2.imread(page_png, cv2.IMREAD_GRAYSCALE)
+        page = read_image(page_png)
         out = {}
         for name in compare:
             started = time.perf_counter()

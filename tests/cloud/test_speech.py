@@ -93,7 +93,7 @@ def test_espeak_wav_lasts_as_long_as_the_words_at_the_rate(rate_wpm: int) -> Non
 
 
 def test_missing_engine_is_a_clear_error() -> None:
-    from darkread.cloud.speech import SpeechUnavailableError
+    from darkread.cloud.errors import SpeechUnavailableError
 
     with pytest.raises(SpeechUnavailableError, match="espeak-ng-missing.*apt-get install espeak-ng"):
         synthesize("hello", Voice(), executable="espeak-ng-missing")

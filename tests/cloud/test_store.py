@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from darkread.cloud.store import Store, StoreError, WriteResult
+from darkread.cloud.errors import StoreError
+from darkread.cloud.store import Store, WriteResult
 from darkread.proto.messages import Frame, Gaze, Hello, Page, pack_mask
 
 

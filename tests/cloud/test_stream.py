@@ -11,7 +11,7 @@ import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
-from darkread.cloud.store import StoreError
+from darkread.cloud.errors import StoreError
 from darkread.cloud.stream import close_reason
 from darkread.proto.errors import CloseCode
 from darkread.proto.messages import Ack, Error, Frame, Hello, Page, Welcome, decode, encode, pack_mask

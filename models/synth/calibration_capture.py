@@ -27,6 +27,7 @@ from darkread.edge.calibrate.markers import BoardSpec, save_board
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
 from darkread.edge.io.calibration import Calibration, save_calibration
 from darkread.edge.io.raw import write_raw
+from darkread.image_codec import write_png
 from darkread.models.synth.camera import (
     SENSOR_WH,
     random_calibration,
@@ -363,7 +364,7 @@ def write_flash_capture(out: str | Path, capture: FlashCapture) -> Path:
             writer.writerow(["timestamp_us", "exposure_us", "file"])
             for t, picture in zip(capture.rgb_times_us, capture.rgb_frames):
                 name = f"rgb_frames/{int(t)}.png"
-                cv2.imwrite(str(out / name), picture)
+                write_png(out / name, picture)
                 writer.writerow([int(t), int(capture.rgb_exposure_us), name])
     save_calibration(out / "calibration.json", capture.nominal_calibration())
     if capture.rgb_frames and isinstance(capture.rgb_camera, Fisheye624Camera):
@@ -650,7 +651,7 @@ def write_page_capture(out: str | Path, page: PageCapture) -> Path:
     (out / "rgb_frames").mkdir(parents=True, exist_ok=True)
     write_raw(out / "events.raw", page.events, width=SENSOR_WH[0], height=SENSOR_WH[1])
     save_board(out / "board.json", page.markers)
-    cv2.imwrite(str(out / "rgb_frames" / "1200000.png"), page.rgb_frame)
+    write_png(out / "rgb_frames" / "1200000.png", page.rgb_frame)
     (out / RGB_FRAMES_NAME).write_text("timestamp_us,exposure_us,file\n1200000,16000,rgb_frames/1200000.png\n", encoding="utf-8")
     nominal = replace(page.truth, gaze_to_event_time_offset_us=0, rgb_camera=rgb_camera_block(page.rgb_camera, page.T_rgb_cpf))
     save_calibration(out / "calibration.json", nominal)
