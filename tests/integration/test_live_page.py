@@ -61,6 +61,7 @@ def browser(tmp_path: Path) -> Iterator[Any]:
     binary, driver = chromium_paths()
     options = webdriver.ChromeOptions()
     options.binary_location = binary
+    options.set_capability("goog:loggingPrefs", {"performance": "ALL"})  # every request, to check the key's path
     for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'chromium-profile'}", "--window-size=1280,1000"):
         options.add_argument(flag)
     chrome = webdriver.Chrome(options=options, service=Service(executable_path=driver, log_output=str(tmp_path / "chromedriver.log")))
@@ -78,13 +79,14 @@ def cloud(tmp_path: Path) -> Iterator[Any]:
         yield server
 
 
-def start_edge(ws_url: str, spool: Path) -> subprocess.Popen[str]:
-    return subprocess.Popen(
-        [sys.executable, "-m", "darkread", "edge", "run", "--replay", str(SAMPLE_RECORDING), "--cloud", ws_url,
-         "--speed", "1", "--lossless", "--spool", str(spool), "--session", SESSION, "--drain-timeout", "60"],
-        env=dict(os.environ, DARKREAD_EDGE_UPLINK_API_KEY=API_KEY), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-        text=True,
-    )
+def start_edge(ws_url: str, spool: Path, log: Path) -> subprocess.Popen[bytes]:
+    """The glasses: the shipped sample replayed at wall-clock pace (so the page grows while watched)."""
+    with log.open("wb") as out:
+        return subprocess.Popen(
+            [sys.executable, "-m", "darkread", "edge", "run", "--replay", str(SAMPLE_RECORDING), "--cloud", ws_url,
+             "--speed", "1", "--lossless", "--spool", str(spool), "--session", SESSION, "--drain-timeout", "60"],
+            env=dict(os.environ, DARKREAD_EDGE_UPLINK_API_KEY=API_KEY), stdout=out, stderr=subprocess.STDOUT,
+        )
 
 
 def wait_for(condition: Callable[[], Any], timeout_s: float, what: str) -> Any:
@@ -120,42 +122,30 @@ def test_live_page_follows_a_session_reads_and_speaks(browser: Any, cloud: Any, 
     printed = open_recording(SAMPLE_RECORDING).text
     assert printed
 
-    browser.get(f"{cloud.url}/#key={API_KEY}")
-    wait_for(lambda: browser.find_element(By.ID, "view").is_displayed(), 20, "the page to accept the key")
+    # Opened before the glasses connect, with the key in the fragment (never sent to the server).
+    browser.get(f"{cloud.url}/sessions/{SESSION}#key={API_KEY}")
+    wait_for(lambda: "waiting for the glasses" in browser.find_element(By.ID, "status").text, 20, "the waiting page")
     assert "key=" not in browser.current_url  # the key left the address bar (and the history)
     assert serious_violations(browser) == []
 
-    edge = start_edge(cloud.ws_url, tmp_path / "spool")
+    captions: list[str] = []  # the page image as it grows: "N frames, W x H pixels"
+
+    def text_shown() -> str:
+        caption = browser.find_element(By.ID, "page-caption").text
+        if "frames," in caption and (not captions or captions[-1] != caption):
+            captions.append(caption)
+        return str(browser.find_element(By.ID, "text").text)
+
+    edge = start_edge(cloud.ws_url, tmp_path / "spool", tmp_path / "edge.log")
     try:
-        # Keyboard only: Tab from the top of the page to the session's link, Enter to open it.
-        link = wait_for(lambda: browser.find_elements(By.CSS_SELECTOR, f'[data-session="{SESSION}"]'), 60, "the session in the list")[0]
-        body = browser.find_element(By.TAG_NAME, "body")
-        body.send_keys(Keys.TAB)  # the skip link
-        for _ in range(10):
-            if browser.switch_to.active_element == link:
-                break
-            browser.switch_to.active_element.send_keys(Keys.TAB)
-        assert browser.switch_to.active_element == link, "the session link is not reachable with Tab"
-        link.send_keys(Keys.ENTER)
-        wait_for(lambda: browser.current_url.endswith(f"/sessions/{SESSION}"), 10, "the session page")
-
-        widths = []
-
-        def text_shown() -> str:
-            width = browser.execute_script("const i = document.getElementById('page-image'); return i.hidden ? 0 : i.naturalWidth;")
-            if width and (not widths or widths[-1] != width):
-                widths.append(width)
-            return str(browser.find_element(By.ID, "text").text)
-
-        wait_for(text_shown, 120, "the text read so far")
-        out, _ = edge.communicate(timeout=180)
-        assert edge.returncode == 0, out[-2000:]
+        wait_for(lambda: (text_shown(), edge.poll() is not None)[1], 180, "the edge to finish its replay")
+        assert edge.returncode == 0, (tmp_path / "edge.log").read_text()[-2000:]
     finally:
         if edge.poll() is None:
             edge.kill()
             edge.wait(10)
-    wait_for(lambda: (text_shown(), len(widths) and widths[-1] == browser.execute_script(
-        "return document.getElementById('page-image').naturalWidth"))[1], 10, "the final page image")
+    wait_for(lambda: text_shown() and captions[-1].startswith("330 frames"), 60, "the page of the whole replay")
+    assert len(captions) >= 2, f"the page image did not grow while frames arrived: {captions}"
 
     ask = browser.find_element(By.ID, "ask")
     ask.send_keys(Keys.ENTER)  # a native button: Enter presses it
@@ -170,14 +160,50 @@ def test_live_page_follows_a_session_reads_and_speaks(browser: Any, cloud: Any, 
         "const v = document.getElementById('voice'); return v.hidden || !(v.duration > 0) ? 0 : v.duration;"), 120, "the spoken answer")
     words = len(answer.split())
     assert 0.6 * 60 / 140 <= seconds / words <= 1.4 * 60 / 140, f"{seconds:.2f} s for {words} words"
-
     assert serious_violations(browser) == []
-    print(f"live page: page widths seen {widths}, answer {answer!r} (CER {rates.cer:.1%}), spoken {seconds:.2f} s")
+    print(f"live page: {captions}; answer {answer!r} (CER {rates.cer:.1%}); spoken {seconds:.2f} s for {words} words")
     browser.execute_script("document.activeElement.blur(); window.scrollTo(0, 0);")
     whole_page(browser, 1280, SCREENSHOT)
     # On a phone: one column, nothing wider than the screen.
-    overflow = whole_page(browser, 390, SCREENSHOT.with_name("ui-phone.png"))
-    assert overflow <= 0
+    assert whole_page(browser, 390, SCREENSHOT.with_name("ui-phone.png")) <= 0
+    browser.execute_cdp_cmd("Emulation.clearDeviceMetricsOverride", {})
+
+    # Keyboard only: Tab to "All sessions", Enter; Tab to the session in the list, Enter.
+    press_tab_until(browser, browser.find_element(By.LINK_TEXT, "All sessions")).send_keys(Keys.ENTER)
+    link = wait_for(lambda: browser.find_elements(By.CSS_SELECTOR, f'[data-session="{SESSION}"]'), 20, "the session list")[0]
+    assert "330 frames" in link.text
+    assert serious_violations(browser) == []
+    press_tab_until(browser, link).send_keys(Keys.ENTER)
+    wait_for(lambda: browser.current_url.endswith(f"/sessions/{SESSION}") and text_shown(), 60, "the session again")
+
+    requests = sent_requests(browser)
+    assert requests and not [url for url, _ in requests if API_KEY in url], "the key went into a URL"
+    api_calls = [(url, headers) for url, headers in requests if "/v1/" in url or "/ui/sessions" in url]
+    assert api_calls and all(headers.get("x-api-key") == API_KEY for _, headers in api_calls)
+
+
+def press_tab_until(chrome: Any, target: Any, most: int = 15) -> Any:
+    """Tab from the top of the page until ``target`` has the focus (fails if it never does)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.keys import Keys
+
+    chrome.execute_script("document.activeElement.blur(); window.scrollTo(0, 0);")
+    for _ in range(most):
+        ActionChains(chrome).send_keys(Keys.TAB).perform()
+        if chrome.switch_to.active_element == target:
+            return target
+    raise AssertionError(f"{target.text!r} is not reachable with Tab")
+
+
+def sent_requests(chrome: Any) -> list[tuple[str, dict[str, str]]]:
+    """(URL, lower-case headers) of every request the page made, from Chromium's DevTools network log."""
+    requests = []
+    for entry in chrome.get_log("performance"):
+        message = json.loads(entry["message"])["message"]
+        if message["method"] == "Network.requestWillBeSent":
+            request = message["params"]["request"]
+            requests.append((request["url"], {k.lower(): v for k, v in request.get("headers", {}).items()}))
+    return requests
 
 
 def whole_page(chrome: Any, width: int, path: Path) -> int:

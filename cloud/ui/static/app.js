@@ -131,6 +131,7 @@ function watchSession(sessionId) {
   let imageOf = null;        // the session state the page image shows
   let textOf = null;         // the session state the text was read from
   let lastReadAt = 0;
+  let reading = false;       // a read is in flight (it runs beside the image refreshes)
   let pageUrl = null;
   let voiceUrl = null;
 
@@ -181,13 +182,15 @@ function watchSession(sessionId) {
 
   // Reads the page again when it changed, at most every MIN_READ_GAP_MS (OCR is the costly part).
   async function readAlong(state) {
-    if (state === textOf || Date.now() - lastReadAt < MIN_READ_GAP_MS) return;
+    if (reading || state === textOf || Date.now() - lastReadAt < MIN_READ_GAP_MS) return;
+    reading = true;
     try {
       showText(linesOf(await ask()));
       textOf = state;
     } catch (error) {
-      if (error instanceof Unauthorized) throw error;
+      if (error instanceof Unauthorized) showLogin("The key is no longer accepted.");
     } finally {
+      reading = false;
       lastReadAt = Date.now();
     }
   }
@@ -205,7 +208,7 @@ function watchSession(sessionId) {
         const age = Math.max(0, Date.now() / 1000 - info.updated_s);
         say(age < 5 ? `Live: ${info.frames} frames received.` : `${info.frames} frames; nothing new for ${Math.round(age)} s.`);
         if (state !== imageOf && (await refreshImage(info))) imageOf = state;
-        if (imageOf !== null) await readAlong(state);
+        if (imageOf !== null) readAlong(state);  // not awaited: the image keeps growing while OCR runs
       }
     } catch (error) {
       if (error instanceof Unauthorized) return showLogin("The key is no longer accepted.");
