@@ -12,7 +12,7 @@ from prometheus_client import make_asgi_app
 from darkread import __version__
 
 from .context import AppContext
-from .metrics import Metrics
+from .prometheus import Metrics
 from .ocr import OcrBackend, create_backend
 from .pages import PageAssembler
 from .routes import api, public

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader, APIKeyQuery
 
-from .metrics import Metrics
+from .prometheus import Metrics
 from .pages import PageAssembler
 from .settings import Settings
 from .store import Store

@@ -89,9 +89,11 @@ def read_recording(
     from darkread.cloud.app import create_app
     from darkread.cloud.server import serve_in_thread
     from darkread.cloud.settings import Settings
+    from darkread.edge.builder import build_edge
     from darkread.edge.config import load_config
-    from darkread.edge.daemon import EdgeService
+    from darkread.edge.daemon import Daemon
     from darkread.edge.io.recording import open_recording
+    from darkread.edge.notify import Notifier
 
     started = time.perf_counter()
     recording = open_recording(path)  # fails early, naming any missing file
@@ -111,20 +113,15 @@ def read_recording(
                        "drain_timeout_s": drain_timeout_s},
             "metrics": {"log_every_s": 3600.0},
         }
-        service = EdgeService(load_config(None, environ={}, overrides=overrides))
         t0 = time.perf_counter()
-        service.startup()
-        try:
-            while not service.finished():
-                service.tick()
-                time.sleep(0.02)
-        finally:
-            drained = service.shutdown(drain_timeout_s)
+        edge = build_edge(load_config(None, environ={}, overrides=overrides))
+        daemon = Daemon(edge, Notifier(environ={}), tick_s=0.02, shutdown_timeout_s=drain_timeout_s, handle_signals=False)
+        drained = daemon.run() == 0
         stages["edge"] = time.perf_counter() - t0
         if not drained:
             raise RuntimeError(f"the cloud did not acknowledge every frame within {drain_timeout_s:g} s")
-        totals = service.metrics.snapshot().totals
-        session_id = service.uplink.session_id
+        totals = edge.metrics.snapshot().totals
+        session_id = edge.uplink.session_id
         t0 = time.perf_counter()
         headers = {"X-API-Key": api_key}
         with httpx.Client(base_url=server.url, headers=headers, timeout=settings.ocr_timeout_s + 30) as client:
@@ -155,7 +152,7 @@ def read_recording(
         speech_wav=str(out / "answer.wav") if spoken is not None else None,
     )
     if recording.text is not None:
-        from darkread.eval.metrics import error_rates
+        from darkread.eval.error_rates import error_rates
 
         rates = error_rates(recording.text, result.text)
         result.reference, result.cer, result.wer = recording.text, rates.cer, rates.wer

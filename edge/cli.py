@@ -90,10 +90,14 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from darkread.edge.builder import build_edge
     from darkread.edge.config import load_config
-    from darkread.edge.daemon import Daemon, EdgeService, use_journal_format_if_under_systemd
+    from darkread.edge.daemon import Daemon
+    from darkread.edge.journal import use_journal_format_if_under_systemd
+    from darkread.edge.notify import Notifier
 
     use_journal_format_if_under_systemd()
     config = load_config(args.config, overrides=overrides_from_args(args))
-    service = EdgeService(config)
-    return Daemon(service, service.notifier, shutdown_timeout_s=config.uplink.drain_timeout_s).run()
+    notifier = Notifier()
+    edge = build_edge(config, watchdog=notifier.watchdog_tick)
+    return Daemon(edge, notifier, shutdown_timeout_s=config.uplink.drain_timeout_s).run()

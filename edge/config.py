@@ -1,8 +1,10 @@
 """Edge configuration: a TOML file, then ``DARKREAD_EDGE_<SECTION>_<KEY>`` environment overrides,
 then command-line overrides (highest precedence).
 
-Every setting lives in one small frozen dataclass per section; ``edge/systemd/edge.toml`` is the
-documented example.
+Every setting lives in one small frozen dataclass per section, and the part that uses a section
+takes that very type (``Pipeline`` a :class:`PipelineConfig`, ``Uplink`` an :class:`UplinkConfig`);
+``edge/systemd/edge.toml`` is the documented example. The window size and the bin count are not
+settings: they are the reconstruction model's input shape.
 """
 
 from __future__ import annotations
@@ -43,10 +45,7 @@ class GazeConfig:
 class PipelineConfig:
     n_events: int = 1600  # foveated events per voxel grid (and new ones that trigger a frame)
     period_ms: float = 50.0  # also make a frame after this long if any new foveated events arrived
-    fovea_height: int = 100
-    fovea_width: int = 200
-    bins: int = 4
-    model: str = ""  # ONNX path; empty: the shipped model
+    model: str = ""  # ONNX path; empty: the shipped model (its input shape sets window and bins)
     threads: int = 1
     ring_capacity: int = 1 << 19  # 8 MB: 0.5 s at 1 Mev/s, far more than a window needs
     lossless: bool = False  # True: the reader waits for inference instead of skipping windows
@@ -68,6 +67,9 @@ class UplinkConfig:
     backoff_max_s: float = 10.0
     max_in_flight: int = 512
     page_every_s: float = 5.0  # pages mode: send the page this often
+    heartbeat_s: float = 5.0
+    open_timeout_s: float = 5.0
+    stable_connection_s: float = 2.0  # a connection that lasted this long resets the backoff
 
 
 @dataclass(frozen=True)
@@ -115,11 +117,16 @@ def _coerce(raw: Any, default: Any, where: str) -> Any:
         raise ValueError(f"config {where}: cannot use {raw!r} (expected {type(default).__name__})") from None
 
 
+FROM_THE_MODEL = {"fovea_height", "fovea_width", "bins"}  # former [pipeline] keys
+
+
 def _section(name: str, values: Mapping[str, Any], base: Any) -> Any:
     cls = _SECTION_TYPES[name]
     known = {f.name for f in dataclasses.fields(cls)}
     updates = {}
     for key, raw in values.items():
+        if name == "pipeline" and key in FROM_THE_MODEL:
+            raise ValueError(f"config: [pipeline] {key} is gone: the window size and bins are the model's input shape")
         if key not in known:
             raise ValueError(f"config: unknown key [{name}] {key} (known: {', '.join(sorted(known))})")
         updates[key] = _coerce(raw, getattr(base, key), f"[{name}] {key}")

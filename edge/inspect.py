@@ -110,7 +110,7 @@ def summarize(
     image: bool = False,
 ) -> EventSummary:
     """Totals over event chunks; with a ``GazeMapper``, the events inside the moving gaze window."""
-    from darkread.edge.fovea import crop_along_track, window_origins
+    from darkread.edge.fovea import crop_along_track, origins_along_gaze
 
     summary = EventSummary()
     for events in chunks:
@@ -118,9 +118,8 @@ def summarize(
         if image:
             summary.accumulate_image(events, width, height)
         if mapper is not None and events.shape[0]:
-            centres = mapper.pixels_at(events["t"])
-            summary.gaze_events += int(np.count_nonzero(np.isfinite(centres[:, 0])))
-            origins = window_origins(centres, (width, height))
+            origins = origins_along_gaze(events["t"], mapper.pixels_at, (width, height))
+            summary.gaze_events += int(np.count_nonzero(np.isfinite(origins[:, 0])))
             summary.fovea_events += int(crop_along_track(events, origins).shape[0])
     return summary
 

@@ -3,11 +3,15 @@
 Two threads meet here. The source's reader thread calls :meth:`Pipeline.sink`, which only pushes
 the chunk into the :class:`EventRing` and counts how many of its events fall inside the *current*
 foveal window. The reconstruction thread wakes when ``n_events`` new foveated events arrived (or
-every ``period_ms``), looks up the gaze at the newest event, and runs the pure core
-:func:`make_frame` (choose window -> crop -> voxel -> infer). If inference fell behind, it jumps to
-the newest window and counts the windows it skipped; the ring is fixed-size, so memory never grows
-with load. In ``lossless`` mode (offline replays) the reader thread reconstructs each window
-itself, so it waits for inference instead of skipping.
+every ``period_ms``), takes the newest event time ``t`` as the frame's one timestamp, looks up the
+gaze at ``t``, places the window there, collects exactly the window's newest ``n_events`` (up to
+``t``) and runs the pure core :func:`make_frame` (voxel -> infer). If inference fell behind, it
+jumps to the newest window and counts the windows it skipped; the ring is fixed-size, so memory
+never grows with load. In ``lossless`` mode (offline replays) the reader thread reconstructs each
+window itself, so it waits for inference instead of skipping.
+
+The window's size and the bin count come from the model (``voxel``, see ``Reconstructor.voxel``);
+the loop's settings are the config's :class:`~darkread.edge.config.PipelineConfig`.
 """
 
 from __future__ import annotations
@@ -16,16 +20,18 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from darkread.edge.config import PipelineConfig
 from darkread.edge.events import Events
-from darkread.edge.fovea import FoveaConfig, crop, window_origin
-from darkread.edge.metrics import EdgeMetrics
+from darkread.edge.fovea import FoveaConfig, in_window, window_origin
+from darkread.edge.gaze import GazeLookup, GazeSample
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
+from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 from darkread.frame_record import FrameRecord
 
@@ -35,37 +41,19 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 MIN_HISTORY_EVENTS = 4096
+MAX_HISTORY_EVENTS = 1 << 16  # usual cap of the ring events searched for a window's events
 
 Infer = Callable[[np.ndarray], np.ndarray]
 """Voxel grid [bins, H, W] float32 -> ink mask [H, W] uint8 (a ``Reconstructor``)."""
 
 
-class GazeLookup(Protocol):
-    """Where the wearer looks at an event time (``GazeMapper`` or a live feed)."""
-
-    def pixel_at(self, t_event_us: int) -> tuple[float, float] | None: ...
-    def angles_at(self, t_event_us: int) -> tuple[float, float] | None: ...
-
-
-@dataclass(frozen=True)
-class PipelineSettings:
-    n_events: int = 1600  # foveated events per voxel grid; that many new ones trigger a frame
-    period_ms: float = 50.0  # a frame at least this often when some new foveated events arrived
-    fovea: FoveaConfig = field(default_factory=FoveaConfig)
-    bins: int = 4
-    history_events: int = 1 << 16  # usual cap of the ring events searched for a window's events
-    lossless: bool = False  # the reader reconstructs (waits for inference) instead of skipping windows
-    stall_s: float = 5.0  # no events for this long: stop feeding the watchdog (a sensor always has noise)
-    sensor_roi: bool = False  # follow the window with the source's ROI (less USB traffic; sees only the window)
-
-    @property
-    def voxel(self) -> VoxelConfig:
-        return VoxelConfig(bins=self.bins, n_events=self.n_events, height=self.fovea.height, width=self.fovea.width)
-
-
 @dataclass(frozen=True)
 class FrameResult(FrameRecord):
-    """The frame record of one reconstructed foveal window, with how it was made."""
+    """The frame record of one reconstructed foveal window, with how it was made.
+
+    ``t_us`` is the frame's one timestamp (event clock): the newest event when it was made, the
+    time its gaze was looked up and the last time its events may have.
+    """
 
     gaze_rad: tuple[float, float]  # (yaw, pitch), radians
     events_used: int
@@ -85,41 +73,35 @@ def count_in_window(events: Events, origin: tuple[int, int] | None, cfg: FoveaCo
     """How many ``events`` fall inside the window at ``origin`` (0 without a window)."""
     if origin is None or events.shape[0] == 0:
         return 0
-    dx = events["x"] - np.uint16(origin[0])  # uint16 wrap: one comparison tests both bounds
-    dy = events["y"] - np.uint16(origin[1])
-    return int(np.count_nonzero((dx < cfg.width) & (dy < cfg.height)))
-
-
-def window_events(recent: Events, origin: tuple[int, int], settings: PipelineSettings) -> Events:
-    """The newest ``n_events`` of ``recent`` inside the window at ``origin``."""
-    inside = crop(recent, origin[0], origin[1], settings.fovea)
-    return inside[-settings.n_events :]
+    return int(np.count_nonzero(in_window(events, origin[0], origin[1], cfg.width, cfg.height)))
 
 
 def make_frame(
-    events: Events,
-    gaze_px: tuple[float, float],
-    gaze_rad: tuple[float, float],
-    sensor_wh: tuple[int, int],
-    settings: PipelineSettings,
+    window: Events,
+    origin: tuple[int, int],
+    gaze: GazeSample,
+    t_us: int,
+    voxel: VoxelConfig,
     infer: Infer,
     frame_id: int,
 ) -> FrameResult | None:
-    """Choose the window at the gaze, crop, bin, infer. None when the window holds no events."""
-    origin = window_origin(gaze_px, sensor_wh, settings.fovea)
-    window = window_events(events, origin, settings)
+    """Bin the window's events and infer. None when the window holds no events.
+
+    ``window`` are exactly the events to bin (``fovea.window_events``), all inside the window at
+    ``origin``; ``t_us`` is the frame's timestamp, the time ``gaze`` was looked up.
+    """
     if window.shape[0] == 0:
         return None
-    voxel = voxel_grid(window, origin[0], origin[1], settings.voxel)
+    grid = voxel_grid(window, origin[0], origin[1], voxel)
     started = time.perf_counter()
-    mask = np.asarray(infer(voxel), dtype=np.uint8)
+    mask = np.asarray(infer(grid), dtype=np.uint8)
     inference_ms = (time.perf_counter() - started) * 1e3
     return FrameResult(
         frame_id=frame_id,
-        t_us=int(window["t"][-1]),
+        t_us=int(t_us),
         origin=origin,
-        gaze_px=(float(gaze_px[0]), float(gaze_px[1])),
-        gaze_rad=(float(gaze_rad[0]), float(gaze_rad[1])),
+        gaze_px=gaze.pixel,
+        gaze_rad=gaze.angles,
         events_used=int(window.shape[0]),
         mask=mask,
         inference_ms=inference_ms,
@@ -141,9 +123,9 @@ class Pipeline:
         gaze: GazeLookup,
         infer: Infer,
         on_frame: FrameHandler,
-        settings: PipelineSettings = PipelineSettings(),
+        settings: PipelineConfig = PipelineConfig(),
+        voxel: VoxelConfig = VoxelConfig(),
         metrics: EdgeMetrics | None = None,
-        ring_capacity: int = 1 << 19,
         watchdog: Callable[[], object] | None = None,
     ) -> None:
         self.source = source
@@ -151,8 +133,10 @@ class Pipeline:
         self.infer = infer
         self.on_frame = on_frame
         self.settings = settings
+        self.voxel = voxel
+        self.fovea = voxel.fovea
         self.metrics = metrics or EdgeMetrics()
-        self.ring = EventRing(ring_capacity)
+        self.ring = EventRing(settings.ring_capacity)
         self.watchdog = watchdog
         self.sensor_wh = (int(source.width), int(source.height))
         self.frames_made = 0
@@ -175,7 +159,7 @@ class Pipeline:
         if events.shape[0] == 0:
             return
         self.ring.push(events)
-        n_foveated = count_in_window(events, self._origin, self.settings.fovea)
+        n_foveated = count_in_window(events, self._origin, self.fovea)
         self.metrics.add("events_in", int(events.shape[0]))
         self.metrics.add("events_foveated", n_foveated)
         if self.ring.dropped != self._ring_dropped:
@@ -274,24 +258,23 @@ class Pipeline:
                 self._step(new, arrival)
 
     def _step(self, new_foveated: int, arrival: float) -> None:
-        t_newest = self.ring.newest_t
-        if t_newest is None:
+        t_frame = self.ring.newest_t  # the frame's one timestamp: its gaze, its stamp, its newest event
+        if t_frame is None:
             return
-        gaze_px = self.gaze.pixel_at(t_newest)
-        gaze_rad = self.gaze.angles_at(t_newest) if gaze_px is not None else None
-        if gaze_px is None or gaze_rad is None:
+        gaze = self.gaze.at(t_frame)
+        if gaze is None:
             self.metrics.add("frames_no_gaze")  # events arrived, but nowhere to look
             self._origin = None
             return
-        origin = window_origin(gaze_px, self.sensor_wh, self.settings.fovea)
+        origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
         moved = origin != self._origin
         self._origin = origin
         if moved and self.settings.sensor_roi:
-            self.source.set_roi(origin[0], origin[1], self.settings.fovea.width, self.settings.fovea.height)
+            self.source.set_roi(origin[0], origin[1], self.fovea.width, self.fovea.height)
         if new_foveated == 0 and not moved:
             return
-        recent = self._recent_events(origin)
-        frame = make_frame(recent, gaze_px, gaze_rad, self.sensor_wh, self.settings, self.infer, self.frames_made)
+        window = self._recent_events(origin, t_frame)
+        frame = make_frame(window, origin, gaze, t_frame, self.voxel, self.infer, self.frames_made)
         if frame is None:
             return
         self.frames_made += 1
@@ -299,24 +282,25 @@ class Pipeline:
         self.metrics.observe_inference(frame.inference_ms)
         self.on_frame(frame, arrival)
 
-    def _recent_events(self, origin: tuple[int, int]) -> Events:
-        """The newest ``n_events`` inside the window, searching back through the ring as needed.
+    def _recent_events(self, origin: tuple[int, int], t_until: int) -> Events:
+        """Exactly the window's events for one frame: the newest ``n_events`` inside the window at
+        ``origin`` with ``t <= t_until``, searching back through the ring as needed.
 
         The search starts from twice the depth the previous window needed, so a frame copies a
         few thousand ring events, not the whole history.
         """
-        k, cfg = self.settings.n_events, self.settings.fovea
+        k, cfg = self.settings.n_events, self.fovea
         n = self._history
         while True:
             recent = self.ring.last(n)
-            dx = recent["x"] - np.uint16(origin[0])
-            dy = recent["y"] - np.uint16(origin[1])
-            inside = np.flatnonzero((dx < cfg.width) & (dy < cfg.height))
+            if recent.shape[0] and recent["t"][-1] > t_until:  # the reader pushed newer events meanwhile
+                recent = recent[: int(np.searchsorted(recent["t"], t_until, side="right"))]
+            inside = np.flatnonzero(in_window(recent, origin[0], origin[1], cfg.width, cfg.height))
             if inside.shape[0] >= k or n >= len(self.ring):
                 break
             n *= 2
         used = inside[-k:]
         if used.shape[0]:
             depth = recent.shape[0] - int(used[0])
-            self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), self.settings.history_events))
+            self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), MAX_HISTORY_EVENTS))
         return recent[used]

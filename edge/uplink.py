@@ -20,13 +20,13 @@ import threading
 import time
 import uuid
 from collections.abc import Iterator
-from dataclasses import dataclass
 
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
-from darkread.edge.metrics import EdgeMetrics
+from darkread.edge.config import UplinkConfig
 from darkread.edge.spool import Spool
+from darkread.edge.telemetry import EdgeMetrics
 from darkread.proto.errors import CloseCode, ProtocolError
 from darkread.proto.messages import (
     DEFAULT_MAX_MESSAGE_BYTES,
@@ -51,23 +51,6 @@ MESSAGE_REJECTED_CODES = frozenset({
 })  # the close names one bad message, not a bad connection  # seqs whose submit time is remembered for the event-to-wire latency
 
 
-@dataclass(frozen=True)
-class UplinkSettings:
-    url: str
-    api_key: str = ""
-    device_id: str = ""
-    session_id: str = ""  # empty: the spool's session if it holds unsent frames, else a new one
-    mode: str = "frames"
-    sensor_wh: tuple[int, int] = (1280, 720)
-    fovea_hw: tuple[int, int] = (100, 200)
-    backoff_initial_s: float = 0.2
-    backoff_max_s: float = 10.0
-    max_in_flight: int = 512
-    heartbeat_s: float = 5.0
-    open_timeout_s: float = 5.0
-    stable_connection_s: float = 2.0  # a connection that lasted this long resets the backoff
-
-
 def backoff_delays(initial_s: float, max_s: float, rng: random.Random) -> Iterator[float]:
     """Exponential backoff with full jitter: uniform in [d/2, d], d doubling up to ``max_s``."""
     delay = initial_s
@@ -84,8 +67,19 @@ def default_device_id() -> str:
 class Uplink:
     """Owns the websocket client thread; thread-safe :meth:`submit`, graceful :meth:`stop`."""
 
-    def __init__(self, settings: UplinkSettings, spool: Spool, metrics: EdgeMetrics | None = None) -> None:
+    def __init__(
+        self,
+        settings: UplinkConfig,
+        spool: Spool,
+        metrics: EdgeMetrics | None = None,
+        *,
+        sensor_wh: tuple[int, int],
+        fovea_hw: tuple[int, int],
+    ) -> None:
+        """``sensor_wh`` (the source's size) and ``fovea_hw`` (the model's window) go into ``hello``."""
         self.settings = settings
+        self.sensor_wh = (int(sensor_wh[0]), int(sensor_wh[1]))
+        self.fovea_hw = (int(fovea_hw[0]), int(fovea_hw[1]))
         self.spool = spool
         self.metrics = metrics or EdgeMetrics()
         self.metrics.spool_depth = lambda: spool.depth
@@ -232,8 +226,8 @@ class Uplink:
                 device_id=self.device_id,
                 session_id=self.session_id,
                 mode=s.mode,  # type: ignore[arg-type]
-                sensor=s.sensor_wh,
-                fovea=s.fovea_hw,
+                sensor=self.sensor_wh,
+                fovea=self.fovea_hw,
                 resume_from_seq=self.acked_seq if self.acked_seq >= 0 else None,
             )
             await ws.send(encode(hello))
@@ -350,4 +344,4 @@ class Uplink:
         )
 
 
-__all__ = ["Uplink", "UplinkSettings", "backoff_delays"]
+__all__ = ["Uplink", "backoff_delays"]

@@ -231,8 +231,8 @@ class Hello(_Checked):
     device_id: str = _spec(_identifier)
     session_id: str = _spec(_identifier)
     mode: Mode = _spec(_mode)
-    sensor: tuple[int, int] = _spec(_shape)  # (width, height) in pixels
-    fovea: tuple[int, int] = _spec(_shape)  # (height, width) in pixels
+    sensor: tuple[int, int] = _spec(_shape)  # (width, height) in pixels -- not the order of fovea (proto/README.md)
+    fovea: tuple[int, int] = _spec(_shape)  # (height, width) in pixels, a numpy shape: frame.shape equals it
     token: str | None = _spec(_optional(lambda v, n: _text(v, n, 512)), None)
     resume_from_seq: int | None = _spec(_optional(_seq), None)
     v: int = _spec(_int, PROTOCOL_VERSION)

@@ -75,7 +75,7 @@ def read_snapshot(snapshot: RgbSnapshot, backend: OcrBackend) -> str:
 
 def rgb_baseline(recording_dir: str | Path, backend: OcrBackend, *, save_crop: str | Path | None = None) -> RgbReading:
     """OCR of the simulated RGB snapshot of a suite recording, scored against its text.txt."""
-    from darkread.eval.metrics import error_rates
+    from darkread.eval.error_rates import error_rates
 
     snap = snapshot_for_recording(recording_dir)
     if save_crop is not None:

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
 from darkread.image_codec import decode_image, encode_jpeg
 
 if TYPE_CHECKING:
@@ -75,6 +76,12 @@ class RgbCameraModel:
     def principal_point(self) -> tuple[float, float]:
         return (self.width - 1) / 2, (self.height - 1) / 2
 
+    @property
+    def intrinsics(self) -> Intrinsics:
+        """The rectified pinhole this camera images through."""
+        cx, cy = self.principal_point
+        return Intrinsics(self.width, self.height, self.focal_px, self.focal_px, cx, cy, RECTIFIED)
+
 
 @dataclass(frozen=True)
 class Exposure:
@@ -96,9 +103,9 @@ def auto_exposure(lux: float, paper_reflectance: float, camera: RgbCameraModel =
 
 def pixel_rays(camera: RgbCameraModel, x0: int, y0: int, width: int, height: int) -> np.ndarray:
     """Normalised rays (x/z, y/z) of a block of the rectified pinhole image, float64 [h*w, 2]."""
-    cx, cy = camera.principal_point
-    xs = (np.arange(x0, x0 + width, dtype=np.float64) - cx) / camera.focal_px
-    ys = (np.arange(y0, y0 + height, dtype=np.float64) - cy) / camera.focal_px
+    pinhole = camera.intrinsics
+    xs = (np.arange(x0, x0 + width, dtype=np.float64) - pinhole.cx) / pinhole.fx
+    ys = (np.arange(y0, y0 + height, dtype=np.float64) - pinhole.cy) / pinhole.fy
     gx, gy = np.meshgrid(xs, ys)
     return np.stack([gx.ravel(), gy.ravel()], axis=1)
 
@@ -110,10 +117,8 @@ def rgb_region(camera: RgbCameraModel, x0: int, y0: int, width: int, height: int
 
 
 def project_rgb(points_camera: np.ndarray, camera: RgbCameraModel) -> np.ndarray:
-    """Camera-frame points [N, 3] -> RGB image pixels [N, 2]."""
-    cx, cy = camera.principal_point
-    p = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)
-    return np.c_[p[:, 0] / p[:, 2] * camera.focal_px + cx, p[:, 1] / p[:, 2] * camera.focal_px + cy]
+    """Camera-frame points [N, 3] -> RGB image pixels [N, 2] (NaN behind the camera)."""
+    return camera.intrinsics.project(points_camera)
 
 
 def _page_texels(scene: Scene, margin_xheights: float) -> np.ndarray:

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from darkread.cloud.context import AppContext
-from darkread.cloud.metrics import Metrics
+from darkread.cloud.prometheus import Metrics
 from darkread.cloud.pages import PageAssembler
 from darkread.cloud.settings import Settings
 from darkread.cloud.store import Store

@@ -3,37 +3,16 @@
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
-from darkread.models.synth.recording import RecordingSpec
-from darkread.models.synth.rgb_camera import session_for, take_snapshot
+from darkread.models.synth.rgb_camera import take_snapshot
 from darkread.models.synth.session import Session
+from factories import under_light
 
-from darkread.eval.metrics import error_rates
+from darkread.eval.error_rates import error_rates
 from darkread.eval.rgb_baseline import read_snapshot
-
-
-def _session(motion: str, lux: float = 1000.0) -> Session:
-    spec = RecordingSpec(lux=lux, motion=motion, kind="pangram", seconds=2.0, seed=5, font="DejaVu Sans",
-                         xheight_px=11.0, n_lines=2, line_chars=24)
-    return session_for(spec)
-
-
-@pytest.fixture(scope="module")
-def still() -> Session:
-    return _session("still")
-
-
-@pytest.fixture(scope="module")
-def walking() -> Session:
-    return _session("walking")
-
-
-def _under(session: Session, lux: float) -> Session:
-    return replace(session, scene=replace(session.scene, lux=lux))
 
 
 @pytest.fixture(scope="module")
@@ -46,13 +25,13 @@ def ocr():
     return engine
 
 
-def test_ocr_reads_a_still_snapshot_at_1000_lux(still: Session, ocr) -> None:
-    snap = take_snapshot(still, 1.0, np.random.default_rng(0))
-    assert error_rates(still.page.text, read_snapshot(snap, ocr)).cer < 0.05
+def test_ocr_reads_a_still_snapshot_at_1000_lux(still_pangram: Session, ocr) -> None:
+    snap = take_snapshot(still_pangram, 1.0, np.random.default_rng(0))
+    assert error_rates(still_pangram.page.text, read_snapshot(snap, ocr)).cer < 0.05
 
 
-def test_ocr_fails_on_a_walking_snapshot_at_5_lux(walking: Session, ocr) -> None:
-    dark = _under(walking, 5.0)
+def test_ocr_fails_on_a_walking_snapshot_at_5_lux(walking_pangram: Session, ocr) -> None:
+    dark = under_light(walking_pangram, 5.0)
     snaps = [take_snapshot(dark, t, np.random.default_rng(0)) for t in (0.5, 1.0, 1.5)]  # three gait phases
     assert min(s.blur_px for s in snaps) > 5.0
     cers = [error_rates(dark.page.text, read_snapshot(s, ocr)).cer for s in snaps]

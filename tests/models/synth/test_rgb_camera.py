@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from darkread.models.synth.recording import RecordingSpec
 from darkread.models.synth.session import Session
+from factories import under_light
 
 from darkread.models.synth.rgb_camera import (
     RgbCameraModel,
@@ -15,33 +16,12 @@ from darkread.models.synth.rgb_camera import (
     expose,
     jpeg_round_trip,
     recording_spec,
-    session_for,
     snapshot_for_recording,
     take_snapshot,
     to_grey,
 )
 
 CAMERA = RgbCameraModel()
-
-
-def _session(motion: str, lux: float = 1000.0) -> Session:
-    spec = RecordingSpec(lux=lux, motion=motion, kind="pangram", seconds=2.0, seed=5, font="DejaVu Sans",
-                         xheight_px=11.0, n_lines=2, line_chars=24)
-    return session_for(spec)
-
-
-@pytest.fixture(scope="module")
-def still() -> Session:
-    return _session("still")
-
-
-@pytest.fixture(scope="module")
-def walking() -> Session:
-    return _session("walking")
-
-
-def _under(session: Session, lux: float) -> Session:
-    return replace(session, scene=replace(session.scene, lux=lux))
 
 
 def _paper_noise(crop: np.ndarray) -> float:
@@ -63,9 +43,9 @@ def test_exposure_lengthens_as_light_falls_up_to_the_cap_then_gain_rises() -> No
         auto_exposure(0.0, 0.85)
 
 
-def test_darker_means_longer_exposure_more_blur_and_more_noise(walking: Session) -> None:
-    bright = take_snapshot(_under(walking, 1000.0), 1.0, np.random.default_rng(0))
-    dark = take_snapshot(_under(walking, 5.0), 1.0, np.random.default_rng(0))
+def test_darker_means_longer_exposure_more_blur_and_more_noise(walking_pangram: Session) -> None:
+    bright = take_snapshot(under_light(walking_pangram, 1000.0), 1.0, np.random.default_rng(0))
+    dark = take_snapshot(under_light(walking_pangram, 5.0), 1.0, np.random.default_rng(0))
     assert dark.exposure_s > 2 * bright.exposure_s
     assert dark.blur_px > 2 * bright.blur_px and dark.subframes > bright.subframes
     assert _paper_noise(dark.crop) > 2 * _paper_noise(bright.crop)
@@ -112,9 +92,9 @@ def test_lens_blur_softens_an_edge_and_jpeg_is_lossy() -> None:
     assert 0 < np.abs(decoded.astype(int) - image).mean() < 10
 
 
-def test_snapshot_is_reproducible_and_frames_the_page(still: Session) -> None:
-    a = take_snapshot(still, 1.0, np.random.default_rng(3))
-    b = take_snapshot(still, 1.0, np.random.default_rng(3))
+def test_snapshot_is_reproducible_and_frames_the_page(still_pangram: Session) -> None:
+    a = take_snapshot(still_pangram, 1.0, np.random.default_rng(3))
+    b = take_snapshot(still_pangram, 1.0, np.random.default_rng(3))
     assert np.array_equal(a.crop, b.crop)
     x0, y0, w, h = a.crop_xywh
     assert a.crop.shape == (h, w, 3)
@@ -124,11 +104,11 @@ def test_snapshot_is_reproducible_and_frames_the_page(still: Session) -> None:
     assert abs(x0 + w / 2 - CAMERA.width / 2) < CAMERA.width / 4
 
 
-def test_recording_spec_round_trip_recreates_the_page(tmp_path: Path, still: Session) -> None:
+def test_recording_spec_round_trip_recreates_the_page(tmp_path: Path, still_pangram: Session) -> None:
     spec = RecordingSpec(lux=1000.0, motion="still", kind="pangram", seconds=2.0, seed=5, font="DejaVu Sans",
                          xheight_px=11.0, n_lines=2, line_chars=24)
     (tmp_path / "spec.json").write_text(json.dumps(asdict(spec)))
-    (tmp_path / "text.txt").write_text(still.page.text)
+    (tmp_path / "text.txt").write_text(still_pangram.page.text)
     assert recording_spec(tmp_path) == spec
     snap = snapshot_for_recording(tmp_path)
     assert snap.lux == 1000.0 and snap.t_s == 1.0
