@@ -3,8 +3,9 @@
 #   docker build -t darkread .
 #   docker compose up            # cloud + an edge replaying the shipped sample recording
 #
-# CPU only; no PyTorch (training is not part of the image). Tesseract is optional: build with
-# --build-arg WITH_TESSERACT=1 to add it (DARKREAD_OCR_BACKEND=tesseract).
+# CPU only; no PyTorch (training is not part of the image). espeak-ng speaks the answers (ask with
+# Accept: audio/wav). Tesseract is optional: build with --build-arg WITH_TESSERACT=1 to add it
+# (DARKREAD_OCR_BACKEND=tesseract).
 FROM python:3.11-slim-bookworm
 
 ARG WITH_TESSERACT=0
@@ -14,10 +15,11 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     OMP_THREAD_LIMIT=1
 
-RUN if [ "$WITH_TESSERACT" = "1" ]; then \
-        apt-get update && apt-get install -y --no-install-recommends tesseract-ocr tesseract-ocr-eng \
-        && rm -rf /var/lib/apt/lists/*; \
-    fi
+RUN apt-get update && apt-get install -y --no-install-recommends espeak-ng \
+    && if [ "$WITH_TESSERACT" = "1" ]; then \
+        apt-get install -y --no-install-recommends tesseract-ocr tesseract-ocr-eng; \
+    fi \
+    && rm -rf /var/lib/apt/lists/*
 
 WORKDIR /app
 # The source tree (see .dockerignore) stays in /app: the edge replays
