@@ -195,6 +195,53 @@ function watchSession(sessionId) {
     }
   }
 
+  // The live push (GET .../events, Server-Sent Events, where the service has it): each `page`
+  // event carries the lines read so far, so the page image and text follow without polling OCR.
+  // Read with fetch (EventSource cannot send the key header); on any failure, back to polling.
+  let pushed = null;         // null: not tried yet, true: events arrive, false: polling
+  async function listen() {
+    pushed = false;
+    let response;
+    try {
+      response = await api(`${base}/events`, { headers: { Accept: "text/event-stream" } });
+    } catch (_) { return; }
+    const type = response.headers.get("Content-Type") || "";
+    if (!response.ok || !type.startsWith("text/event-stream") || !response.body) return;
+    pushed = true;
+    const reader = response.body.pipeThrough(new TextDecoderStream()).getReader();
+    let buffer = "";
+    try {
+      for (;;) {
+        const { value, done } = await reader.read();
+        if (done) break;
+        buffer += value.replace(/\r\n?/g, "\n");
+        let end;
+        while ((end = buffer.indexOf("\n\n")) >= 0) {
+          const block = buffer.slice(0, end);
+          buffer = buffer.slice(end + 2);
+          const fields = { event: "message", data: [] };
+          for (const line of block.split("\n")) {
+            if (line.startsWith(":")) continue;  // keep-alive comment
+            const colon = line.indexOf(":");
+            const name = colon < 0 ? line : line.slice(0, colon);
+            const value_ = colon < 0 ? "" : line.slice(colon + 1).replace(/^ /, "");
+            if (name === "data") fields.data.push(value_);
+            else if (name === "event") fields.event = value_;
+          }
+          if (fields.event === "page" && fields.data.length) await onPage(JSON.parse(fields.data.join("\n")));
+        }
+      }
+    } catch (_) { /* the stream broke: polling takes over */ }
+    pushed = null;  // try again on a later poll
+  }
+
+  async function onPage(event) {
+    const response = await api(base);
+    if (response.ok && (await refreshImage(await response.json()))) imageOf = null;
+    const lines = (event.lines || []).map((line) => line.text).filter((line) => line.trim());
+    if (lines.length) showText(lines);
+  }
+
   async function follow() {
     try {
       const response = await api(base);
@@ -207,8 +254,11 @@ function watchSession(sessionId) {
         const state = `${info.last_seq}/${info.frames}/${info.pages}`;
         const age = Math.max(0, Date.now() / 1000 - info.updated_s);
         say(age < 5 ? `Live: ${info.frames} frames received.` : `${info.frames} frames; nothing new for ${Math.round(age)} s.`);
-        if (state !== imageOf && (await refreshImage(info))) imageOf = state;
-        if (imageOf !== null) readAlong(state);  // not awaited: the image keeps growing while OCR runs
+        if (pushed === null && info.mode === "frames" && info.frames > 0) listen();
+        if (!pushed) {  // no live push: poll the image, and read beside it
+          if (state !== imageOf && (await refreshImage(info))) imageOf = state;
+          if (imageOf !== null) readAlong(state);  // not awaited: the image keeps growing while OCR runs
+        }
       }
     } catch (error) {
       if (error instanceof Unauthorized) return showLogin("The key is no longer accepted.");
