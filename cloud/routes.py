@@ -12,7 +12,8 @@ from darkread.image_codec import encode_png
 from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
-from .context import AppContext, get_context, require_api_key
+from .auth import Principal, Scope
+from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
 from .pages import PageImage
 from .speech import WAV_MEDIA_TYPE, wants_wav
@@ -67,8 +68,10 @@ class Health(BaseModel):
 
 
 public = APIRouter(tags=["health"])
-api = APIRouter(prefix="/v1", tags=["sessions"], dependencies=[Depends(require_api_key)])
+api = APIRouter(prefix="/v1", tags=["sessions"])
 Context = Annotated[AppContext, Depends(get_context)]
+Reader = Annotated[Principal, Depends(require(Scope.READ))]
+Admin = Annotated[Principal, Depends(require(Scope.ADMIN))]
 
 
 @public.get("/healthz", summary="Liveness: the process answers", response_model=Health)
@@ -92,9 +95,10 @@ async def readyz(context: Context, response: Response) -> Health:
     return Health(status="ready", checks=checks)
 
 
-async def _session(context: AppContext, session_id: str) -> SessionInfo:
+async def _session(context: AppContext, session_id: str, principal: Principal) -> SessionInfo:
+    """The session, 404 also when it belongs to another device (its existence is not revealed)."""
     info = await asyncio.to_thread(context.store.session, session_id)
-    if info is None:
+    if info is None or not principal.owns(info.device_id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     return info
 
@@ -107,8 +111,9 @@ async def _page(context: AppContext, info: SessionInfo) -> PageImage:
 
 
 @api.get("/sessions", summary="List sessions, most recently active first", response_model=list[SessionModel])
-async def list_sessions(context: Context) -> list[SessionModel]:
-    return [SessionModel.of(info) for info in await asyncio.to_thread(context.store.sessions)]
+async def list_sessions(context: Context, principal: Reader) -> list[SessionModel]:
+    infos = await asyncio.to_thread(context.store.sessions)
+    return [SessionModel.of(info) for info in infos if principal.owns(info.device_id)]
 
 
 @api.get(
@@ -117,17 +122,17 @@ async def list_sessions(context: Context) -> list[SessionModel]:
     response_model=SessionModel,
     responses={404: {"description": "unknown session"}},
 )
-async def get_session(session_id: SessionId, context: Context) -> SessionModel:
-    return SessionModel.of(await _session(context, session_id))
+async def get_session(session_id: SessionId, context: Context, principal: Reader) -> SessionModel:
+    return SessionModel.of(await _session(context, session_id, principal))
 
 
 @api.delete(
     "/sessions/{session_id}",
-    summary="Delete a session with its frames and pages",
+    summary="Delete a session with its frames and pages (admin keys)",
     status_code=status.HTTP_204_NO_CONTENT,
-    responses={404: {"description": "unknown session"}},
+    responses={403: {"description": "not an admin key"}, 404: {"description": "unknown session"}},
 )
-async def delete_session(session_id: SessionId, context: Context) -> Response:
+async def delete_session(session_id: SessionId, context: Context, principal: Admin) -> Response:
     if not await asyncio.to_thread(context.store.delete_session, session_id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     context.pages.forget(session_id)
@@ -144,8 +149,8 @@ async def delete_session(session_id: SessionId, context: Context) -> Response:
         409: {"description": "nothing stored yet"},
     },
 )
-async def page_png(session_id: SessionId, context: Context) -> Response:
-    page = await _page(context, await _session(context, session_id))
+async def page_png(session_id: SessionId, context: Context, principal: Reader) -> Response:
+    page = await _page(context, await _session(context, session_id, principal))
     return Response(encode_png(page.image), media_type="image/png", headers={"X-Page-Id": page.page_id})
 
 
@@ -165,6 +170,7 @@ async def page_png(session_id: SessionId, context: Context) -> Response:
 async def ask(
     session_id: SessionId,
     context: Context,
+    principal: Reader,
     request: Annotated[AskRequest | None, Body()] = None,
     format_: Annotated[Literal["json", "wav"] | None, Query(alias="format", description="wav: the answer spoken")] = None,
     accept: Annotated[str | None, Header()] = None,
@@ -174,7 +180,7 @@ async def ask(
     if spoken:
         require_speech_engine(context.settings)  # before the OCR work: a missing engine is known at once
     started = time.perf_counter()
-    page = await _page(context, await _session(context, session_id))
+    page = await _page(context, await _session(context, session_id, principal))
     backend = context.ocr
     try:
         with context.metrics.ocr_seconds.labels(backend=backend.name).time():

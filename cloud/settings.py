@@ -27,12 +27,21 @@ class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="DARKREAD_", env_file=".env", extra="ignore")
 
     data_dir: Path = Field(Path("darkread-data"), description="SQLite database and page images live here")
-    api_key: SecretStr | None = Field(None, description="required on every request; unset = open service")
+    api_key: SecretStr | None = Field(
+        None, description="one admin key; unset and no keys file = loopback clients only (see auth.py)"
+    )
+    keys_file: Path | None = Field(None, description="per-device keys (default: <data_dir>/keys.json)")
+    insecure: bool = Field(False, description="serve clients on other hosts without any key (never in production)")
+    api_docs: bool = Field(False, description="serve /docs, /redoc and /openapi.json")
+    metrics_public: bool = Field(False, description="serve /metrics without a key (else an admin key is needed)")
 
     # Stream limits.
     max_message_bytes: int = Field(DEFAULT_MAX_MESSAGE_BYTES, ge=1024, le=64 * 1024 * 1024)
     max_in_flight: int = Field(64, ge=1, description="unacked messages per connection before reading pauses")
     hello_timeout_s: float = Field(10.0, gt=0, description="time a client has to send hello")
+    shutdown_timeout_s: float = Field(
+        10.0, gt=0, description="graceful shutdown deadline: then open connections are cancelled and the store let go"
+    )
 
     # Page assembly.
     max_frames_per_page: int = Field(4000, ge=1, description="most recent frames stitched into a page")
@@ -68,11 +77,22 @@ class Settings(BaseSettings):
     def voice(self) -> Voice:
         return Voice(self.speech_language, self.speech_voice, self.speech_rate_wpm)
 
-    @field_validator("api_key", "google_api_key", "google_bearer_token", "openai_api_key", mode="before")
+    @field_validator("api_key", mode="before")
+    @classmethod
+    def _empty_key_is_an_error(cls, value: object) -> object:
+        """An empty key is a mistake (an unset variable in a compose file), not "no auth"."""
+        if isinstance(value, str | SecretStr) and not str(getattr(value, "get_secret_value", lambda: value)()).strip():
+            raise ValueError("DARKREAD_API_KEY / --api-key is empty; set a key or leave it unset")
+        return value
+
+    @field_validator("google_api_key", "google_bearer_token", "openai_api_key", mode="before")
     @classmethod
     def _empty_is_unset(cls, value: object) -> object:
-        """``DARKREAD_API_KEY=`` (empty) means no key, not the empty key."""
+        """``DARKREAD_OPENAI_API_KEY=`` (empty) means no key, not the empty key."""
         return None if value in ("", None) else value
+
+    def keys_path(self) -> Path:
+        return self.keys_file or self.data_dir / "keys.json"
 
     def database_path(self) -> Path:
         return self.data_dir / "darkread.sqlite3"

@@ -37,7 +37,7 @@ from darkread.mask_bits import unpack_bits
 from darkread.proto.messages import Frame, Gaze, Hello, Page
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
-from .errors import StoreError
+from .errors import SessionOwnedError, SessionShapeError, StoreError
 
 log = logging.getLogger(__name__)
 
@@ -49,7 +49,8 @@ CREATE TABLE IF NOT EXISTS sessions (
     sensor_w INTEGER NOT NULL, sensor_h INTEGER NOT NULL,
     fovea_h INTEGER NOT NULL, fovea_w INTEGER NOT NULL,
     created_s REAL NOT NULL, updated_s REAL NOT NULL,
-    last_seq INTEGER NOT NULL DEFAULT -1
+    last_seq INTEGER NOT NULL DEFAULT -1,
+    stream_id TEXT NOT NULL DEFAULT ''
 );
 CREATE TABLE IF NOT EXISTS frames (
     session_id TEXT NOT NULL, seq INTEGER NOT NULL,
@@ -69,6 +70,25 @@ CREATE TABLE IF NOT EXISTS gaze (
     PRIMARY KEY (session_id, seq)
 );
 """
+
+
+def check_owner(hello: Hello, device_id: str, stream_id: str, mode: str, sensor: tuple[int, int],
+                fovea: tuple[int, int]) -> None:
+    """Raise unless ``hello`` may resume the stored session: same device, same stream (seq
+    space; '' = a client that sends none), same mode and geometry."""
+    if hello.device_id != device_id:
+        raise SessionOwnedError(f"session {hello.session_id!r} belongs to device {device_id!r}")
+    if (hello.stream_id or "") != stream_id:
+        raise SessionOwnedError(
+            f"session {hello.session_id!r} belongs to another stream of {device_id!r} (another spool, whose seqs "
+            "would collide); use a new session id"
+        )
+    wanted, stored = (hello.mode, tuple(hello.sensor), tuple(hello.fovea)), (mode, sensor, fovea)
+    if wanted != stored:
+        raise SessionShapeError(
+            f"session {hello.session_id!r} is {mode} with sensor {sensor} and fovea {fovea}; hello says {wanted[0]} "
+            f"with sensor {wanted[1]} and fovea {wanted[2]}"
+        )
 
 
 @dataclass(frozen=True)
@@ -144,6 +164,9 @@ class Store:
         self._closed = False
         with closing(self._connect()) as conn:
             conn.executescript(SCHEMA)
+            columns = {row[1] for row in conn.execute("PRAGMA table_info(sessions)")}
+            if "stream_id" not in columns:  # databases from before session ownership
+                conn.execute("ALTER TABLE sessions ADD COLUMN stream_id TEXT NOT NULL DEFAULT ''")
             conn.execute("PRAGMA journal_mode=WAL")
             self._last_seq = dict(conn.execute("SELECT session_id, last_seq FROM sessions"))
         self._writer = threading.Thread(target=self._write_loop, name="darkread-store-writer", daemon=True)
@@ -249,27 +272,38 @@ class Store:
             raise outcome["error"]
         return outcome["value"]
 
-    def close(self) -> None:
+    def close(self, timeout_s: float = 30.0) -> None:
+        """Finish queued writes; a writer stuck longer than ``timeout_s`` (a locked database) is
+        left behind (a daemon thread) so that shutdown keeps its deadline."""
         if not self._closed:
             self._closed = True
             self._jobs.put(None)
-            self._writer.join(timeout=30)
+            self._writer.join(timeout=timeout_s)
+            if self._writer.is_alive():
+                log.error("store writer still busy after %g s; leaving it (uncommitted writes are not acked)", timeout_s)
 
     # --- writes (run in the writer thread) ----------------------------------------------------
 
     def open_session(self, hello: Hello) -> asyncio.Future[int]:
-        """Create or refresh the session; resolves to its highest stored seq (-1 if none)."""
+        """Create the session, or resume it when ``hello`` is its owner with the same mode and
+        geometry (else SessionOwnedError / SessionShapeError); resolves to its highest stored seq."""
 
         def work(conn: sqlite3.Connection) -> int:
             now = time.time()
-            conn.execute(
-                "INSERT INTO sessions (session_id, device_id, mode, sensor_w, sensor_h, fovea_h, fovea_w,"
-                " created_s, updated_s) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)"
-                " ON CONFLICT(session_id) DO UPDATE SET device_id=excluded.device_id, mode=excluded.mode,"
-                " sensor_w=excluded.sensor_w, sensor_h=excluded.sensor_h, fovea_h=excluded.fovea_h,"
-                " fovea_w=excluded.fovea_w, updated_s=excluded.updated_s",
-                (hello.session_id, hello.device_id, hello.mode, *hello.sensor, *hello.fovea, now, now),
-            )
+            row = conn.execute(
+                "SELECT device_id, stream_id, mode, sensor_w, sensor_h, fovea_h, fovea_w FROM sessions"
+                " WHERE session_id = ?", (hello.session_id,),
+            ).fetchone()
+            if row is None:
+                conn.execute(
+                    "INSERT INTO sessions (session_id, device_id, mode, sensor_w, sensor_h, fovea_h, fovea_w,"
+                    " created_s, updated_s, stream_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (hello.session_id, hello.device_id, hello.mode, *hello.sensor, *hello.fovea, now, now,
+                     hello.stream_id or ""),
+                )
+            else:
+                check_owner(hello, row[0], row[1], row[2], (row[3], row[4]), (row[5], row[6]))
+                conn.execute("UPDATE sessions SET updated_s = ? WHERE session_id = ?", (now, hello.session_id))
             return self._last_seq.setdefault(hello.session_id, -1)
 
         return self._submit(work)
@@ -283,6 +317,8 @@ class Store:
                 raise StoreError(f"unknown session {session_id!r}")
             if seq <= last:
                 return WriteResult(stored=False, last_seq=last)
+            if seq != last + 1:  # an earlier message of the stream failed: never leave a hole
+                raise StoreError(f"seq {seq} of session {session_id!r} does not follow the stored seq {last}")
             insert(conn)
             conn.execute(
                 "UPDATE sessions SET last_seq = ?, updated_s = ? WHERE session_id = ?", (seq, time.time(), session_id)

@@ -95,9 +95,18 @@ def read_recording(
     from darkread.edge.io.recording import open_recording
     from darkread.edge.notify import Notifier
 
+    from darkread.cloud.errors import CloudError
+    from darkread.edge.errors import RunError
+
+    if out_dir is None:  # a scratch directory that does not outlive the read
+        with tempfile.TemporaryDirectory(prefix="darkread-read-") as scratch:
+            result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
+                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon)
+        result.page_png = ""
+        return result
     started = time.perf_counter()
     recording = open_recording(path)  # fails early, naming any missing file
-    out = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix="darkread-read-"))
+    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     api_key = secrets.token_urlsafe(16)
     settings = Settings(data_dir=out / "cloud", api_key=SecretStr(api_key), ocr_backend=backend,  # type: ignore[arg-type]
@@ -119,15 +128,21 @@ def read_recording(
         drained = daemon.run() == 0
         stages["edge"] = time.perf_counter() - t0
         if not drained:
-            raise RuntimeError(f"the cloud did not acknowledge every frame within {drain_timeout_s:g} s")
+            raise RunError(f"the cloud did not acknowledge every frame within {drain_timeout_s:g} s")
         totals = edge.metrics.snapshot().totals
         session_id = edge.uplink.session_id
         t0 = time.perf_counter()
         headers = {"X-API-Key": api_key}
         with httpx.Client(base_url=server.url, headers=headers, timeout=settings.ocr_timeout_s + 30) as client:
-            answer = client.post(f"/v1/sessions/{session_id}/ask", json={}).raise_for_status().json()
-            page = client.get(f"/v1/sessions/{session_id}/page.png").raise_for_status().content
-            spoken = _ask_spoken(client, session_id) if speech else None
+            try:
+                answer = client.post(f"/v1/sessions/{session_id}/ask", json={}).raise_for_status().json()
+                page = client.get(f"/v1/sessions/{session_id}/page.png").raise_for_status().content
+                spoken = _ask_spoken(client, session_id) if speech else None
+            except httpx.HTTPStatusError as exc:
+                detail = exc.response.json().get("detail", "") if exc.response.headers.get("content-type", "").startswith(
+                    "application/json") else exc.response.text[:200]
+                raise CloudError(f"{recording.path}: the page could not be read (HTTP {exc.response.status_code}: "
+                                 f"{detail})") from None
         stages["stitch_and_ocr"] = time.perf_counter() - t0
     page_png = out / "page.png"
     page_png.write_bytes(page)
@@ -247,6 +262,7 @@ def _print_summary(result: ReadResult, stream: Any) -> None:
     print(
         f"{result.events_in:,} events, {kept:.1%} inside the fovea, {result.frames} frames, "
         f"{result.bytes_sent:,} bytes sent ({result.raw_bytes / max(result.bytes_sent, 1):.0f}x less than the raw "
-        f"event stream), OCR {result.backend}, {result.seconds:.1f} s; page: {result.page_png}",
+        f"event stream), OCR {result.backend}, {result.seconds:.1f} s; "
+        + (f"page: {result.page_png}" if result.page_png else "the page image is kept with --out DIR"),
         file=stream,
     )

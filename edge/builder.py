@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from darkread.edge.config import EdgeConfig, GazeConfig, SourceConfig
+from darkread.edge.errors import RunError
 from darkread.edge.gaze import GazeLookup
 from darkread.edge.io.calibration import Calibration
 from darkread.edge.pipeline import FrameHandler, FrameResult, Pipeline
@@ -69,10 +70,12 @@ class Edge:
 
     def tick(self) -> str | None:
         if self.pipeline.error is not None:
-            raise RuntimeError(f"reconstruction loop failed: {self.pipeline.error}") from self.pipeline.error
+            raise RunError(f"reconstruction loop failed: {self.pipeline.error}") from self.pipeline.error
         source_error = getattr(self.source, "error", None)
         if source_error is not None:
-            raise RuntimeError(f"event source failed: {source_error}") from source_error
+            raise RunError(f"event source failed: {source_error}") from source_error
+        if self.uplink is not None and self.uplink.fatal_error:
+            raise RunError(self.uplink.fatal_error)
         if self.pages is not None and self.pages.due():
             self._send_page()
         if time.monotonic() - self._last_log < self.config.metrics.log_every_s:
@@ -88,6 +91,23 @@ class Edge:
     def finished(self) -> bool:
         finished = getattr(self.source, "finished", None)
         return bool(finished is not None and finished.is_set()) or not self.pipeline.running
+
+    def verify(self) -> None:
+        """After a run that ended by itself: raise what failed while draining, a replay that looked
+        corrupt, or one that produced no frames (a recording that cannot be read is not a success)."""
+        self.tick()
+        problems = getattr(self.source, "problems", [])
+        if problems:
+            raise RunError(f"{self.config.source.path} does not look like a valid recording: {'; '.join(problems)}")
+        totals = self.metrics.totals
+        if self.config.source.kind == "replay" and totals["frames"] == 0:
+            if totals["events_in"] == 0:
+                why = "no events decoded"
+            elif totals["events_foveated"] == 0:
+                why = f"{int(totals['events_in']):,} events, none inside the gaze window (no valid gaze on the sensor?)"
+            else:
+                why = f"{int(totals['events_foveated']):,} events inside the gaze window, too few for a frame"
+            raise RunError(f"the replay of {self.config.source.path} produced no frames: {why}")
 
     def shutdown(self, timeout_s: float) -> bool:
         """Stop the source (the last frame comes from what is buffered), send the last page, drain."""
@@ -189,6 +209,10 @@ def _open_source(cfg: SourceConfig, metrics: EdgeMetrics) -> tuple[EventSource, 
             )
         recording = open_recording(cfg.path, gaze=cfg.gaze_csv or None, calibration=cfg.calibration or None)
         source = ReplaySource(recording.raw_path, speed=cfg.speed or None)
+        calibrated = (recording.calibration.width, recording.calibration.height)
+        if calibrated != (source.width, source.height):
+            logger.warning("%s: calibration is for %dx%d but the RAW header says %dx%d: gaze lands in the wrong place",
+                           cfg.path, *calibrated, source.width, source.height)
         n_events = recording.meta.get("event_count")
         if isinstance(n_events, int) and n_events > 0:  # the bandwidth ratio against this very stream
             metrics.raw_bytes_per_event = recording.raw_path.stat().st_size / n_events

@@ -65,6 +65,7 @@ class UplinkConfig:
     drain_timeout_s: float = 30.0
     backoff_initial_s: float = 0.2
     backoff_max_s: float = 10.0
+    ack_timeout_s: float = 15.0  # messages in flight and no ack advancing for this long: reconnect
     max_in_flight: int = 512
     page_every_s: float = 5.0  # pages mode: send the page this often
     heartbeat_s: float = 5.0

@@ -29,6 +29,7 @@ class Service(Protocol):
     def tick(self) -> str | None: ...  # periodic duty; returns a status line or None
     def finished(self) -> bool: ...  # e.g. a replay reached its end
     def shutdown(self, timeout_s: float) -> bool: ...  # drain + flush; True when nothing was lost
+    def verify(self) -> None: ...  # after a run that ended by itself: raise if it did not do its job
 
 
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -64,8 +65,10 @@ class Daemon:
                 self.notifier.ready(status)
                 logger.info("ready: %s", status)
                 last_status = time.monotonic()
-                while not self.should_exit.is_set() and not self.service.finished():
-                    line = self.service.tick()
+                while not self.should_exit.is_set():
+                    line = self.service.tick()  # first: it raises what failed, also when that ended the run
+                    if self.service.finished():
+                        break
                     if line and time.monotonic() - last_status >= self.status_every_s:
                         self.notifier.status(line)
                         last_status = time.monotonic()
@@ -74,6 +77,8 @@ class Daemon:
                 self.notifier.stopping()
                 self.notifier.status("draining")
                 clean = self.service.shutdown(0.0 if self.force_exit else self.shutdown_timeout_s)
+        if not self.should_exit.is_set():
+            self.service.verify()
         logger.info("stopped (%s)", "clean" if clean else "messages left in the spool")
         return 0 if clean else 3
 

@@ -235,6 +235,8 @@ class Hello(_Checked):
     fovea: tuple[int, int] = _spec(_shape)  # (height, width) in pixels, a numpy shape: frame.shape equals it
     token: str | None = _spec(_optional(lambda v, n: _text(v, n, 512)), None)
     resume_from_seq: int | None = _spec(_optional(_seq), None)
+    # which spool (seq space) speaks: a session belongs to the stream that opened it
+    stream_id: str | None = _spec(_optional(_identifier), None)
     v: int = _spec(_int, PROTOCOL_VERSION)
 
 

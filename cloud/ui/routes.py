@@ -14,8 +14,8 @@ from fastapi.templating import Jinja2Templates
 
 from darkread import __version__
 
-from ..context import AppContext, get_context, require_api_key
-from ..routes import SessionId
+from ..context import AppContext, get_context
+from ..routes import Reader, SessionId
 
 HERE = Path(__file__).parent
 templates = Jinja2Templates(directory=HERE / "templates")
@@ -34,12 +34,13 @@ SECURITY_HEADERS = {
 }
 
 pages = APIRouter(tags=["live page"], include_in_schema=False)
-fragments = APIRouter(prefix="/ui", tags=["live page"], include_in_schema=False, dependencies=[Depends(require_api_key)])
+fragments = APIRouter(prefix="/ui", tags=["live page"], include_in_schema=False)
 Context = Annotated[AppContext, Depends(get_context)]
 
 
 def _page(request: Request, template: str, **values: object) -> HTMLResponse:
-    response = templates.TemplateResponse(request, template, {"version": __version__, **values})
+    api_docs = get_context(request).settings.api_docs
+    response = templates.TemplateResponse(request, template, {"version": __version__, "api_docs": api_docs, **values})
     response.headers.update(SECURITY_HEADERS)
     return response
 
@@ -55,9 +56,9 @@ async def session_page(request: Request, session_id: SessionId) -> HTMLResponse:
 
 
 @fragments.get("/sessions", response_class=HTMLResponse)
-async def session_list(request: Request, context: Context) -> HTMLResponse:
-    """The sessions, most recently active first, as the list the index page shows."""
-    sessions = await asyncio.to_thread(context.store.sessions)
+async def session_list(request: Request, context: Context, principal: Reader) -> HTMLResponse:
+    """The sessions the key may read, most recently active first, as the list the index page shows."""
+    sessions = [info for info in await asyncio.to_thread(context.store.sessions) if principal.owns(info.device_id)]
     return _page(request, "fragments/sessions.html", sessions=sessions)
 
 

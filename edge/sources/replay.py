@@ -14,10 +14,12 @@ import threading
 import time
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from darkread.edge.events import Events
 from darkread.edge.fovea import in_window
 from darkread.edge.io.iterator import EventsIterator, PacedReplay
+from darkread.edge.io.plausibility import TimeCheck
 from darkread.edge.io.raw_header import read_raw_header
 from darkread.edge.sources.base import EventSink
 
@@ -59,6 +61,9 @@ class ReplaySource:
         self.chunk_bytes = int(chunk_bytes)
         self.finished = threading.Event()
         self.error: BaseException | None = None
+        self.problems: list[str] = []  # what makes the stream implausible (set when the replay ends)
+        self._reader: Any = None
+        self._time_check = TimeCheck()
         self._roi: tuple[int, int, int, int] | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -107,7 +112,19 @@ class ReplaySource:
         the first slices late.
         """
         slices = EventsIterator(self.raw_path, delta_t=self.slice_us, chunk_bytes=self.chunk_bytes)
+        self._reader = slices.reader
         return PacedReplay(slices, self.speed, clock=time.perf_counter, sleep=self._stop.wait)
+
+    def _judge(self) -> None:
+        """After the replay: name what makes the stream implausible (``problems``)."""
+        from darkread.edge.io.plausibility import problems
+
+        if self._reader is None:
+            return
+        header = self._reader.header
+        self.problems = problems(self._reader.stats, header.format, header.width, header.height, self._time_check)
+        for problem in self.problems:
+            logger.warning("%s: %s", self.raw_path, problem)
 
     def _apply_roi(self, events: Events) -> Events:
         if self._roi is None:
@@ -126,6 +143,7 @@ class ReplaySource:
                 if self._first_t is None:
                     self._first_t = int(events["t"][0])
                 self._last_t = int(events["t"][-1])
+                self._time_check.add(events["t"])
                 events = self._apply_roi(events)
                 if events.shape[0] == 0:
                     continue
@@ -136,6 +154,8 @@ class ReplaySource:
             logger.exception("replay of %s failed", self.raw_path)
         finally:
             self._wall_s = time.perf_counter() - started
+            if self.error is None and not self._stop.is_set():
+                self._judge()
             self.finished.set()
             logger.info("replay of %s ended: %s", self.raw_path.name, {k: round(v, 3) for k, v in self.stats.items()})
 

@@ -34,15 +34,16 @@ def store(tmp_path: Path) -> Store:
 def test_frames_are_sequenced_and_duplicates_not_stored(store: Store) -> None:
     async def scenario() -> list[WriteResult]:
         assert await store.open_session(hello("s")) == -1
-        return [await store.add_frame("s", frame(seq)) for seq in (0, 1, 1, 0, 5, 3)]
+        results = [await store.add_frame("s", frame(seq)) for seq in (0, 1, 1, 0, 2)]
+        with pytest.raises(StoreError, match="does not follow the stored seq 2"):
+            await store.add_frame("s", frame(5))  # a hole would hide a lost frame behind the resume point
+        return results
 
     results = asyncio.run(scenario())
-    assert [(r.stored, r.last_seq) for r in results] == [
-        (True, 0), (True, 1), (False, 1), (False, 1), (True, 5), (False, 5),
-    ]  # fmt: skip
+    assert [(r.stored, r.last_seq) for r in results] == [(True, 0), (True, 1), (False, 1), (False, 1), (True, 2)]
     stored = store.frames("s", 10)
-    assert [f.seq for f in stored] == [0, 1, 5]
-    assert stored[2].frame_id == 15 and stored[2].origin == (5, 10) and stored[2].mask[5].all()
+    assert [f.seq for f in stored] == [0, 1, 2]
+    assert stored[2].frame_id == 12 and stored[2].origin == (2, 4) and stored[2].mask[2].all()
 
 
 def test_many_concurrent_writes_share_commits(store: Store) -> None:
@@ -70,8 +71,8 @@ def test_everything_survives_reopening(tmp_path: Path) -> None:
 
     async def write(store: Store) -> None:
         await store.open_session(hello("s", mode="pages"))
-        await store.add_page("s", Page(seq=4, page_id=2, t_us=9, shape=shape, bits=bits, lines=((0, 0, 5, 5),)))
-        await store.add_gaze("s", Gaze(seq=5, t_us=(1, 2), px=((3.0, 4.0), (5.0, 6.0))))
+        await store.add_page("s", Page(seq=0, page_id=2, t_us=9, shape=shape, bits=bits, lines=((0, 0, 5, 5),)))
+        await store.add_gaze("s", Gaze(seq=1, t_us=(1, 2), px=((3.0, 4.0), (5.0, 6.0))))
 
     first = Store(tmp_path)
     asyncio.run(write(first))
@@ -79,16 +80,16 @@ def test_everything_survives_reopening(tmp_path: Path) -> None:
     second = Store(tmp_path)
     try:
         info = second.session("s")
-        assert info is not None and info.last_seq == 5 and info.pages == 1 and info.sensor == (1280, 720)
+        assert info is not None and info.last_seq == 1 and info.pages == 1 and info.sensor == (1280, 720)
         page = second.latest_page("s")
         assert page is not None and page.page_id == 2 and page.lines == [(0, 0, 5, 5)]
         np.testing.assert_array_equal(page.image(), np.where(mask == 1, 0, 255))
 
         async def resend() -> WriteResult:
-            assert await second.open_session(hello("s", mode="pages")) == 5
-            return await second.add_page("s", Page(seq=4, page_id=2, t_us=9, shape=shape, bits=bits))
+            assert await second.open_session(hello("s", mode="pages")) == 1
+            return await second.add_page("s", Page(seq=0, page_id=2, t_us=9, shape=shape, bits=bits))
 
-        assert asyncio.run(resend()) == WriteResult(stored=False, last_seq=5)
+        assert asyncio.run(resend()) == WriteResult(stored=False, last_seq=1)
     finally:
         second.close()
 

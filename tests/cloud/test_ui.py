@@ -12,15 +12,17 @@ from typing import Any
 import httpx
 from websockets.asyncio.client import connect
 
+from darkread.cloud.auth import KeyRing, Scope
 from darkread.proto.messages import Hello, Welcome, decode, encode
 
 API_KEY = "test-key-7f3a"
 
 
-def open_session(ws_url: str, session_id: str, device_id: str = "glasses-1") -> None:
+def open_session(ws_url: str, session_id: str, device_id: str = "glasses-1", key: str = API_KEY) -> None:
     """A session as the glasses open it: hello over the websocket, welcome back."""
+
     async def hello() -> None:
-        async with connect(ws_url, additional_headers={"X-API-Key": API_KEY}) as ws:
+        async with connect(ws_url, additional_headers={"X-API-Key": key}) as ws:
             await ws.send(encode(Hello(device_id=device_id, session_id=session_id, mode="frames", sensor=(1280, 720), fovea=(100, 200))))
             assert isinstance(decode(await ws.recv(), max_bytes=1 << 20), Welcome)
 
@@ -59,6 +61,22 @@ def test_the_session_list_needs_the_key(server: Any) -> None:
     assert denied.status_code == wrong.status_code == 401
     assert listed.status_code == 200
     assert 'href="/sessions/reader-7"' in listed.text and "glasses-1" in listed.text and "0 frames" in listed.text
+
+
+def test_the_session_list_shows_a_device_key_only_its_own_sessions(make_settings: Any, run_server: Any) -> None:
+    settings = make_settings()
+    ring = KeyRing(settings.keys_path())
+    glasses = {name: ring.add(name, {Scope.STREAM, Scope.READ}) for name in ("glasses-1", "glasses-2")}
+    stream_only = ring.add("glasses-1", {Scope.STREAM})
+    with run_server(settings) as live:
+        for name, key in glasses.items():
+            open_session(live.ws_url, f"s-{name}", name, key)
+        mine = httpx.get(f"{live.url}/ui/sessions", headers={"X-API-Key": glasses["glasses-1"]}).text
+        everyone = httpx.get(f"{live.url}/ui/sessions", headers={"X-API-Key": API_KEY}).text
+        refused = httpx.get(f"{live.url}/ui/sessions", headers={"X-API-Key": stream_only})
+    assert "s-glasses-1" in mine and "s-glasses-2" not in mine
+    assert "s-glasses-1" in everyone and "s-glasses-2" in everyone
+    assert refused.status_code == 403
 
 
 def test_the_session_list_says_when_it_is_empty(server: Any) -> None:

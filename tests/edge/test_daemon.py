@@ -5,7 +5,10 @@ from __future__ import annotations
 import os
 import threading
 
+import pytest
+
 from darkread.edge.daemon import Daemon
+from darkread.edge.errors import RunError
 from darkread.edge.notify import Notifier
 
 
@@ -30,13 +33,33 @@ class FakeService:
         self.calls.append(f"shutdown {timeout_s}")
         return True
 
+    def verify(self) -> None:
+        self.calls.append("verify")
+
+
+class CrashedReplay(FakeService):
+    """The replay thread died: the source reports finished, and the failure waits in tick()."""
+
+    def tick(self) -> str | None:
+        raise RunError("event source failed: CorruptRawError at byte 42")
+
+    def finished(self) -> bool:
+        return True
+
+
+def test_a_replay_that_crashed_is_not_reported_as_finished() -> None:
+    service = CrashedReplay()
+    with pytest.raises(RunError, match="byte 42"):
+        Daemon(service, Notifier({}), tick_s=0.001).run()
+    assert service.calls == ["startup", "shutdown 10.0"]  # still drained what it could
+
 
 def test_daemon_runs_until_service_finishes_and_notifies(notify_socket) -> None:
     path = notify_socket.path
     service = FakeService(ticks_until_finished=3)
     daemon = Daemon(service, Notifier({"NOTIFY_SOCKET": path}), tick_s=0.001, status_every_s=0.0)
     assert daemon.run() == 0
-    assert service.calls == ["startup", "shutdown 10.0"]
+    assert service.calls == ["startup", "shutdown 10.0", "verify"]
     messages = notify_socket.received()
     assert messages[0] == "READY=1\nSTATUS=sensor open, model warm"
     assert "STATUS=tick 1" in messages

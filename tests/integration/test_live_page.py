@@ -26,7 +26,7 @@ from darkread.cloud.app import create_app
 from darkread.cloud.server import serve_in_thread
 from darkread.cloud.settings import Settings
 from darkread.edge.io.recording import open_recording
-from darkread.eval.metrics import error_rates
+from darkread.eval.error_rates import error_rates
 from darkread.paths import SAMPLE_RECORDING
 
 pytestmark = pytest.mark.slow
@@ -178,6 +178,7 @@ def test_live_page_follows_a_session_reads_and_speaks(browser: Any, cloud: Any, 
 
     requests = sent_requests(browser)
     assert requests and not [url for url, _ in requests if API_KEY in url], "the key went into a URL"
+    print("events requests:", [u for u, _ in requests if u.endswith("/events")], "asks:", len([u for u, _ in requests if u.endswith("/ask")]))
     api_calls = [(url, headers) for url, headers in requests if "/v1/" in url or "/ui/sessions" in url]
     assert api_calls and all(headers.get("x-api-key") == API_KEY for _, headers in api_calls)
 

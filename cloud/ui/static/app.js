@@ -67,6 +67,10 @@ function whenLoggedIn(start) {
 async function open(start) {
   try {
     const probe = await api("/v1/sessions");
+    if (probe.status === 403) {  // a key for streaming only, say
+      showLogin(`That key may not read sessions: ${await failure(probe)}.`);
+      return;
+    }
     if (!probe.ok) throw new Error(await failure(probe));
   } catch (error) {
     if (error instanceof Unauthorized) {
