@@ -176,11 +176,25 @@ def test_live_page_follows_a_session_reads_and_speaks(browser: Any, cloud: Any, 
     press_tab_until(browser, link).send_keys(Keys.ENTER)
     wait_for(lambda: browser.current_url.endswith(f"/sessions/{SESSION}") and text_shown(), 60, "the session again")
 
+    # Without a key in the tab: the login form, a wrong key refused, the right one typed in.
+    browser.execute_script("sessionStorage.clear();")
+    browser.get(f"{cloud.url}/")
+    key_input = wait_for(lambda: [e for e in browser.find_elements(By.ID, "key") if e.is_displayed()], 20, "the login form")[0]
+    assert browser.switch_to.active_element == key_input
+    key_input.send_keys("not-the-key", Keys.ENTER)
+    wait_for(lambda: "not accepted" in browser.find_element(By.ID, "login-error").text, 20, "the wrong key refused")
+    assert browser.current_url == f"{cloud.url}/"  # the form never submitted
+    key_input.clear()
+    key_input.send_keys(API_KEY, Keys.ENTER)
+    wait_for(lambda: browser.find_elements(By.CSS_SELECTOR, f'[data-session="{SESSION}"]'), 20, "the list after login")
+    assert serious_violations(browser) == []
+
     requests = sent_requests(browser)
     assert requests and not [url for url, _ in requests if API_KEY in url], "the key went into a URL"
-    print("events requests:", [u for u, _ in requests if u.endswith("/events")], "asks:", len([u for u, _ in requests if u.endswith("/ask")]))
     api_calls = [(url, headers) for url, headers in requests if "/v1/" in url or "/ui/sessions" in url]
-    assert api_calls and all(headers.get("x-api-key") == API_KEY for _, headers in api_calls)
+    assert {headers.get("x-api-key") for _, headers in api_calls} == {API_KEY, "not-the-key", None}
+    # without a key (after sessionStorage was cleared) only the probe that shows the login form
+    assert {url for url, headers in api_calls if "x-api-key" not in headers} == {f"{cloud.url}/v1/sessions"}
 
 
 def press_tab_until(chrome: Any, target: Any, most: int = 15) -> Any:
