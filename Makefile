@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
-EXTRAS ?= edge,cloud,dev,train
+EXTRAS ?= edge,cloud,dev,train,gaze
 
 .PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps speech-deps browser-deps ocr-deps
 
@@ -39,12 +39,13 @@ browser-deps:  ## Chromium and its WebDriver for the live-page browser test (whe
 	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then $(APT_INSTALL) chromium chromium-driver >/dev/null; \
 	else echo "browser-deps: not root or no apt-get; the browser test will skip"; fi
 
-ocr-deps:  ## Tesseract, an optional second local OCR engine (when root)
+ocr-deps:  ## Tesseract (an optional second local OCR engine) and libcairo2 for eyekit (when root)
 	@if [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
 		command -v tesseract >/dev/null || ($(APT_INSTALL) tesseract-ocr tesseract-ocr-eng >/dev/null) || true; \
+		ldconfig -p | grep -q libcairo.so.2 || ($(APT_INSTALL) libcairo2 >/dev/null) || true; \
 	else echo "ocr-deps: not root or no apt-get; Tesseract stays optional"; fi
 
-test: $(STAMP) speech-deps browser-deps  ## run the whole test suite (installs espeak-ng and Chromium when root)
+test: system-deps $(STAMP)  ## run the whole test suite (installs espeak-ng, Chromium, Tesseract, libcairo2 when root)
 	$(PY) -m pytest -q
 
 test-fast: $(STAMP)  ## unit tests only (no integration tests)

@@ -3,9 +3,12 @@
 "use strict";
 
 const KEY_SLOT = "darkread.key";
-const POLL_MS = 1000;       // session state while watching
-const LIST_POLL_MS = 2000;  // the session list
-const MIN_READ_GAP_MS = 1500;
+const POLL_MS = 1000;        // session state while watching (not rate-limited)
+const LIST_POLL_MS = 2000;   // the session list
+// page.png and ask share a per-key budget (DARKREAD_ASK_RATE_PER_MIN, 30 by default): polling
+// spends at most 15 + 7.5 a minute, leaving the rest for the Ask and Speak buttons.
+const MIN_IMAGE_GAP_MS = 4000;
+const MIN_READ_GAP_MS = 8000;
 
 // -- the key -------------------------------------------------------------------------------------
 
@@ -27,12 +30,22 @@ function storedKey() {
 
 class Unauthorized extends Error {}
 
+let slowUntil = 0;  // after a 429: no polling of limited routes before this time
+
+function slowedDown() {
+  return Date.now() < slowUntil;
+}
+
 async function api(path, options = {}) {
   const headers = new Headers(options.headers || {});
   const key = storedKey();
   if (key) headers.set("X-API-Key", key);
   const response = await fetch(path, { ...options, headers, cache: "no-store", credentials: "omit" });
   if (response.status === 401) throw new Unauthorized("the service did not accept the key");
+  if (response.status === 429) {
+    const wait = Number(response.headers.get("Retry-After")) || 5;
+    slowUntil = Date.now() + wait * 1000;
+  }
   return response;
 }
 
@@ -141,7 +154,10 @@ function watchSession(sessionId) {
 
   const say = (message) => { status.textContent = message; };
 
+  let lastImageAt = 0;
   async function refreshImage(info) {
+    if (slowedDown() || Date.now() - lastImageAt < MIN_IMAGE_GAP_MS) return false;
+    lastImageAt = Date.now();
     const response = await api(`${base}/page.png`);
     if (response.status === 409) {
       caption.textContent = "Waiting for the first frames.";
@@ -186,7 +202,7 @@ function watchSession(sessionId) {
 
   // Reads the page again when it changed, at most every MIN_READ_GAP_MS (OCR is the costly part).
   async function readAlong(state) {
-    if (reading || state === textOf || Date.now() - lastReadAt < MIN_READ_GAP_MS) return;
+    if (reading || state === textOf || slowedDown() || Date.now() - lastReadAt < MIN_READ_GAP_MS) return;
     reading = true;
     try {
       showText(linesOf(await ask()));
@@ -200,7 +216,7 @@ function watchSession(sessionId) {
   }
 
   // The live push (GET .../events, Server-Sent Events, where the service has it): each `page`
-  // event carries the lines read so far, so the page image and text follow without polling OCR.
+  // event carries the lines read so far, so the text follows without asking (the image is polled).
   // Read with fetch (EventSource cannot send the key header); on any failure, back to polling.
   let pushed = null;         // null: not tried yet, true: events arrive, false: polling
   async function listen() {
@@ -240,8 +256,6 @@ function watchSession(sessionId) {
   }
 
   async function onPage(event) {
-    const response = await api(base);
-    if (response.ok && (await refreshImage(await response.json()))) imageOf = null;
     const lines = (event.lines || []).map((line) => line.text).filter((line) => line.trim());
     if (lines.length) showText(lines);
   }
@@ -257,12 +271,12 @@ function watchSession(sessionId) {
         const info = await response.json();
         const state = `${info.last_seq}/${info.frames}/${info.pages}`;
         const age = Math.max(0, Date.now() / 1000 - info.updated_s);
-        say(age < 5 ? `Live: ${info.frames} frames received.` : `${info.frames} frames; nothing new for ${Math.round(age)} s.`);
+        say(slowedDown() ? `${info.frames} frames; the service asked to slow down, updating again shortly.`
+          : age < 5 ? `Live: ${info.frames} frames received.` : `${info.frames} frames; nothing new for ${Math.round(age)} s.`);
         if (pushed === null && info.mode === "frames" && info.frames > 0) listen();
-        if (!pushed) {  // no live push: poll the image, and read beside it
-          if (state !== imageOf && (await refreshImage(info))) imageOf = state;
-          if (imageOf !== null) readAlong(state);  // not awaited: the image keeps growing while OCR runs
-        }
+        if (state !== imageOf && (await refreshImage(info))) imageOf = state;
+        // Without the live push, read beside the image (not awaited: the image keeps growing meanwhile).
+        if (!pushed && imageOf !== null) readAlong(state);
       }
     } catch (error) {
       if (error instanceof Unauthorized) return showLogin("The key is no longer accepted.");
