@@ -40,8 +40,10 @@ Each component keeps its own errors in its own ``errors.py``::
           ├── NoPageError              the session has nothing to read yet
           ├── DataDirError             the data directory is unusable or held by another process
           ├── ServiceStartError        the service did not come up
-          └── OcrError                 an OCR engine failed (``retryable`` says whether to try again)
-               └── OcrUnavailableError the engine is not installed or not configured
+          ├── OcrError                 an OCR engine failed (``retryable`` says whether to try again)
+          │    └── OcrUnavailableError the engine is not installed or not configured
+          └── SpeechError              the speech engine failed or timed out (spoken answers)
+               └── SpeechUnavailableError  espeak-ng is not installed
 
 Built-in exceptions are used where their meaning fits: ``FileNotFoundError``/``OSError`` for files
 and sockets, ``ValueError`` for bad arguments. The ``darkread`` command turns all of these into one
