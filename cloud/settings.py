@@ -50,6 +50,9 @@ class Settings(BaseSettings):
         True, description="correct offline engines' misread glyphs (e/o, i/l) with an English word list"
     )
     ocr_timeout_s: float = Field(60.0, gt=0)
+    ask_timeout_s: float = Field(90.0, gt=0, description="an ask (stitching + OCR) answers 503 after this long")
+    ask_rate_per_min: float = Field(30.0, gt=0, description="asks and page.png per key per minute (sustained)")
+    ask_burst: int = Field(10, ge=1, description="asks and page.png per key at once")
 
     google_base_url: str = "https://vision.googleapis.com"
     google_api_key: SecretStr | None = None

@@ -97,7 +97,7 @@ def test_signals_can_stay_with_the_caller() -> None:
     before = signal.getsignal(signal.SIGINT)
     assert Daemon(service, Notifier({}), tick_s=0.001, handle_signals=False).run() == 0
     assert seen and all(handler is before for handler in seen)
-    assert service.calls == ["startup", "shutdown 10.0"]
+    assert service.calls == ["startup", "shutdown 10.0", "verify"]
     handled = Recording(ticks_until_finished=1)
     Daemon(handled, Notifier({}), tick_s=0.001).run()
     assert seen[-1] is not before  # by default the daemon handles SIGINT itself
