@@ -84,8 +84,16 @@ def test_ocr_benchmark_writes_its_keys(tmp_path: Path) -> None:
     assert set(run_smoke("ocr", tmp_path)) == ocr_keys()
 
 
+def test_gaze_benchmark_writes_its_keys(tmp_path: Path, shared_data: Path) -> None:
+    from darkread.gaze.scores import ARIA_RATES_HZ
+
+    if not (shared_data / "reading_gaze" / "oz").is_dir():
+        pytest.skip("../shared/data/reading_gaze/oz is not present")
+    assert set(run_smoke("gaze", tmp_path)) == {f"gaze_fixation_onset_f1_{rate:g}hz" for rate in ARIA_RATES_HZ}
+
+
 def test_every_benchmark_module_is_tested() -> None:
-    tested = {"decode", "fovea", "synth", "cloud", "inference", "edge", "stitch", "ocr"}
+    tested = {"decode", "fovea", "synth", "gaze", "cloud", "inference", "edge", "stitch", "ocr"}
     assert {name.rsplit(".", 1)[-1] for name in BENCH_MODULES} == tested
 
 
