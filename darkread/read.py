@@ -102,7 +102,7 @@ def read_recording(
     if out_dir is None:  # a scratch directory that does not outlive the read
         with tempfile.TemporaryDirectory(prefix="darkread-read-") as scratch:
             result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
-                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon)
+                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer)
         result.page_png = ""
         return result
     started = time.perf_counter()

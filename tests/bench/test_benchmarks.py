@@ -27,7 +27,7 @@ FOVEA = {
 SYNTH = {"synth_samples_per_s", "synth_sim_s_per_wall_s"}
 EDGE = {
     "edge_realtime_factor", "edge_decode_realtime_factor", "edge_latency_p50_ms", "edge_latency_p99_ms",
-    "edge_uplink_kbyte_per_s",
+    "edge_uplink_kbyte_per_s", "edge_inferences_per_s", "edge_view_latency_p99_ms", "edge_realtime_factor_every_window",
 }
 CLOUD = {"cloud_ingest_frames_per_s_1", "cloud_ingest_frames_per_s_10", "cloud_ingest_frames_per_s_50"}
 STITCH = {"stitch_ms_per_frame", "stitch_ink_f1", "stitch_ink_f1_tol1px", "stitch_ocr_cer"}
