@@ -72,6 +72,7 @@ def read_recording(
     out_dir: str | Path | None = None,
     drain_timeout_s: float = 60.0,
     lexicon: bool = True,
+    infer: str = "on-change",
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says."""
     import httpx
@@ -108,7 +109,7 @@ def read_recording(
         overrides = {
             "source": {"kind": "replay", "path": str(recording.path if recording.path.is_dir() else recording.raw_path), "speed": 0.0},
             "gaze": {"kind": "recording"},
-            "pipeline": {"lossless": True, **({"model": str(model)} if model else {})},
+            "pipeline": {"lossless": True, "infer": infer, **({"model": str(model)} if model else {})},
             "uplink": {"url": server.ws_url, "api_key": api_key, "mode": mode, "spool_dir": str(out / "spool"),
                        "drain_timeout_s": drain_timeout_s},
             "metrics": {"log_every_s": 3600.0},
@@ -174,6 +175,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
                         help="OCR backend (default: local, the embedded offline engine); remote ones read DARKREAD_* settings")
     parser.add_argument("--mode", default="frames", choices=["frames", "pages"], help="stream frames (default) or stitch on the glasses")
+    parser.add_argument("--infer", default="on-change", choices=["on-change", "every-window"],
+                        help="on-change (default): one fused view per fixation; every-window: every frame (research)")
     parser.add_argument("--no-lexicon", dest="lexicon", action="store_false",
                         help="report the offline engine's text as read, without the dictionary correction")
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
@@ -192,7 +195,7 @@ def _run(args: argparse.Namespace) -> int:
     else:
         raise ValueError("give a RECORDING directory, or --demo for the shipped sample")
     result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out,
-                           lexicon=args.lexicon)
+                           lexicon=args.lexicon, infer=args.infer)
     if args.json:
         print(json.dumps(result.to_json(), indent=1))
         return 0

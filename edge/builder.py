@@ -25,6 +25,7 @@ from darkread.edge.pipeline import FrameHandler, FrameResult, Pipeline
 from darkread.edge.reconstruct import Reconstructor
 from darkread.edge.sources.base import EventSource
 from darkread.edge.telemetry import EdgeMetrics, MetricsServer
+from darkread.edge.view_fusion import ViewRecord
 
 logger = logging.getLogger(__name__)
 
@@ -84,9 +85,9 @@ class Edge:
         snap = self.metrics.snapshot()
         logger.info("%s", snap.log_line())
         if self.uplink is None:
-            return f"{snap.rates['frames']:.1f} frames/s"
+            return snap.status_line()
         state = "connected" if self.uplink.connected.is_set() else f"offline ({self.uplink.last_error or 'connecting'})"
-        return f"{snap.rates['frames']:.1f} frames/s, spool {snap.spool_depth}, uplink {state}"
+        return f"{snap.status_line()}, spool {snap.spool_depth}, uplink {state}"
 
     def finished(self) -> bool:
         finished = getattr(self.source, "finished", None)
@@ -181,14 +182,14 @@ def build_edge(
 
 
 def _to_uplink(uplink: Any) -> FrameHandler:
-    def submit(frame: FrameResult, arrival: float) -> None:
+    def submit(frame: FrameResult | ViewRecord, arrival: float) -> None:
         uplink.submit(frame.to_message(), submitted_at=arrival)
 
     return submit
 
 
 def _to_pages(pages: Any) -> FrameHandler:
-    def add(frame: FrameResult, arrival: float) -> None:
+    def add(frame: FrameResult | ViewRecord, arrival: float) -> None:
         pages.add(frame)
 
     return add

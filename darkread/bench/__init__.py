@@ -19,6 +19,7 @@ import numpy as np
 BENCH_MODULES: tuple[str, ...] = (
     "darkread.bench.decode",
     "darkread.bench.fovea",
+    "darkread.bench.gaze",
     "darkread.bench.synth",
     "darkread.bench.inference",
     "darkread.bench.edge",
