@@ -17,7 +17,7 @@ from .ocr import OcrBackend, create_backend
 from .pages import PageAssembler
 from .routes import api, public
 from .settings import Settings, get_settings
-from .store import Store
+from .store import SqliteStore
 from .stream import stream_endpoint
 
 log = logging.getLogger(__name__)
@@ -41,7 +41,7 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         settings.data_dir.mkdir(parents=True, exist_ok=True)
-        store = Store(settings.data_dir)
+        store = SqliteStore(settings.data_dir)
         engine = ocr or create_backend(settings)
         if settings.api_key is None:
             log.warning("no API key configured (DARKREAD_API_KEY): the service accepts anyone")
@@ -59,7 +59,7 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
             close = getattr(engine, "close", None)
             if callable(close):
                 close()
-            store.close()
+            await store.close()
 
     app = FastAPI(title="darkread cloud", version=__version__, description=DESCRIPTION, lifespan=lifespan)
     app.include_router(public)

@@ -12,7 +12,7 @@ from fastapi.security import APIKeyHeader, APIKeyQuery
 from .metrics import Metrics
 from .pages import PageAssembler
 from .settings import Settings
-from .store import Store
+from .store import SessionStore
 
 if TYPE_CHECKING:
     from .ocr.base import OcrBackend
@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 @dataclass
 class AppContext:
     settings: Settings
-    store: Store
+    store: SessionStore
     metrics: Metrics
     ocr: OcrBackend
     pages: PageAssembler

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import asyncio
 import threading
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from dataclasses import dataclass
 
 import numpy as np
 
-from .store import Store, StoredFrame
+from .store import FrameRecord, SessionStore
 
 Box = tuple[int, int, int, int]
 
@@ -28,7 +29,7 @@ class PageImage:
     lines: list[Box]
 
 
-def stitch_frames(frames: list[StoredFrame], page_id: str) -> PageImage:
+def stitch_frames(frames: list[FrameRecord], page_id: str) -> PageImage:
     """Stored frames -> the stitched page (the same stitcher the glasses run)."""
     try:
         from darkread.edge.stitch import StitchFrame, stitch_page
@@ -49,29 +50,32 @@ def stitch_frames(frames: list[StoredFrame], page_id: str) -> PageImage:
 class PageAssembler:
     """Builds the current page of a session, caching stitched pages by their last frame seq."""
 
-    def __init__(self, store: Store, max_frames: int, cache_size: int = 16) -> None:
+    def __init__(self, store: SessionStore, max_frames: int, cache_size: int = 16) -> None:
         self.store = store
         self.max_frames = max_frames
         self._cache: OrderedDict[tuple[str, int], PageImage] = OrderedDict()
         self._cache_size = cache_size
         self._lock = threading.Lock()
 
-    def current_page(self, session_id: str, mode: str, last_seq: int) -> PageImage:
-        """Blocking (stitching is CPU work): call from a worker thread."""
+    async def current_page(self, session_id: str, mode: str, last_seq: int) -> PageImage:
+        """The page now; stitching runs in a worker thread."""
         if mode == "pages":
-            stored = self.store.latest_page(session_id)
+            stored = await self.store.latest_page(session_id)
             if stored is None:
                 raise NoPageError(f"session {session_id!r} has not sent a page yet")
-            return PageImage(f"page-{stored.page_id}", stored.image(), list(stored.lines))
+            return PageImage(f"page-{stored.page_id}", np.where(stored.mask != 0, 0, 255).astype(np.uint8), list(stored.lines))
         key = (session_id, last_seq)
         with self._lock:
             if key in self._cache:
                 self._cache.move_to_end(key)
                 return self._cache[key]
-        frames = self.store.frames(session_id, self.max_frames)
+        recent: deque[FrameRecord] = deque(maxlen=self.max_frames)
+        while chunk := await self.store.frames(session_id, after_seq=recent[-1].seq if recent else -1):
+            recent.extend(chunk)
+        frames = list(recent)
         if not frames:
             raise NoPageError(f"session {session_id!r} has not sent any frames yet")
-        page = stitch_frames(frames, f"frames-{frames[0].seq}-{frames[-1].seq}")
+        page = await asyncio.to_thread(stitch_frames, frames, f"frames-{frames[0].seq}-{frames[-1].seq}")
         with self._lock:
             self._cache[key] = page
             while len(self._cache) > self._cache_size:

@@ -80,7 +80,7 @@ async def healthz() -> Health:
     responses={503: {"model": Health, "description": "a dependency is not ready"}},
 )
 async def readyz(context: Context, response: Response) -> Health:
-    store_ok = await asyncio.to_thread(context.store.ping)
+    store_ok = await context.store.ping()
     ocr_ok = await asyncio.to_thread(context.ocr.ready)
     checks = {"store": store_ok, f"ocr:{context.ocr.name}": ocr_ok}
     if not all(checks.values()):
@@ -90,7 +90,7 @@ async def readyz(context: Context, response: Response) -> Health:
 
 
 async def _session(context: AppContext, session_id: str) -> SessionInfo:
-    info = await asyncio.to_thread(context.store.session, session_id)
+    info = await context.store.session(session_id)
     if info is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     return info
@@ -98,7 +98,7 @@ async def _session(context: AppContext, session_id: str) -> SessionInfo:
 
 async def _page(context: AppContext, info: SessionInfo) -> PageImage:
     try:
-        return await asyncio.to_thread(context.pages.current_page, info.session_id, info.mode, info.last_seq)
+        return await context.pages.current_page(info.session_id, info.mode, info.last_seq)
     except NoPageError as exc:
         raise HTTPException(status.HTTP_409_CONFLICT, detail=str(exc)) from None
     except StitchUnavailableError as exc:
@@ -107,7 +107,7 @@ async def _page(context: AppContext, info: SessionInfo) -> PageImage:
 
 @api.get("/sessions", summary="List sessions, most recently active first", response_model=list[SessionModel])
 async def list_sessions(context: Context) -> list[SessionModel]:
-    return [SessionModel.of(info) for info in await asyncio.to_thread(context.store.sessions)]
+    return [SessionModel.of(info) for info in await context.store.sessions()]
 
 
 @api.get(
@@ -127,7 +127,7 @@ async def get_session(session_id: SessionId, context: Context) -> SessionModel:
     responses={404: {"description": "unknown session"}},
 )
 async def delete_session(session_id: SessionId, context: Context) -> Response:
-    if not await asyncio.to_thread(context.store.delete_session, session_id):
+    if not await context.store.delete_session(session_id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     context.pages.forget(session_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -33,7 +33,7 @@ from darkread.proto.errors import (
 from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, Message, Page, Welcome, decode, encode
 
 from .context import AppContext
-from .store import StoreError, WriteResult
+from .store import FrameRecord, GazeRecord, PageRecord, SessionSpec, StoreError, WriteResult
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +48,7 @@ class StreamState(Enum):
 class _Pending:
     """A message handed to the store; the sender acks it once ``result`` resolves."""
 
-    result: asyncio.Future[WriteResult]
+    result: asyncio.Future[WriteResult]  # a task started on arrival, so writes queue in order
     kind: str
 
 
@@ -89,7 +89,8 @@ class StreamConnection:
             raise UnexpectedMessageError(f"expected hello as the first message, got {message.TYPE}")
         if not self.authenticated and not self.context.key_matches(message.token):
             raise AuthenticationError("missing or wrong API key (X-API-Key header, ?key= or hello.token)")
-        last_seq = await self.context.store.open_session(message)
+        spec = SessionSpec(message.session_id, message.device_id, message.mode, message.sensor, message.fovea)
+        last_seq = await self.context.store.open_session(spec)
         self.hello = message
         self.state = StreamState.STREAMING
         log.info("session %s from %s: %s mode, resuming after seq %d", message.session_id, message.device_id,
@@ -108,17 +109,27 @@ class StreamConnection:
                 raise UnexpectedMessageError("frame received but hello.mode is 'pages'")
             if message.shape != self.hello.fovea:
                 raise BadMaskError(f"frame shape {message.shape} differs from hello.fovea {self.hello.fovea}")
-            return _Pending(store.add_frame(session_id, message), "frame")
+            return _Pending(asyncio.ensure_future(store.add_frame(session_id, frame_record(message))), "frame")
         if isinstance(message, Page):
             if self.hello.mode != "pages":
                 raise UnexpectedMessageError("page received but hello.mode is 'frames'")
-            return _Pending(store.add_page(session_id, message), "page")
+            record = PageRecord(message.seq, message.page_id, message.t_us, message.mask(), message.lines)
+            return _Pending(asyncio.ensure_future(store.add_page(session_id, record)), "page")
         if isinstance(message, Gaze):
-            return _Pending(store.add_gaze(session_id, message), "gaze")
+            record = GazeRecord(message.seq, message.t_us, message.px)
+            return _Pending(asyncio.ensure_future(store.add_gaze(session_id, record)), "gaze")
         if isinstance(message, Heartbeat):
             log.debug("session %s heartbeat t_us=%d %s", session_id, message.t_us, message.stats)
             return None
         raise UnexpectedMessageError(f"{message.TYPE} is not allowed after hello")
+
+
+def frame_record(frame: Frame) -> FrameRecord:
+    """The wire frame as the store keeps it."""
+    return FrameRecord(
+        frame.seq, frame.frame_id, frame.t_us, frame.origin, frame.gaze_px, frame.gaze_rad, frame.events_used,
+        frame.mask(),
+    )
 
 
 async def stream_endpoint(websocket: WebSocket) -> None:

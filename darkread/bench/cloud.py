@@ -93,28 +93,28 @@ async def _ingest(url: str, streams: int, frames_per_stream: int, time_limit_s: 
 
 
 def _store_alone(data_dir: Path, count: int) -> float:
-    from darkread.cloud.store import Store
+    from darkread.cloud.store import SessionSpec, SqliteStore
+    from darkread.cloud.stream import frame_record
     from darkread.proto.messages import decode as decode_message
 
-    store = Store(data_dir)
-    frames = [decode_message(data, max_bytes=1 << 20) for data in _frame_bytes(count)]
+    frames = [frame_record(decode_message(data, max_bytes=1 << 20)) for data in _frame_bytes(count)]  # type: ignore[arg-type]
 
     async def write() -> float:
-        hello = Hello(device_id="bench", session_id="alone", mode="frames", sensor=(1280, 720), fovea=(100, 200))
-        await store.open_session(hello)
-        started = time.perf_counter()
-        pending = []
-        for frame in frames:
-            pending.append(store.add_frame("alone", frame))  # type: ignore[arg-type]
-            if len(pending) >= WINDOW:
-                await pending.pop(0)
-        await asyncio.gather(*pending)
-        return count / (time.perf_counter() - started)
+        store = SqliteStore(data_dir)
+        try:
+            await store.open_session(SessionSpec("alone", "bench", "frames", (1280, 720), (100, 200)))
+            started = time.perf_counter()
+            pending: list[asyncio.Future[object]] = []
+            for frame in frames:
+                pending.append(asyncio.ensure_future(store.add_frame("alone", frame)))
+                if len(pending) >= WINDOW:
+                    await pending.pop(0)
+            await asyncio.gather(*pending)
+            return count / (time.perf_counter() - started)
+        finally:
+            await store.close()
 
-    try:
-        return asyncio.run(write())
-    finally:
-        store.close()
+    return asyncio.run(write())
 
 
 def run(ctx: BenchContext) -> list[Figure]:

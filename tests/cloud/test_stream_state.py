@@ -15,7 +15,7 @@ from darkread.cloud.context import AppContext
 from darkread.cloud.metrics import Metrics
 from darkread.cloud.pages import PageAssembler
 from darkread.cloud.settings import Settings
-from darkread.cloud.store import Store
+from darkread.cloud.store import SqliteStore
 from darkread.cloud.stream import StreamConnection, StreamState, _Pending
 from darkread.proto.errors import ProtocolError, UnexpectedMessageError
 from darkread.proto.messages import Ack, Hello, Welcome, encode
@@ -34,10 +34,10 @@ class NoOcr:
 @pytest.fixture(scope="module")
 def context(tmp_path_factory: pytest.TempPathFactory) -> Iterator[AppContext]:
     data = Path(tmp_path_factory.mktemp("state"))
-    store = Store(data)
+    store = SqliteStore(data)
     settings = Settings(_env_file=None, data_dir=data, max_message_bytes=4096)  # type: ignore[call-arg]
     yield AppContext(settings=settings, store=store, metrics=Metrics(), ocr=NoOcr(), pages=PageAssembler(store, 100))
-    store.close()
+    asyncio.run(store.close())
 
 
 HELLO = Hello(device_id="d", session_id="fuzz", mode="frames", sensor=(1280, 720), fovea=(100, 200))

@@ -1,0 +1,33 @@
+"""Durable storage of sessions: the ``SessionStore`` protocol, its records, and its backends."""
+
+from .blobs import BlobStore, FileBlobs
+from .protocol import SessionStore
+from .records import (
+    FrameRecord,
+    GazeRecord,
+    PageBreak,
+    PageRecord,
+    SessionInfo,
+    SessionSpec,
+    StoreError,
+    UnknownSessionError,
+    WriteResult,
+)
+from .sqlite import SqliteStore
+
+
+__all__ = [
+    "BlobStore",
+    "FileBlobs",
+    "FrameRecord",
+    "GazeRecord",
+    "PageBreak",
+    "PageRecord",
+    "SessionInfo",
+    "SessionSpec",
+    "SessionStore",
+    "SqliteStore",
+    "StoreError",
+    "UnknownSessionError",
+    "WriteResult",
+]

@@ -1,0 +1,51 @@
+"""``SessionStore``: everything the cloud keeps about a session, as one async interface.
+
+Ingest, page assembly and the REST routes talk only to this protocol, in domain records
+(``records.py``). A write returns once its record is durable (the stream acks after it), and a
+record whose (session, seq) is already stored is a duplicate: acknowledged, not stored again.
+SQLite (``sqlite.py``) is the first backend; a second one only has to pass
+``tests/cloud/store/test_contract.py``.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from .records import FrameRecord, GazeRecord, PageBreak, PageRecord, SessionInfo, SessionSpec, WriteResult
+
+
+class SessionStore(Protocol):
+    async def open_session(self, spec: SessionSpec) -> int:
+        """Create the session or refresh its metadata; its highest stored seq (-1 if none)."""
+
+    async def add_frame(self, session_id: str, frame: FrameRecord) -> WriteResult: ...
+
+    async def add_page(self, session_id: str, page: PageRecord) -> WriteResult: ...
+
+    async def add_gaze(self, session_id: str, gaze: GazeRecord) -> WriteResult: ...
+
+    async def add_page_break(self, session_id: str, mark: PageBreak) -> WriteResult:
+        """The glasses said the wearer moved to other text: frames after ``mark.seq`` start a page."""
+
+    async def session(self, session_id: str) -> SessionInfo | None: ...
+
+    async def sessions(self) -> list[SessionInfo]:
+        """Every session, most recently active first."""
+
+    async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[FrameRecord]:
+        """Up to ``limit`` frames with seq > ``after_seq``, oldest first (page through long sessions)."""
+
+    async def page_breaks(self, session_id: str) -> list[PageBreak]:
+        """The session's explicit page breaks, in seq order."""
+
+    async def latest_page(self, session_id: str) -> PageRecord | None:
+        """The most recent page sent by the glasses, with its image."""
+
+    async def delete_session(self, session_id: str) -> bool:
+        """Remove the session with everything stored for it; False if it did not exist."""
+
+    async def ping(self) -> bool:
+        """True when the backend answers (readiness)."""
+
+    async def close(self) -> None:
+        """Finish pending writes and release the backend; later writes raise StoreError."""

@@ -1,0 +1,94 @@
+"""What the store keeps, as plain values: no proto messages, no database rows, no file paths.
+
+The websocket layer converts wire messages into these records; every ``SessionStore`` backend
+takes and returns only them, so a backend can be swapped without touching ingest or the routes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+Box = tuple[int, int, int, int]  # x0, y0, x1, y1
+
+
+class StoreError(Exception):
+    """The store could not persist or read something (disk full, database locked, closed)."""
+
+
+class UnknownSessionError(StoreError):
+    """A write named a session that was never opened (or was deleted)."""
+
+
+@dataclass(frozen=True)
+class SessionSpec:
+    """What a stream says about itself when it opens (the ``hello``)."""
+
+    session_id: str
+    device_id: str
+    mode: str  # "frames" (the cloud stitches) or "pages" (the glasses stitch)
+    sensor: tuple[int, int]  # (width, height)
+    fovea: tuple[int, int]  # (height, width)
+
+
+@dataclass(frozen=True)
+class SessionInfo:
+    session_id: str
+    device_id: str
+    mode: str
+    sensor: tuple[int, int]  # (width, height)
+    fovea: tuple[int, int]  # (height, width)
+    created_s: float
+    updated_s: float
+    last_seq: int  # highest seq stored, -1 if none
+    frames: int
+    pages: int
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """One reconstructed foveal window as stored: where and when it was taken, and its ink."""
+
+    seq: int
+    frame_id: int
+    t_us: int
+    origin: tuple[int, int]  # window top-left, sensor pixels
+    gaze_px: tuple[float, float]
+    gaze_rad: tuple[float, float]
+    events_used: int
+    mask: np.ndarray = field(repr=False)  # uint8 [rows, cols], ink = 1
+
+
+@dataclass(frozen=True)
+class PageRecord:
+    """A page stitched on the glasses (black text on white) and its line boxes."""
+
+    seq: int
+    page_id: int
+    t_us: int
+    mask: np.ndarray = field(repr=False)  # uint8 ink mask, ink = 1
+    lines: tuple[Box, ...] = ()
+
+
+@dataclass(frozen=True)
+class GazeRecord:
+    """A batch of gaze samples the glasses sent beside the frames."""
+
+    seq: int
+    t_us: tuple[int, ...]
+    px: tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True)
+class WriteResult:
+    stored: bool  # False for a duplicate seq
+    last_seq: int  # highest seq durably stored for the session (the cumulative ack)
+
+
+@dataclass(frozen=True)
+class PageBreak:
+    """The glasses' explicit "new page": frames after ``seq`` belong to a new page."""
+
+    seq: int
+    t_us: int
