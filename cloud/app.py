@@ -17,7 +17,7 @@ from .ocr import OcrBackend, create_backend
 from .pages import PageAssembler
 from .routes import api, public
 from .settings import Settings, get_settings
-from .store import SqliteStore
+from .store import open_store
 from .stream import stream_endpoint
 
 log = logging.getLogger(__name__)
@@ -41,7 +41,8 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         settings.data_dir.mkdir(parents=True, exist_ok=True)
-        store = SqliteStore(settings.data_dir)
+        database_url = settings.database_url.get_secret_value() if settings.database_url else None
+        store = await open_store(settings.data_dir, database_url)
         engine = ocr or create_backend(settings)
         if settings.api_key is None:
             log.warning("no API key configured (DARKREAD_API_KEY): the service accepts anyone")
@@ -52,7 +53,7 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
             ocr=engine,
             pages=PageAssembler(store, settings.max_frames_per_page),
         )
-        log.info("darkread cloud ready: data in %s, OCR engine %s", settings.data_dir, engine.name)
+        log.info("darkread cloud ready: sessions in %s, OCR engine %s", _where(settings), engine.name)
         try:
             yield
         finally:
@@ -67,3 +68,11 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
     app.add_api_websocket_route("/v1/stream", stream_endpoint, name="stream")
     app.mount("/metrics", make_asgi_app(registry=metrics.registry))
     return app
+
+
+def _where(settings: Settings) -> str:
+    if settings.database_url is None:
+        return str(settings.data_dir)
+    from .store.postgres import describe
+
+    return describe(settings.database_url.get_secret_value())

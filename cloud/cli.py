@@ -19,13 +19,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         description=(
             "Serve the darkread cloud: WS /v1/stream for the glasses, POST /v1/sessions/{id}/ask, "
             "GET /v1/sessions/{id}/page.png, /healthz, /readyz, /metrics and the API docs at /docs. "
-            "Every option can also be set as an environment variable (DARKREAD_DATA_DIR, DARKREAD_API_KEY, "
+            "Every option can also be set as an environment variable (DARKREAD_DATA_DIR, DARKREAD_DATABASE_URL, DARKREAD_API_KEY, "
             "DARKREAD_OCR_BACKEND, DARKREAD_GOOGLE_API_KEY, DARKREAD_OPENAI_API_KEY, ...)."
         ),
     )
     serve.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 in containers)")
     serve.add_argument("--port", type=int, default=8000, help="TCP port (default 8000)")
     serve.add_argument("--data-dir", type=Path, help="where the SQLite database and page images live")
+    serve.add_argument(
+        "--database-url", metavar="URL",
+        help="postgresql://user:password@host:port/db: sessions in PostgreSQL, shared by every instance "
+        "pointed at it (prefer DARKREAD_DATABASE_URL: arguments show up in ps); default: SQLite in --data-dir",
+    )  # fmt: skip
     serve.add_argument("--api-key", help="required API key (prefer DARKREAD_API_KEY: arguments show up in ps)")
     serve.add_argument(
         "--ocr", choices=("local", "tesseract", "google", "openai"), help="OCR engine (default: local rapidocr)"
@@ -46,9 +51,15 @@ def _serve(args: argparse.Namespace) -> int:
         overrides["data_dir"] = args.data_dir
     if args.api_key is not None:
         overrides["api_key"] = args.api_key
+    if args.database_url is not None:
+        overrides["database_url"] = args.database_url
     if args.ocr is not None:
         overrides["ocr_backend"] = args.ocr
     settings = Settings(**overrides)  # type: ignore[arg-type]
+    if settings.database_url is not None:
+        from darkread.cloud.store.postgres import migrate_database
+
+        migrate_database(settings.database_url.get_secret_value())  # a wrong URL: one line, before uvicorn starts
     app = create_app(settings)
     # uvicorn refuses larger websocket messages itself (close 1009); leave room so that our own
     # check answers first with an error message naming the limit.

@@ -26,6 +26,11 @@ class Settings(BaseSettings):
 
     data_dir: Path = Field(Path("darkread-data"), description="SQLite database and page images live here")
     api_key: SecretStr | None = Field(None, description="required on every request; unset = open service")
+    database_url: SecretStr | None = Field(
+        None,
+        description="postgresql://user:password@host:port/db: keep sessions in PostgreSQL (several instances "
+        "share it); unset = SQLite in data_dir",
+    )
 
     # Stream limits.
     max_message_bytes: int = Field(DEFAULT_MAX_MESSAGE_BYTES, ge=1024, le=64 * 1024 * 1024)
@@ -54,11 +59,18 @@ class Settings(BaseSettings):
     openai_max_output_tokens: int = Field(1024, ge=1)
     openai_max_retries: int = Field(2, ge=0, description="retries after HTTP 429, honouring retry-after")
 
-    @field_validator("api_key", "google_api_key", "google_bearer_token", "openai_api_key", mode="before")
+    @field_validator("api_key", "database_url", "google_api_key", "google_bearer_token", "openai_api_key", mode="before")
     @classmethod
     def _empty_is_unset(cls, value: object) -> object:
         """``DARKREAD_API_KEY=`` (empty) means no key, not the empty key."""
         return None if value in ("", None) else value
+
+    @field_validator("database_url")
+    @classmethod
+    def _postgres_url(cls, value: SecretStr | None) -> SecretStr | None:
+        if value is not None and not value.get_secret_value().startswith(("postgresql://", "postgres://")):
+            raise ValueError("DARKREAD_DATABASE_URL must be a postgresql:// URL")
+        return value
 
     def database_path(self) -> Path:
         return self.data_dir / "darkread.sqlite3"

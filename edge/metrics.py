@@ -35,6 +35,7 @@ COUNTERS = (
     "messages_acked",
     "messages_rejected",
     "reconnects",
+    "failovers",
     "pages",
 )
 

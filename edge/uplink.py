@@ -7,6 +7,11 @@ drops from the spool whatever ``welcome.last_acked_seq`` covers, sends the rest 
 (at most ``max_in_flight`` unacknowledged) and deletes messages as cumulative acks arrive. Any
 failure reconnects with exponential backoff and jitter and resends from the spool; the cloud drops
 duplicates by seq. Nothing is lost unless the bounded spool overflows (counted as drops).
+
+``url`` may list several cloud instances (comma-separated) sharing one database: a failed
+connect or a closed connection moves to the next one at once, and backoff starts only after
+every instance failed in a row. The next instance's welcome says what the database holds, so
+the resume point is the same whichever instance answers.
 """
 
 from __future__ import annotations
@@ -51,9 +56,14 @@ MESSAGE_REJECTED_CODES = frozenset({
 })  # the close names one bad message, not a bad connection  # seqs whose submit time is remembered for the event-to-wire latency
 
 
+def split_urls(urls: str) -> tuple[str, ...]:
+    """``"ws://a/v1/stream, ws://b/v1/stream"`` -> both URLs, in order (blanks dropped)."""
+    return tuple(part.strip() for part in urls.split(",") if part.strip())
+
+
 @dataclass(frozen=True)
 class UplinkSettings:
-    url: str
+    url: str  # one websocket URL, or several comma-separated (failover in order)
     api_key: str = ""
     device_id: str = ""
     session_id: str = ""  # empty: the spool's session if it holds unsent frames, else a new one
@@ -109,6 +119,15 @@ class Uplink:
         self._rng = random.Random()
         self._connected_since: float | None = None
         self._rejected: tuple[int, str] | None = None  # close code and reason naming a bad message
+        self.urls = split_urls(settings.url)
+        if not self.urls:
+            raise ValueError("uplink: no cloud URL given")
+        self._url_index = 0
+
+    @property
+    def url(self) -> str:
+        """The cloud instance the uplink uses now (or tries next)."""
+        return self.urls[self._url_index]
 
     # -- called from other threads ---------------------------------------------------------
     def start(self) -> None:
@@ -181,24 +200,26 @@ class Uplink:
         ready.set()
         delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
         first = True
+        failed_in_a_row = 0  # connections that ended without a welcome, across instances
         while not self._stopping:
             if not first:
                 self.metrics.add("reconnects")
             first = False
             self._connected_since = None
+            url = self.url
             try:
-                await self._connection()
+                await self._connection(url)
             except InvalidStatus as exc:
                 self.last_error = f"cloud refused the connection: HTTP {exc.response.status_code}"
-                logger.error("%s (check the API key and URL)", self.last_error)
+                logger.error("%s at %s (check the API key and URL)", self.last_error, url)
             except ConnectionClosed as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
-                logger.warning("uplink to %s lost: %s", self.settings.url, self.last_error)
+                logger.warning("uplink to %s lost: %s", url, self.last_error)
                 if exc.rcvd is not None and exc.rcvd.code in MESSAGE_REJECTED_CODES:
                     self._rejected = (exc.rcvd.code, exc.rcvd.reason)  # dropped after the next welcome
             except (OSError, InvalidHandshake, TimeoutError, ProtocolError) as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
-                logger.warning("uplink to %s lost: %s", self.settings.url, self.last_error)
+                logger.warning("uplink to %s lost: %s", url, self.last_error)
             except InvalidURI as exc:
                 self.last_error = str(exc)
                 logger.error("uplink URL is not valid: %s", exc)
@@ -206,11 +227,25 @@ class Uplink:
                 self.connected.clear()
             if self._stopping:
                 break
-            stable_s = self.settings.stable_connection_s
-            if self._connected_since is not None and time.monotonic() - self._connected_since >= stable_s:
+            connected = self._connected_since is not None
+            lasted = connected and time.monotonic() - self._connected_since >= self.settings.stable_connection_s
+            if lasted:
                 # a connection that worked for a while: the next outage starts from a short delay again
                 delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
+            failed_in_a_row = 0 if connected else failed_in_a_row + 1
+            if self._rejected is None:  # a rejected message is no reason to leave a working instance
+                self._fail_over()
+            if len(self.urls) > 1 and (lasted or (not connected and failed_in_a_row % len(self.urls) != 0)):
+                continue  # the next instance may answer at once; back off only after a whole round failed
             await self._sleep_or_stop(next(delays))
+
+    def _fail_over(self) -> None:
+        """Move to the next cloud instance (a no-op with one URL)."""
+        if len(self.urls) > 1:
+            previous = self.url
+            self._url_index = (self._url_index + 1) % len(self.urls)
+            self.metrics.add("failovers")
+            logger.warning("uplink fails over from %s to %s", previous, self.url)
 
     async def _sleep_or_stop(self, delay_s: float) -> None:
         assert self._wake is not None
@@ -222,11 +257,11 @@ class Uplink:
             except TimeoutError:
                 return
 
-    async def _connection(self) -> None:
+    async def _connection(self, url: str) -> None:
         s = self.settings
         headers = {"X-API-Key": s.api_key} if s.api_key else None
         async with connect(
-            s.url, additional_headers=headers, open_timeout=s.open_timeout_s, max_size=DEFAULT_MAX_MESSAGE_BYTES
+            url, additional_headers=headers, open_timeout=s.open_timeout_s, max_size=DEFAULT_MAX_MESSAGE_BYTES
         ) as ws:
             hello = Hello(
                 device_id=self.device_id,
@@ -249,7 +284,7 @@ class Uplink:
             self.last_error = ""
             logger.info(
                 "uplink connected to %s, session %s, cloud has up to seq %d, %d to send",
-                s.url, self.session_id, welcome.last_acked_seq, self.spool.depth,
+                url, self.session_id, welcome.last_acked_seq, self.spool.depth,
             )
             await self._stream(ws, welcome)
 
@@ -350,4 +385,4 @@ class Uplink:
         )
 
 
-__all__ = ["Uplink", "UplinkSettings", "backoff_delays"]
+__all__ = ["Uplink", "UplinkSettings", "backoff_delays", "split_urls"]

@@ -9,6 +9,7 @@ SQLite (``sqlite.py``) is the first backend; a second one only has to pass
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Protocol
 
 from .records import FrameRecord, GazeRecord, PageBreak, PageRecord, SessionInfo, SessionSpec, WriteResult
@@ -43,6 +44,10 @@ class SessionStore(Protocol):
 
     async def delete_session(self, session_id: str) -> bool:
         """Remove the session with everything stored for it; False if it did not exist."""
+
+    def subscribe(self, listener: Callable[[str, int], None]) -> Callable[[], None]:
+        """Call ``listener(session_id, last_seq)`` on the event loop after records of a session are
+        committed, by this process or (a shared database) any other instance; returns the unsubscribe."""
 
     async def ping(self) -> bool:
         """True when the backend answers (readiness)."""

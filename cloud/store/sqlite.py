@@ -6,7 +6,8 @@ Layout under ``data_dir``::
     pages/<session>/<seq>.png   page images (through ``FileBlobs``; rows hold only the key)
 
 The schema version lives in ``PRAGMA user_version``; ``MIGRATIONS[i]`` takes a database from
-version i to i + 1 and all pending ones run at start-up, in one transaction each. Duplicates
+version i to i + 1 and all pending ones run at start-up, in one transaction each (the mechanism
+both backends share, ``migrations.py``). Duplicates
 are found by the database: every sequenced table's primary key is (session_id, seq).
 """
 
@@ -27,6 +28,8 @@ import msgpack
 import numpy as np
 
 from .blobs import BlobStore, FileBlobs
+from .changes import ChangeFeed, Listener
+from .migrations import migrate as run_migrations
 from .records import (
     FrameRecord,
     GazeRecord,
@@ -88,27 +91,30 @@ SCHEMA_VERSION = len(MIGRATIONS)
 _SEQUENCED = ("frames", "pages", "gaze", "page_breaks")
 
 
+class _SqliteSchema:
+    """``SchemaTarget`` for SQLite: the version is ``PRAGMA user_version``."""
+
+    def __init__(self, conn: sqlite3.Connection) -> None:
+        self.conn = conn
+
+    def version(self) -> int:
+        return int(self.conn.execute("PRAGMA user_version").fetchone()[0])
+
+    def apply(self, statements: list[str], new_version: int) -> None:
+        self.conn.execute("BEGIN IMMEDIATE")
+        try:
+            for statement in statements:
+                self.conn.execute(statement)
+            self.conn.execute(f"PRAGMA user_version = {int(new_version)}")
+            self.conn.execute("COMMIT")
+        except sqlite3.Error:
+            self.conn.execute("ROLLBACK")
+            raise
+
+
 def migrate(conn: sqlite3.Connection) -> int:
     """Apply every pending migration; returns the version the database was at before."""
-    before = int(conn.execute("PRAGMA user_version").fetchone()[0])
-    if before > SCHEMA_VERSION:
-        raise StoreError(f"the database is at schema version {before}; this darkread knows up to {SCHEMA_VERSION}")
-    for version in range(before, SCHEMA_VERSION):
-        conn.execute("BEGIN IMMEDIATE")
-        try:
-            for statement in _statements(MIGRATIONS[version]):
-                conn.execute(statement)
-            conn.execute(f"PRAGMA user_version = {version + 1}")
-            conn.execute("COMMIT")
-        except sqlite3.Error as exc:
-            conn.execute("ROLLBACK")
-            raise StoreError(f"schema migration {version} -> {version + 1} failed: {exc}") from exc
-        log.info("store schema migrated to version %d", version + 1)
-    return before
-
-
-def _statements(script: str) -> list[str]:
-    return [s.strip() for s in script.split(";") if s.strip()]
+    return run_migrations(_SqliteSchema(conn), MIGRATIONS, backend="SQLite")
 
 
 def encode_mask_png(mask: np.ndarray) -> bytes:
@@ -147,6 +153,10 @@ class SqliteStore:
         except sqlite3.Error as exc:
             raise StoreError(f"cannot open the database {self.db_path}: {exc}") from exc
         self._writer = GroupCommitWriter(self._connect)
+        self._changes = ChangeFeed()
+
+    def subscribe(self, listener: Listener) -> Callable[[], None]:
+        return self._changes.subscribe(listener)
 
     def _connect(self) -> sqlite3.Connection:
         # Autocommit mode: transactions are explicit (BEGIN/COMMIT), so a savepoint never commits alone.
@@ -181,7 +191,7 @@ class SqliteStore:
 
         return await self._writer.submit(work)
 
-    def _sequenced(self, session_id: str, seq: int, insert: Callable[[sqlite3.Connection], int]) -> Any:
+    async def _sequenced(self, session_id: str, seq: int, insert: Callable[[sqlite3.Connection], int]) -> WriteResult:
         """A write whose (session, seq) the database keeps once: ``insert`` returns its rowcount,
         0 when the key was already there (a resend)."""
 
@@ -199,7 +209,10 @@ class SqliteStore:
                 raise UnknownSessionError(f"unknown session {session_id!r}")
             return WriteResult(stored=True, last_seq=int(row[0]))
 
-        return self._writer.submit(work)
+        result: WriteResult = await self._writer.submit(work)
+        if result.stored:
+            self._changes.publish(session_id, result.last_seq)
+        return result
 
     async def add_frame(self, session_id: str, frame: FrameRecord) -> WriteResult:
         rows, cols = frame.mask.shape

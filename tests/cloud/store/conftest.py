@@ -1,7 +1,7 @@
 """Backend-parametrised store fixtures: every contract test runs once per ``SessionStore`` backend.
 
-A new backend adds one entry to ``BACKENDS`` (a factory that opens the store on a location that
-survives reopening) and must then pass ``test_contract.py`` unchanged.
+A new backend adds one entry to ``BACKENDS`` (the name, its pytest marks, and how to open it on
+a location that survives reopening) and must then pass ``test_contract.py`` unchanged.
 """
 
 from __future__ import annotations
@@ -13,14 +13,27 @@ import pytest
 
 from darkread.cloud.store import SessionStore, SqliteStore
 
-
-async def _sqlite(location: Path) -> SessionStore:
-    return SqliteStore(location / "sqlite")
-
-
-BACKENDS: dict[str, Callable[[Path], Awaitable[SessionStore]]] = {"sqlite": _sqlite}
-
 Opener = Callable[[], Awaitable[SessionStore]]
+
+
+def _sqlite(request: pytest.FixtureRequest, tmp_path: Path) -> Opener:
+    async def open_() -> SessionStore:
+        return SqliteStore(tmp_path / "sqlite")
+
+    return open_
+
+
+def _postgres(request: pytest.FixtureRequest, tmp_path: Path) -> Opener:
+    from darkread.cloud.store.postgres import PostgresStore
+
+    url = request.getfixturevalue("postgres_url")  # a fresh database on the session's real server
+    return lambda: PostgresStore.open(url)
+
+
+BACKENDS: dict[str, tuple[Callable[[pytest.FixtureRequest, Path], Opener], tuple[pytest.MarkDecorator, ...]]] = {
+    "sqlite": (_sqlite, ()),
+    "postgres": (_postgres, (pytest.mark.postgres,)),
+}
 
 
 @pytest.fixture
@@ -28,11 +41,11 @@ def anyio_backend() -> str:
     return "asyncio"
 
 
-@pytest.fixture(params=sorted(BACKENDS))
+@pytest.fixture(params=[pytest.param(name, marks=marks) for name, (_, marks) in sorted(BACKENDS.items())])
 def open_store(request: pytest.FixtureRequest, tmp_path: Path) -> Opener:
     """``await open_store()`` opens the backend on this test's location (again: a restart)."""
-    factory = BACKENDS[request.param]
-    return lambda: factory(tmp_path)
+    factory, _ = BACKENDS[request.param]
+    return factory(request, tmp_path)
 
 
 @pytest.fixture

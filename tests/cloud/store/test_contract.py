@@ -164,3 +164,17 @@ async def test_an_open_store_answers_ping_and_a_closed_one_refuses_writes(open_s
     await store.close()
     with pytest.raises(StoreError, match="closed"):
         await store.open_session(spec("s"))
+
+
+async def test_subscribers_hear_of_each_commit_once(store: SessionStore) -> None:
+    heard: list[tuple[str, int]] = []
+    unsubscribe = store.subscribe(lambda session_id, last_seq: heard.append((session_id, last_seq)))
+    await store.open_session(spec("s"))
+    await store.add_frame("s", frame(0))
+    await store.add_frame("s", frame(0))  # a duplicate changes nothing: nobody is told
+    await store.add_page_break("s", PageBreak(1, 5))
+    await asyncio.sleep(0.2)  # a backend relaying other instances' commits must not echo its own
+    assert heard == [("s", 0), ("s", 1)]
+    unsubscribe()
+    await store.add_frame("s", frame(2))
+    assert heard == [("s", 0), ("s", 1)]
