@@ -106,3 +106,25 @@ def test_an_instance_killed_mid_stream_the_other_serves_the_whole_session(tmp_pa
             edge.join(timeout=10)
         a.stop()
         b.stop()
+
+
+def test_paced_replays_over_two_instances_store_every_frame_once(tmp_path: Path, postgres_url: str) -> None:
+    """The short form of ``make bench``'s 50 replays for 60 s: 8 replays at 1x for 4 s, the first
+    instance SIGKILLed halfway (its replays fail over to the second)."""
+    from darkread.bench.replays import count_stored_in, run_replays
+
+    a = CloudProcess(tmp_path / "a", database_url=postgres_url)
+    b = CloudProcess(tmp_path / "b", database_url=postgres_url)
+    a.launch()
+    b.launch()
+    try:
+        a.wait_ready(60)
+        b.wait_ready(60)
+        outcome = run_replays([a.ws_url, b.ws_url], API_KEY, count_stored_in(postgres_url), sessions=8, seconds=4.0,
+                              at_half=a.kill)  # fmt: skip
+        assert outcome.exactly_once, outcome
+        assert outcome.stored == outcome.submitted == 8 * 120
+        assert outcome.failovers >= 4  # the replays that started on A moved to B
+    finally:
+        a.stop()
+        b.stop()
