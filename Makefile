@@ -8,7 +8,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 EXTRAS ?= edge,cloud,dev,train
 
-.PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps
+.PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps postgres-deps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
@@ -28,13 +28,21 @@ system-deps:  ## optional Debian packages (Tesseract OCR, extra fonts) when run 
 		command -v tesseract >/dev/null || (apt-get update -qq && apt-get install -y -qq tesseract-ocr tesseract-ocr-eng >/dev/null) || true; \
 	else echo "system-deps: not root or no apt-get; Tesseract stays optional"; fi
 
-test: $(STAMP)  ## run the whole test suite
+postgres-deps:  ## Debian's PostgreSQL server (initdb, pg_ctl) for the tests and benchmarks, when run as root
+	@if ls /usr/lib/postgresql/*/bin/pg_ctl >/dev/null 2>&1 || command -v pg_ctl >/dev/null; then :; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
+		echo "postgres-deps: installing Debian's postgresql"; \
+		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends postgresql >/dev/null) \
+			|| echo "postgres-deps: apt-get install postgresql failed; the postgres tests will say so"; \
+	else echo "postgres-deps: no PostgreSQL server binaries and not root: install postgresql (the postgres tests skip, or fail under CI)"; fi
+
+test: $(STAMP) postgres-deps  ## run the whole test suite
 	$(PY) -m pytest -q
 
-test-fast: $(STAMP)  ## unit tests only (no integration tests)
+test-fast: $(STAMP) postgres-deps  ## unit tests only (no integration tests)
 	$(PY) -m pytest -q -m "not slow"
 
-bench: $(STAMP)  ## benchmarks; prints a table and writes bench.json
+bench: $(STAMP) postgres-deps  ## benchmarks; prints a table and writes bench.json
 	$(PY) -m darkread.bench
 
 demo: $(STAMP)  ## read the shipped sample recording and compare with its printed text
