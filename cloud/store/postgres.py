@@ -124,10 +124,13 @@ _COLUMNS: dict[str, tuple[tuple[str, str], ...]] = {
 
 
 def _insert_sql(table: str) -> str:
+    """One statement for a batch's rows of ``table``; rows of sessions that do not exist (never
+    opened, or deleted meanwhile) are left out instead of failing the batch on the foreign key."""
     names = ", ".join(name for name, _ in _COLUMNS[table])
     arrays = ", ".join(f"%s::{kind}[]" for _, kind in _COLUMNS[table])
     return (
-        f"INSERT INTO {table} ({names}) SELECT * FROM unnest({arrays})"  # noqa: S608 - names are ours
+        f"INSERT INTO {table} ({names}) SELECT * FROM unnest({arrays}) AS r({names})"  # noqa: S608 - names are ours
+        " WHERE EXISTS (SELECT 1 FROM sessions s WHERE s.session_id = r.session_id)"
         " ON CONFLICT DO NOTHING RETURNING session_id, seq"
     )
 
@@ -136,15 +139,13 @@ _INSERT = {table: _insert_sql(table) for table in _COLUMNS}
 _LOCK_SESSIONS = (
     "SELECT session_id, last_seq FROM sessions WHERE session_id = ANY(%s) ORDER BY session_id FOR NO KEY UPDATE"
 )
+# Every seq of a batch is stored afterwards (now or before: a duplicate), so a session's last_seq
+# is the greater of its own and the batch's highest; only sessions that advance are told.
 _ADVANCE = f"""
-    WITH stored AS (SELECT * FROM unnest(%s::text[], %s::bigint[]) AS t(session_id, top)),
-    advanced AS (
-        UPDATE sessions s SET last_seq = GREATEST(s.last_seq, stored.top), updated_s = %s
-        FROM stored WHERE s.session_id = stored.session_id
-        RETURNING s.session_id, s.last_seq
-    )
-    SELECT session_id, last_seq, pg_notify('{CHANNEL}', %s || ' ' || last_seq || ' ' || session_id)::text
-    FROM advanced
+    WITH batch AS (SELECT * FROM unnest(%s::text[], %s::bigint[]) AS t(session_id, top))
+    UPDATE sessions s SET last_seq = batch.top, updated_s = %s
+    FROM batch WHERE s.session_id = batch.session_id AND s.last_seq < batch.top
+    RETURNING s.session_id, s.last_seq, pg_notify('{CHANNEL}', %s || ' ' || s.last_seq || ' ' || s.session_id)::text
 """  # noqa: S608 - the channel is ours
 _SESSIONS = """
     SELECT s.session_id, device_id, mode, sensor_w, sensor_h, fovea_h, fovea_w, created_s, updated_s, last_seq,
@@ -244,8 +245,9 @@ class _Insert:
 class _BatchWriter:
     """Group commit: one task commits every waiting insert in one transaction."""
 
-    def __init__(self, pool: AsyncConnectionPool[Any], instance_id: str, changes: ChangeFeed) -> None:
-        self.pool = pool
+    def __init__(self, url: str, instance_id: str, changes: ChangeFeed) -> None:
+        self.url = url
+        self._conn: psycopg.AsyncConnection[Any] | None = None
         self.instance_id = instance_id
         self.changes = changes
         self._queue: asyncio.Queue[_Insert | None] = asyncio.Queue()
@@ -281,7 +283,8 @@ class _BatchWriter:
                 batch.append(job)
             await self._commit(batch)
             if stop:
-                return
+                break
+        await self._drop_connection()
 
     async def _commit(self, batch: list[_Insert]) -> None:
         try:
@@ -309,27 +312,44 @@ class _BatchWriter:
             self.changes.publish(session_id, last_seq)
 
     async def _transaction(self, batch: list[_Insert]) -> tuple[dict[str, int], set[tuple[str, str, int]]]:
-        """Insert the batch; the last_seq of every known session in it and the keys stored."""
+        """Insert the batch; the last_seq of every known session in it and the keys stored.
+
+        The statements do not depend on each other's results, so they go out pipelined: the
+        whole transaction costs one round trip (and one WAL flush at commit)."""
         sessions = sorted({job.session_id for job in batch})
-        stored: set[tuple[str, str, int]] = set()
-        async with self.pool.connection() as conn, conn.transaction():
-            cursor = await conn.execute(_LOCK_SESSIONS, (sessions,))
-            known = {session_id: int(last_seq) for session_id, last_seq in await cursor.fetchall()}
-            by_table: dict[str, list[tuple[Any, ...]]] = defaultdict(list)
-            for job in batch:
-                if job.session_id in known:
-                    by_table[job.table].append(job.row)
-            for table, rows in by_table.items():
-                columns = [list(column) for column in zip(*rows, strict=True)]
-                cursor = await conn.execute(_INSERT[table], columns)
-                stored.update((table, session_id, int(seq)) for session_id, seq in await cursor.fetchall())
-            tops: dict[str, int] = {}
-            for _, session_id, seq in stored:
-                tops[session_id] = max(tops.get(session_id, -1), seq)
-            if tops:
-                cursor = await conn.execute(_ADVANCE, (list(tops), list(tops.values()), time.time(), self.instance_id))
-                known.update({session_id: int(last_seq) for session_id, last_seq, _ in await cursor.fetchall()})
+        rows_of: dict[str, list[tuple[Any, ...]]] = defaultdict(list)
+        tops: dict[str, int] = {}
+        for job in batch:
+            rows_of[job.table].append(job.row)
+            tops[job.session_id] = max(tops.get(job.session_id, -1), job.seq)
+        conn = await self._connection()
+        try:
+            async with conn.pipeline(), conn.transaction():
+                locked = await conn.execute(_LOCK_SESSIONS, (sessions,))
+                inserts = [
+                    await conn.execute(_INSERT[table], [list(column) for column in zip(*rows, strict=True)])
+                    for table, rows in rows_of.items()
+                ]
+                advance = await conn.execute(_ADVANCE, (list(tops), list(tops.values()), time.time(), self.instance_id))
+            known = {session_id: int(last_seq) for session_id, last_seq in await locked.fetchall()}
+            stored = {(table, session_id, int(seq)) for table, cursor in zip(rows_of, inserts, strict=True)
+                      for session_id, seq in await cursor.fetchall()}  # fmt: skip
+            known.update({session_id: int(last_seq) for session_id, last_seq, _ in await advance.fetchall()})
+        except BaseException:
+            await self._drop_connection()
+            raise
         return known, stored
+
+    async def _connection(self) -> psycopg.AsyncConnection[Any]:
+        """The writer's own connection (no pool checkout per batch), reopened after a failure."""
+        if self._conn is None or self._conn.closed:
+            self._conn = await psycopg.AsyncConnection.connect(self.url, autocommit=True, connect_timeout=10)
+        return self._conn
+
+    async def _drop_connection(self) -> None:
+        if self._conn is not None:
+            await self._conn.close()
+            self._conn = None
 
 
 class PostgresStore:
@@ -344,7 +364,7 @@ class PostgresStore:
         self.instance_id = uuid.uuid4().hex[:12]
         self._blob_pool = blob_pool
         self._changes = ChangeFeed()
-        self._writer = _BatchWriter(pool, self.instance_id, self._changes)
+        self._writer = _BatchWriter(url, self.instance_id, self._changes)
         self._listener = asyncio.create_task(self._listen(), name="darkread-pg-listen")
         self._closed = False
 

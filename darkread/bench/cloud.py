@@ -14,6 +14,7 @@ an interpreter lock; each stream pipelines up to 32 unacknowledged frames, as th
 from __future__ import annotations
 
 import asyncio
+import logging
 import os
 import signal
 import socket
@@ -163,6 +164,7 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
         instances[0] = list(_start_server(ctx.scratch / "replay-a", database_url, port=port))
 
     sessions, seconds = 50, 15.0 if ctx.quick else 60.0
+    logging.getLogger("darkread.edge.uplink").setLevel(logging.ERROR)  # 25 failovers, one line each
     try:
         urls = [f"ws://127.0.0.1:{port}/v1/stream" for _, port in instances]
         outcome = run_replays(urls, API_KEY, count_stored_in(database_url), sessions=sessions, seconds=seconds,
