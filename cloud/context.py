@@ -1,4 +1,4 @@
-"""What every request handler shares: settings, store, metrics and the OCR backend."""
+"""What every request handler shares: settings, store, metrics, the OCR backend, live pages."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING
 from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader, APIKeyQuery
 
+from .live import LivePages
 from .metrics import Metrics
-from .pages import PageAssembler
 from .settings import Settings
 from .store import SessionStore
 
@@ -24,7 +24,7 @@ class AppContext:
     store: SessionStore
     metrics: Metrics
     ocr: OcrBackend
-    pages: PageAssembler
+    live: LivePages
 
     def key_matches(self, candidate: str | None) -> bool:
         """True when no key is configured, or ``candidate`` equals it (constant-time)."""

@@ -37,8 +37,16 @@ class Settings(BaseSettings):
     max_in_flight: int = Field(64, ge=1, description="unacked messages per connection before reading pauses")
     hello_timeout_s: float = Field(10.0, gt=0, description="time a client has to send hello")
 
-    # Page assembly.
-    max_frames_per_page: int = Field(4000, ge=1, description="most recent frames stitched into a page")
+    # Live pages.
+    live_idle_s: float = Field(300.0, gt=0, description="a session's pages leave memory after this idle time")
+    session_expire_s: float = Field(
+        0.0, ge=0, description="sessions idle this long are deleted with everything stored; 0 keeps them"
+    )
+    ask_catch_up_s: float = Field(10.0, ge=0, description="an ask first waits at most this for frames stored before it")
+    page_lost_after_s: float = Field(0.25, gt=0, description="registration lost this long (event time) starts a page")
+    max_page_pixels: int = Field(2_000_000, ge=10_000, description="a page whose canvas outgrows this starts anew")
+    stitch_threads: int = Field(2, ge=1, description="threads stitching frames into pages (all sessions)")
+    ocr_threads: int = Field(1, ge=1, description="threads rendering and reading pages (all sessions)")
 
     # OCR. "local" is the embedded rapidocr engine.
     ocr_backend: OcrBackendName = "local"

@@ -30,10 +30,23 @@ from darkread.proto.errors import (
     ProtocolError,
     UnexpectedMessageError,
 )
-from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, Message, Page, Welcome, decode, encode
+from darkread.proto.messages import (
+    Ack,
+    Error,
+    Frame,
+    Gaze,
+    Heartbeat,
+    Hello,
+    Message,
+    NewPage,
+    Page,
+    Welcome,
+    decode,
+    encode,
+)
 
 from .context import AppContext
-from .store import FrameRecord, GazeRecord, PageRecord, SessionSpec, StoreError, WriteResult
+from .store import FrameRecord, GazeRecord, PageBreak, PageRecord, SessionSpec, StoreError, WriteResult
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +63,7 @@ class _Pending:
 
     result: asyncio.Future[WriteResult]  # a task started on arrival, so writes queue in order
     kind: str
+    session_id: str
 
 
 @dataclass(frozen=True)
@@ -99,6 +113,7 @@ class StreamConnection:
             session_id=message.session_id,
             last_acked_seq=last_seq,
             max_message_bytes=self.context.settings.max_message_bytes,
+            features=("new_page",),
         )
 
     def _on_streaming(self, message: Message) -> _Pending | None:
@@ -109,15 +124,20 @@ class StreamConnection:
                 raise UnexpectedMessageError("frame received but hello.mode is 'pages'")
             if message.shape != self.hello.fovea:
                 raise BadMaskError(f"frame shape {message.shape} differs from hello.fovea {self.hello.fovea}")
-            return _Pending(asyncio.ensure_future(store.add_frame(session_id, frame_record(message))), "frame")
+            return _Pending(asyncio.ensure_future(store.add_frame(session_id, frame_record(message))), "frame", session_id)
         if isinstance(message, Page):
             if self.hello.mode != "pages":
                 raise UnexpectedMessageError("page received but hello.mode is 'frames'")
             record = PageRecord(message.seq, message.page_id, message.t_us, message.mask(), message.lines)
-            return _Pending(asyncio.ensure_future(store.add_page(session_id, record)), "page")
+            return _Pending(asyncio.ensure_future(store.add_page(session_id, record)), "page", session_id)
         if isinstance(message, Gaze):
             record = GazeRecord(message.seq, message.t_us, message.px)
-            return _Pending(asyncio.ensure_future(store.add_gaze(session_id, record)), "gaze")
+            return _Pending(asyncio.ensure_future(store.add_gaze(session_id, record)), "gaze", session_id)
+        if isinstance(message, NewPage):
+            if self.hello.mode != "frames":
+                raise UnexpectedMessageError("new_page received but hello.mode is 'pages'")
+            mark = PageBreak(message.seq, message.t_us)
+            return _Pending(asyncio.ensure_future(store.add_page_break(session_id, mark)), "new_page", session_id)
         if isinstance(message, Heartbeat):
             log.debug("session %s heartbeat t_us=%d %s", session_id, message.t_us, message.stats)
             return None
@@ -203,6 +223,8 @@ async def _send_loop(websocket: WebSocket, outbox: asyncio.Queue[_Outgoing | Non
                 reply = _Close(CloseCode.INTERNAL_ERROR, f"could not store {item.kind}: {exc}")
             else:
                 if result.stored:
+                    if item.kind in ("frame", "new_page"):
+                        context.live.notify(item.session_id)  # the session's pages take it up
                     if item.kind == "frame":
                         metrics.frames_stored.inc()
                     elif item.kind == "page":

@@ -250,6 +250,9 @@ class Welcome(_Checked):
     last_acked_seq: int = _spec(lambda v, n: _int(v, n, -1, INT64_MAX))
     max_message_bytes: int = _spec(lambda v, n: _int(v, n, 1, 2**31))
     v: int = _spec(_int, PROTOCOL_VERSION)
+    # optional message types this server accepts beyond the version's core set (e.g. "new_page");
+    # a client sends those only when listed, so old servers and old clients keep working
+    features: tuple[str, ...] | None = _spec(_optional(_list_of(lambda v, n: _text(v, n, 64))), None)
 
 
 @dataclass(frozen=True)
@@ -285,6 +288,16 @@ class Page(_Checked):
 
     def mask(self) -> np.ndarray:
         return unpack_mask(self.shape, self.bits)
+
+
+@dataclass(frozen=True)
+class NewPage(_Checked):
+    """client -> server (mode "frames", if ``welcome.features`` lists "new_page"): the wearer
+    moved to other text; frames after this seq start a new page."""
+
+    TYPE: ClassVar[str] = "new_page"
+    seq: int = _spec(_seq)
+    t_us: int = _spec(_int)
 
 
 @dataclass(frozen=True)
@@ -324,9 +337,9 @@ class Error(_Checked):
     fatal: bool = _spec(_bool)
 
 
-Message: TypeAlias = Hello | Welcome | Frame | Page | Gaze | Heartbeat | Ack | Error
+Message: TypeAlias = Hello | Welcome | Frame | Page | NewPage | Gaze | Heartbeat | Ack | Error
 MESSAGE_TYPES: dict[str, type[Message]] = {
-    cls.TYPE: cls for cls in (Hello, Welcome, Frame, Page, Gaze, Heartbeat, Ack, Error)
+    cls.TYPE: cls for cls in (Hello, Welcome, Frame, Page, NewPage, Gaze, Heartbeat, Ack, Error)
 }
 
 
@@ -406,6 +419,7 @@ __all__ = [
     "Hello",
     "Message",
     "Mode",
+    "NewPage",
     "Page",
     "Welcome",
     "check_mask",

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from darkread.cloud.context import AppContext
 from darkread.cloud.metrics import Metrics
-from darkread.cloud.pages import PageAssembler
+from darkread.cloud.live import LivePages
 from darkread.cloud.settings import Settings
 from darkread.cloud.store import SqliteStore
 from darkread.cloud.stream import StreamConnection, StreamState, _Pending
@@ -36,7 +36,9 @@ def context(tmp_path_factory: pytest.TempPathFactory) -> Iterator[AppContext]:
     data = Path(tmp_path_factory.mktemp("state"))
     store = SqliteStore(data)
     settings = Settings(_env_file=None, data_dir=data, max_message_bytes=4096)  # type: ignore[call-arg]
-    yield AppContext(settings=settings, store=store, metrics=Metrics(), ocr=NoOcr(), pages=PageAssembler(store, 100))
+    live = LivePages(store, NoOcr())  # type: ignore[arg-type]
+    yield AppContext(settings=settings, store=store, metrics=Metrics(), ocr=NoOcr(), live=live)  # type: ignore[arg-type]
+    asyncio.run(live.close())
     asyncio.run(store.close())
 
 
@@ -70,6 +72,7 @@ def test_anything_after_hello_is_handled_or_refused(context: AppContext, data: b
             assert result.last_seq >= 0
         else:
             assert outgoing is None  # a heartbeat
+        await context.live.forget("fuzz")  # its pages belong to this event loop
 
     asyncio.run(scenario())
 
