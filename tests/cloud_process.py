@@ -65,7 +65,8 @@ class CloudProcess:
 
     def launch(self) -> None:
         """Start the process without waiting (start several instances side by side)."""
-        env = dict(os.environ, DARKREAD_API_KEY=self.api_key)
+        # a loaded machine stitches slowly: an ask waits for every stored frame, as the tests check
+        env = dict(os.environ, DARKREAD_API_KEY=self.api_key, DARKREAD_ASK_CATCH_UP_S="60")
         if self.database_url:
             env["DARKREAD_DATABASE_URL"] = self.database_url
         log = open(self.log_path, "ab") if self.log_path else subprocess.DEVNULL  # noqa: SIM115 - closed below

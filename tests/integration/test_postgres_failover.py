@@ -95,6 +95,7 @@ def test_an_instance_killed_mid_stream_the_other_serves_the_whole_session(tmp_pa
         reference = open_recording(SAMPLE_RECORDING).text
         rates = error_rates(reference, str(answer["text"]))
         assert rates.cer <= MAX_CER, f"B read {answer['text']!r} (CER {rates.cer:.1%}), expected {reference!r}"
+        assert answer.get("frames_pending") is not True  # B had stitched every stored frame
         print(  # noqa: T201 - the figures the issue asks for
             f"\nfailover: {len(sent)} frames sent, A killed after ack {killed_after}, {len(stored)} stored once each,"
             f" B read CER {rates.cer:.1%}: {answer['text']!r}"
