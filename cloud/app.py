@@ -15,7 +15,7 @@ from prometheus_client import make_asgi_app
 from darkread import __version__
 
 from .context import AppContext
-from .metrics import Metrics
+from .prometheus import Metrics
 from .ocr import OcrBackend, create_backend
 from .live import LiveConfig, LivePages, PagingConfig
 from .routes import api, public

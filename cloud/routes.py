@@ -15,11 +15,11 @@ from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Respon
 from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 
-from darkread.edge.stitch.frames import ink_mask_to_paper
+from darkread.image_codec import encode_png
+from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .context import AppContext, get_context, require_api_key
-from .live import NoPageError
-from .ocr.base import OcrError, OcrUnavailableError, encode_png
+from .errors import NoPageError, OcrError, OcrUnavailableError
 from .store import SessionInfo
 
 _T = TypeVar("_T")

@@ -147,7 +147,7 @@ def read_recording(
         stage_seconds=stages,
     )
     if recording.text is not None:
-        from darkread.eval.metrics import error_rates
+        from darkread.eval.error_rates import error_rates
 
         rates = error_rates(recording.text, result.text)
         result.reference, result.cer, result.wer = recording.text, rates.cer, rates.wer

@@ -31,3 +31,19 @@ def real_events_dir(shared_data: Path) -> Path:
 @pytest.fixture(scope="session")
 def aria_dir(shared_data: Path) -> Path:
     return shared_data / "aria" / "projectaria_tools"
+
+
+@pytest.fixture(scope="session")
+def still_pangram():
+    """The pangram read with the head still (``factories.pangram_session``)."""
+    from factories import pangram_session
+
+    return pangram_session("still")
+
+
+@pytest.fixture(scope="session")
+def walking_pangram():
+    """The pangram read while walking (``factories.pangram_session``)."""
+    from factories import pangram_session
+
+    return pangram_session("walking")

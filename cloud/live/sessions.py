@@ -19,16 +19,13 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
+from ..errors import NoPageError, StoreError
 from ..ocr.base import OcrBackend
-from ..store import FrameRecord, PageBreak, SessionStore, StoreError
+from ..store import PageBreak, SessionStore, StoredFrame
 from .paging import LivePage, Paginator, PagingConfig, RenderedPage
 from .reading import LineReader, PageReading
 
 log = logging.getLogger(__name__)
-
-
-class NoPageError(Exception):
-    """The session has nothing to read yet, or not the page asked for."""
 
 
 @dataclass(frozen=True)
@@ -113,7 +110,7 @@ class SessionPages:
             async with self._progress:
                 self._progress.notify_all()
 
-    def _stitch(self, frames: list[FrameRecord], breaks: list[PageBreak]) -> None:
+    def _stitch(self, frames: list[StoredFrame], breaks: list[PageBreak]) -> None:
         """Worker thread: every frame once, with the explicit breaks before it applied first."""
         for frame in frames:
             while self._breaks_applied < len(breaks) and breaks[self._breaks_applied].seq < frame.seq:

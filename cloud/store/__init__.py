@@ -3,12 +3,12 @@
 from .blobs import BlobStore, FileBlobs
 from .protocol import SessionStore
 from .records import (
-    FrameRecord,
     GazeRecord,
     PageBreak,
     PageRecord,
     SessionInfo,
     SessionSpec,
+    StoredFrame,
     StoreError,
     UnknownSessionError,
     WriteResult,
@@ -19,7 +19,6 @@ from .sqlite import SqliteStore
 __all__ = [
     "BlobStore",
     "FileBlobs",
-    "FrameRecord",
     "GazeRecord",
     "PageBreak",
     "PageRecord",
@@ -28,6 +27,7 @@ __all__ = [
     "SessionStore",
     "SqliteStore",
     "StoreError",
+    "StoredFrame",
     "UnknownSessionError",
     "WriteResult",
 ]

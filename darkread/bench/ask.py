@@ -23,9 +23,9 @@ import numpy as np
 
 from darkread.bench import BenchContext, Figure
 from darkread.bench.cloud import API_KEY, _start_server
-from darkread.cloud.store import FrameRecord, SessionSpec, SqliteStore
+from darkread.cloud.store import SessionSpec, SqliteStore, StoredFrame
 from darkread.paths import SAMPLE_RECORDING
-from darkread.proto.messages import Ack, Frame, Hello, Welcome, decode, encode, pack_mask
+from darkread.proto.messages import Ack, Frame, Hello, Welcome, decode, encode
 
 ASK_EVERY_S = 0.5
 WEARERS = 20
@@ -33,14 +33,14 @@ WEARER_ASK_EVERY_S = 3.0
 HEADERS = {"X-API-Key": API_KEY}
 
 
-def recorded_frames(ctx: BenchContext) -> tuple[list[FrameRecord], float]:
+def recorded_frames(ctx: BenchContext) -> tuple[list[StoredFrame], float]:
     """The sample recording's frames as the cloud stored them, and ``darkread read``'s answer_ms."""
     from darkread.read import read_recording
 
     out = ctx.scratch / "read-sample"
     result = read_recording(SAMPLE_RECORDING, out_dir=out)
 
-    async def load() -> list[FrameRecord]:
+    async def load() -> list[StoredFrame]:
         store = SqliteStore(out / "cloud")
         try:
             session = (await store.sessions())[0].session_id
@@ -51,7 +51,7 @@ def recorded_frames(ctx: BenchContext) -> tuple[list[FrameRecord], float]:
     return asyncio.run(load()), result.answer_ms
 
 
-def repeated(frames: list[FrameRecord], count: int, first_seq: int = 0) -> list[FrameRecord]:
+def repeated(frames: list[StoredFrame], count: int, first_seq: int = 0) -> list[StoredFrame]:
     """``count`` frames: the recording over and over, each pass later in time than the last."""
     span = frames[-1].t_us - frames[0].t_us + 100_000
     out = []
@@ -63,13 +63,11 @@ def repeated(frames: list[FrameRecord], count: int, first_seq: int = 0) -> list[
     return out
 
 
-def to_wire(frame: FrameRecord) -> bytes:
-    shape, bits = pack_mask(frame.mask)
-    return encode(Frame(frame.seq, frame.frame_id, frame.t_us, frame.origin, frame.gaze_px, frame.gaze_rad,
-                        frame.events_used, shape, bits))  # fmt: skip
+def to_wire(frame: StoredFrame) -> bytes:
+    return encode(Frame.of(frame, seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used))
 
 
-def preload(data_dir: Path, session_id: str, frames: list[FrameRecord]) -> None:
+def preload(data_dir: Path, session_id: str, frames: list[StoredFrame]) -> None:
     async def write() -> None:
         store = SqliteStore(data_dir)
         try:
@@ -88,7 +86,7 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-async def stream_and_ask(base: str, session_id: str, frames: list[FrameRecord], ask_every_s: float) -> list[float]:
+async def stream_and_ask(base: str, session_id: str, frames: list[StoredFrame], ask_every_s: float) -> list[float]:
     """Stream ``frames`` at 1x real time (their t_us) and ask every ``ask_every_s``; answer times (ms)."""
     import httpx
     from websockets.asyncio.client import connect
@@ -161,7 +159,7 @@ def _server(ctx: BenchContext, name: str) -> tuple[object, str]:
     return process, f"http://127.0.0.1:{port}"
 
 
-def _wearers(base: str, frames: list[FrameRecord]) -> tuple[float, bool]:
+def _wearers(base: str, frames: list[StoredFrame]) -> tuple[float, bool]:
     """20 wearers at 1x real time, each asking every few seconds; p95 answer and exactly-once."""
     import httpx
 
@@ -175,16 +173,16 @@ def _wearers(base: str, frames: list[FrameRecord]) -> tuple[float, bool]:
     return p95(latencies), all(count == len(frames) for count in counts)
 
 
-def from_scratch_ms(frames: list[FrameRecord]) -> tuple[float, float]:
+def from_scratch_ms(frames: list[StoredFrame]) -> tuple[float, float]:
     """The old way to answer: stitch every stored frame, then read the whole page (ms each)."""
     from darkread.cloud.ocr import create_backend
     from darkread.cloud.settings import Settings
-    from darkread.edge.stitch import StitchFrame, stitch_page
+    from darkread.stitch import stitch_page
 
     ocr = create_backend(Settings(_env_file=None))  # type: ignore[call-arg]
     ocr.ready()
     started = time.perf_counter()
-    page = stitch_page([StitchFrame(f.frame_id, f.t_us, f.mask, f.origin, f.gaze_px) for f in frames])
+    page = stitch_page(frames)
     stitched = time.perf_counter()
     ocr.read(page.to_grey())
     return (stitched - started) * 1000, (time.perf_counter() - stitched) * 1000

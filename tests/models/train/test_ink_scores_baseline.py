@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from darkread.models.train.baseline import BaselineParams, activity, predict, tune
-from darkread.models.train.metrics import ink_scores
+from darkread.models.train.ink_scores import ink_scores
 
 
 def test_ink_scores_on_a_known_case() -> None:

@@ -1,38 +1,8 @@
-"""Types of the stitcher: what goes in (frames), how it behaves (config), what comes out (page)."""
+"""How the stitcher behaves: every threshold in one frozen dataclass."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
-import cv2
-import numpy as np
-
-
-@dataclass(frozen=True)
-class StitchFrame:
-    """One reconstructed binary window and where it was taken.
-
-    ``origin_xy`` and ``gaze_px`` are sensor pixels; the page moves in the sensor with the head, so
-    they predict the frame's place on the page only roughly (the stitcher refines by correlation).
-    """
-
-    frame_id: int
-    t_us: int  # event clock
-    mask: np.ndarray  # uint8 [h, w] ink mask (1 = ink, 0 = paper); default 100x200
-    origin_xy: tuple[int, int]  # window top-left in sensor pixels
-    gaze_px: tuple[float, float]  # gaze pixel (u, v) in sensor pixels at t_us
-
-    def __post_init__(self) -> None:
-        mask = np.asarray(self.mask)
-        if mask.ndim != 2 or mask.shape[0] < 8 or mask.shape[1] < 8:
-            raise ValueError(f"frame {self.frame_id}: mask must be a 2-D image of at least 8x8, got shape {mask.shape}")
-        if mask.dtype != np.bool_ and not np.issubdtype(mask.dtype, np.integer):
-            raise ValueError(f"frame {self.frame_id}: mask must be uint8 (1 = ink), got {mask.dtype}")
-        if mask.dtype != np.uint8 or mask.max(initial=0) > 1:
-            mask = (mask > 0).astype(np.uint8)
-        object.__setattr__(self, "mask", mask)
-        object.__setattr__(self, "origin_xy", (int(self.origin_xy[0]), int(self.origin_xy[1])))
-        object.__setattr__(self, "gaze_px", (float(self.gaze_px[0]), float(self.gaze_px[1])))
+from dataclasses import dataclass
 
 
 @dataclass(frozen=True)
@@ -194,49 +164,3 @@ class StitchConfig:
             raise ValueError("alpha must be in [0, 1] and ink_threshold in (0, 1)")
         if not 0.0 < self.grey_saturation <= 1.0:
             raise ValueError(f"grey_saturation must be in (0, 1], got {self.grey_saturation}")
-
-
-def ink_mask_to_paper(mask: np.ndarray) -> np.ndarray:
-    """Ink mask (nonzero = ink) -> uint8 black (0) on white (255), as OCR engines and people read it."""
-    return np.where(np.asarray(mask) != 0, 0, 255).astype(np.uint8)
-
-
-def ink_probability_to_paper(probability: np.ndarray, saturation: float = 0.8) -> np.ndarray:
-    """Ink probability in [0, 1] -> uint8 black (ink) on white (paper), saturating at ``saturation``."""
-    shade = np.clip(np.asarray(probability, np.float32) / saturation, 0.0, 1.0)
-    return np.round(255.0 * (1.0 - shade)).astype(np.uint8)
-
-
-@dataclass
-class Page:
-    """A stitched page. Coordinates are page pixels, (0, 0) at the top-left of the covered area."""
-
-    image: np.ndarray  # uint8 ink mask of the whole page (1 = ink)
-    lines: list[tuple[int, int, int, int]]  # line boxes (x0, y0, x1, y1), top to bottom
-    line_images: list[np.ndarray]  # each line's ink mask (the page cut to its box; the line's own strip dominates it)
-    frames_used: int = 0
-    frames_dropped: int = 0
-    frame_positions: dict[int, tuple[float, float]] = field(default_factory=dict)  # frame_id -> top-left on the page
-    skew_deg: float = 0.0  # rotation applied to level the text lines (cv2.getRotationMatrix2D sense)
-    # alpha-averaged ink probability behind ``image`` (float32, same shape); None when not stitched
-    ink_probability: np.ndarray | None = None
-    grey_saturation: float = 0.8
-
-    def to_grey(self) -> np.ndarray:
-        """Black-on-white uint8 page with shades where frames disagreed: what OCR should read.
-
-        Falls back to the binary page when no probability is known.
-        """
-        if self.ink_probability is None:
-            return ink_mask_to_paper(self.image)
-        return ink_probability_to_paper(self.ink_probability, self.grey_saturation)
-
-    def to_png_bytes(self) -> bytes:
-        """Black ink on white, 8-bit grey PNG."""
-        grey = ink_mask_to_paper(self.image)
-        if grey.size == 0:
-            grey = np.full((1, 1), 255, np.uint8)
-        ok, buf = cv2.imencode(".png", grey)
-        if not ok:
-            raise ValueError(f"cannot encode a page of shape {grey.shape} as PNG")
-        return buf.tobytes()

@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from darkread.edge.stitch import register_frame
+from darkread.stitch import register_frame
 
 
 def _crop(mask: np.ndarray, x: int, y: int, h: int = 100, w: int = 200) -> np.ndarray:
@@ -51,7 +51,7 @@ def test_reference_of_the_wrong_size_is_refused(rendered_page) -> None:
 @pytest.mark.parametrize("roll", [-1.2, 0.7])
 def test_recovers_a_small_rotation_of_the_frame(rendered_page, roll: float) -> None:
     import cv2
-    from darkread.edge.stitch.register import frame_transform
+    from darkread.stitch.register import frame_transform
 
     r = 8
     px, py = 200, 130
@@ -95,7 +95,7 @@ def test_the_vertical_margin_tells_the_true_line_from_its_neighbours(rendered_pa
 
 @pytest.mark.parametrize("shift", [(0, 0), (-70, 95), (110, -60)])
 def test_locate_frame_finds_a_crop_far_from_the_prediction(rendered_page, shift: tuple[int, int]) -> None:
-    from darkread.edge.stitch.register import locate_frame
+    from darkread.stitch.register import locate_frame
 
     rng = np.random.default_rng(1)
     radius = 120
@@ -111,7 +111,7 @@ def test_locate_frame_finds_a_crop_far_from_the_prediction(rendered_page, shift:
 
 
 def test_locate_frame_needs_known_content_with_ink(rendered_page) -> None:
-    from darkread.edge.stitch.register import locate_frame
+    from darkread.stitch.register import locate_frame
 
     radius = 60
     frame = _crop(rendered_page.mask, 200, 130)

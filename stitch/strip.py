@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from darkread.edge.stitch.canvas import Canvas
-from darkread.edge.stitch.frames import StitchConfig
-from darkread.edge.stitch.register import frame_transform
+from darkread.stitch.canvas import Canvas
+from darkread.stitch.config import StitchConfig
+from darkread.stitch.register import frame_transform
 
 STRIP_LAYERS = ("avg", "count", "conf", "best")
 

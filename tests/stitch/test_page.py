@@ -3,8 +3,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from darkread.edge.stitch import Page, StitchConfig
-from darkread.edge.stitch.page import (
+from darkread.stitch import StitchConfig, StitchedPage
+from darkread.stitch.page import (
     assign_lines,
     binarize,
     estimate_skew,
@@ -57,11 +57,11 @@ def test_main_column_span_skips_stray_ink() -> None:
 def test_png_is_black_ink_on_white() -> None:
     image = np.zeros((30, 40), np.uint8)
     image[10:20, 5:15] = 1
-    page = Page(image, [(5, 10, 15, 20)], [image[10:20, 5:15]], 3, 1)
+    page = StitchedPage(image, [(5, 10, 15, 20)], [image[10:20, 5:15]], 3, 1)
     decoded = cv2.imdecode(np.frombuffer(page.to_png_bytes(), np.uint8), cv2.IMREAD_UNCHANGED)
     assert decoded.shape == (30, 40)
     assert (decoded[image == 1] == 0).all() and (decoded[image == 0] == 255).all()
-    assert cv2.imdecode(np.frombuffer(Page(np.zeros((0, 0), np.uint8), [], []).to_png_bytes(), np.uint8), 0).shape == (
+    assert cv2.imdecode(np.frombuffer(StitchedPage(np.zeros((0, 0), np.uint8), [], []).to_png_bytes(), np.uint8), 0).shape == (
         1,
         1,
     )
@@ -76,10 +76,10 @@ def test_skew_of_a_turned_page_is_found(rendered_page, angle: float) -> None:
 
 
 def test_grey_page_keeps_the_averaged_ink_probability() -> None:
-    from darkread.edge.stitch.frames import Page, ink_probability_to_paper
+    from darkread.stitch.stitched_page import StitchedPage, ink_probability_to_paper
 
     probability = np.array([[0.0, 0.4, 0.8, 1.0]], np.float32)
     assert ink_probability_to_paper(probability, 0.8).tolist() == [[255, 128, 0, 0]]
     binary = (probability > 0.4).astype(np.uint8)
-    assert Page(binary, [], []).to_grey().tolist() == [[255, 255, 0, 0]]  # no probability: the binary page
-    assert Page(binary, [], [], ink_probability=probability).to_grey()[0, 1] == 128
+    assert StitchedPage(binary, [], []).to_grey().tolist() == [[255, 255, 0, 0]]  # no probability: the binary page
+    assert StitchedPage(binary, [], [], ink_probability=probability).to_grey()[0, 1] == 128

@@ -8,7 +8,7 @@ import sys
 
 def test_stitch_imports_no_web_stack_torch_or_onnxruntime() -> None:
     code = (
-        "import sys, darkread.edge.stitch\n"
+        "import sys, darkread.stitch\n"
         "heavy = {'torch', 'onnxruntime', 'fastapi', 'starlette', 'uvicorn', 'PIL', 'matplotlib', 'scipy', 'rapidocr'}\n"
         "print(sorted(heavy & {name.split('.')[0] for name in sys.modules}))\n"
     )

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from darkread.edge.stitch import StitchFrame
+from darkread.frame_record import FrameRecord
 from PIL import Image, ImageDraw, ImageFont
 
 PARAGRAPH = (
@@ -64,7 +64,7 @@ class ScanParams:
 @dataclass
 class Reading:
     page: RenderedPage
-    frames: list[StitchFrame]
+    frames: list[FrameRecord]
     line_of_frame: list[int]  # true line index of each delivered frame
     head_xy: list[tuple[int, int]]  # page top-left in the sensor at each delivered frame (without rotation)
     window_centres: list[tuple[float, float]]  # page coordinates of each delivered window's centre
@@ -182,7 +182,7 @@ def simulate_reading(page: RenderedPage | None = None, params: ScanParams = Scan
     page = page or render_page()
     h, w = params.frame_hw
     head_at = _head_track(rng, params)
-    frames: list[StitchFrame] = []
+    frames: list[FrameRecord] = []
     lines: list[int] = []
     heads: list[tuple[int, int]] = []
     centres: list[tuple[float, float]] = []
@@ -202,11 +202,11 @@ def simulate_reading(page: RenderedPage | None = None, params: ScanParams = Scan
             if rng.random() < params.drop_prob:
                 continue
             frames.append(
-                StitchFrame(
+                FrameRecord(
                     frame_id=frame_id,
                     t_us=t,
                     mask=_degrade(rng, window, params),
-                    origin_xy=(int(origin[0]), int(origin[1])),
+                    origin=(int(origin[0]), int(origin[1])),
                     gaze_px=(float(gaze[0]), float(gaze[1])),
                 )
             )

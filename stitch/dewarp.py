@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from darkread.edge.stitch.canvas import Canvas
-from darkread.edge.stitch.frames import StitchConfig
+from darkread.stitch.canvas import Canvas
+from darkread.stitch.config import StitchConfig
 
 _FB_MAX_ERROR_PX = 1.0  # forward-backward KLT disagreement above which a track is discarded
 _MIN_SHIFT_PX = 0.25  # smaller corrections are not worth resampling (and blurring) the strip

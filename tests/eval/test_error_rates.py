@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pytest
 
-from darkread.eval.metrics import error_rates, normalize_text
+from darkread.eval.error_rates import error_rates, normalize_text
 
 
 def test_normalisation_collapses_whitespace_and_line_breaks() -> None:

@@ -17,9 +17,10 @@ from typing import Literal, NamedTuple
 
 import cv2
 import numpy as np
-from darkread.edge.stitch.dewarp import dewarp_strip
-from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
-from darkread.edge.stitch.page import (
+from darkread.frame_record import FrameRecord
+from darkread.stitch.config import StitchConfig
+from darkread.stitch.dewarp import dewarp_strip
+from darkread.stitch.page import (
     PageCanvas,
     assign_lines,
     binarize,
@@ -30,11 +31,14 @@ from darkread.edge.stitch.page import (
     text_bands,
     union_box,
 )
-from darkread.edge.stitch.register import Registration, locate_frame, register_frame
-from darkread.edge.stitch.segment import LineSegmenter
-from darkread.edge.stitch.strip import LineStrip
+from darkread.stitch.register import Registration, locate_frame, register_frame
+from darkread.stitch.segment import LineSegmenter
+from darkread.stitch.stitched_page import StitchedPage
+from darkread.stitch.strip import LineStrip
 
 log = logging.getLogger(__name__)
+
+MIN_FRAME_SIDE = 8  # smaller masks hold too little text to register by correlation
 
 
 @dataclass
@@ -86,7 +90,7 @@ Outcome = Literal["blank", "dropped", "placed", "registered"]
 
 
 class Placement(NamedTuple):
-    frame: StitchFrame
+    frame: FrameRecord
     outcome: Outcome
     score: float  # the match score it was placed with (0 when not registered)
 
@@ -116,18 +120,23 @@ class PageStitcher:
         self._positions: dict[int, tuple[float, float]] = {}
         self._score = 0.0  # the last decided frame's match score
 
-    def add(self, frame: StitchFrame) -> list[Placement]:
+    def add(self, frame: FrameRecord) -> list[Placement]:
+        if min(frame.mask.shape) < MIN_FRAME_SIDE:
+            raise ValueError(
+                f"frame {frame.frame_id}: the stitcher needs masks of at least {MIN_FRAME_SIDE}x{MIN_FRAME_SIDE}, "
+                f"got shape {frame.mask.shape}"
+            )
         return [self._place(decided, new_line) for decided, new_line in self._segmenter.push(frame)]
 
     def flush(self) -> list[Placement]:
         return [self._place(decided, new_line) for decided, new_line in self._segmenter.flush()]
 
-    def _place(self, frame: StitchFrame, new_line: bool) -> Placement:
+    def _place(self, frame: FrameRecord, new_line: bool) -> Placement:
         self._score = 0.0
         outcome = self._integrate(frame, new_line)
         return Placement(frame, outcome, self._score)
 
-    def snapshot(self) -> Page:
+    def snapshot(self) -> StitchedPage:
         """The page with the undecided frames integrated too, leaving this stitcher as it was."""
         if not self._segmenter.pending:
             return self.page()
@@ -163,7 +172,7 @@ class PageStitcher:
         self._page.add_strip(strip)
         self._lines.append(_FinishedLine.of(strip))
 
-    def _integrate(self, frame: StitchFrame, new_line: bool) -> Outcome:
+    def _integrate(self, frame: FrameRecord, new_line: bool) -> Outcome:
         cfg = self.cfg
         mask = frame.mask
         if mask.mean() < cfg.min_ink_fraction:
@@ -176,7 +185,7 @@ class PageStitcher:
         h, w = mask.shape
         r = cfg.search_radius_px
         correction = predict_correction(self._corrections, frame.t_us)
-        px, py = np.round(np.asarray(frame.origin_xy) + correction).astype(int).tolist()
+        px, py = np.round(np.asarray(frame.origin) + correction).astype(int).tolist()
         x, y = float(px), float(py)
         reference, seen = self._page.reference(self._strip, (px - r, py - r, px + w + r, py + h + r))
         roll = float(np.median(self._rolls)) if self._rolls else 0.0
@@ -204,7 +213,7 @@ class PageStitcher:
             score = self._score = reg.score
             x = px + reg.shift_xy[0] + (reg.subpixel_xy[0] if cfg.subpixel else 0.0)
             y = py + reg.shift_xy[1] + (reg.subpixel_xy[1] if cfg.subpixel else 0.0)
-            correction = np.array([x, y]) - np.asarray(frame.origin_xy)
+            correction = np.array([x, y]) - np.asarray(frame.origin)
             self._corrections.append((frame.t_us, correction))
             self._scores.append(score)
             self._registered += 1
@@ -226,7 +235,7 @@ class PageStitcher:
         return self._page.canvas.empty and (self._strip is None or self._strip.empty)
 
     def _search_anchor(
-        self, frame: StitchFrame, px: int, py: int, roll: float, current: Registration | None
+        self, frame: FrameRecord, px: int, py: int, roll: float, current: Registration | None
     ) -> Registration | None:
         """The whole frame matched against everything seen within ``anchor_search_px`` of the
         prediction, for a frame that found no good match near it: under walking the head bobs tens
@@ -249,7 +258,7 @@ class PageStitcher:
             return None
         if self._corrections:  # the head cannot have moved faster than it does
             t_last, last = self._corrections[-1]
-            moved = np.array([px + found.shift_xy[0], py + found.shift_xy[1]]) - np.asarray(frame.origin_xy) - last
+            moved = np.array([px + found.shift_xy[0], py + found.shift_xy[1]]) - np.asarray(frame.origin) - last
             reach = cfg.anchor_slack_px + cfg.max_head_speed_px_s * max(0, frame.t_us - t_last) / 1e6
             if float(np.hypot(*moved)) > reach:
                 log.debug("frame %d: a match %s px away is beyond the head's reach", frame.frame_id, found.shift_xy)
@@ -264,7 +273,7 @@ class PageStitcher:
         )
         return found
 
-    def _search_wide(self, frame: StitchFrame, px: int, py: int, roll: float) -> Registration | None:
+    def _search_wide(self, frame: FrameRecord, px: int, py: int, roll: float) -> Registration | None:
         """Registration over ``wide_search_px`` around the prediction for a frame whose best match lay
         on the rim of the usual search or was weak (the head moved more than predicted); None, and
         the frame is dropped, unless the peak is a true maximum that beats every match a line above or below
@@ -281,21 +290,21 @@ class PageStitcher:
             return None
         return reg
 
-    def page(self) -> Page:
+    def page(self) -> StitchedPage:
         """The page so far: finished lines plus the line being read."""
         cfg = self.cfg
         lines = list(self._lines)
         if self._strip is not None and not self._strip.empty:
             lines.append(_FinishedLine.of(self._strip))
         if not lines:
-            return Page(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
+            return StitchedPage(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
         box = union_box([ln.box for ln in lines])
         current = self._strip if self._strip is not None and not self._strip.empty else None
         avg, seen = self._page.reference(current, box)
         views = self._page.views(current, box)
         cover = covered_box(seen)
         if cover is None:
-            return Page(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
+            return StitchedPage(np.zeros((0, 0), np.uint8), [], [], self._used, self._dropped)
         cx0, cy0, cx1, cy1 = cover
         avg, views = avg[cy0:cy1, cx0:cx1], views[cy0:cy1, cx0:cx1]
         to_image = np.array([[1.0, 0.0, -(box[0] + cx0)], [0.0, 1.0, -(box[1] + cy0)]])  # page -> image
@@ -312,7 +321,7 @@ class PageStitcher:
             image = binarize(avg, cfg, views)
         boxes, images = self._line_boxes(lines, image, to_image)
         positions = {fid: _apply(to_image, xy) for fid, xy in self._positions.items()}
-        return Page(
+        return StitchedPage(
             image,
             boxes,
             images,
@@ -342,7 +351,7 @@ class PageStitcher:
         return boxes, images
 
 
-def stitch_page(frames: Sequence[StitchFrame], cfg: StitchConfig = StitchConfig()) -> Page:
+def stitch_page(frames: Sequence[FrameRecord], cfg: StitchConfig = StitchConfig()) -> StitchedPage:
     """Stitch a whole reading pass (frames are taken in time order)."""
     stitcher = PageStitcher(cfg)
     for frame in sorted(frames, key=lambda f: f.t_us):

@@ -13,7 +13,8 @@ from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
-from darkread.edge.stitch.frames import StitchConfig, StitchFrame
+from darkread.frame_record import FrameRecord
+from darkread.stitch.config import StitchConfig
 
 LAUNCH_PCT = 75
 CONFIRM_FRAC = 1.0
@@ -29,13 +30,13 @@ class LineSegmenter:
 
     def __init__(self, cfg: StitchConfig = StitchConfig()) -> None:
         self.cfg = cfg
-        self._pending: deque[StitchFrame] = deque()
+        self._pending: deque[FrameRecord] = deque()
         self._recent: deque[tuple[float, float]] = deque(maxlen=cfg.sweep_context_frames)
         self._line_x: list[float] = []
         self._since_break = 0
         self._started = False
 
-    def push(self, frame: StitchFrame) -> list[tuple[StitchFrame, bool]]:
+    def push(self, frame: FrameRecord) -> list[tuple[FrameRecord, bool]]:
         self._pending.append(frame)
         decided = []
         while len(self._pending) > self.cfg.sweep_confirm_frames:
@@ -47,7 +48,7 @@ class LineSegmenter:
         """Frames pushed but not yet decided."""
         return len(self._pending)
 
-    def flush(self) -> list[tuple[StitchFrame, bool]]:
+    def flush(self) -> list[tuple[FrameRecord, bool]]:
         decided = []
         while self._pending:
             decided.append(self._decide())
@@ -77,7 +78,7 @@ class LineSegmenter:
         went_up = launch_y - float(np.median(after[:, 1])) > cfg.sweep_max_rise_px
         return bool(jumped_left and stayed_left and not went_up)
 
-    def _decide(self) -> tuple[StitchFrame, bool]:
+    def _decide(self) -> tuple[FrameRecord, bool]:
         new_line = (not self._started) or self._is_sweep()
         frame = self._pending.popleft()
         self._started = True
@@ -91,11 +92,11 @@ class LineSegmenter:
         return frame, new_line
 
 
-def segment_lines(frames: Sequence[StitchFrame], cfg: StitchConfig = StitchConfig()) -> list[list[StitchFrame]]:
+def segment_lines(frames: Sequence[FrameRecord], cfg: StitchConfig = StitchConfig()) -> list[list[FrameRecord]]:
     """Split frames (in time order) into lines at return sweeps."""
     segmenter = LineSegmenter(cfg)
     decided = [d for f in frames for d in segmenter.push(f)] + segmenter.flush()
-    lines: list[list[StitchFrame]] = []
+    lines: list[list[FrameRecord]] = []
     for frame, new_line in decided:
         if new_line:
             lines.append([])

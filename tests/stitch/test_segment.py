@@ -2,13 +2,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from darkread.edge.stitch import LineSegmenter, StitchConfig, StitchFrame, segment_lines
-from stitch_scan import ScanParams, simulate_reading
+from darkread.frame_record import FrameRecord
+from darkread.stitch import LineSegmenter, StitchConfig, segment_lines
+from reading_factory import ScanParams, simulate_reading
 
 
-def _frames(gaze: list[tuple[float, float]]) -> list[StitchFrame]:
+def _frames(gaze: list[tuple[float, float]]) -> list[FrameRecord]:
     blank = np.zeros((100, 200), np.uint8)
-    return [StitchFrame(i, i * 40_000, blank, (int(u) - 100, int(v) - 50), (u, v)) for i, (u, v) in enumerate(gaze)]
+    return [FrameRecord(i, i * 40_000, blank, (int(u) - 100, int(v) - 50), (u, v)) for i, (u, v) in enumerate(gaze)]
 
 
 def _line(x0: float, x1: float, y: float, rng: np.random.Generator, per_fix: int = 3) -> list[tuple[float, float]]:

@@ -1,9 +1,9 @@
 from __future__ import annotations
 
 import numpy as np
-from darkread.edge.stitch import StitchConfig
-from darkread.edge.stitch.canvas import Canvas
-from darkread.edge.stitch.strip import STRIP_LAYERS, accumulate, row_taper
+from darkread.stitch import StitchConfig
+from darkread.stitch.canvas import Canvas
+from darkread.stitch.strip import STRIP_LAYERS, accumulate, row_taper
 
 
 def _ones(h: int = 20, w: int = 30) -> np.ndarray:

@@ -3,14 +3,14 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from darkread.edge.stitch import StitchConfig
-from darkread.edge.stitch.canvas import Canvas
-from darkread.edge.stitch.dewarp import (
+from darkread.stitch import StitchConfig
+from darkread.stitch.canvas import Canvas
+from darkread.stitch.dewarp import (
     apply_line_warp,
     dewarp_strip,
     estimate_line_warp,
 )
-from darkread.edge.stitch.strip import STRIP_LAYERS
+from darkread.stitch.strip import STRIP_LAYERS
 
 
 def _warped(image: np.ndarray, offset_xy: tuple[float, float], slope: float) -> np.ndarray:

@@ -4,14 +4,14 @@ import dataclasses
 
 import numpy as np
 import pytest
-from darkread.edge.stitch import (
+from darkread.frame_record import FrameRecord
+from darkread.stitch import (
     PageStitcher,
     StitchConfig,
-    StitchFrame,
     naive_page,
     stitch_page,
 )
-from stitch_scan import ink_f1_aligned, simulate_reading
+from reading_factory import ink_f1_aligned, simulate_reading
 
 
 def test_stitched_page_matches_the_truth(rendered_page, stitched) -> None:
@@ -90,7 +90,7 @@ def test_blank_and_corrupt_frames_are_dropped_not_stitched(rendered_page, readin
 
 @pytest.mark.parametrize("seed", [1, 2])
 def test_other_readings_with_stronger_head_drift(rendered_page, seed: int) -> None:
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     reading = simulate_reading(rendered_page, ScanParams(drift_amplitude_px=45.0, tremor_px=2.0), seed=seed)
     page = stitch_page(reading.frames)
@@ -106,17 +106,17 @@ def test_empty_input_gives_an_empty_page() -> None:
 
 def test_frames_and_config_validate_their_input() -> None:
     with pytest.raises(ValueError, match="2-D"):
-        StitchFrame(1, 0, np.zeros(10, np.uint8), (0, 0), (0.0, 0.0))
+        FrameRecord(1, 0, np.zeros(10, np.uint8), (0, 0), (0.0, 0.0))
     with pytest.raises(ValueError, match="uint8"):
-        StitchFrame(1, 0, np.zeros((10, 10), np.float32), (0, 0), (0.0, 0.0))
-    frame = StitchFrame(1, 0, np.full((10, 10), 255, np.uint8), (0, 0), (0.0, 0.0))
+        FrameRecord(1, 0, np.zeros((10, 10), np.float32), (0, 0), (0.0, 0.0))
+    frame = FrameRecord(1, 0, np.full((10, 10), 255, np.uint8), (0, 0), (0.0, 0.0))
     assert frame.mask.max() == 1
     with pytest.raises(ValueError):
         StitchConfig(search_radius_px=-1)
 
 
 def test_head_motion_is_predicted_from_recent_corrections() -> None:
-    from darkread.edge.stitch.stitcher import predict_correction
+    from darkread.stitch.stitcher import predict_correction
 
     assert np.array_equal(predict_correction([], 0), np.zeros(2))
     two = [(0, np.array([1.0, 2.0])), (40_000, np.array([3.0, 2.0]))]
@@ -126,7 +126,7 @@ def test_head_motion_is_predicted_from_recent_corrections() -> None:
 
 
 def test_a_velocity_from_a_few_milliseconds_is_not_carried_across_a_saccade() -> None:
-    from darkread.edge.stitch.stitcher import predict_correction
+    from darkread.stitch.stitcher import predict_correction
 
     # frames 3 ms apart (busy text) with 1 px registration jitter: over 15 ms that looks like a
     # drift of ~100 px/s, which over the next 150 ms gap would move the prediction by a line pitch
@@ -143,7 +143,7 @@ def test_a_velocity_from_a_few_milliseconds_is_not_carried_across_a_saccade() ->
 def _dense_reading(rendered_page, seed: int):
     """A reading as the event camera delivers it on busy text: a frame every 3 ms during a
     fixation, none during the ~150 ms of a saccade."""
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     params = ScanParams(
         frame_dt_us=3_000,
@@ -184,7 +184,7 @@ def test_a_head_jump_beyond_the_search_finds_the_right_line_not_the_neighbour(sh
         f
         if i < start
         else dataclasses.replace(
-            f, origin_xy=(f.origin_xy[0], f.origin_xy[1] + 24), gaze_px=(f.gaze_px[0], f.gaze_px[1] + 24)
+            f, origin=(f.origin[0], f.origin[1] + 24), gaze_px=(f.gaze_px[0], f.gaze_px[1] + 24)
         )
         for i, f in enumerate(reading.frames)
     ]
@@ -198,7 +198,7 @@ def test_a_head_jump_beyond_the_search_finds_the_right_line_not_the_neighbour(sh
 
 
 def test_head_roll_is_tracked_and_undone(rendered_page) -> None:
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     reading = simulate_reading(rendered_page, ScanParams(roll_deg=1.5), seed=3)
     with_roll = stitch_page(reading.frames)
@@ -209,7 +209,7 @@ def test_head_roll_is_tracked_and_undone(rendered_page) -> None:
 
 
 def test_other_window_sizes_stitch_too(rendered_page) -> None:
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     reading = simulate_reading(rendered_page, ScanParams(frame_hw=(80, 160)), seed=4)
     assert reading.frames[0].mask.shape == (80, 160)
@@ -219,7 +219,7 @@ def test_other_window_sizes_stitch_too(rendered_page) -> None:
 
 
 def test_a_page_held_askew_comes_out_level(rendered_page) -> None:
-    from stitch_scan import ScanParams
+    from reading_factory import ScanParams
 
     reading = simulate_reading(rendered_page, ScanParams(page_tilt_deg=6.0), seed=1)
     page = stitch_page(reading.frames)
@@ -243,7 +243,7 @@ def test_a_walking_head_jump_registers_to_the_lines_already_read_not_a_second_co
         f
         if i < start
         else dataclasses.replace(
-            f, origin_xy=(f.origin_xy[0], f.origin_xy[1] + jump_px), gaze_px=(f.gaze_px[0], f.gaze_px[1] + jump_px)
+            f, origin=(f.origin[0], f.origin[1] + jump_px), gaze_px=(f.gaze_px[0], f.gaze_px[1] + jump_px)
         )
         for i, f in enumerate(reading.frames)
         if not start <= i < start + 6

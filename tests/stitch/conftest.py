@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-_spec = importlib.util.spec_from_file_location("stitch_scan", Path(__file__).with_name("scan.py"))
+_spec = importlib.util.spec_from_file_location("reading_factory", Path(__file__).with_name("reading_factory.py"))
 assert _spec is not None and _spec.loader is not None
 scan = importlib.util.module_from_spec(_spec)
-sys.modules["stitch_scan"] = scan
+sys.modules["reading_factory"] = scan
 _spec.loader.exec_module(scan)
 
 
@@ -33,6 +33,6 @@ def reading(rendered_page):
 
 @pytest.fixture(scope="session")
 def stitched(reading):
-    from darkread.edge.stitch import stitch_page
+    from darkread.stitch import stitch_page
 
     return stitch_page(reading.frames)

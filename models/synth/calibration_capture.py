@@ -22,11 +22,13 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from darkread.edge.calibrate.cameras import Camera, Fisheye624Camera, PinholeCamera
+from darkread.edge.calibrate.cameras import Camera, Fisheye624Camera
 from darkread.edge.calibrate.markers import BoardSpec, save_board
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
 from darkread.edge.io.calibration import Calibration, save_calibration
+from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
 from darkread.edge.io.raw import write_raw
+from darkread.image_codec import write_png
 from darkread.models.synth.camera import (
     SENSOR_WH,
     random_calibration,
@@ -227,7 +229,7 @@ class FlashCaptureSpec:
     flashes_per_pose: int = 1  # appear + disappear cycles per pose
     rgb_fps: float = 30.0
     rgb_exposure_us: float = 16000.0
-    rgb_camera: Camera = field(default_factory=lambda: PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5))  # or Fisheye624Camera
+    rgb_camera: Camera = field(default_factory=lambda: Intrinsics(512, 512, 700.0, 700.0, 255.5, 255.5, RECTIFIED))  # or Fisheye624Camera
     with_rgb: bool = True
     lux: float = 250.0
     distance_m: tuple[float, float] = (0.6, 0.7)
@@ -265,7 +267,7 @@ class FlashCapture:
             width=w, height=h, fx=1400.0, fy=1400.0, cx=w / 2, cy=h / 2, distortion=(0.0, 0.0, 0.0, 0.0),
             T_event_cpf=np.diag([-1.0, -1.0, 1.0, 1.0]), gaze_to_event_time_offset_us=0,
             rgb_camera=rgb_camera_block(self.rgb_camera, self.T_rgb_cpf)
-            if self.rgb_frames and isinstance(self.rgb_camera, PinholeCamera) else None,
+            if self.rgb_frames and isinstance(self.rgb_camera, Intrinsics) else None,
         )
 
 
@@ -363,7 +365,7 @@ def write_flash_capture(out: str | Path, capture: FlashCapture) -> Path:
             writer.writerow(["timestamp_us", "exposure_us", "file"])
             for t, picture in zip(capture.rgb_times_us, capture.rgb_frames):
                 name = f"rgb_frames/{int(t)}.png"
-                cv2.imwrite(str(out / name), picture)
+                write_png(out / name, picture)
                 writer.writerow([int(t), int(capture.rgb_exposure_us), name])
     save_calibration(out / "calibration.json", capture.nominal_calibration())
     if capture.rgb_frames and isinstance(capture.rgb_camera, Fisheye624Camera):
@@ -388,7 +390,7 @@ def aria_pose(T: np.ndarray) -> dict:
     return {"Translation": [float(v) for v in T[:3, 3]], "UnitQuaternion": [w, [float(v) for v in xyz]]}
 
 
-def rgb_camera_block(camera: PinholeCamera, T_rgb_cpf: np.ndarray) -> dict:
+def rgb_camera_block(camera: Intrinsics, T_rgb_cpf: np.ndarray) -> dict:
     return {
         "width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
         "distortion": {"model": "none"}, "T_rgb_cpf": np.asarray(T_rgb_cpf).tolist(),
@@ -533,7 +535,7 @@ def evaluate_session(*, device_seed: int = 0, n_poses: int = 8, flashes_per_pose
                  "recovered": clock_t.offset_us - true_offset, "sigma": clock_t.uncertainty_us})
 
     pairs = paired_views(posed.events, find_bursts(posed.events), frames(posed, None), clock.offset_us, posed.board, *SENSOR_WH)
-    event_camera = PinholeCamera(SENSOR_WH[0], SENSOR_WH[1], intr.fx, intr.fy, intr.cx, intr.cy, intr.distortion)
+    event_camera = Intrinsics(SENSOR_WH[0], SENSOR_WH[1], intr.fx, intr.fy, intr.cx, intr.cy, intr.distortion)
     ext = extrinsics_from_views(pairs, event_camera, posed.rgb_camera, posed.T_rgb_cpf)
     rows.append({"quantity": f"T_event_cpf rotation error (deg), {ext.n_views} views", "true": 0.0,
                  "recovered": rotation_angle_deg(ext.T_event_cpf[:3, :3], truth.T_event_cpf[:3, :3]), "sigma": None})
@@ -577,7 +579,7 @@ class PageCapture:
     events: np.ndarray
     markers: BoardSpec  # a 2 x 2 grid: one marker in each corner around the text
     rgb_frame: np.ndarray
-    rgb_camera: PinholeCamera
+    rgb_camera: Intrinsics
     truth: Calibration
     T_rgb_cpf: np.ndarray
     T_cpf_page: np.ndarray
@@ -635,7 +637,7 @@ def simulate_page_capture(seed: int = 0, device_seed: int = 0, *, lux: float = 3
     events = unique_events(concat_events(parts))
     events = events[(events["t"] >= 0) & (events["t"] < 40_000)]
     events["t"] += 1_000_000
-    rgb_camera = PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5)
+    rgb_camera = Intrinsics(512, 512, 700.0, 700.0, 255.5, 255.5, RECTIFIED)
     T_cpf_page = np.linalg.inv(truth.T_event_cpf) @ T_event_page
     rgb_value, rgb_outside = sample_plane(texture, px_per_m, margin_m, camera_rays(rgb_camera), (512, 512), T_rgb_cpf @ T_cpf_page)
     rgb = to_picture(np.where(rgb_outside, np.float32(0.15), rgb_value) * np.float32(lux), lux * 0.9, rng)
@@ -650,7 +652,7 @@ def write_page_capture(out: str | Path, page: PageCapture) -> Path:
     (out / "rgb_frames").mkdir(parents=True, exist_ok=True)
     write_raw(out / "events.raw", page.events, width=SENSOR_WH[0], height=SENSOR_WH[1])
     save_board(out / "board.json", page.markers)
-    cv2.imwrite(str(out / "rgb_frames" / "1200000.png"), page.rgb_frame)
+    write_png(out / "rgb_frames" / "1200000.png", page.rgb_frame)
     (out / RGB_FRAMES_NAME).write_text("timestamp_us,exposure_us,file\n1200000,16000,rgb_frames/1200000.png\n", encoding="utf-8")
     nominal = replace(page.truth, gaze_to_event_time_offset_us=0, rgb_camera=rgb_camera_block(page.rgb_camera, page.T_rgb_cpf))
     save_calibration(out / "calibration.json", nominal)

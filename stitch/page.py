@@ -6,9 +6,11 @@ from collections.abc import Sequence
 
 import cv2
 import numpy as np
-from darkread.edge.stitch.canvas import Canvas
-from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
-from darkread.edge.stitch.strip import LineStrip
+from darkread.frame_record import FrameRecord
+from darkread.stitch.canvas import Canvas
+from darkread.stitch.config import StitchConfig
+from darkread.stitch.stitched_page import StitchedPage
+from darkread.stitch.strip import LineStrip
 
 _MIN_DEN = 1e-6
 
@@ -216,12 +218,12 @@ def _monotone_assignment(rows: np.ndarray, centres: np.ndarray, jump_cost: float
     return path[::-1]
 
 
-def naive_page(frames: Sequence[StitchFrame], average: bool = False, cfg: StitchConfig = StitchConfig()) -> Page:
-    """Reference without registration: every frame pasted at its sensor position (``origin_xy``),
+def naive_page(frames: Sequence[FrameRecord], average: bool = False, cfg: StitchConfig = StitchConfig()) -> StitchedPage:
+    """Reference without registration: every frame pasted at its sensor position (``origin``),
     later frames over earlier ones; with ``average``, averaged and thresholded instead."""
     canvas = Canvas(("sum", "count"))
     for f in frames:
-        x, y = f.origin_xy
+        x, y = f.origin
         h, w = f.mask.shape
         canvas.ensure(x, y, x + w, y + h)
         if average:
@@ -230,7 +232,7 @@ def naive_page(frames: Sequence[StitchFrame], average: bool = False, cfg: Stitch
             canvas.view("sum", x, y, x + w, y + h)[...] = f.mask
         canvas.view("count", x, y, x + w, y + h)[...] += 1
     if canvas.empty:
-        return Page(np.zeros((0, 0), np.uint8), [], [], 0, 0)
+        return StitchedPage(np.zeros((0, 0), np.uint8), [], [], 0, 0)
     count = canvas.layers["count"]
     x0, y0, x1, y1 = covered_box(count > 0) or (0, 0, 0, 0)
     if average:
@@ -238,4 +240,4 @@ def naive_page(frames: Sequence[StitchFrame], average: bool = False, cfg: Stitch
         image = binarize(avg[y0:y1, x0:x1], cfg)
     else:
         image = (canvas.layers["sum"][y0:y1, x0:x1] > 0).astype(np.uint8)
-    return Page(image, [], [], len(frames), 0)
+    return StitchedPage(image, [], [], len(frames), 0)

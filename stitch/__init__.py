@@ -7,19 +7,19 @@ correlation (``register``) and accumulated with an alpha channel and an improvem
 (``page``), driven incrementally by ``PageStitcher`` (``stitcher``).
 """
 
-from darkread.edge.stitch.frames import Page, StitchConfig, StitchFrame
-from darkread.edge.stitch.page import naive_page
-from darkread.edge.stitch.register import Registration, register_frame
-from darkread.edge.stitch.segment import LineSegmenter, segment_lines
-from darkread.edge.stitch.stitcher import PageStitcher, stitch_page
+from darkread.stitch.config import StitchConfig
+from darkread.stitch.page import naive_page
+from darkread.stitch.register import Registration, register_frame
+from darkread.stitch.segment import LineSegmenter, segment_lines
+from darkread.stitch.stitched_page import StitchedPage
+from darkread.stitch.stitcher import PageStitcher, stitch_page
 
 __all__ = [
     "LineSegmenter",
-    "Page",
     "PageStitcher",
     "Registration",
     "StitchConfig",
-    "StitchFrame",
+    "StitchedPage",
     "naive_page",
     "register_frame",
     "segment_lines",
