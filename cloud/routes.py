@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import time
@@ -299,4 +300,6 @@ async def _event_stream(context: AppContext, session_id: str) -> AsyncIterator[s
             next_update = asyncio.ensure_future(anext(updates))
     finally:
         next_update.cancel()
+        with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
+            await next_update  # the generator must be at rest before it is closed
         await updates.aclose()

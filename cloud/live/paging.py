@@ -25,6 +25,7 @@ import numpy as np
 from darkread.frame_record import FrameRecord
 from darkread.stitch import PageStitcher, StitchConfig
 from darkread.stitch.page import text_bands
+from darkread.stitch.stitcher import MIN_FRAME_SIDE
 
 from ..store import StoredFrame
 
@@ -109,7 +110,10 @@ class Paginator:
             self._break_pending = True
 
     def add(self, record: StoredFrame) -> None:
+        """Stitch one frame; ValueError (and no change) for a frame the stitcher cannot use."""
         frame: FrameRecord = record
+        if min(frame.mask.shape) < MIN_FRAME_SIDE:
+            raise ValueError(f"frame seq {record.seq}: a {frame.mask.shape} mask is too small to stitch")
         if self._redundant(frame):
             self.skipped += 1
             return
@@ -149,9 +153,10 @@ class Paginator:
 
     def _feed(self, page: LivePage, seq: int, frame: FrameRecord) -> None:
         assert page.stitcher is not None  # noqa: S101
+        placements = page.stitcher.add(frame)  # decides earlier frames (first in, first out)
         self._undecided.append((seq, frame))
         page.last_seq = seq
-        for placement in page.stitcher.add(frame):
+        for placement in placements:
             decided_seq, _ = self._undecided.popleft()
             if placement.outcome == "blank":
                 continue

@@ -34,7 +34,7 @@ class LiveConfig:
     batch_frames: int = 32  # frames stitched per turn (a question waits at most one batch)
     stitch_threads: int = 2
     ocr_threads: int = 1
-    catch_up_s: float = 10.0  # a question first waits this long at most for frames stored before it
+    catch_up_s: float = 2.0  # a question first waits this long at most for frames stored before it
     push_interval_s: float = 1.0  # live push: at most one page update per session this often
     live_idle_s: float = 300.0  # a session untouched this long leaves memory
 
@@ -116,7 +116,10 @@ class SessionPages:
             while self._breaks_applied < len(breaks) and breaks[self._breaks_applied].seq < frame.seq:
                 self.paginator.page_break()
                 self._breaks_applied += 1
-            self.paginator.add(frame)
+            try:
+                self.paginator.add(frame)
+            except ValueError as exc:  # a frame the stitcher cannot use (too small): left out, once
+                log.warning("session %s: frame seq %d not stitched: %s", self.session_id, frame.seq, exc)
 
     async def caught_up(self, timeout_s: float) -> bool:
         """Wait until every frame stored so far is stitched (at most ``timeout_s``)."""

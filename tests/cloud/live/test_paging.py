@@ -5,10 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import pytest
 from page_readings import LINES, reading_frames
 
 from darkread.cloud.live import LineReader, Paginator, PagingConfig
 from darkread.cloud.ocr.base import OcrLine, OcrResult
+from darkread.cloud.store import StoredFrame
 from darkread.cloud.stream import stored_frame
 
 OTHER_LINES = ["a second page of text comes", "after the first one was read", "by the same pair of glasses"]
@@ -90,3 +92,10 @@ def test_a_version_is_read_once_and_unchanged_lines_are_not_read_again() -> None
     second = reader.read(moved)
     assert second.lines_read == 0 and [ln.text for ln in second.lines] == [ln.text for ln in first.lines]
     assert {ln.read_at_version for ln in second.lines} == {page.version}
+
+
+def test_a_frame_too_small_to_stitch_is_refused_and_changes_nothing() -> None:
+    paginator = Paginator()
+    with pytest.raises(ValueError, match="too small"):
+        paginator.add(StoredFrame(0, 0, np.ones((4, 4), np.uint8), (0, 0), (0.0, 0.0), seq=0))
+    assert paginator.pages == [] and paginator.current is None
