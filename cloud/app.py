@@ -15,7 +15,7 @@ from prometheus_client import make_asgi_app
 from darkread import __version__
 
 from .context import AppContext
-from .metrics import Metrics
+from .prometheus import Metrics
 from .ocr import OcrBackend, create_backend
 from .live import LiveConfig, LivePages, PagingConfig
 from .routes import api, public
@@ -40,7 +40,11 @@ Ingest of reconstructed text frames from darkread glasses, page stitching and OC
 
 
 def live_config(settings: Settings) -> LiveConfig:
-    paging = PagingConfig(lost_after_s=settings.page_lost_after_s, max_page_pixels=settings.max_page_pixels)
+    paging = PagingConfig(
+        lost_after_s=settings.page_lost_after_s,
+        max_page_pixels=settings.max_page_pixels,
+        min_stitch_gap_us=round(settings.min_stitch_gap_ms * 1000),
+    )
     return LiveConfig(
         paging=paging,
         stitch_threads=settings.stitch_threads,

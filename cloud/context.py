@@ -10,7 +10,7 @@ from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader, APIKeyQuery
 
 from .live import LivePages
-from .metrics import Metrics
+from .prometheus import Metrics
 from .settings import Settings
 from .store import SessionStore
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import time
@@ -15,11 +16,11 @@ from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Respon
 from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 
-from darkread.edge.stitch.frames import ink_mask_to_paper
+from darkread.image_codec import encode_png
+from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .context import AppContext, get_context, require_api_key
-from .live import NoPageError
-from .ocr.base import OcrError, OcrUnavailableError, encode_png
+from .errors import NoPageError, OcrError, OcrUnavailableError
 from .store import SessionInfo
 
 _T = TypeVar("_T")
@@ -299,4 +300,6 @@ async def _event_stream(context: AppContext, session_id: str) -> AsyncIterator[s
             next_update = asyncio.ensure_future(anext(updates))
     finally:
         next_update.cancel()
+        with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
+            await next_update  # the generator must be at rest before it is closed
         await updates.aclose()

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import uvicorn
 from fastapi import FastAPI
 
+from .errors import ServiceStartError
+
 
 @dataclass(frozen=True)
 class RunningServer:
@@ -39,10 +41,10 @@ def serve_in_thread(
     deadline = time.monotonic() + timeout_s
     while not server.started:
         if not thread.is_alive():
-            raise RuntimeError("the cloud service failed to start (see the log above)")
+            raise ServiceStartError("the cloud service failed to start (see the log above)")
         if time.monotonic() > deadline:
             server.should_exit = True
-            raise RuntimeError(f"the cloud service did not start within {timeout_s:g} s")
+            raise ServiceStartError(f"the cloud service did not start within {timeout_s:g} s")
         time.sleep(0.01)
     bound_port = server.servers[0].sockets[0].getsockname()[1]
     try:

@@ -46,7 +46,8 @@ from darkread.proto.messages import (
 )
 
 from .context import AppContext
-from .store import FrameRecord, GazeRecord, PageBreak, PageRecord, SessionSpec, StoreError, WriteResult
+from .errors import StoreError
+from .store import GazeRecord, PageBreak, PageRecord, SessionSpec, StoredFrame, WriteResult
 
 log = logging.getLogger(__name__)
 
@@ -124,7 +125,7 @@ class StreamConnection:
                 raise UnexpectedMessageError("frame received but hello.mode is 'pages'")
             if message.shape != self.hello.fovea:
                 raise BadMaskError(f"frame shape {message.shape} differs from hello.fovea {self.hello.fovea}")
-            return _Pending(asyncio.ensure_future(store.add_frame(session_id, frame_record(message))), "frame", session_id)
+            return _Pending(asyncio.ensure_future(store.add_frame(session_id, stored_frame(message))), "frame", session_id)
         if isinstance(message, Page):
             if self.hello.mode != "pages":
                 raise UnexpectedMessageError("page received but hello.mode is 'frames'")
@@ -144,12 +145,13 @@ class StreamConnection:
         raise UnexpectedMessageError(f"{message.TYPE} is not allowed after hello")
 
 
-def frame_record(frame: Frame) -> FrameRecord:
-    """The wire frame as the store keeps it."""
-    return FrameRecord(
-        frame.seq, frame.frame_id, frame.t_us, frame.origin, frame.gaze_px, frame.gaze_rad, frame.events_used,
-        frame.mask(),
-    )
+def stored_frame(frame: Frame) -> StoredFrame:
+    """The wire frame as the store keeps it: its frame record, seq, gaze angles and event count."""
+    record = frame.record()
+    return StoredFrame(
+        record.frame_id, record.t_us, record.mask, record.origin, record.gaze_px,
+        seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used,
+    )  # fmt: skip
 
 
 async def stream_endpoint(websocket: WebSocket) -> None:

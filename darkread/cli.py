@@ -14,6 +14,7 @@ import sys
 from collections.abc import Sequence
 
 from darkread import __version__
+from darkread.errors import DarkreadError
 
 # Modules that contribute sub-commands, in the order they appear in --help.
 COMMAND_MODULES: tuple[str, ...] = (
@@ -62,6 +63,24 @@ def configure_logging(verbose: int, quiet: bool) -> None:
     logging.basicConfig(level=level, format="%(asctime)s %(levelname)-7s %(name)s: %(message)s", stream=sys.stderr)
 
 
+# What bad input and a failing environment raise: darkread's own errors, files and sockets
+# (OSError), bad values and undecodable text or JSON (ValueError covers JSONDecodeError and
+# UnicodeDecodeError). Exit 1 with one line; anything else is a bug: exit 70 (EX_SOFTWARE).
+USER_ERRORS: tuple[type[BaseException], ...] = (DarkreadError, OSError, ValueError)
+EXIT_ERROR = 1
+EXIT_USAGE = 2
+EXIT_INTERNAL = 70
+EXIT_INTERRUPTED = 130
+
+
+def error_line(exc: BaseException) -> str:
+    """One line for stderr: the message, or the exception's type when it has none."""
+    message = " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, USER_ERRORS):
+        return f"darkread: error: {message}"
+    return f"darkread: internal error: {type(exc).__name__}: {message} (run with -vv for the traceback)"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -69,18 +88,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler = getattr(args, "func", None)
     if handler is None:
         parser.print_help()
-        return 2
+        return EXIT_USAGE
     try:
         return int(handler(args) or 0)
     except KeyboardInterrupt:
-        return 130
-    except Exception as exc:  # a clear one-line message for users; tracebacks with -vv
-        from darkread.edge.errors import DarkreadError
-
-        if isinstance(exc, (DarkreadError, FileNotFoundError, ValueError)) and args.verbose < 2:
-            print(f"darkread: error: {exc}", file=sys.stderr)
-            return 1
-        raise
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # one line for users; the traceback with -vv
+        if args.verbose >= 2:
+            raise
+        print(error_line(exc), file=sys.stderr)
+        return EXIT_ERROR if isinstance(exc, USER_ERRORS) else EXIT_INTERNAL
 
 
 if __name__ == "__main__":

@@ -93,7 +93,7 @@ def read_recording(
     out.mkdir(parents=True, exist_ok=True)
     api_key = secrets.token_urlsafe(16)
     settings = Settings(data_dir=out / "cloud", api_key=SecretStr(api_key), ocr_backend=backend,  # type: ignore[arg-type]
-                        ocr_lexicon=lexicon)
+                        ocr_lexicon=lexicon, ask_catch_up_s=drain_timeout_s)  # the answer covers every frame
     stages: dict[str, float] = {}
     with serve_in_thread(create_app(settings)) as server:
         stages["cloud_start"] = time.perf_counter() - started
@@ -147,7 +147,7 @@ def read_recording(
         stage_seconds=stages,
     )
     if recording.text is not None:
-        from darkread.eval.metrics import error_rates
+        from darkread.eval.error_rates import error_rates
 
         rates = error_rates(recording.text, result.text)
         result.reference, result.cer, result.wer = recording.text, rates.cer, rates.wer

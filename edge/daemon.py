@@ -179,7 +179,7 @@ class EdgeService:
     """Source + gaze + reconstructor + pipeline + uplink + metrics, built from an ``EdgeConfig``."""
 
     def __init__(self, config: EdgeConfig, notifier: Notifier | None = None) -> None:
-        from darkread.edge.metrics import EdgeMetrics
+        from darkread.edge.telemetry import EdgeMetrics
 
         self.config = config
         self.notifier = notifier or Notifier()
@@ -198,7 +198,7 @@ class EdgeService:
     # -- Service -----------------------------------------------------------------------------
     def startup(self) -> str:
         from darkread.edge.fovea import FoveaConfig
-        from darkread.edge.metrics import MetricsServer
+        from darkread.edge.telemetry import MetricsServer
         from darkread.edge.pipeline import Pipeline, PipelineSettings
         from darkread.edge.reconstruct import Reconstructor
         from darkread.edge.spool import Spool
@@ -225,7 +225,7 @@ class EdgeService:
             self.metrics,
         )
         if cfg.uplink.mode == "pages":
-            from darkread.edge.stitch import PageStitcher
+            from darkread.stitch import PageStitcher
 
             self._pages = PageStitcher()
         settings = PipelineSettings(
@@ -344,10 +344,8 @@ class EdgeService:
         if self._pages is None:
             self.sent_seqs.append(self.uplink.submit(frame.to_message(), submitted_at=arrival))
             return
-        from darkread.edge.stitch import StitchFrame
-
         with self._page_lock:
-            self._pages.add(StitchFrame(frame.frame_id, frame.t_us, frame.mask, frame.origin, frame.gaze_px))
+            self._pages.add(frame)  # a FrameResult is the frame record the stitcher reads
 
     def _send_page(self, final: bool = False) -> None:
         from darkread.proto.messages import Page, pack_mask

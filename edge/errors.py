@@ -1,23 +1,11 @@
-"""Errors raised on the glasses side, in one place.
+"""Errors raised on the glasses side: recordings, the event camera, the model.
 
-    DarkreadError
-     ├── RecordingError            a recording (directory or file) cannot be used
-     │    ├── RawFormatError       RAW header unknown or inconsistent
-     │    ├── CorruptRawError      bytes that cannot be decoded (names file and byte offset)
-     │    ├── GazeCsvError         eye-gaze CSV missing columns or malformed (names file and line)
-     │    └── CalibrationError     calibration.json missing keys or impossible values
-     ├── DeviceError               the event camera cannot be opened or answers wrongly
-     └── ModelError                the ONNX model is missing or has the wrong shape
-
-Built-in exceptions are used where their meaning fits (FileNotFoundError, ValueError for bad
-arguments).
+They sit under ``DarkreadError``; the whole tree is drawn in ``darkread/errors.py``.
 """
 
 from __future__ import annotations
 
-
-class DarkreadError(Exception):
-    """Base of every darkread error."""
+from darkread.errors import DarkreadError
 
 
 class RecordingError(DarkreadError):

@@ -23,10 +23,11 @@ import numpy as np
 
 from darkread.edge.events import Events
 from darkread.edge.fovea import FoveaConfig, crop, window_origin
-from darkread.edge.metrics import EdgeMetrics
+from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
 from darkread.edge.voxel import VoxelConfig, voxel_grid
+from darkread.frame_record import FrameRecord
 
 if TYPE_CHECKING:
     from darkread.proto.messages import Frame
@@ -63,27 +64,18 @@ class PipelineSettings:
 
 
 @dataclass(frozen=True)
-class FrameResult:
-    """One reconstructed foveal window; ``t_us`` is the event clock of its newest event."""
+class FrameResult(FrameRecord):
+    """The frame record of one reconstructed foveal window, with how it was made."""
 
-    frame_id: int
-    t_us: int
-    origin: tuple[int, int]  # (x0, y0) sensor pixels
-    gaze_px: tuple[float, float]  # (u, v)
-    gaze_rad: tuple[float, float]  # (yaw, pitch)
+    gaze_rad: tuple[float, float]  # (yaw, pitch), radians
     events_used: int
-    mask: np.ndarray  # uint8 [H, W], 1 = ink
     inference_ms: float
 
     def to_message(self) -> Frame:
         """The wire message (``seq`` is assigned by the uplink)."""
-        from darkread.proto.messages import Frame, pack_mask  # lazily: the core needs no msgpack
+        from darkread.proto.messages import Frame  # lazily: the core needs no msgpack
 
-        shape, bits = pack_mask(self.mask)
-        return Frame(
-            seq=0, frame_id=self.frame_id, t_us=self.t_us, origin=self.origin, gaze_px=self.gaze_px,
-            gaze_rad=self.gaze_rad, events_used=self.events_used, shape=shape, bits=bits,
-        )
+        return Frame.of(self, gaze_rad=self.gaze_rad, events_used=self.events_used)
 
 
 # -- the pure core -------------------------------------------------------------------------------

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
-from darkread.edge.metrics import EdgeMetrics
+from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.spool import Spool
 from darkread.proto.errors import CloseCode, ProtocolError
 from darkread.proto.messages import (

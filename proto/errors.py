@@ -1,22 +1,15 @@
-"""Errors of the wire protocol and the websocket close codes they map to, in one place.
+"""Errors of the wire protocol and the websocket close codes they map to.
 
-    ProtocolError                  any message that cannot be accepted (close code 4400)
-     ├── MessageTooLargeError      more bytes than the receiver allows (1009)
-     ├── MalformedMessageError     not msgpack, trailing bytes, or not a map (4400)
-     ├── UnknownMessageTypeError   ``type`` missing or not one we know (4400)
-     ├── InvalidFieldError         a field missing, of the wrong type or out of range (4400)
-     │    └── BadMaskError         mask ``shape``/``bits`` inconsistent (4422)
-     ├── VersionMismatchError      ``hello.v`` is not our PROTOCOL_VERSION (4409)
-     ├── UnexpectedMessageError    valid, but not allowed now, e.g. frame before hello (4401)
-     └── AuthenticationError       missing or wrong API key in ``hello.token`` (1008)
-
-Every error carries ``close_code`` so the server can close the websocket with the right code
-and the error's message as the reason.
+Every error carries ``close_code`` so the server can close the websocket with the right code and
+the error's message as the reason. They sit under ``DarkreadError``; the whole tree, with each
+error's close code, is drawn in ``darkread/errors.py``.
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
+
+from darkread.errors import DarkreadError
 
 
 class CloseCode(IntEnum):
@@ -33,7 +26,7 @@ class CloseCode(IntEnum):
     BAD_MASK = 4422  # mask shape/bit length wrong, or frame shape differs from hello.fovea
 
 
-class ProtocolError(Exception):
+class ProtocolError(DarkreadError):
     """A message that cannot be accepted; ``close_code`` tells the server how to close."""
 
     close_code: CloseCode = CloseCode.MALFORMED

@@ -19,6 +19,9 @@ from typing import Any, ClassVar, Literal, TypeAlias
 import msgpack
 import numpy as np
 
+from darkread.frame_record import FrameRecord
+from darkread.mask_bits import pack_bits, packed_length, unpack_bits
+
 from .errors import (
     BadMaskError,
     InvalidFieldError,
@@ -175,11 +178,6 @@ def _spec(check: Callable[[Any, str], Any], default: Any = MISSING, **kwargs: An
 # --- masks --------------------------------------------------------------------------------------
 
 
-def packed_length(shape: tuple[int, int]) -> int:
-    """Bytes of ``np.packbits`` output for a mask of ``shape`` (rows, cols)."""
-    return (shape[0] * shape[1] + 7) // 8
-
-
 def pack_mask(mask: np.ndarray) -> tuple[tuple[int, int], bytes]:
     """A 2-D ink mask (nonzero = ink) -> ``(shape, bits)``, row-major, MSB first, ink = 1."""
     array = np.asarray(mask)
@@ -187,7 +185,7 @@ def pack_mask(mask: np.ndarray) -> tuple[tuple[int, int], bytes]:
         raise BadMaskError(f"mask must be a non-empty 2-D array, got shape {array.shape}")
     shape = (int(array.shape[0]), int(array.shape[1]))
     check_mask(shape, b"\0" * packed_length(shape))
-    return shape, np.packbits(array != 0, axis=None).tobytes()
+    return shape, pack_bits(array)
 
 
 def check_mask(shape: tuple[int, int], bits: bytes) -> None:
@@ -208,8 +206,7 @@ def check_mask(shape: tuple[int, int], bits: bytes) -> None:
 def unpack_mask(shape: tuple[int, int], bits: bytes) -> np.ndarray:
     """``(shape, bits)`` -> uint8 mask of ``shape`` with ink = 1, background = 0."""
     check_mask(shape, bits)
-    flat = np.unpackbits(np.frombuffer(bits, dtype=np.uint8), count=shape[0] * shape[1])
-    return flat.reshape(shape)
+    return unpack_bits(shape, bits)
 
 
 # --- messages -----------------------------------------------------------------------------------
@@ -234,8 +231,8 @@ class Hello(_Checked):
     device_id: str = _spec(_identifier)
     session_id: str = _spec(_identifier)
     mode: Mode = _spec(_mode)
-    sensor: tuple[int, int] = _spec(_shape)  # (width, height) in pixels
-    fovea: tuple[int, int] = _spec(_shape)  # (height, width) in pixels
+    sensor: tuple[int, int] = _spec(_shape)  # (width, height) in pixels -- not the order of fovea (proto/README.md)
+    fovea: tuple[int, int] = _spec(_shape)  # (height, width) in pixels, a numpy shape: frame.shape equals it
     token: str | None = _spec(_optional(lambda v, n: _text(v, n, 512)), None)
     resume_from_seq: int | None = _spec(_optional(_seq), None)
     v: int = _spec(_int, PROTOCOL_VERSION)
@@ -268,10 +265,25 @@ class Frame(_Checked):
     gaze_rad: tuple[float, float] = _spec(_pair_float)  # (yaw, pitch), radians
     events_used: int = _spec(_count)
     shape: tuple[int, int] = _spec(_mask_shape)  # (rows, cols)
-    bits: bytes = _spec(_bytes, repr=False)  # np.packbits(ink_mask, axis=None)
+    bits: bytes = _spec(_bytes, repr=False)  # the ink mask, darkread.mask_bits.pack_bits
+
+    @classmethod
+    def of(
+        cls, record: FrameRecord, *, seq: int = 0, gaze_rad: tuple[float, float] = (0.0, 0.0), events_used: int = 0
+    ) -> Frame:
+        """The wire message carrying ``record`` (``seq`` is assigned by the uplink)."""
+        shape, bits = pack_mask(record.mask)
+        return cls(
+            seq=seq, frame_id=record.frame_id, t_us=record.t_us, origin=record.origin, gaze_px=record.gaze_px,
+            gaze_rad=gaze_rad, events_used=events_used, shape=shape, bits=bits,
+        )
 
     def mask(self) -> np.ndarray:
         return unpack_mask(self.shape, self.bits)
+
+    def record(self) -> FrameRecord:
+        """The frame record this message carries."""
+        return FrameRecord(self.frame_id, self.t_us, self.mask(), self.origin, self.gaze_px)
 
 
 @dataclass(frozen=True)
@@ -426,6 +438,5 @@ __all__ = [
     "decode",
     "encode",
     "pack_mask",
-    "packed_length",
     "unpack_mask",
 ]

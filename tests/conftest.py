@@ -69,3 +69,19 @@ def postgres_server() -> Iterator[TemporaryPostgres]:
 def postgres_url(postgres_server: TemporaryPostgres) -> str:
     """The URL of a new, empty database on the session's server."""
     return postgres_server.create_database(f"t{uuid.uuid4().hex[:16]}")
+
+
+@pytest.fixture(scope="session")
+def still_pangram():
+    """The pangram read with the head still (``factories.pangram_session``)."""
+    from factories import pangram_session
+
+    return pangram_session("still")
+
+
+@pytest.fixture(scope="session")
+def walking_pangram():
+    """The pangram read while walking (``factories.pangram_session``)."""
+    from factories import pangram_session
+
+    return pangram_session("walking")

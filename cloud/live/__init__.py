@@ -2,7 +2,7 @@
 
 from .paging import LivePage, Paginator, PagingConfig, RenderedPage
 from .reading import LineReader, PageReading, ReadLine
-from .sessions import Answer, LiveConfig, LivePages, NoPageError, PageSummary, SessionPages, page_event
+from .sessions import Answer, LiveConfig, LivePages, PageSummary, SessionPages, page_event
 
 __all__ = [
     "Answer",
@@ -10,7 +10,6 @@ __all__ = [
     "LiveConfig",
     "LivePage",
     "LivePages",
-    "NoPageError",
     "PageReading",
     "PageSummary",
     "Paginator",

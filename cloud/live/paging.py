@@ -22,10 +22,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from darkread.edge.stitch import PageStitcher, StitchConfig, StitchFrame
-from darkread.edge.stitch.page import text_bands
+from darkread.frame_record import FrameRecord
+from darkread.stitch import PageStitcher, StitchConfig
+from darkread.stitch.page import text_bands
+from darkread.stitch.stitcher import MIN_FRAME_SIDE
 
-from ..store import FrameRecord
+from ..store import StoredFrame
 
 Box = tuple[int, int, int, int]
 
@@ -71,10 +73,6 @@ class LivePage:
         return self.stitcher is None
 
 
-def stitch_frame(record: FrameRecord) -> StitchFrame:
-    return StitchFrame(record.frame_id, record.t_us, record.mask, record.origin, record.gaze_px)
-
-
 def find_bands(ink: np.ndarray, pad: int = 3) -> tuple[Box, ...]:
     """Text lines of a page as boxes: the row bands of its ink, each over its own ink columns."""
     boxes = []
@@ -95,11 +93,11 @@ class Paginator:
         self.cfg = cfg
         self.pages: list[LivePage] = []
         self._break_pending = False
-        self._undecided: deque[tuple[int, StitchFrame]] = deque()  # added, not yet decided by the stitcher
-        self._lost: list[tuple[int, StitchFrame]] = []  # the current stretch of failed frames
+        self._undecided: deque[tuple[int, FrameRecord]] = deque()  # added, not yet decided by the stitcher
+        self._lost: list[tuple[int, FrameRecord]] = []  # the current stretch of failed frames
         self._checkpoint: tuple[PageStitcher, int, int, int] | None = None  # the page before the stretch
         self._scores: deque[float] = deque(maxlen=cfg.score_window)
-        self._last_stitched: StitchFrame | None = None
+        self._last_stitched: FrameRecord | None = None
         self.skipped = 0
 
     @property
@@ -111,8 +109,11 @@ class Paginator:
         if self.pages:
             self._break_pending = True
 
-    def add(self, record: FrameRecord) -> None:
-        frame = stitch_frame(record)
+    def add(self, record: StoredFrame) -> None:
+        """Stitch one frame; ValueError (and no change) for a frame the stitcher cannot use."""
+        frame: FrameRecord = record
+        if min(frame.mask.shape) < MIN_FRAME_SIDE:
+            raise ValueError(f"frame seq {record.seq}: a {frame.mask.shape} mask is too small to stitch")
         if self._redundant(frame):
             self.skipped += 1
             return
@@ -125,7 +126,7 @@ class Paginator:
             page = self._start(record.seq, "size")
         self._feed(page, record.seq, frame)
 
-    def _redundant(self, frame: StitchFrame) -> bool:
+    def _redundant(self, frame: FrameRecord) -> bool:
         last, cfg = self._last_stitched, self.cfg
         if last is None or cfg.min_stitch_gap_us <= 0 or self._break_pending:
             return False
@@ -150,11 +151,12 @@ class Paginator:
             page.rendered = self.render(page)
         page.stitcher = None
 
-    def _feed(self, page: LivePage, seq: int, frame: StitchFrame) -> None:
+    def _feed(self, page: LivePage, seq: int, frame: FrameRecord) -> None:
         assert page.stitcher is not None  # noqa: S101
+        placements = page.stitcher.add(frame)  # decides earlier frames (first in, first out)
         self._undecided.append((seq, frame))
         page.last_seq = seq
-        for placement in page.stitcher.add(frame):
+        for placement in placements:
             decided_seq, _ = self._undecided.popleft()
             if placement.outcome == "blank":
                 continue

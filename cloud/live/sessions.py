@@ -19,16 +19,13 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
+from ..errors import NoPageError, StoreError
 from ..ocr.base import OcrBackend
-from ..store import FrameRecord, PageBreak, SessionStore, StoreError
+from ..store import PageBreak, SessionStore, StoredFrame
 from .paging import LivePage, Paginator, PagingConfig, RenderedPage
 from .reading import LineReader, PageReading
 
 log = logging.getLogger(__name__)
-
-
-class NoPageError(Exception):
-    """The session has nothing to read yet, or not the page asked for."""
 
 
 @dataclass(frozen=True)
@@ -37,7 +34,7 @@ class LiveConfig:
     batch_frames: int = 32  # frames stitched per turn (a question waits at most one batch)
     stitch_threads: int = 2
     ocr_threads: int = 1
-    catch_up_s: float = 10.0  # a question first waits this long at most for frames stored before it
+    catch_up_s: float = 2.0  # a question first waits this long at most for frames stored before it
     push_interval_s: float = 1.0  # live push: at most one page update per session this often
     live_idle_s: float = 300.0  # a session untouched this long leaves memory
 
@@ -113,13 +110,16 @@ class SessionPages:
             async with self._progress:
                 self._progress.notify_all()
 
-    def _stitch(self, frames: list[FrameRecord], breaks: list[PageBreak]) -> None:
+    def _stitch(self, frames: list[StoredFrame], breaks: list[PageBreak]) -> None:
         """Worker thread: every frame once, with the explicit breaks before it applied first."""
         for frame in frames:
             while self._breaks_applied < len(breaks) and breaks[self._breaks_applied].seq < frame.seq:
                 self.paginator.page_break()
                 self._breaks_applied += 1
-            self.paginator.add(frame)
+            try:
+                self.paginator.add(frame)
+            except ValueError as exc:  # a frame the stitcher cannot use (too small): left out, once
+                log.warning("session %s: frame seq %d not stitched: %s", self.session_id, frame.seq, exc)
 
     async def caught_up(self, timeout_s: float) -> bool:
         """Wait until every frame stored so far is stitched (at most ``timeout_s``)."""

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .base import OcrBackend, OcrError, OcrLine, OcrResult, OcrUnavailableError
+from ..errors import OcrError, OcrUnavailableError
+from .base import OcrBackend, OcrLine, OcrResult
 
 if TYPE_CHECKING:
     from darkread.cloud.settings import Settings

@@ -7,21 +7,10 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from ..errors import OcrError
+
 Box = tuple[int, int, int, int]  # x0, y0, x1, y1 in image pixels
 Quad = tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]]
-
-
-class OcrError(Exception):
-    """OCR failed; ``retryable`` says whether trying again later may help (timeouts, 429, 5xx)."""
-
-    def __init__(self, message: str, *, backend: str, retryable: bool = False) -> None:
-        super().__init__(f"{backend}: {message}")
-        self.backend = backend
-        self.retryable = retryable
-
-
-class OcrUnavailableError(OcrError):
-    """The engine is not installed or not configured (missing binary, package or API key)."""
 
 
 @dataclass(frozen=True)
@@ -111,11 +100,3 @@ def _rows(keyed: list[tuple[float, float, float, OcrLine]]) -> list[OcrLine]:
 def join_lines(lines: list[OcrLine]) -> str:
     return "\n".join(line.text for line in lines if line.text)
 
-
-def encode_png(image: np.ndarray) -> bytes:
-    import cv2
-
-    ok, png = cv2.imencode(".png", image)
-    if not ok:
-        raise OcrError("PNG encoding failed", backend="png")
-    return png.tobytes()

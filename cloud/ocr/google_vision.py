@@ -13,8 +13,10 @@ from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
+from darkread.image_codec import encode_png
 
-from .base import OcrError, OcrLine, OcrResult, OcrUnavailableError, check_image, encode_png, join_lines, reading_order
+from ..errors import OcrError, OcrUnavailableError
+from .base import OcrLine, OcrResult, check_image, join_lines, reading_order
 
 if TYPE_CHECKING:
     from darkread.cloud.settings import Settings

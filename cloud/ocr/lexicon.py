@@ -38,7 +38,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .base import OcrResult, OcrUnavailableError
+from ..errors import OcrUnavailableError
+from .base import OcrResult
 
 if TYPE_CHECKING:
     from symspellpy import SymSpell

@@ -15,8 +15,10 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import httpx
 import numpy as np
+from darkread.image_codec import encode_png
 
-from .base import OcrError, OcrLine, OcrResult, OcrUnavailableError, check_image, encode_png
+from ..errors import OcrError, OcrUnavailableError
+from .base import OcrLine, OcrResult, check_image
 from .google_vision import RETRYABLE_STATUS
 
 if TYPE_CHECKING:

@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from .base import OcrError, OcrLine, OcrResult, OcrUnavailableError, check_image, join_lines, reading_order
+from ..errors import OcrError, OcrUnavailableError
+from .base import OcrLine, OcrResult, check_image, join_lines, reading_order
 
 os.environ.setdefault("OMP_THREAD_LIMIT", "1")  # read by libtesseract when it loads
 

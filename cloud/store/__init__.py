@@ -5,12 +5,12 @@ from pathlib import Path
 from .blobs import BlobStore, FileBlobs
 from .protocol import SessionStore
 from .records import (
-    FrameRecord,
     GazeRecord,
     PageBreak,
     PageRecord,
     SessionInfo,
     SessionSpec,
+    StoredFrame,
     StoreError,
     UnknownSessionError,
     WriteResult,
@@ -30,7 +30,6 @@ async def open_store(data_dir: Path, database_url: str | None = None) -> Session
 __all__ = [
     "BlobStore",
     "FileBlobs",
-    "FrameRecord",
     "GazeRecord",
     "PageBreak",
     "PageRecord",
@@ -39,6 +38,7 @@ __all__ = [
     "SessionStore",
     "SqliteStore",
     "StoreError",
+    "StoredFrame",
     "UnknownSessionError",
     "WriteResult",
     "open_store",

@@ -21,13 +21,9 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .records import StoreError
+from ..errors import PostgresUnavailable
 
 SERVER_USER = "postgres"  # the account Debian's postgresql package creates
-
-
-class PostgresUnavailable(StoreError):
-    """No PostgreSQL server can be started on this machine (the message says why)."""
 
 
 def find_bin_dir() -> Path:

@@ -32,26 +32,29 @@ from dataclasses import dataclass
 from typing import Any
 
 import msgpack
-import numpy as np
 import psycopg
 from psycopg import conninfo
 from psycopg_pool import AsyncConnectionPool, ConnectionPool, PoolTimeout
+
+from darkread.image_codec import encode_png
+from darkread.mask_bits import pack_bits, unpack_bits
+from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .blobs import BlobStore
 from .changes import ChangeFeed, Listener
 from .migrations import migrate
 from .records import (
-    FrameRecord,
     GazeRecord,
     PageBreak,
     PageRecord,
     SessionInfo,
     SessionSpec,
+    StoredFrame,
     StoreError,
     UnknownSessionError,
     WriteResult,
 )
-from .sqlite import decode_mask_png, encode_mask_png
+from .sqlite import _page_key, decode_mask_png
 
 log = logging.getLogger(__name__)
 
@@ -432,22 +435,22 @@ class PostgresStore:
         self._check_open()
         return await self._writer.submit(table, session_id, seq, (session_id, seq, *row))
 
-    async def add_frame(self, session_id: str, frame: FrameRecord) -> WriteResult:
+    async def add_frame(self, session_id: str, frame: StoredFrame) -> WriteResult:
         rows, cols = frame.mask.shape
-        bits = np.packbits(frame.mask != 0, axis=None).tobytes()
+        bits = pack_bits(frame.mask)
         row = (frame.frame_id, frame.t_us, *frame.origin, *frame.gaze_px, *frame.gaze_rad, frame.events_used, rows, cols, bits)
         return await self._sequenced("frames", session_id, frame.seq, row)
 
     async def add_page(self, session_id: str, page: PageRecord) -> WriteResult:
         self._check_open()
-        key = f"pages/{session_id}/{page.seq}.png"
+        key = _page_key(session_id, page.seq)
         known = await self._fetch(
             "SELECT s.last_seq FROM pages p JOIN sessions s USING (session_id) WHERE p.session_id = %s AND p.seq = %s",
             (session_id, page.seq),
         )
         if known:  # a resend: the image is already there
             return WriteResult(stored=False, last_seq=int(known[0][0]))
-        await asyncio.to_thread(self.blobs.put, key, encode_mask_png(page.mask))
+        await asyncio.to_thread(self.blobs.put, key, encode_png(ink_mask_to_paper(page.mask)))
         rows, cols = page.mask.shape
         row = (page.page_id, page.t_us, rows, cols, key, json.dumps([list(box) for box in page.lines]))
         return await self._sequenced("pages", session_id, page.seq, row)
@@ -493,7 +496,7 @@ class PostgresStore:
         rows = await self._fetch(_SESSIONS.format(where="WHERE s.session_id = %s"), (session_id,))
         return _session_info(rows[0]) if rows else None
 
-    async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[FrameRecord]:
+    async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[StoredFrame]:
         rows = await self._fetch(
             "SELECT seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used, rows, cols, bits"
             " FROM frames WHERE session_id = %s AND seq > %s ORDER BY seq LIMIT %s",
@@ -501,8 +504,9 @@ class PostgresStore:
         )
         frames = []
         for seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, n_rows, cols, bits in rows:
-            mask = np.unpackbits(np.frombuffer(bits, np.uint8), count=n_rows * cols).reshape(n_rows, cols)
-            frames.append(FrameRecord(int(seq), int(frame_id), int(t_us), (x0, y0), (u, v), (yaw, pitch), used, mask))
+            mask = unpack_bits((n_rows, cols), bits)
+            frames.append(StoredFrame(int(frame_id), int(t_us), mask, (x0, y0), (u, v), seq=int(seq), gaze_rad=(yaw, pitch),
+                                      events_used=int(used)))  # fmt: skip
         return frames
 
     async def page_breaks(self, session_id: str) -> list[PageBreak]:

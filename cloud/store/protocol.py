@@ -12,14 +12,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
-from .records import FrameRecord, GazeRecord, PageBreak, PageRecord, SessionInfo, SessionSpec, WriteResult
+from .records import GazeRecord, PageBreak, PageRecord, SessionInfo, SessionSpec, StoredFrame, WriteResult
 
 
 class SessionStore(Protocol):
     async def open_session(self, spec: SessionSpec) -> int:
         """Create the session or refresh its metadata; its highest stored seq (-1 if none)."""
 
-    async def add_frame(self, session_id: str, frame: FrameRecord) -> WriteResult: ...
+    async def add_frame(self, session_id: str, frame: StoredFrame) -> WriteResult: ...
 
     async def add_page(self, session_id: str, page: PageRecord) -> WriteResult: ...
 
@@ -33,7 +33,7 @@ class SessionStore(Protocol):
     async def sessions(self) -> list[SessionInfo]:
         """Every session, most recently active first."""
 
-    async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[FrameRecord]:
+    async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[StoredFrame]:
         """Up to ``limit`` frames with seq > ``after_seq``, oldest first (page through long sessions)."""
 
     async def page_breaks(self, session_id: str) -> list[PageBreak]:

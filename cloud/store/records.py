@@ -10,15 +10,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from darkread.frame_record import FrameRecord
+
+from ..errors import StoreError, UnknownSessionError
+
 Box = tuple[int, int, int, int]  # x0, y0, x1, y1
 
-
-class StoreError(Exception):
-    """The store could not persist or read something (disk full, database locked, closed)."""
-
-
-class UnknownSessionError(StoreError):
-    """A write named a session that was never opened (or was deleted)."""
+__all__ = [
+    "GazeRecord", "PageBreak", "PageRecord", "SessionInfo", "SessionSpec", "StoreError", "StoredFrame",
+    "UnknownSessionError", "WriteResult",
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -47,17 +48,13 @@ class SessionInfo:
 
 
 @dataclass(frozen=True)
-class FrameRecord:
-    """One reconstructed foveal window as stored: where and when it was taken, and its ink."""
+class StoredFrame(FrameRecord):
+    """The frame record as a session stored it: the seq it arrived under, and what the glasses
+    said besides (gaze angles, events used). The stitcher reads it as a ``FrameRecord``."""
 
-    seq: int
-    frame_id: int
-    t_us: int
-    origin: tuple[int, int]  # window top-left, sensor pixels
-    gaze_px: tuple[float, float]
-    gaze_rad: tuple[float, float]
-    events_used: int
-    mask: np.ndarray = field(repr=False)  # uint8 [rows, cols], ink = 1
+    seq: int = 0
+    gaze_rad: tuple[float, float] = (0.0, 0.0)
+    events_used: int = 0
 
 
 @dataclass(frozen=True)

@@ -23,20 +23,23 @@ from contextlib import closing
 from pathlib import Path
 from typing import Any, TypeVar
 
-import cv2
 import msgpack
 import numpy as np
+
+from darkread.image_codec import ImageCodecError, decode_image, encode_png
+from darkread.mask_bits import pack_bits, unpack_bits
+from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .blobs import BlobStore, FileBlobs
 from .changes import ChangeFeed, Listener
 from .migrations import migrate as run_migrations
 from .records import (
-    FrameRecord,
     GazeRecord,
     PageBreak,
     PageRecord,
     SessionInfo,
     SessionSpec,
+    StoredFrame,
     StoreError,
     UnknownSessionError,
     WriteResult,
@@ -117,19 +120,12 @@ def migrate(conn: sqlite3.Connection) -> int:
     return run_migrations(_SqliteSchema(conn), MIGRATIONS, backend="SQLite")
 
 
-def encode_mask_png(mask: np.ndarray) -> bytes:
-    """Ink mask (nonzero = ink) -> PNG bytes, black text on white."""
-    ok, png = cv2.imencode(".png", np.where(np.asarray(mask) != 0, 0, 255).astype(np.uint8))
-    if not ok:
-        raise StoreError("PNG encoding failed")
-    return png.tobytes()
-
-
 def decode_mask_png(data: bytes, key: str) -> np.ndarray:
     """PNG bytes (black text on white) -> uint8 ink mask, ink = 1."""
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise StoreError(f"page image {key!r} is not a readable PNG")
+    try:
+        image = decode_image(data)
+    except ImageCodecError as exc:
+        raise StoreError(f"page image {key!r} is not a readable PNG: {exc}") from exc
     return (image < 128).astype(np.uint8)
 
 
@@ -214,11 +210,11 @@ class SqliteStore:
             self._changes.publish(session_id, result.last_seq)
         return result
 
-    async def add_frame(self, session_id: str, frame: FrameRecord) -> WriteResult:
+    async def add_frame(self, session_id: str, frame: StoredFrame) -> WriteResult:
         rows, cols = frame.mask.shape
         row = (
             session_id, frame.seq, frame.frame_id, frame.t_us, *frame.origin, *frame.gaze_px, *frame.gaze_rad,
-            frame.events_used, rows, cols, np.packbits(frame.mask != 0, axis=None).tobytes(),
+            frame.events_used, rows, cols, pack_bits(frame.mask),
         )  # fmt: skip
 
         def insert(conn: sqlite3.Connection) -> int:
@@ -230,7 +226,7 @@ class SqliteStore:
     async def add_page(self, session_id: str, page: PageRecord) -> WriteResult:
         key = _page_key(session_id, page.seq)
         rows, cols = page.mask.shape
-        png = encode_mask_png(page.mask)
+        png = encode_png(ink_mask_to_paper(page.mask))
 
         def insert(conn: sqlite3.Connection) -> int:
             known = conn.execute("SELECT 1 FROM pages WHERE session_id = ? AND seq = ?", (session_id, page.seq))
@@ -282,7 +278,7 @@ class SqliteStore:
         rows = await self._read(lambda conn: _session_rows(conn, "WHERE s.session_id = ?", (session_id,)))
         return rows[0] if rows else None
 
-    async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[FrameRecord]:
+    async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[StoredFrame]:
         def query(conn: sqlite3.Connection) -> list[tuple[Any, ...]]:
             return conn.execute(
                 "SELECT seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used, rows, cols, bits"
@@ -292,8 +288,8 @@ class SqliteStore:
 
         frames = []
         for seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, rows, cols, bits in await self._read(query):
-            mask = np.unpackbits(np.frombuffer(bits, np.uint8), count=rows * cols).reshape(rows, cols)
-            frames.append(FrameRecord(seq, frame_id, t_us, (x0, y0), (u, v), (yaw, pitch), used, mask))
+            mask = unpack_bits((rows, cols), bits)
+            frames.append(StoredFrame(frame_id, t_us, mask, (x0, y0), (u, v), seq=seq, gaze_rad=(yaw, pitch), events_used=used))
         return frames
 
     async def page_breaks(self, session_id: str) -> list[PageBreak]:

@@ -15,7 +15,7 @@ import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from .records import StoreError
+from ..errors import StoreError
 
 log = logging.getLogger(__name__)
 

@@ -109,10 +109,10 @@ async def _ingest(url: str, streams: int, frames_per_stream: int, time_limit_s: 
 
 
 def _store_alone(open_store: Callable[[], Awaitable[SessionStore]], count: int) -> float:
-    from darkread.cloud.stream import frame_record
+    from darkread.cloud.stream import stored_frame
     from darkread.proto.messages import decode as decode_message
 
-    frames = [frame_record(decode_message(data, max_bytes=1 << 20)) for data in _frame_bytes(count)]  # type: ignore[arg-type]
+    frames = [stored_frame(decode_message(data, max_bytes=1 << 20)) for data in _frame_bytes(count)]  # type: ignore[arg-type]
 
     async def write() -> float:
         from darkread.cloud.store import SessionSpec

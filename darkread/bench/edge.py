@@ -91,7 +91,7 @@ def _run_edge(recording: Path, model: Path | None, speed: float | None, on_frame
     """(wall s, process CPU s, source, metrics) of one replay through the loop."""
     from darkread.edge.gaze import GazeMapper
     from darkread.edge.io.recording import open_recording
-    from darkread.edge.metrics import EdgeMetrics
+    from darkread.edge.telemetry import EdgeMetrics
     from darkread.edge.pipeline import Pipeline, PipelineSettings
     from darkread.edge.reconstruct import Reconstructor
     from darkread.edge.sources.replay import ReplaySource
@@ -151,17 +151,19 @@ class _AckServer:
 
 def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
     """Bytes of one 2880x2880 RGB PNG: the recording's snapshot upscaled and encoded, or the estimate."""
-    from darkread.edge.metrics import RGB_FRAME_BYTES_ESTIMATE
+    from darkread.edge.telemetry import RGB_FRAME_BYTES_ESTIMATE
 
     rgb = recording / "rgb.png"
     if rgb.is_file():
         import cv2
 
-        image = cv2.imread(str(rgb), cv2.IMREAD_COLOR)
-        if image is not None:
-            ok, png = cv2.imencode(".png", cv2.resize(image, (2880, 2880), interpolation=cv2.INTER_CUBIC))
-            if ok:
-                return int(png.size), "measured"
+        from darkread.image_codec import ImageCodecError, encode_png, read_image
+
+        try:
+            image = read_image(rgb, colour=True)
+            return len(encode_png(cv2.resize(image, (2880, 2880), interpolation=cv2.INTER_CUBIC))), "measured"
+        except ImageCodecError:
+            pass
     return RGB_FRAME_BYTES_ESTIMATE, "estimated"
 
 

@@ -35,7 +35,8 @@ def onnx_latency_ms(model_path: str | Path, runs: int = 60, repeats: int = 3) ->
     return median_ms(lambda: rec.logits(voxel), runs, repeats)
 
 
-def _reference(runs: int) -> tuple[float, str]:
+def reference_latency_ms(runs: int) -> tuple[float, str]:
+    """The reference latency (ms) and what it measured: torch eager when installed, else the naive baseline."""
     voxel = example_voxel()
     try:
         import torch
@@ -66,7 +67,7 @@ def run(ctx: BenchContext) -> list[Figure]:
         ctx.notes.append(f"inference: no shipped model at {fp32}; run `darkread train all`")
         return []
     runs = 20 if ctx.quick else 100
-    reference_ms, reference = _reference(runs)
+    reference_ms, reference = reference_latency_ms(runs)
     figures = [
         Figure("inference_ms_fp32", onnx_latency_ms(fp32, runs), "U-Net fp32 ORT, 1 core (ms/window)", reference, "<= 3 ms (goal 2)"),
     ]

@@ -1,7 +1,7 @@
 """Stitching: time per frame and ink F1 against the true page, next to naive placement (every frame
 at its sensor position, no registration) measured on the same synthetic readings.
 
-The readings come from the stitcher tests' generator (``tests/edge/stitch/scan.py``: a rendered
+The readings come from the stitcher tests' generator (``tests/stitch/reading_factory.py``: a rendered
 page, a reading scanpath with gaze noise, head drift/tremor/roll, speckle, missing strokes and
 dropped frames), so this benchmark needs a source checkout.
 """
@@ -17,20 +17,20 @@ from types import ModuleType
 
 from darkread.bench import BenchContext, Figure
 
-_SCAN = Path(__file__).resolve().parents[2] / "tests" / "edge" / "stitch" / "scan.py"
+_SCAN = Path(__file__).resolve().parents[2] / "tests" / "stitch" / "reading_factory.py"
 
 
 def load_scan() -> ModuleType | None:
     """The synthetic reading generator, or None outside a source checkout."""
     if not _SCAN.is_file():
         return None
-    if "stitch_scan" in sys.modules:
-        return sys.modules["stitch_scan"]
-    spec = importlib.util.spec_from_file_location("stitch_scan", _SCAN)
+    if "reading_factory" in sys.modules:
+        return sys.modules["reading_factory"]
+    spec = importlib.util.spec_from_file_location("reading_factory", _SCAN)
     if spec is None or spec.loader is None:
         return None
     module = importlib.util.module_from_spec(spec)
-    sys.modules["stitch_scan"] = module
+    sys.modules["reading_factory"] = module
     spec.loader.exec_module(module)
     return module
 
@@ -50,10 +50,9 @@ def _ocr_reader():
     engine = RapidOCR(params=params)
 
     def read(png: bytes) -> str:
-        import cv2
-        import numpy as np
+        from darkread.image_codec import decode_image
 
-        result = engine(cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR))
+        result = engine(decode_image(png, colour=True))
         return re.sub(r"\s+", " ", " ".join(result.txts or ())).strip()
 
     return read
@@ -62,7 +61,7 @@ def _ocr_reader():
 def run(ctx: BenchContext) -> list[Figure]:
     import jiwer
 
-    from darkread.edge.stitch import naive_page, stitch_page
+    from darkread.stitch import naive_page, stitch_page
 
     scan = load_scan()
     if scan is None:
@@ -138,7 +137,7 @@ def write_example(path: Path, seed: int = 0) -> Path:
     import cv2
     import numpy as np
 
-    from darkread.edge.stitch import naive_page, stitch_page
+    from darkread.stitch import naive_page, stitch_page
 
     scan = load_scan()
     if scan is None:

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from darkread.edge.events import Events
+from darkread.image_codec import encode_jpeg, encode_png, read_image
 
 JPEG_QUALITIES: tuple[int, ...] = (100, 80, 60, 40, 20)
 PAPER_FOVEATION_REMOVED = 0.98
@@ -27,22 +28,10 @@ GAZE_TIME_STEP_US = 1000  # gaze is looked up once per millisecond of events (it
 
 def image_sizes(image: np.ndarray, qualities: tuple[int, ...] = JPEG_QUALITIES) -> dict[str, int]:
     """Bytes of one image uncompressed, as PNG, and as JPEG at each quality (OpenCV encoders)."""
-    import cv2
-
     array = np.ascontiguousarray(image)
-    if array.dtype != np.uint8 or array.ndim not in (2, 3):
-        raise ValueError(f"expected a uint8 [h, w] or [h, w, 3] image, got {array.dtype} {array.shape}")
-    bgr = array[..., ::-1] if array.ndim == 3 else array
-    sizes = {"raw": int(array.nbytes)}
-    ok, png = cv2.imencode(".png", bgr)
-    if not ok:
-        raise RuntimeError("PNG encoding failed")
-    sizes["png"] = int(png.size)
+    sizes = {"raw": int(array.nbytes), "png": len(encode_png(array))}
     for quality in qualities:
-        ok, jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-        if not ok:
-            raise RuntimeError(f"JPEG encoding at quality {quality} failed")
-        sizes[f"jpeg{quality}"] = int(jpeg.size)
+        sizes[f"jpeg{quality}"] = len(encode_jpeg(array, quality))
     return sizes
 
 
@@ -93,12 +82,7 @@ def page_message_bytes(ink: np.ndarray, lines: list[tuple[int, int, int, int]] |
 
 def page_ink_from_png(path: str | Path) -> np.ndarray:
     """The cloud's stitched page (black text on white PNG) as an ink mask."""
-    import cv2
-
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise FileNotFoundError(f"{path}: not a readable image")
-    return (image < 128).astype(np.uint8)
+    return (read_image(path) < 128).astype(np.uint8)
 
 
 @dataclass

@@ -5,6 +5,10 @@ from __future__ import annotations
 import argparse
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from darkread.eval.results import RecordingResult
 
 logger = logging.getLogger(__name__)
 
@@ -76,12 +80,8 @@ def _make_suite(args: argparse.Namespace) -> int:
 
 def _evaluate(args: argparse.Namespace) -> int:
     from darkread.edge.reconstruct import default_model_path
-    from darkread.eval.report import (
-        ReportInfo,
-        describe_model,
-        git_commit,
-        write_report,
-    )
+    from darkread.eval.provenance import ReportInfo, describe_model, git_commit
+    from darkread.eval.report import write_report
     from darkread.eval.runner import evaluate_suite, load_results
 
     suite = Path(args.target)
@@ -105,10 +105,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _describe_suite(suite: Path, results: list[dict]) -> str:
+def _describe_suite(suite: Path, results: list[RecordingResult]) -> str:
     import json
 
-    seconds = sorted(r["duration_s"] for r in results if r.get("duration_s"))
+    seconds = sorted(r.duration_s for r in results if r.duration_s)
     kind = ""
     doc = suite / "suite.json"
     if doc.is_file():

@@ -16,6 +16,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from darkread.eval.results import RecordingResult
+
 logger = logging.getLogger(__name__)
 
 OFFLINE_BACKENDS: tuple[str, ...] = ("rapidocr", "rapidocr-raw", "tesseract", "tesseract-raw")
@@ -102,8 +104,9 @@ def evaluate_recording(
 ) -> dict[str, Any]:
     """Everything the report needs about one recording (errors are recorded per stage)."""
     from darkread.eval.bandwidth import measure_bandwidth, page_ink_from_png
-    from darkread.eval.metrics import error_rates
+    from darkread.eval.error_rates import error_rates
     from darkread.eval.rgb_baseline import baseline_snapshot, read_snapshot
+    from darkread.image_codec import read_image, write_png
     from darkread.read import read_recording
 
     recording_dir, run_dir = Path(recording_dir), Path(run_dir)
@@ -116,7 +119,7 @@ def evaluate_recording(
         return cache[name]
 
     reference = (recording_dir / "text.txt").read_text(encoding="utf-8")
-    from darkread.eval.report import git_commit
+    from darkread.eval.provenance import git_commit
 
     result: dict[str, Any] = {**conditions(recording_dir), "backend": backend, "commit": git_commit(),
                               "evaluated": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
@@ -136,12 +139,9 @@ def evaluate_recording(
     snapshot: dict[str, Any] = {}
 
     def run_rgb() -> dict[str, Any]:
-        import cv2
-
         snap, source = baseline_snapshot(recording_dir)
         snapshot["snap"] = snap
-        crop_png = run_dir / "rgb_crop.png"
-        cv2.imwrite(str(crop_png), cv2.cvtColor(snap.crop, cv2.COLOR_RGB2BGR))
+        crop_png = write_png(run_dir / "rgb_crop.png", snap.crop)
         text = read_snapshot(snap, engine(backend))
         rates = error_rates(reference, text)
         described = {k: v for k, v in snap.describe().items() if not (isinstance(v, float) and math.isnan(v))}
@@ -150,12 +150,10 @@ def evaluate_recording(
     result["rgb"] = _guard(f"{recording_dir.name}: RGB baseline", run_rgb)
 
     def run_compare() -> dict[str, Any]:
-        import cv2
-
         page_png = result["darkread"].get("page_png")
         if not page_png:
             raise RuntimeError("no stitched page to read")
-        page = cv2.imread(page_png, cv2.IMREAD_GRAYSCALE)
+        page = read_image(page_png)
         out = {}
         for name in compare:
             started = time.perf_counter()
@@ -196,7 +194,7 @@ def evaluate_suite(
     force: bool = False,
     progress: bool = True,
     jobs: int = 1,
-) -> list[dict[str, Any]]:
+) -> list[RecordingResult]:
     """Evaluate every recording of a suite with ``jobs`` worker processes; stored results are reused
     unless ``force``.
 
@@ -236,9 +234,10 @@ def evaluate_suite(
                 by_name[futures[future].name] = future.result()
                 bar.update()
     bar.close()
-    return [by_name[f.name] for f in folders]
+    return [RecordingResult.from_dict(by_name[f.name]) for f in folders]
 
 
-def load_results(work_dir: str | Path) -> list[dict[str, Any]]:
+def load_results(work_dir: str | Path) -> list[RecordingResult]:
+    """The results stored under ``work_dir`` (one ``result.json`` per recording folder)."""
     runs = Path(work_dir)
-    return [json.loads(p.read_text()) for p in sorted(runs.glob(f"*/{RESULT_NAME}"))]
+    return [RecordingResult.from_dict(json.loads(p.read_text())) for p in sorted(runs.glob(f"*/{RESULT_NAME}"))]

@@ -24,7 +24,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from darkread.eval.rgb_baseline import SPEC_NAME
+from darkread.models.synth.rgb_camera import SPEC_NAME
 
 logger = logging.getLogger(__name__)
 

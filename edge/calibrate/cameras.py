@@ -1,4 +1,4 @@
-"""Camera models of the calibration inputs: a pinhole/radtan camera and Aria's Fisheye624.
+"""Camera models of the calibration inputs: a pinhole/radtan camera (``Intrinsics``) and Aria's Fisheye624.
 
 Both map camera-frame points (x right, y down, z forward, metres) to pixels and back to
 normalised rays (x/z, y/z), so pose estimation can run on undistorted points with an identity
@@ -20,6 +20,7 @@ from typing import Any, Protocol
 import cv2
 import numpy as np
 from darkread.edge.errors import CalibrationError
+from darkread.edge.io.intrinsics import Intrinsics, intrinsics_from_dict
 
 
 class Camera(Protocol):
@@ -29,39 +30,6 @@ class Camera(Protocol):
     def project(self, points_camera: np.ndarray) -> np.ndarray: ...
 
     def unproject(self, uv: np.ndarray) -> np.ndarray: ...
-
-
-@dataclass(frozen=True)
-class PinholeCamera:
-    """OpenCV pinhole camera with radial-tangential distortion (k1, k2, p1, p2); zeros = rectified."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    distortion: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
-
-    def camera_matrix(self) -> np.ndarray:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
-    def distortion_coefficients(self) -> np.ndarray:
-        return np.asarray(self.distortion, dtype=np.float64)
-
-    def project(self, points_camera: np.ndarray) -> np.ndarray:
-        pts = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)
-        uv, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), self.camera_matrix(), self.distortion_coefficients())
-        uv = uv.reshape(-1, 2)
-        uv[pts[:, 2] <= 0] = np.nan
-        return uv
-
-    def unproject(self, uv: np.ndarray) -> np.ndarray:
-        pts = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
-        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-10)
-        return cv2.undistortPoints(
-            pts, self.camera_matrix(), self.distortion_coefficients(), R=None, P=None, criteria=criteria
-        ).reshape(-1, 2)
 
 
 @dataclass(frozen=True)
@@ -129,24 +97,15 @@ def matrix_from_list(value: Any, where: str) -> np.ndarray:
     return matrix
 
 
-def rgb_camera_from_calibration(doc: dict) -> tuple[PinholeCamera, np.ndarray]:
+def rgb_camera_from_calibration(doc: dict) -> tuple[Intrinsics, np.ndarray]:
     """(camera, T_rgb_cpf) from the ``rgb_camera`` block of ``calibration.json``."""
     rgb = doc.get("rgb_camera")
     if not isinstance(rgb, dict):
         raise CalibrationError("calibration.json has no rgb_camera block (or pass --aria-calibration)")
-    try:
-        dist = rgb.get("distortion", {"model": "none"})
-        coeffs = (0.0, 0.0, 0.0, 0.0)
-        if dist.get("model") == "radtan":
-            coeffs = tuple(float(dist[k]) for k in ("k1", "k2", "p1", "p2"))
-        elif dist.get("model") != "none":
-            raise CalibrationError(f"rgb_camera.distortion.model {dist.get('model')!r} is not supported (none, radtan)")
-        camera = PinholeCamera(
-            int(rgb["width"]), int(rgb["height"]), float(rgb["fx"]), float(rgb["fy"]), float(rgb["cx"]), float(rgb["cy"]), coeffs  # type: ignore[arg-type]
-        )
-        return camera, matrix_from_list(rgb["T_rgb_cpf"], "rgb_camera.T_rgb_cpf")
-    except KeyError as exc:
-        raise CalibrationError(f"rgb_camera block is missing {exc}") from None
+    camera = intrinsics_from_dict(rgb, "rgb_camera", "calibration.json", distortion_required=False)
+    if "T_rgb_cpf" not in rgb:
+        raise CalibrationError("calibration.json: missing key rgb_camera.T_rgb_cpf")
+    return camera, matrix_from_list(rgb["T_rgb_cpf"], "rgb_camera.T_rgb_cpf")
 
 
 def _pose_from_aria(entry: dict, where: str) -> np.ndarray:

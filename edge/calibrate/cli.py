@@ -205,7 +205,6 @@ def _clock_refine(args: argparse.Namespace) -> int:
 def _extrinsics(args: argparse.Namespace) -> int:
     import numpy as np
     from darkread.edge.calibrate.cameras import (
-        PinholeCamera,
         aria_camera_from_device_calibration,
         matrix_from_list,
         pose_from_aria_json,
@@ -242,7 +241,7 @@ def _extrinsics(args: argparse.Namespace) -> int:
     pairs = paired_views(data.events, bursts, frames, calib.gaze_to_event_time_offset_us, spec, data.width, data.height)
     if not pairs:
         raise CalibrationError("the board was not found in both cameras at the same time (run `calibrate clock` first?)")
-    event_camera = PinholeCamera(calib.width, calib.height, calib.fx, calib.fy, calib.cx, calib.cy, calib.distortion)
+    event_camera = calib.intrinsics()
     if args.aria_calibration:
         if not args.t_device_cpf:
             raise CalibrationError("--aria-calibration needs --T-device-cpf (the CPF pose in the device frame)")

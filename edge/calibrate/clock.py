@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 from darkread.edge.calibrate.event_image import Burst
 from darkread.edge.errors import CalibrationError
+from darkread.image_codec import ImageCodecError, read_image
 
 logger = logging.getLogger(__name__)
 
@@ -54,10 +55,10 @@ class LazyImages(Sequence):
     def __getitem__(self, k):
         if isinstance(k, slice):
             return LazyImages(self.paths[k])
-        image = cv2.imread(str(self.paths[k]), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            raise CalibrationError(f"{self.paths[k]}: cannot read image")
-        return image
+        try:
+            return read_image(self.paths[k])
+        except ImageCodecError:
+            raise CalibrationError(f"{self.paths[k]}: cannot read image") from None
 
 
 def load_rgb_frames(path: str | Path, *, max_side: int | None = 128, lazy: bool = False) -> RgbFrames:
@@ -82,9 +83,10 @@ def load_rgb_frames(path: str | Path, *, max_side: int | None = 128, lazy: bool 
                 if not frame_path.is_file():
                     raise CalibrationError(f"{path}:{line}: cannot read image {name}")
             else:
-                image = cv2.imread(str(frame_path), cv2.IMREAD_GRAYSCALE)
-                if image is None:
-                    raise CalibrationError(f"{path}:{line}: cannot read image {name}")
+                try:
+                    image = read_image(frame_path)
+                except ImageCodecError:
+                    raise CalibrationError(f"{path}:{line}: cannot read image {name}") from None
                 if max_side and max(image.shape) > max_side:
                     scale = max_side / max(image.shape)
                     image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)

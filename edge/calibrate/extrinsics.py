@@ -19,16 +19,17 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from darkread.edge.calibrate.cameras import Camera, Fisheye624Camera, PinholeCamera
+from darkread.edge.calibrate.cameras import Camera, Fisheye624Camera
 from darkread.edge.calibrate.markers import Detection, board_pose, pose_matrix
 from darkread.edge.errors import CalibrationError
+from darkread.edge.io.intrinsics import Intrinsics
 
 logger = logging.getLogger(__name__)
 
 
 def camera_board_pose(detection: Detection, camera: Camera) -> tuple[np.ndarray, float]:
     """``T_camera_board`` and the RMS reprojection error (px) for any supported camera model."""
-    if isinstance(camera, PinholeCamera):
+    if isinstance(camera, Intrinsics):
         return board_pose(detection, camera.camera_matrix(), camera.distortion_coefficients())
     if isinstance(camera, Fisheye624Camera):
         rays = camera.unproject(detection.image_points.astype(np.float64))
@@ -79,7 +80,7 @@ class ExtrinsicsResult:
 
 def extrinsics_from_views(
     views: list[tuple[Detection, Detection]],
-    event_camera: PinholeCamera,
+    event_camera: Intrinsics,
     rgb_camera: Camera,
     T_rgb_cpf: np.ndarray,
     *,
@@ -121,7 +122,7 @@ class HomographyResult:
         return cv2.perspectiveTransform(pts, self.H_event_rgb).reshape(-1, 2)
 
 
-def page_homography(event_det: Detection, rgb_det: Detection, *, rgb_camera: Camera | None = None, event_camera: PinholeCamera | None = None) -> HomographyResult:
+def page_homography(event_det: Detection, rgb_det: Detection, *, rgb_camera: Camera | None = None, event_camera: Intrinsics | None = None) -> HomographyResult:
     """Homography from matched marker corners (by id) of a flat page; undistorts when cameras are given."""
     common, ie, ir = np.intersect1d(event_det.ids, rgb_det.ids, return_indices=True)
     if common.size < 4:

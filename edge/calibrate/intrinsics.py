@@ -22,6 +22,7 @@ from darkread.edge.calibrate.event_image import (
 )
 from darkread.edge.calibrate.markers import BoardSpec, Detection, detect_board
 from darkread.edge.errors import CalibrationError
+from darkread.edge.io.intrinsics import RADTAN_KEYS, Intrinsics
 
 logger = logging.getLogger(__name__)
 
@@ -36,15 +37,10 @@ class View:
     detection: Detection | None
 
 
-@dataclass
-class IntrinsicsResult:
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    distortion: tuple[float, float, float, float]
+@dataclass(frozen=True, eq=False)
+class IntrinsicsResult(Intrinsics):
+    """The fitted camera, and how well it fits the board corners."""
+
     rms_px: float  # RMS reprojection error over all corners of all used views
     std: dict[str, float]  # standard deviations of fx, fy, cx, cy, k1, k2, p1, p2 (from the fit's Jacobian)
     per_view_rms_px: list[float]
@@ -52,13 +48,10 @@ class IntrinsicsResult:
     n_corners: int
     poses: list[np.ndarray] = field(repr=False, default_factory=list)  # T_event_board per used view
 
-    def camera_matrix(self) -> np.ndarray:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
     def to_dict(self) -> dict:
         return {
             "fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy,
-            "distortion": dict(zip(("k1", "k2", "p1", "p2"), self.distortion)),
+            "distortion": dict(zip(RADTAN_KEYS, self.distortion)),
             "rms_px": self.rms_px, "std": self.std, "n_views": self.n_views, "n_corners": self.n_corners,
         }
 
@@ -121,7 +114,7 @@ def calibrate_intrinsics(
         cy=float(K[1, 2]),
         distortion=(float(dist[0]), float(dist[1]), float(dist[2]), float(dist[3])),
         rms_px=float(rms),
-        std=dict(zip(("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"), (float(v) for v in std[:8]))),
+        std=dict(zip(("fx", "fy", "cx", "cy", *RADTAN_KEYS), (float(v) for v in std[:8]))),
         per_view_rms_px=per_view,
         n_views=len(used),
         n_corners=int(sum(len(d) for d in used)),

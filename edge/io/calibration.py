@@ -1,36 +1,29 @@
 """``calibration.json`` of the recording format: event-camera intrinsics, CPF pose, clock offset.
 
-The event camera uses OpenCV's radial-tangential model (k1, k2, p1, p2), so ``Calibration.project``
-equals ``cv2.projectPoints``; it is written out in numpy so that it vectorises over any number of
-points and marks points behind the camera as NaN instead of mirroring them into the image.
+The event camera is an ``Intrinsics`` (pinhole + radtan, ``intrinsics.py``); ``Calibration`` adds
+where it sits on the glasses and the clock offset to the gaze.
 """
 
 from __future__ import annotations
 
 import json
-import math
-from dataclasses import dataclass, field
+from dataclasses import astuple, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from darkread.edge.errors import CalibrationError
+from darkread.edge.io.intrinsics import Intrinsics, intrinsics_from_dict, intrinsics_to_dict
 
 _RIGID_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
-class Calibration:
-    """Event camera seen from the glasses' central pupil frame (CPF)."""
+class Calibration(Intrinsics):
+    """The event camera's intrinsics, and where it sits on the glasses: seen from the central
+    pupil frame (CPF), on the device clock."""
 
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    distortion: tuple[float, float, float, float]  # radtan k1, k2, p1, p2
     T_event_cpf: np.ndarray = field(repr=False)  # 4x4, maps CPF points (m) into the event camera frame
     gaze_to_event_time_offset_us: int = 0  # t_event = t_device + offset
     rgb_camera: dict | None = field(default=None, repr=False)
@@ -45,47 +38,10 @@ class Calibration:
 
     __hash__ = None  # type: ignore[assignment]
 
-    def camera_matrix(self) -> np.ndarray:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
-    def distortion_coefficients(self) -> np.ndarray:
-        """``[k1, k2, p1, p2]`` as OpenCV expects them."""
-        return np.asarray(self.distortion, dtype=np.float64)
-
     def cpf_to_event(self, points_cpf: np.ndarray) -> np.ndarray:
         """(N, 3) CPF points -> (N, 3) event-camera-frame points."""
         points = np.asarray(points_cpf, dtype=np.float64).reshape(-1, 3)
         return points @ self.T_event_cpf[:3, :3].T + self.T_event_cpf[:3, 3]
-
-    def project(self, points_event: np.ndarray) -> np.ndarray:
-        """(N, 3) event-frame points -> (N, 2) pixels; points with Z <= 0 give NaN rows."""
-        points = np.asarray(points_event, dtype=np.float64).reshape(-1, 3)
-        z = points[:, 2]
-        in_front = z > 0
-        safe_z = np.where(in_front, z, 1.0)
-        x, y = points[:, 0] / safe_z, points[:, 1] / safe_z
-        k1, k2, p1, p2 = self.distortion
-        r2 = x * x + y * y
-        radial = 1 + k1 * r2 + k2 * r2 * r2
-        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-        uv = np.stack([self.fx * xd + self.cx, self.fy * yd + self.cy], axis=1)
-        uv[~in_front] = np.nan
-        return uv
-
-    def on_sensor(self, uv: np.ndarray) -> np.ndarray:
-        """Pixel centres sit at integers, so the sensor spans -0.5 <= u < width - 0.5 (likewise v)."""
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        with np.errstate(invalid="ignore"):
-            return (
-                (uv[:, 0] >= -0.5) & (uv[:, 0] < self.width - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < self.height - 0.5)
-            )
-
-
-def _number(value: Any, where: str, path: Path) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise CalibrationError(f"{path}: {where} must be a finite number, got {value!r}")
-    return float(value)
 
 
 def _get(mapping: Any, key: str, where: str, path: Path) -> Any:
@@ -121,27 +77,7 @@ def load_calibration(path: str | Path) -> Calibration:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise CalibrationError(f"{path}: not a readable JSON file: {exc}") from exc
 
-    camera = _get(doc, "event_camera", "", path)
-    numbers = {k: _number(_get(camera, k, "event_camera", path), f"event_camera.{k}", path) for k in
-               ("width", "height", "fx", "fy", "cx", "cy")}
-    for k in ("width", "height"):
-        if numbers[k] <= 0 or not numbers[k].is_integer():
-            raise CalibrationError(f"{path}: event_camera.{k} must be a positive integer, got {camera[k]!r}")
-    for k in ("fx", "fy"):
-        if numbers[k] <= 0:
-            raise CalibrationError(f"{path}: event_camera.{k} must be positive, got {camera[k]!r}")
-
-    distortion = _get(camera, "distortion", "event_camera", path)
-    model = _get(distortion, "model", "event_camera.distortion", path)
-    if model == "radtan":
-        coeffs = tuple(
-            _number(_get(distortion, k, "event_camera.distortion", path), f"event_camera.distortion.{k}", path)
-            for k in ("k1", "k2", "p1", "p2")
-        )
-    elif model == "none":
-        coeffs = (0.0, 0.0, 0.0, 0.0)
-    else:
-        raise CalibrationError(f"{path}: event_camera.distortion.model {model!r} is not supported (radtan, none)")
+    camera = intrinsics_from_dict(_get(doc, "event_camera", "", path), "event_camera", str(path))
 
     offset = _get(doc, "gaze_to_event_time_offset_us", "", path)
     if isinstance(offset, bool) or not isinstance(offset, int):
@@ -151,13 +87,7 @@ def load_calibration(path: str | Path) -> Calibration:
         raise CalibrationError(f"{path}: rgb_camera must be a JSON object")
 
     return Calibration(
-        width=int(numbers["width"]),
-        height=int(numbers["height"]),
-        fx=numbers["fx"],
-        fy=numbers["fy"],
-        cx=numbers["cx"],
-        cy=numbers["cy"],
-        distortion=coeffs,  # type: ignore[arg-type]
+        *astuple(camera),
         T_event_cpf=_matrix4(_get(doc, "T_event_cpf", "", path), "T_event_cpf", path),
         gaze_to_event_time_offset_us=offset,
         rgb_camera=rgb,
@@ -165,17 +95,8 @@ def load_calibration(path: str | Path) -> Calibration:
 
 
 def calibration_to_dict(calib: Calibration) -> dict[str, Any]:
-    k1, k2, p1, p2 = (float(c) for c in calib.distortion)
     doc: dict[str, Any] = {
-        "event_camera": {
-            "width": int(calib.width),
-            "height": int(calib.height),
-            "fx": float(calib.fx),
-            "fy": float(calib.fy),
-            "cx": float(calib.cx),
-            "cy": float(calib.cy),
-            "distortion": {"model": "radtan", "k1": k1, "k2": k2, "p1": p1, "p2": p2},
-        },
+        "event_camera": intrinsics_to_dict(calib),
         "T_event_cpf": np.asarray(calib.T_event_cpf, dtype=np.float64).tolist(),
         "gaze_to_event_time_offset_us": int(calib.gaze_to_event_time_offset_us),
     }

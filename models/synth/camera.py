@@ -53,16 +53,7 @@ def random_calibration(rng: np.random.Generator, *, time_offset_us: int = 0) -> 
 def region_rays(calib: Calibration, x0: int, y0: int, width: int, height: int) -> np.ndarray:
     """Undistorted normalised rays (x/z, y/z) of the pixel centres of a region, float64 [h*w, 2]."""
     xs, ys = np.meshgrid(np.arange(x0, x0 + width, dtype=np.float64), np.arange(y0, y0 + height, dtype=np.float64))
-    pts = np.stack([xs.ravel(), ys.ravel()], axis=1).reshape(-1, 1, 2)
-    und = cv2.undistortPoints(
-        pts,
-        calib.camera_matrix(),
-        calib.distortion_coefficients(),
-        R=None,
-        P=None,
-        criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-9),
-    )
-    return und.reshape(-1, 2)
+    return calib.unproject(np.stack([xs.ravel(), ys.ravel()], axis=1), iterations=20, eps=1e-9)
 
 
 def pixels_per_degree(calib: Calibration) -> float:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from darkread.models.synth.page import Page
+from darkread.models.synth.page import PrintedPage
 
 EYE_OFFSET_M = 0.0315
 FIXATION_MIN_MS, FIXATION_MAX_MS = 150.0, 500.0
@@ -76,7 +76,7 @@ def _saccade_ms(amplitude_deg: float, forward: bool) -> float:
 
 
 def reading_scanpath(
-    page: Page,
+    page: PrintedPage,
     duration_s: float,
     deg_per_texel: float,
     rng: np.random.Generator,

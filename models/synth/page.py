@@ -18,7 +18,9 @@ SUPERSAMPLE = 4
 
 
 @dataclass
-class Page:
+class PrintedPage:
+    """A rendered printed page: ink coverage per texel and where its lines and characters sit."""
+
     lines: list[str]
     font: str
     coverage: np.ndarray  # float32 [H, W] ink coverage 0..1 (1 = ink), anti-aliased
@@ -65,7 +67,7 @@ def render_page(
     *,
     line_spacing: float = 1.4,
     margin_xheights: float = 12.0,
-) -> Page:
+) -> PrintedPage:
     """Render ``lines`` left-aligned so that the x-height is ``xheight_tex`` texels."""
     path = str(face.path)
     ratio = xheight_ratio(path)
@@ -97,7 +99,7 @@ def render_page(
         (margin_ss + max(widths)) / SUPERSAMPLE,
         float(line_y[-1] + xh * 1.5),
     )
-    return Page(
+    return PrintedPage(
         lines=list(lines),
         font=face.name,
         coverage=coverage,
@@ -110,7 +112,7 @@ def render_page(
 
 
 def reflectance(
-    page: Page, *, paper: float = 0.85, contrast: float = 0.88, blur_tex: float = 0.0
+    page: PrintedPage, *, paper: float = 0.85, contrast: float = 0.88, blur_tex: float = 0.0
 ) -> np.ndarray:
     """Paper reflectance image: ``paper`` where blank, ``paper * (1 - contrast)`` under full ink.
 

@@ -17,7 +17,7 @@ import numpy as np
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.camera import region_rays, rotation_xyz
 from darkread.models.synth.motion import Motion
-from darkread.models.synth.page import Page
+from darkread.models.synth.page import PrintedPage
 
 
 @dataclass
@@ -48,7 +48,7 @@ class Region:
 
 @dataclass
 class Scene:
-    page: Page
+    page: PrintedPage
     reflect: np.ndarray  # float32 texture reflectance (paper tone, ink, print blur)
     calib: Calibration
     base_rotation: np.ndarray  # [3, 3] page orientation in the camera frame at rest

@@ -16,7 +16,7 @@ from darkread.models.synth.camera import random_calibration
 from darkread.models.synth.fonts import FontFace, face_by_name, faces_for
 from darkread.models.synth.gaze import Scanpath, TrackerModel, reading_scanpath
 from darkread.models.synth.motion import MOTION_LEVELS, random_motion
-from darkread.models.synth.page import Page, reflectance, render_page
+from darkread.models.synth.page import PrintedPage, reflectance, render_page
 from darkread.models.synth.scene import Scene, base_pose
 from darkread.models.synth.sensor import SensorParams, random_sensor_params
 from darkread.models.synth.text import TEXT_KINDS, make_lines
@@ -44,7 +44,7 @@ class SessionSpec:
 class Session:
     spec: SessionSpec
     seed: int
-    page: Page
+    page: PrintedPage
     scene: Scene
     scanpath: Scanpath
     tracker: TrackerModel

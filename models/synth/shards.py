@@ -18,6 +18,7 @@ import numpy as np
 
 from darkread.edge.fovea import FoveaConfig, window_origin
 from darkread.edge.voxel import VoxelConfig, voxel_grid
+from darkread.mask_bits import pack_rows
 from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
 from darkread.models.synth.scene import Region, Scene
@@ -32,6 +33,10 @@ SAMPLES_PER_PAGE = 8
 SHARD_SIZE = 250
 MAX_WINDOW_S = 0.5  # give up collecting events after this much simulated time
 SHARD_FORMAT_VERSION = 1
+
+
+# Per-sample arrays of a shard besides voxels and targets (what ``write_shard`` writes).
+METADATA_KEYS: tuple[str, ...] = ("lux", "xheight_px", "motion", "font", "kind", "seed", "window_origin", "t_end_us", "n_events")
 
 
 @dataclass
@@ -136,20 +141,12 @@ def make_samples(
     return voxels, targets, metas
 
 
-def pack_targets(targets: np.ndarray) -> np.ndarray:
-    return np.packbits(targets.astype(np.uint8), axis=-1)
-
-
-def unpack_targets(packed: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    return np.unpackbits(packed, axis=-1, count=shape[-1]).astype(np.uint8)
-
-
 def write_shard(path: Path, voxels: np.ndarray, targets: np.ndarray, metas: list[SampleMeta]) -> None:
     cols = {k: [getattr(m, k) for m in metas] for k in SampleMeta.__dataclass_fields__}
     np.savez_compressed(
         path,
         voxels=voxels.astype(np.float16),
-        targets=pack_targets(targets),
+        targets=pack_rows(targets),
         target_shape=np.array(targets.shape[1:], dtype=np.int32),
         lux=np.array(cols["lux"], dtype=np.float32),
         xheight_px=np.array(cols["xheight_px"], dtype=np.float32),

@@ -1,8 +1,9 @@
 """Training data: synthetic shards -> shuffled, augmented torch batches.
 
 A shard ``shard-NNNNN.npz`` holds ``voxels`` float16 [n,4,100,200], ``targets`` packed bits
-(``np.packbits`` on the last axis, [n,100,25]), ``target_shape`` and per-sample metadata
-(``lux``, ``xheight_px``, ``motion``, ``font``, ``kind``, ``seed``). Shards are streamed a few
+(``darkread.mask_bits.pack_rows``, [n,100,25]), ``target_shape`` and per-sample metadata
+(``models.synth.shards.METADATA_KEYS``: lux, x-height, motion, font, kind, seed, window origin,
+window end time, event count); ``models/synth/shards.py`` writes them, this module reads them. Shards are streamed a few
 at a time so a 30 k-sample set (~5 GB as float16) never has to sit in memory at once.
 
 Augmentation (all exact for the physics of the voxel grid, none changes glyph shapes):
@@ -25,11 +26,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from darkread.mask_bits import unpack_rows
+from darkread.models.synth.shards import METADATA_KEYS
 
 log = logging.getLogger(__name__)
-
-METADATA_KEYS: tuple[str, ...] = ("lux", "xheight_px", "motion", "font", "kind", "seed")
-
 
 @dataclass
 class Shard:
@@ -57,24 +57,20 @@ def shard_paths(root: str | Path) -> list[Path]:
     return paths
 
 
-def unpack_targets(packed: np.ndarray, target_shape: Sequence[int]) -> np.ndarray:
-    """Packed bits [n,H,ceil(W/8)] -> uint8 [n,H,W] with 1 = ink."""
-    width = int(target_shape[-1])
-    return np.unpackbits(packed, axis=-1, count=width).astype(np.uint8)
-
-
-def pack_targets(targets: np.ndarray) -> np.ndarray:
-    return np.packbits(targets.astype(bool), axis=-1)
-
-
 def load_shard(path: str | Path) -> Shard:
     with np.load(path, allow_pickle=False) as data:
         voxels = data["voxels"]
         packed = data["targets"]
         target_shape = tuple(int(v) for v in data["target_shape"]) if "target_shape" in data else voxels.shape[-2:]
-        targets = unpack_targets(packed, target_shape) if packed.shape[-1] != target_shape[-1] else packed
+        targets = unpack_rows(packed, target_shape[-1]) if packed.shape[-1] != target_shape[-1] else packed
         meta = {key: data[key] for key in METADATA_KEYS if key in data}
     return Shard(voxels=voxels, targets=targets.astype(np.uint8), meta=meta)
+
+
+def iter_shards(root: str | Path) -> Iterator[Shard]:
+    """The shards of a dataset one at a time (memory stays at one shard)."""
+    for path in shard_paths(root):
+        yield load_shard(path)
 
 
 def load_dataset(root: str | Path, limit: int | None = None) -> Shard:

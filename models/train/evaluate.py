@@ -15,7 +15,7 @@ import numpy as np
 from darkread.models.train.baseline import BaselineParams
 from darkread.models.train.baseline import predict as baseline_predict
 from darkread.models.train.data import Shard, iterate_batches, load_dataset, shard_paths
-from darkread.models.train.metrics import ink_counts, scores_from_counts
+from darkread.models.train.ink_scores import ink_counts, scores_from_counts
 
 log = logging.getLogger(__name__)
 

@@ -26,7 +26,7 @@ from darkread.models.train.data import (
     shard_paths,
     split_mask,
 )
-from darkread.models.train.metrics import ink_scores
+from darkread.models.train.ink_scores import ink_scores
 from darkread.models.train.net import BinaryUNet, NetConfig, count_parameters
 
 log = logging.getLogger(__name__)

@@ -43,9 +43,9 @@ def export_models(checkpoint: str | Path, train_dir: str | Path, out_dir: str | 
 def measure_latency(models_dir: str | Path = MODELS_DIR, runs: int = 60) -> dict[str, Any]:
     import onnxruntime
 
-    from darkread.bench.inference import _reference, onnx_latency_ms
+    from darkread.bench.inference import onnx_latency_ms, reference_latency_ms
 
-    ref_ms, ref = _reference(runs)
+    ref_ms, ref = reference_latency_ms(runs)
     out = Path(models_dir)
     return {
         "fp32_ms": onnx_latency_ms(out / FP32_NAME, runs),
@@ -167,12 +167,9 @@ def reproduce(
 
 
 def generate_dataset(split: str, root: str | Path, samples: int, workers: int) -> None:
-    """Make a synthetic split with the synth component's own command (train seed 1, val seed 2)."""
-    from darkread.cli import main as darkread_main
+    """Make a synthetic split as ``darkread synth dataset`` does (train seed 1, val seed 2)."""
+    from darkread.models.synth.shards import build_dataset
 
-    seed = "1" if split == "train" else "2"
-    argv = ["synth", "dataset", str(root), "--samples", str(samples), "--workers", str(workers), "--seed", seed, "--split", split]
-    log.info("generating %s set: darkread %s", split, " ".join(argv))
-    code = darkread_main(argv)
-    if code:
-        raise RuntimeError(f"`darkread {' '.join(argv)}` failed with exit code {code}")
+    seed = 1 if split == "train" else 2
+    log.info("generating %s set: %d samples, seed %d, %d workers -> %s", split, samples, seed, workers, root)
+    build_dataset(root, samples, workers=workers, seed=seed, split=split)

@@ -14,7 +14,7 @@ import pytest
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 
-from darkread.cloud.ocr.base import OcrError, OcrUnavailableError
+from darkread.cloud.errors import OcrError, OcrUnavailableError
 from darkread.cloud.ocr.google_vision import GoogleVisionBackend
 from darkread.cloud.ocr.openai_compatible import OpenAiCompatibleBackend, prepare_image
 from darkread.cloud.server import serve_in_thread

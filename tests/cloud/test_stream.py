@@ -11,7 +11,8 @@ import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
-from darkread.cloud.store import FrameRecord, StoreError
+from darkread.cloud.errors import StoreError
+from darkread.cloud.store import StoredFrame
 from darkread.cloud.stream import close_reason
 from darkread.proto.errors import CloseCode
 from darkread.proto.messages import Ack, Error, Frame, Hello, Page, Welcome, decode, encode, pack_mask
@@ -245,7 +246,7 @@ def test_storage_failure_closes_with_internal_error_and_the_client_can_resume(se
     store = server.context.store
     real_add_frame = store.add_frame
 
-    async def failing_add_frame(session_id: str, record: FrameRecord) -> Any:
+    async def failing_add_frame(session_id: str, record: StoredFrame) -> Any:
         if record.seq == 2:
             raise StoreError("disk full")
         return await real_add_frame(session_id, record)

@@ -12,8 +12,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from darkread.cloud.context import AppContext
-from darkread.cloud.metrics import Metrics
 from darkread.cloud.live import LivePages
+from darkread.cloud.prometheus import Metrics
 from darkread.cloud.settings import Settings
 from darkread.cloud.store import SqliteStore
 from darkread.cloud.stream import StreamConnection, StreamState, _Pending

@@ -11,7 +11,7 @@ from factories import random_events
 
 from darkread.edge.events import EVENT_CD_DTYPE, Events, empty_events
 from darkread.edge.fovea import FoveaConfig
-from darkread.edge.metrics import EdgeMetrics, MetricsServer
+from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.pipeline import (
     FrameResult,
     Pipeline,

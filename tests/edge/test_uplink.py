@@ -15,7 +15,7 @@ from websockets.asyncio.server import ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
-from darkread.edge.metrics import EdgeMetrics
+from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.spool import Spool
 from darkread.edge.uplink import Uplink, UplinkSettings, backoff_delays
 from darkread.proto.messages import Ack, Frame, Hello, Welcome, decode, encode, pack_mask

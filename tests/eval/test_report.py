@@ -7,14 +7,10 @@ from typing import Any
 import pytest
 from PIL import Image
 
-from darkread.eval.report import (
-    ReportInfo,
-    bandwidth_table,
-    grouped_table,
-    headline_table,
-    rate,
-    write_report,
-)
+from darkread.eval.provenance import ReportInfo
+from darkread.eval.report import write_report
+from darkread.eval.results import RecordingResult, typed
+from darkread.eval.tables import bandwidth_table, grouped_table, headline_table
 
 
 def _bandwidth(png: int, frames_bytes: int, page: int) -> dict[str, Any]:
@@ -49,20 +45,21 @@ def fake_results() -> list[dict[str, Any]]:
 
 
 def test_rate_reads_nested_sections_and_clips() -> None:
-    r = {"darkread": {"cer": 1.7}, "backends": {"x": {"cer": 0.25}}, "rgb": {"error": "no"}}
-    assert rate(r, "darkread") == 1.0
-    assert rate(r, "backends.x") == 0.25
-    assert rate(r, "rgb") is None and rate(r, "backends.y") is None
+    r = RecordingResult.from_dict({"darkread": {"cer": 1.7}, "backends": {"x": {"cer": 0.25}}, "rgb": {"error": "no"}})
+    assert r.rate("darkread") == 1.0
+    assert r.backend_rate("x") == 0.25
+    assert r.rate("rgb") is None and r.backend_rate("y") is None
+    assert r.failures == ("rgb: no",)
 
 
 def test_grouped_table_means_per_lux() -> None:
-    rows = grouped_table(fake_results(), "lux", "lux", lambda v: f"{v:g}")
+    rows = grouped_table(typed(fake_results()), "lux", "lux", lambda v: f"{v:g}")
     assert rows[2] == "| 5 | 1 | 6.0% | 30.0% | 100.0% | 100.0% |"
     assert rows[3] == "| 1000 | 1 | 2.0% | 10.0% | 0.0% | 0.0% |"
 
 
 def test_bandwidth_table_medians_and_paper_ratios() -> None:
-    text = "\n".join(bandwidth_table(fake_results()))
+    text = "\n".join(bandwidth_table(typed(fake_results())))
     assert "one full image of 2880 x 2880 pixels" in text
     # medians: PNG 19 MB; frames 1.5 MB per page = 750 kB/s; page 9 kB
     assert "| RGB snapshot, PNG | 19.0 MB | – | 1.0x |" in text
@@ -77,7 +74,7 @@ def test_bandwidth_table_medians_and_paper_ratios() -> None:
 def test_report_on_a_two_recording_suite(tmp_path: Path) -> None:
     info = ReportInfo(date="2026-01-02 03:04 UTC", commit="abc1234567", backend="local", model="m.onnx (sha256 x)",
                       suite="2 fake recordings")
-    path = write_report(fake_results(), tmp_path, info)
+    path = write_report(typed(fake_results()), tmp_path, info)
     md = path.read_text()
     assert path.name == "README.md"
     for expected in ("2026-01-02 03:04 UTC", "`abc1234567`", "2 fake recordings", "![CER vs lux](cer_vs_lux.png)",
@@ -97,14 +94,14 @@ def test_headline_compares_30_lux_paragraphs_with_the_paper() -> None:
     runs = [{**base, "name": f"p{k}", "lux": 30.0, "kind": "paragraph", "motion": motion,
              "darkread": {"cer": cer, "wer": 0.05}, "rgb": {"cer": 0.5, "wer": 0.9}}
             for k, (motion, cer) in enumerate([("still", 0.0), ("normal", 0.02), ("walking", 0.04)])]
-    text = "\n".join(headline_table(runs + fake_results()))
+    text = "\n".join(headline_table(typed(runs + fake_results())))
     assert "| still | 1 | 0.0% | 0.0% | 0.0% | 5.0% | 50.0% | 90.0% |" in text
     assert "| **all** | 3 | 2.0% | 2.0% | 4.0% | 5.0% | 50.0% | 90.0% |" in text
     assert "| still + normal | 2 | 1.0% | 1.0% | 2.0% | 5.0% | 50.0% | 90.0% |" in text
     assert "paragraphs: 2.0% over 3 recordings, at or below the paper's 2.5%" in text
     assert "normal head motion: 1.0% over 2 recordings, at or below" in text
     runs[0]["darkread"]["cer"] = 0.2
-    assert "above the paper's" in "\n".join(headline_table(runs))
+    assert "above the paper's" in "\n".join(headline_table(typed(runs)))
 
 
 def test_cli_rebuilds_the_report_from_stored_results(tmp_path: Path) -> None:
@@ -131,7 +128,7 @@ def test_cli_refuses_a_report_without_results(tmp_path: Path) -> None:
 
 
 def test_examples_grid_shows_the_rgb_crop_next_to_the_page(tmp_path: Path) -> None:
-    from darkread.eval.report import plot_examples
+    from darkread.eval.plots import plot_examples
 
     results = fake_results()
     for r in results:
@@ -139,12 +136,12 @@ def test_examples_grid_shows_the_rgb_crop_next_to_the_page(tmp_path: Path) -> No
         Image.new("RGB", (120, 60), (90, 90, 90)).save(crop)
         Image.new("L", (200, 80), 255).save(page)
         r["rgb"]["crop_png"], r["darkread"]["page_png"] = str(crop), str(page)
-    path = plot_examples(results, tmp_path / "examples.png")
+    path = plot_examples(typed(results), tmp_path / "examples.png")
     assert path is not None
     with Image.open(path) as image:
         assert image.size[1] > image.size[0] / 4  # two rows
-    assert plot_examples(fake_results(), tmp_path / "none.png") is None  # no images: no figure
-    assert "(examples.png)" in write_report(results, tmp_path / "report", ReportInfo()).read_text()
+    assert plot_examples(typed(fake_results()), tmp_path / "none.png") is None  # no images: no figure
+    assert "(examples.png)" in write_report(typed(results), tmp_path / "report", ReportInfo()).read_text()
 
 
 def test_engine_selection_skips_unconfigured_remote_engines(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -159,26 +156,26 @@ def test_engine_selection_skips_unconfigured_remote_engines(monkeypatch: pytest.
 
 
 def test_grouping_by_two_conditions() -> None:
-    rows = grouped_table(fake_results(), ("lux", "motion"), "lux, motion", lambda v: f"{v[0]:g}, {v[1]}")
+    rows = grouped_table(typed(fake_results()), ("lux", "motion"), "lux, motion", lambda v: f"{v[0]:g}, {v[1]}")
     assert [row.split(" | ")[0] for row in rows[2:]] == ["| 5, walking", "| 1000, still"]
 
 
 def test_size_sweep_uses_one_condition_when_the_suite_has_one() -> None:
-    from darkread.eval.report import sweep_subset
+    from darkread.eval.aggregate import sweep_subset
 
     base = fake_results()[0]
     sweep = [{**base, "name": f"s{x}", "xheight_px": float(x)} for x in (7, 9, 12)]
     other = {**fake_results()[1], "xheight_px": 8.0}
-    subset, label = sweep_subset([*sweep, other], "xheight_px")
-    assert [r["name"] for r in subset] == ["s7", "s9", "s12"]
+    subset, label = sweep_subset(typed([*sweep, other]), "xheight_px")
+    assert [r.name for r in subset] == ["s7", "s9", "s12"]
     assert label == "1000 lux, still motion, pangram: 3 recordings"
-    everything, label = sweep_subset(fake_results(), "xheight_px")
+    everything, label = sweep_subset(typed(fake_results()), "xheight_px")
     assert len(everything) == 2 and label == "all 2 recordings"
 
 
 def test_report_names_the_commits_the_recordings_were_evaluated_at(tmp_path: Path) -> None:
     results = [{**r, "commit": "1111111111", "evaluated": f"2026-01-01 00:0{i} UTC"} for i, r in enumerate(fake_results())]
-    md = write_report(results, tmp_path, ReportInfo(commit="2222222222")).read_text()
+    md = write_report(typed(results), tmp_path, ReportInfo(commit="2222222222")).read_text()
     assert "- commit: `2222222222` (recordings evaluated at `1111111111`, 2026-01-01 00:00 UTC to 2026-01-01 00:01 UTC)" in md
-    md = write_report(results, tmp_path, ReportInfo(commit="1111111111")).read_text()
+    md = write_report(typed(results), tmp_path, ReportInfo(commit="1111111111")).read_text()
     assert "- commit: `1111111111`\n" in md

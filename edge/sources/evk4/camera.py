@@ -18,13 +18,14 @@ from typing import Any, Protocol
 
 from usb.util import SPEED_SUPER
 
-from darkread.edge.errors import DarkreadError, DeviceError
+from darkread.edge.errors import DeviceError
 from darkread.edge.events import Events
 from darkread.edge.sources.base import EventSink
 from darkread.edge.sources.evk4 import registers as regs
 from darkread.edge.sources.evk4.device import Evk4Device, Sleep
 from darkread.edge.sources.evk4.resync import ChunkAligner
 from darkread.edge.sources.evk4.treuzell import format_version
+from darkread.errors import DarkreadError
 
 log = logging.getLogger(__name__)
 

@@ -137,9 +137,9 @@ class Evk4Device:
         reply = self.request(tz.PROP_SERIAL)
         return f"{reply.u64():08x}" if len(reply.payload) >= 8 else f"{reply.word(0):08x}"
 
-    def request(self, prop: int, payload: bytes = b"") -> tz.Frame:
+    def request(self, prop: int, payload: bytes = b"") -> tz.Packet:
         """One control round trip; DeviceError subclasses on USB or protocol failure."""
-        frame = tz.encode_frame(prop, payload)
+        frame = tz.encode_packet(prop, payload)
         with self._control_lock:
             try:
                 self.dev.write(regs.EP_CONTROL_OUT, frame, regs.CONTROL_WRITE_TIMEOUT_MS)
@@ -159,7 +159,7 @@ class Evk4Device:
         reply = self._register_request(tz.PROP_DEVICE_REG32 | tz.WRITE_FLAG, addr, value)
         tz.check_register_reply(reply, addr, regs.SENSOR_DEVICE_ID)
 
-    def _register_request(self, prop: int, addr: int, last_word: int) -> tz.Frame:
+    def _register_request(self, prop: int, addr: int, last_word: int) -> tz.Packet:
         payload = tz.encode_words(0, regs.SENSOR_DEVICE_ID, addr, last_word)[tz.HEADER_BYTES :]
         try:
             return self.request(prop, payload)

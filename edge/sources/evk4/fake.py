@@ -134,23 +134,23 @@ class FakeEvk4:
 
     def _answer(self, data: bytes) -> bytes:
         try:
-            frame = tz.decode_frame(data)
+            frame = tz.decode_packet(data)
         except tz.TreuzellError:
-            return tz.encode_frame(tz.UNKNOWN_COMMAND)
+            return tz.encode_packet(tz.UNKNOWN_COMMAND)
         prop = frame.prop
         if prop in (tz.PROP_DEVICE_REG32, tz.PROP_DEVICE_REG32 | tz.WRITE_FLAG):
             return self._register_access(frame)
         if prop == tz.PROP_RELEASE_VERSION:
             return tz.encode_words(prop, self.release_version)
         if prop == tz.PROP_SERIAL:
-            return tz.encode_frame(prop, struct.pack("<Q", self.serial))
+            return tz.encode_packet(prop, struct.pack("<Q", self.serial))
         if prop == tz.PROP_BUILD_DATE:
-            return tz.encode_frame(prop, struct.pack("<Q", 1_700_000_000))
+            return tz.encode_packet(prop, struct.pack("<Q", 1_700_000_000))
         if prop == tz.PROP_DEVICE_COMPATIBLE:
-            return tz.encode_frame(prop, struct.pack("<I", 0) + b"psee,ccam5_imx636\0")
-        return tz.encode_frame(tz.UNKNOWN_COMMAND)
+            return tz.encode_packet(prop, struct.pack("<I", 0) + b"psee,ccam5_imx636\0")
+        return tz.encode_packet(tz.UNKNOWN_COMMAND)
 
-    def _register_access(self, frame: tz.Frame) -> bytes:
+    def _register_access(self, frame: tz.Packet) -> bytes:
         prop = frame.prop
         if len(frame.payload) < 12:
             return tz.encode_words(prop | tz.FAILURE_FLAG, 0, 0, errno.EINVAL)

@@ -52,7 +52,9 @@ class CommandFailedError(TreuzellError):
 
 
 @dataclass(frozen=True)
-class Frame:
+class Packet:
+    """One Treuzell control packet: a property id and its payload (a request, or the board's reply)."""
+
     prop: int
     payload: bytes
 
@@ -74,27 +76,27 @@ class Frame:
         return struct.unpack_from("<Q", self.payload, 8 * index)[0]
 
 
-def encode_frame(prop: int, payload: bytes = b"") -> bytes:
+def encode_packet(prop: int, payload: bytes = b"") -> bytes:
     return struct.pack("<II", prop, len(payload)) + payload
 
 
 def encode_words(prop: int, *words: int) -> bytes:
-    return encode_frame(prop, struct.pack(f"<{len(words)}I", *words))
+    return encode_packet(prop, struct.pack(f"<{len(words)}I", *words))
 
 
-def decode_frame(data: bytes) -> Frame:
+def decode_packet(data: bytes) -> Packet:
     """Split a frame; TreuzellError when the size word does not match the bytes received."""
     if len(data) < HEADER_BYTES:
         raise TreuzellError(f"control reply of {len(data)} bytes is shorter than a frame header")
     prop, size = struct.unpack_from("<II", data)
     if size != len(data) - HEADER_BYTES:
         raise TreuzellError(f"control frame says {size} payload bytes but carries {len(data) - HEADER_BYTES}")
-    return Frame(prop, bytes(data[HEADER_BYTES:]))
+    return Packet(prop, bytes(data[HEADER_BYTES:]))
 
 
-def check_reply(request_prop: int, data: bytes) -> Frame:
+def check_reply(request_prop: int, data: bytes) -> Packet:
     """The reply frame to ``request_prop``, or the error the board signalled."""
-    reply = decode_frame(data)
+    reply = decode_packet(data)
     if reply.prop == UNKNOWN_COMMAND:
         raise TreuzellError(f"camera does not implement property 0x{request_prop:08X}")
     if reply.prop == request_prop | FAILURE_FLAG:
@@ -113,7 +115,7 @@ def encode_register_read(addr: int, device: int = 0, count: int = 1) -> bytes:
     return encode_words(PROP_DEVICE_REG32, device, addr, count)
 
 
-def check_register_reply(reply: Frame, addr: int, device: int = 0) -> None:
+def check_register_reply(reply: Packet, addr: int, device: int = 0) -> None:
     """The board echoes device and address; a mismatch means replies got out of step."""
     if reply.word(0) != device or reply.word(1) != addr:
         raise TreuzellError(

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from darkread.cloud.store import (
-    FrameRecord,
     GazeRecord,
     PageBreak,
     PageRecord,
     SessionSpec,
     SessionStore,
+    StoredFrame,
     StoreError,
     UnknownSessionError,
     WriteResult,
@@ -31,7 +31,7 @@ def frame(seq: int) -> FrameRecord:
     mask = np.zeros((100, 200), np.uint8)
     mask[seq % 100, :] = 1
     mask[:, seq % 200] = 1
-    return FrameRecord(seq, seq + 10, seq * 100, (seq, 2 * seq), (1.5, 2.5), (0.25, -0.5), 1600 + seq, mask)
+    return StoredFrame(seq + 10, seq * 100, mask, (seq, 2 * seq), (1.5, 2.5), seq=seq, gaze_rad=(0.25, -0.5), events_used=1600 + seq)
 
 
 def page(seq: int, ink_row: int = 3) -> PageRecord:

@@ -9,7 +9,7 @@ import numpy as np
 import psycopg
 import pytest
 
-from darkread.cloud.store import FrameRecord, PageRecord, SessionSpec, StoreError
+from darkread.cloud.store import PageRecord, SessionSpec, StoredFrame, StoreError
 from darkread.cloud.store.postgres import SCHEMA_VERSION, PostgresStore
 
 pytestmark = [pytest.mark.anyio, pytest.mark.postgres]
@@ -24,10 +24,10 @@ def spec(session_id: str, mode: str = "frames") -> SessionSpec:
     return SessionSpec(session_id, "glasses", mode, (1280, 720), (100, 200))
 
 
-def frame(seq: int) -> FrameRecord:
+def frame(seq: int) -> StoredFrame:
     mask = np.zeros((100, 200), np.uint8)
     mask[seq % 100, : 1 + seq % 200] = 1
-    return FrameRecord(seq, seq, seq * 50_000, (seq, 0), (1.0, 2.0), (0.0, 0.0), 1600, mask)
+    return StoredFrame(seq, seq * 50_000, mask, (seq, 0), (1.0, 2.0), seq=seq, events_used=1600)
 
 
 async def test_a_frame_resent_to_another_instance_is_stored_once(postgres_url: str) -> None:

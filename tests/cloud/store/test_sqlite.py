@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from darkread.cloud.store import FrameRecord, SessionSpec, SqliteStore, StoreError, WriteResult
+from darkread.cloud.store import SessionSpec, SqliteStore, StoredFrame, StoreError, WriteResult
 from darkread.cloud.store.sqlite import MIGRATIONS, SCHEMA_VERSION
 
 pytestmark = pytest.mark.anyio
@@ -24,7 +24,7 @@ def anyio_backend() -> str:
 
 
 def frame(seq: int) -> FrameRecord:
-    return FrameRecord(seq, seq, seq * 100, (0, 0), (1.0, 2.0), (0.0, 0.0), 1600, np.eye(100, 200, dtype=np.uint8))
+    return StoredFrame(seq, seq * 100, np.eye(100, 200, dtype=np.uint8), (0, 0), (1.0, 2.0), seq=seq, events_used=1600)
 
 
 def _old_database(data_dir: Path) -> None:

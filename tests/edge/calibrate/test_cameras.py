@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from darkread.edge.calibrate.cameras import (
     Fisheye624Camera,
-    PinholeCamera,
     aria_camera_from_device_calibration,
     rgb_camera_from_calibration,
 )
 from darkread.edge.errors import CalibrationError
+from darkread.edge.io.intrinsics import Intrinsics
 
 # Gen1-RGB-like Fisheye624 parameters [f, cx, cy, k0..k5, p0, p1, s0..s3]
 FISHEYE = (610.0, 1440.0, 1440.0, 0.40, -0.45, 0.12, 0.70, -1.50, 0.80, 1e-4, -2e-4, 1e-4, -1e-5, 2e-4, -3e-5)
@@ -23,14 +23,14 @@ def _points(rng, n=200):
 def test_pinhole_projection_equals_the_recording_format_formula():
     from darkread.edge.io.calibration import Calibration
 
-    cam = PinholeCamera(1280, 720, 1400.0, 1401.0, 641.0, 359.0, (-0.05, 0.02, 1e-3, -5e-4))
+    cam = Intrinsics(1280, 720, 1400.0, 1401.0, 641.0, 359.0, (-0.05, 0.02, 1e-3, -5e-4))
     ref = Calibration(1280, 720, 1400.0, 1401.0, 641.0, 359.0, (-0.05, 0.02, 1e-3, -5e-4), np.eye(4))
     pts = _points(np.random.default_rng(0)) * [0.4, 0.4, 1.0]
     assert np.allclose(cam.project(pts), ref.project(pts), atol=1e-6)
 
 
 @pytest.mark.parametrize("camera", [
-    PinholeCamera(1280, 720, 1400.0, 1401.0, 640.0, 360.0, (-0.05, 0.02, 1e-3, -5e-4)),
+    Intrinsics(1280, 720, 1400.0, 1401.0, 640.0, 360.0, (-0.05, 0.02, 1e-3, -5e-4)),
     Fisheye624Camera(2880, 2880, FISHEYE),
 ])
 def test_unproject_inverts_project(camera):
@@ -80,7 +80,7 @@ def test_aria_device_calibration_gives_fisheye_and_pose(tmp_path):
 def test_aria_pose_layout_round_trips():
     from darkread.edge.calibrate.cameras import pose_from_aria_json
     from darkread.edge.calibrate.markers import pose_matrix
-    from darkread.models.synth.markers import aria_pose
+    from darkread.models.synth.calibration_capture import aria_pose
 
     T = pose_matrix(np.radians([20.0, -170.0, 35.0]), [0.01, -0.02, 0.03])
     assert np.allclose(pose_from_aria_json(aria_pose(T)), T, atol=1e-12)

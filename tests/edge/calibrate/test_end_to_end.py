@@ -10,7 +10,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from darkread.edge.calibrate.cameras import PinholeCamera
+from darkread.edge.io.intrinsics import Intrinsics
 from darkread.edge.calibrate.capture import paired_views
 from darkread.edge.calibrate.clock import (
     RgbFrames,
@@ -83,7 +83,7 @@ def test_pose_from_both_cameras(posed_capture, intrinsics):
     pairs = paired_views(posed_capture.events, find_bursts(posed_capture.events), _frames(posed_capture), offset,
                          posed_capture.board, 1280, 720)
     assert len(pairs) >= 5
-    event_camera = PinholeCamera(1280, 720, intr.fx, intr.fy, intr.cx, intr.cy, intr.distortion)
+    event_camera = Intrinsics(1280, 720, intr.fx, intr.fy, intr.cx, intr.cy, intr.distortion)
     result = extrinsics_from_views(pairs, event_camera, posed_capture.rgb_camera, posed_capture.T_rgb_cpf)
     assert rotation_deg(result.T_event_cpf[:3, :3], truth.T_event_cpf[:3, :3]) < 0.5
     assert np.linalg.norm(result.T_event_cpf[:3, 3] - truth.T_event_cpf[:3, 3]) < 0.01
@@ -94,7 +94,7 @@ def test_pose_through_an_aria_fisheye_rgb_camera(tmp_path, capsys):
     """RGB frames rendered through a Fisheye624 lens; poses from unprojected rays (library and CLI)."""
     from darkread.edge.calibrate.cameras import Fisheye624Camera
     from darkread.edge.io.calibration import load_calibration, save_calibration
-    from darkread.models.synth.markers import (
+    from darkread.models.synth.calibration_capture import (
         FlashCaptureSpec,
         simulate_flash_capture,
         write_flash_capture,
@@ -109,7 +109,7 @@ def test_pose_through_an_aria_fisheye_rgb_camera(tmp_path, capsys):
     pairs = paired_views(capture.events, find_bursts(capture.events), _frames(capture), truth.gaze_to_event_time_offset_us,
                          capture.board, 1280, 720)
     assert len(pairs) == 3
-    event_camera = PinholeCamera(1280, 720, truth.fx, truth.fy, truth.cx, truth.cy, truth.distortion)
+    event_camera = Intrinsics(1280, 720, truth.fx, truth.fy, truth.cx, truth.cy, truth.distortion)
     result = extrinsics_from_views(pairs, event_camera, fisheye, capture.T_rgb_cpf)
     assert max(result.rgb_rms_px) < 1.0
     assert rotation_deg(result.T_event_cpf[:3, :3], truth.T_event_cpf[:3, :3]) < 0.5

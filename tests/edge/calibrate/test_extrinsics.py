@@ -2,7 +2,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from darkread.edge.calibrate.cameras import Fisheye624Camera, PinholeCamera
+from darkread.edge.calibrate.cameras import Fisheye624Camera
+from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
 from darkread.edge.calibrate.extrinsics import (
     average_poses,
     extrinsics_from_views,
@@ -14,7 +15,7 @@ from darkread.edge.errors import CalibrationError
 
 FISHEYE = (610.0, 1440.0, 1440.0, 0.40, -0.45, 0.12, 0.70, -1.50, 0.80, 1e-4, -2e-4, 1e-4, -1e-5, 2e-4, -3e-5)
 
-EVENT = PinholeCamera(1280, 720, 1410.0, 1412.0, 643.0, 358.0, (-0.03, 0.01, 0.0, 0.0))
+EVENT = Intrinsics(1280, 720, 1410.0, 1412.0, 643.0, 358.0, (-0.03, 0.01, 0.0, 0.0))
 
 
 def _detection(camera, T_cam_board, rng, noise_px=0.2):
@@ -30,7 +31,7 @@ def _truth():
     return T_event_cpf, T_rgb_cpf
 
 
-@pytest.mark.parametrize("rgb", [PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5), Fisheye624Camera(2880, 2880, FISHEYE)])
+@pytest.mark.parametrize("rgb", [Intrinsics(512, 512, 700.0, 700.0, 255.5, 255.5, RECTIFIED), Fisheye624Camera(2880, 2880, FISHEYE)])
 def test_pose_is_recovered_through_either_rgb_model(rgb):
     rng = np.random.default_rng(0)
     T_event_cpf, T_rgb_cpf = _truth()
@@ -61,8 +62,8 @@ def test_homography_fallback_maps_page_points_only():
     rng = np.random.default_rng(3)
     T_event_cpf, T_rgb_cpf = _truth()
     T_cpf_board = np.linalg.inv(T_event_cpf) @ pose_matrix(np.radians([10.0, -5.0, 2.0]), [-0.12, -0.08, 0.5])
-    rgb = PinholeCamera(512, 512, 700.0, 700.0, 255.5, 255.5)
-    pinhole_event = PinholeCamera(1280, 720, 1410.0, 1412.0, 643.0, 358.0)
+    rgb = Intrinsics(512, 512, 700.0, 700.0, 255.5, 255.5, RECTIFIED)
+    pinhole_event = Intrinsics(1280, 720, 1410.0, 1412.0, 643.0, 358.0, RECTIFIED)
     ev = _detection(pinhole_event, T_event_cpf @ T_cpf_board, rng, 0.1)
     rg = _detection(rgb, T_rgb_cpf @ T_cpf_board, rng, 0.1)
     result = page_homography(ev, rg)
@@ -75,7 +76,7 @@ def test_homography_fallback_on_a_printed_page_lit_by_a_lamp():
     """Static markers around text (ESIM): first-event latency image vs one RGB frame."""
     from darkread.edge.calibrate.event_image import find_bursts, latency_image
     from darkread.edge.calibrate.markers import detect_board
-    from darkread.models.synth.markers import simulate_page_capture
+    from darkread.models.synth.calibration_capture import simulate_page_capture
 
     page = simulate_page_capture(seed=1)
     bursts = find_bursts(page.events)
@@ -95,7 +96,7 @@ def test_homography_fallback_on_a_printed_page_lit_by_a_lamp():
 
 def test_lamp_views_find_the_printed_markers():
     from darkread.edge.calibrate.intrinsics import detect_views
-    from darkread.models.synth.markers import simulate_page_capture
+    from darkread.models.synth.calibration_capture import simulate_page_capture
 
     page = simulate_page_capture(seed=3)
     views = detect_views(page.events, page.markers, 1280, 720, lamp=True)

@@ -25,7 +25,7 @@ def test_register_read_frame_asks_for_one_value() -> None:
 
 @given(st.integers(0, 0xFFFFFFFF), st.binary(max_size=64))
 def test_frames_round_trip(prop: int, payload: bytes) -> None:
-    frame = tz.decode_frame(tz.encode_frame(prop, payload))
+    frame = tz.decode_packet(tz.encode_packet(prop, payload))
     assert (frame.prop, frame.payload) == (prop, payload)
 
 
@@ -47,7 +47,7 @@ def test_failure_flag_raises_with_errno() -> None:
 @pytest.mark.parametrize(
     ("answer", "message"),
     [
-        (tz.encode_frame(tz.UNKNOWN_COMMAND), "does not implement"),
+        (tz.encode_packet(tz.UNKNOWN_COMMAND), "does not implement"),
         (tz.encode_words(0x79, 1), "answered property"),
         (b"\x01\x00", "shorter than a frame header"),
         (struct.pack("<III", 0x72, 8, 5), "says 8 payload bytes but carries 4"),
@@ -59,14 +59,14 @@ def test_malformed_replies_raise(answer: bytes, message: str) -> None:
 
 
 def test_register_reply_for_another_address_is_rejected() -> None:
-    reply = tz.decode_frame(tz.encode_words(0x10102, 0, 0x18, 5))
+    reply = tz.decode_packet(tz.encode_words(0x10102, 0, 0x18, 5))
     with pytest.raises(tz.TreuzellError, match="expected device 0 address 0x0014"):
         tz.check_register_reply(reply, 0x14)
 
 
 def test_short_payload_word_access_raises() -> None:
     with pytest.raises(tz.TreuzellError, match="need 12"):
-        tz.decode_frame(tz.encode_words(0x10102, 0, 0x14)).word(2)
+        tz.decode_packet(tz.encode_words(0x10102, 0, 0x14)).word(2)
 
 
 def test_version_format() -> None:

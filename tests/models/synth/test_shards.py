@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 
-from darkread.models.synth.dataset import iter_shards, load_dataset
+from darkread.models.train.data import iter_shards, load_dataset
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES, faces_for
 from darkread.models.synth.session import SessionSpec
 from darkread.models.synth.shards import build_dataset, make_samples

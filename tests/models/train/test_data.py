@@ -7,15 +7,14 @@ from darkread.models.train.data import (
     iterate_batches,
     load_dataset,
     load_shard,
-    pack_targets,
     shard_paths,
-    unpack_targets,
 )
+from darkread.mask_bits import pack_rows, unpack_rows
 
 
 def test_packed_targets_round_trip() -> None:
     targets = (np.random.default_rng(0).random((3, 100, 200)) < 0.2).astype(np.uint8)
-    assert np.array_equal(unpack_targets(pack_targets(targets), (100, 200)), targets)
+    assert np.array_equal(unpack_rows(pack_rows(targets), 200), targets)
 
 
 def test_shard_loads_with_unpacked_targets_and_metadata(fake_dataset) -> None:

@@ -1,0 +1,45 @@
+"""Errors of the cloud service: storage, pages, start-up, OCR engines.
+
+They sit under ``DarkreadError``; the whole tree is drawn in ``darkread/errors.py``.
+"""
+
+from __future__ import annotations
+
+from darkread.errors import DarkreadError
+
+
+class CloudError(DarkreadError):
+    """The cloud service could not do what was asked."""
+
+
+class StoreError(CloudError):
+    """The store could not persist or read something (disk full, database locked, closed)."""
+
+
+class UnknownSessionError(StoreError):
+    """A write named a session that was never opened (or was deleted)."""
+
+
+class NoPageError(CloudError):
+    """The session has nothing to read yet (no frames or pages stored)."""
+
+
+class PostgresUnavailable(CloudError):
+    """No PostgreSQL server can be started on this machine for tests or benchmarks (the message says why)."""
+
+
+class ServiceStartError(CloudError):
+    """The service did not come up (it exited during start-up, or did not listen in time)."""
+
+
+class OcrError(CloudError):
+    """OCR failed; ``retryable`` says whether trying again later may help (timeouts, 429, 5xx)."""
+
+    def __init__(self, message: str, *, backend: str, retryable: bool = False) -> None:
+        super().__init__(f"{backend}: {message}")
+        self.backend = backend
+        self.retryable = retryable
+
+
+class OcrUnavailableError(OcrError):
+    """The engine is not installed or not configured (missing binary, package or API key)."""

@@ -1,0 +1,47 @@
+"""The one exception tree of darkread, drawn once.
+
+Every error darkread raises on purpose derives from ``DarkreadError``, so a caller (the command
+line, the daemon, a test) can tell "darkread refused this input or could not do this" from a bug.
+The base lives here, in the top package, because every component may import it: ``proto/`` and
+``stitch/`` stay pure (this module imports nothing), and neither depends on ``edge/`` or ``cloud/``.
+Each component keeps its own errors in its own ``errors.py``::
+
+    DarkreadError                      darkread/errors.py
+     ├── RecordingError                edge/errors.py: a recording (directory or file) cannot be used
+     │    ├── RawFormatError           RAW header unknown or inconsistent
+     │    ├── CorruptRawError          bytes that cannot be decoded (names file and byte offset)
+     │    ├── GazeCsvError             eye-gaze CSV missing columns or malformed (names file and line)
+     │    └── CalibrationError         calibration.json missing keys or impossible values
+     ├── DeviceError                   edge/errors.py: the event camera cannot be opened or answers wrongly
+     │    └── TreuzellError            edge/sources/evk4/treuzell.py: the EVK4's control protocol failed
+     │         └── CommandFailedError  the camera answered a command with an error status
+     ├── ModelError                    edge/errors.py: the ONNX model is missing or has the wrong shape
+     ├── ImageCodecError               darkread/image_codec.py: an image that cannot be encoded or decoded
+     ├── ProtocolError                 proto/errors.py: a wire message that cannot be accepted (close 4400)
+     │    ├── MessageTooLargeError     more bytes than the receiver allows (1009)
+     │    ├── MalformedMessageError    not msgpack, trailing bytes, or not a map (4400)
+     │    ├── UnknownMessageTypeError  ``type`` missing or not one we know (4400)
+     │    ├── InvalidFieldError        a field missing, of the wrong type or out of range (4400)
+     │    │    └── BadMaskError        mask ``shape``/``bits`` inconsistent (4422)
+     │    ├── VersionMismatchError     ``hello.v`` is not a protocol version we speak (4409)
+     │    ├── UnexpectedMessageError   valid, but not allowed now, e.g. frame before hello (4401)
+     │    └── AuthenticationError      missing or wrong API key in ``hello.token`` (1008)
+     └── CloudError                    cloud/errors.py: the cloud service could not do what was asked
+          ├── StoreError               a session's frames or pages could not be stored or read
+          │    └── UnknownSessionError a write named a session never opened (or deleted)
+          ├── NoPageError              the session has nothing to read yet (or not the page asked for)
+          ├── ServiceStartError        the service did not come up
+          ├── PostgresUnavailable      no PostgreSQL server can be started here (tests, benchmarks)
+          └── OcrError                 an OCR engine failed (``retryable`` says whether to try again)
+               └── OcrUnavailableError the engine is not installed or not configured
+
+Built-in exceptions are used where their meaning fits: ``FileNotFoundError``/``OSError`` for files
+and sockets, ``ValueError`` for bad arguments. The ``darkread`` command turns all of these into one
+line on stderr and a non-zero exit (``darkread/cli.py``).
+"""
+
+from __future__ import annotations
+
+
+class DarkreadError(Exception):
+    """Base of every error darkread raises on purpose."""

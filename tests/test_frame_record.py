@@ -1,0 +1,56 @@
+"""One frame record from the U-Net to the stitcher: the edge's result, the wire message and the store's row carry it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from darkread.cloud.store import StoredFrame
+from darkread.edge.pipeline import FrameResult
+from darkread.frame_record import FrameRecord
+from darkread.proto.messages import Frame, decode, encode
+
+
+def _mask() -> np.ndarray:
+    return np.random.default_rng(1).integers(0, 2, (100, 200), dtype=np.uint8)
+
+
+def test_the_record_normalises_its_fields() -> None:
+    record = FrameRecord(3, 10, np.full((8, 9), 255, np.uint8), (np.int64(4), 5.0), (1, np.float32(2.5)))
+    assert record.mask.max() == 1 and record.mask.dtype == np.uint8
+    assert record.origin == (4, 5) and type(record.origin[0]) is int
+    assert record.gaze_px == (1.0, 2.5) and type(record.gaze_px[0]) is float
+    with pytest.raises(ValueError, match="2-D"):
+        FrameRecord(1, 0, np.zeros((0, 4), np.uint8), (0, 0), (0.0, 0.0))
+
+
+def test_the_wire_carries_the_record_unchanged() -> None:
+    record = FrameRecord(7, 123_456, _mask(), (540, 310), (640.25, 360.5))
+    message = decode(encode(Frame.of(record, seq=9, gaze_rad=(0.1, -0.2), events_used=1600)), max_bytes=1 << 20)
+    assert isinstance(message, Frame) and (message.seq, message.gaze_rad, message.events_used) == (9, (0.1, -0.2), 1600)
+    back = message.record()
+    assert (back.frame_id, back.t_us, back.origin, back.gaze_px) == (7, 123_456, (540, 310), (640.25, 360.5))
+    np.testing.assert_array_equal(back.mask, record.mask)
+
+
+def test_the_edge_result_and_the_stored_frame_are_frame_records() -> None:
+    result = FrameResult(1, 2, _mask(), (3, 4), (5.0, 6.0), gaze_rad=(0.5, 0.25), events_used=1600, inference_ms=1.5)
+    stored = StoredFrame(1, 2, result.mask, (3, 4), (5.0, 6.0), seq=11)
+    assert isinstance(result, FrameRecord) and isinstance(stored, FrameRecord)
+    message = result.to_message()
+    assert (message.gaze_rad, message.events_used, message.seq) == ((0.5, 0.25), 1600, 0)
+    np.testing.assert_array_equal(message.mask(), stored.mask)
+
+
+def test_the_wire_and_its_records_stay_pure() -> None:
+    """proto/ and the shared base import with numpy and msgpack only: no edge, cloud, OpenCV or web stack."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, darkread.proto.messages, darkread.errors, darkread.frame_record, darkread.mask_bits\n"
+        "heavy = {'darkread.edge', 'darkread.cloud', 'darkread.stitch', 'cv2', 'fastapi', 'onnxruntime', 'torch'}\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60)
+    assert out.stdout.strip() == "[]"
