@@ -85,9 +85,7 @@ def run_replays(
         if tick == halfway and at_half is not None:
             at_half()
         for i, uplink in enumerate(uplinks):
-            base = frames[(tick + i) % len(frames)]
-            uplink.submit(Frame(0, tick, int(tick * 1e6 / FRAME_RATE_HZ), base.origin, base.gaze_px, base.gaze_rad,
-                                base.events_used, base.shape, base.bits))  # fmt: skip
+            uplink.submit(frames[(tick + i) % len(frames)])  # the uplink numbers it
             submitted[i] += 1
     elapsed = time.monotonic() - started
     drained = all([uplink.stop(drain_timeout_s=60) for uplink in uplinks])
