@@ -7,6 +7,7 @@ PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 EXTRAS ?= edge,cloud,dev,train
+PYTEST_ARGS ?=  # e.g. make test PYTEST_ARGS="-m postgres"
 
 .PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps postgres-deps
 
@@ -37,7 +38,7 @@ postgres-deps:  ## Debian's PostgreSQL server (initdb, pg_ctl) for the tests and
 	else echo "postgres-deps: no PostgreSQL server binaries and not root: install postgresql (the postgres tests skip, or fail under CI)"; fi
 
 test: $(STAMP) postgres-deps  ## run the whole test suite
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q $(PYTEST_ARGS)
 
 test-fast: $(STAMP) postgres-deps  ## unit tests only (no integration tests)
 	$(PY) -m pytest -q -m "not slow"
