@@ -292,11 +292,11 @@ class _BatchWriter:
     async def _commit(self, batch: list[_Insert]) -> None:
         try:
             known, stored = await self._transaction(batch)
-        except _DB_ERRORS as exc:
-            log.error("PostgreSQL commit of %d records failed: %s", len(batch), exc)
+        except Exception as exc:  # noqa: BLE001 - whatever failed, the writer lives on and every caller hears of it
+            log.error("PostgreSQL commit of %d records failed: %s", len(batch), _first_line(exc))
             for job in batch:
                 if not job.done.done():
-                    job.done.set_exception(StoreError(f"commit failed: {exc}"))
+                    job.done.set_exception(StoreError(f"commit failed: {type(exc).__name__}: {_first_line(exc)}"))
             return
         advanced: dict[str, int] = {}
         for job in batch:
