@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
-EXTRAS ?= edge,cloud,dev,train
+EXTRAS ?= edge,cloud,dev,train,gaze
 
 .PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps
 
@@ -23,12 +23,13 @@ $(STAMP): pyproject.toml setup.py
 
 venv: $(STAMP)  ## create .venv and install darkread with all extras
 
-system-deps:  ## optional Debian packages (Tesseract OCR, extra fonts) when run as root
+system-deps:  ## optional Debian packages (Tesseract OCR, libcairo2 for eyekit) when run as root
 	@if [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
 		command -v tesseract >/dev/null || (apt-get update -qq && apt-get install -y -qq tesseract-ocr tesseract-ocr-eng >/dev/null) || true; \
+		ldconfig -p | grep -q libcairo.so.2 || (apt-get update -qq && apt-get install -y -qq libcairo2 >/dev/null) || true; \
 	else echo "system-deps: not root or no apt-get; Tesseract stays optional"; fi
 
-test: $(STAMP)  ## run the whole test suite
+test: system-deps $(STAMP)  ## run the whole test suite
 	$(PY) -m pytest -q
 
 test-fast: $(STAMP)  ## unit tests only (no integration tests)

@@ -20,8 +20,21 @@ class UnknownSessionError(StoreError):
     """A write named a session that was never opened (or was deleted)."""
 
 
+class SessionOwnedError(StoreError):
+    """The session exists and belongs to another device or stream (seq space)."""
+
+
+class SessionShapeError(StoreError):
+    """A hello names an existing session with another mode or geometry."""
+
+
 class NoPageError(CloudError):
     """The session has nothing to read yet (no frames or pages stored)."""
+
+
+class DataDirError(CloudError):
+    """The data directory cannot be used: a file, not writable, a corrupt database, or held by
+    another service process."""
 
 
 class ServiceStartError(CloudError):

@@ -118,8 +118,9 @@ def _store_alone(data_dir: Path, count: int) -> float:
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    total = 1500 if ctx.quick else 6000  # frames per configuration, split over the streams
-    time_limit_s = 10.0 if ctx.quick else 30.0
+    total = ctx.runs(6000, 1500, 100)  # frames per configuration, split over the streams
+    time_limit_s = float(ctx.runs(30, 10, 10))
+    least = 2 if ctx.smoke else 20  # frames per stream
     alone = _store_alone(ctx.scratch / "store-alone", total)
     reference = f"store alone, no network: {alone:.0f} frames/s"
     process, port = _start_server(ctx.scratch / "cloud-bench")
@@ -127,7 +128,7 @@ def run(ctx: BenchContext) -> list[Figure]:
     try:
         url = f"ws://127.0.0.1:{port}/v1/stream"
         for streams in (1, 10, 50):
-            rate = asyncio.run(_ingest(url, streams, max(total // streams, 20), time_limit_s, f"s{streams}"))
+            rate = asyncio.run(_ingest(url, streams, max(total // streams, least), time_limit_s, f"s{streams}"))
             figures.append(
                 Figure(
                     key=f"cloud_ingest_frames_per_s_{streams}",
