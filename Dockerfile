@@ -3,6 +3,10 @@
 #   docker build -t darkread .
 #   docker compose up            # cloud + an edge replaying the shipped sample recording
 #
+# The container listens on 0.0.0.0, so it needs a key: without DARKREAD_API_KEY (or a keys file
+# in /data, `darkread cloud keys add`) the service refuses to start and says so.
+#   docker run -e DARKREAD_API_KEY=$(openssl rand -hex 16) -p 127.0.0.1:8000:8000 darkread
+#
 # CPU only; no PyTorch (training is not part of the image). Tesseract is optional: build with
 # --build-arg WITH_TESSERACT=1 to add it (DARKREAD_OCR_BACKEND=tesseract).
 FROM python:3.11-slim-bookworm

@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
-EXTRAS ?= edge,cloud,dev,train
+EXTRAS ?= edge,cloud,dev,train,gaze
 PYTEST_ARGS ?=  # e.g. make test PYTEST_ARGS="-m postgres"
 
 .PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps postgres-deps
@@ -24,9 +24,10 @@ $(STAMP): pyproject.toml setup.py
 
 venv: $(STAMP)  ## create .venv and install darkread with all extras
 
-system-deps:  ## optional Debian packages (Tesseract OCR, extra fonts) when run as root
+system-deps:  ## optional Debian packages (Tesseract OCR, libcairo2 for eyekit) when run as root
 	@if [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
 		command -v tesseract >/dev/null || (apt-get update -qq && apt-get install -y -qq tesseract-ocr tesseract-ocr-eng >/dev/null) || true; \
+		ldconfig -p | grep -q libcairo.so.2 || (apt-get update -qq && apt-get install -y -qq libcairo2 >/dev/null) || true; \
 	else echo "system-deps: not root or no apt-get; Tesseract stays optional"; fi
 
 postgres-deps:  ## Debian's PostgreSQL server (initdb, pg_ctl) for the tests and benchmarks, when run as root
@@ -37,7 +38,7 @@ postgres-deps:  ## Debian's PostgreSQL server (initdb, pg_ctl) for the tests and
 			|| echo "postgres-deps: apt-get install postgresql failed; the postgres tests will say so"; \
 	else echo "postgres-deps: no PostgreSQL server binaries and not root: install postgresql (the postgres tests skip, or fail under CI)"; fi
 
-test: $(STAMP) postgres-deps  ## run the whole test suite
+test: system-deps postgres-deps $(STAMP)  ## run the whole test suite
 	$(PY) -m pytest -q $(PYTEST_ARGS)
 
 test-fast: $(STAMP) postgres-deps  ## unit tests only (no integration tests)

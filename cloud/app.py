@@ -9,11 +9,16 @@ import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
-from fastapi import FastAPI
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
+from starlette.types import ASGIApp, Receive, Send
+from starlette.types import Scope as Scope_
 from prometheus_client import make_asgi_app
 
 from darkread import __version__
 
+from . import datadir
+from .auth import KeyRing, Scope, install_log_redaction
 from .context import AppContext
 from .prometheus import Metrics
 from .ocr import OcrBackend, create_backend
@@ -35,7 +40,9 @@ Ingest of reconstructed text frames from darkread glasses, page stitching and OC
   frames arrive, and only lines that changed are read again.
 * `GET /v1/sessions/{id}/pages`, `GET /v1/sessions/{id}/page.png` — the session's pages.
 * `GET /v1/sessions/{id}/events` — Server-Sent Events: `page` updates while the wearer reads.
-* `/metrics` — Prometheus metrics, including websocket ingest counters.
+* `/metrics` — Prometheus metrics (an admin key, unless `DARKREAD_METRICS_PUBLIC`).
+
+Keys are per device with scopes `stream`, `read`, `admin` (`darkread cloud keys add`).
 """
 
 
@@ -56,14 +63,14 @@ def live_config(settings: Settings) -> LiveConfig:
 
 async def expire_sessions(context: AppContext) -> list[str]:
     """Free idle sessions' pages from memory; delete sessions idle past ``session_expire_s``."""
-    await context.live.sweep()
+    await context.pages.sweep()
     expire_s = context.settings.session_expire_s
     if expire_s <= 0:
         return []
     cutoff = time.time() - expire_s
     expired = [info.session_id for info in await context.store.sessions() if info.updated_s < cutoff]
     for session_id in expired:
-        await context.live.forget(session_id)
+        await context.pages.forget(session_id)
         await context.store.delete_session(session_id)
         log.info("session %s expired after %.0f s idle: deleted", session_id, expire_s)
     return expired
@@ -86,20 +93,29 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        install_log_redaction()
+        datadir.check_data_dir(settings.data_dir)
+        held = datadir.acquire(settings.data_dir)
         database_url = settings.database_url.get_secret_value() if settings.database_url else None
         store = await open_store(settings.data_dir, database_url)
         engine = ocr or create_backend(settings)
-        if settings.api_key is None:
-            log.warning("no API key configured (DARKREAD_API_KEY): the service accepts anyone")
-        live = LivePages(store, engine, live_config(settings))
-        context = AppContext(settings=settings, store=store, metrics=metrics, ocr=engine, live=live)
+        context = AppContext(
+            settings=settings,
+            store=store,
+            metrics=metrics,
+            ocr=engine,
+            pages=LivePages(store, engine, live_config(settings)),
+            keys=KeyRing(settings.keys_path()),
+        )
+        if not context.auth_configured():
+            log.warning("no API key configured: %s", "anyone may connect (--insecure)" if settings.insecure
+                        else "serving loopback clients only (darkread cloud keys add, or DARKREAD_API_KEY)")
         app.state.context = context
         sweeper = asyncio.create_task(_sweep_forever(context))
         # load the OCR models now, off the event loop, so the first question does not wait for them
         warm = asyncio.create_task(asyncio.to_thread(engine.ready))
         # commits of other instances on a shared database wake the pages this instance keeps live
-        unsubscribe = store.subscribe(lambda session_id, _last_seq: live.wake(session_id))
+        unsubscribe = store.subscribe(lambda session_id, _last_seq: context.pages.wake(session_id))
         log.info("darkread cloud ready: sessions in %s, OCR engine %s", _where(settings), engine.name)
         try:
             yield
@@ -110,17 +126,24 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
             with contextlib.suppress(Exception):
                 await warm
             unsubscribe()
-            await live.close()
+            await context.pages.close()
             close = getattr(engine, "close", None)
             if callable(close):
                 close()
-            await store.close()
+            await store.close(timeout_s=settings.shutdown_timeout_s)
+            datadir.release(held)
 
-    app = FastAPI(title="darkread cloud", version=__version__, description=DESCRIPTION, lifespan=lifespan)
+    docs = settings.api_docs
+    app = FastAPI(
+        title="darkread cloud", version=__version__, description=DESCRIPTION, lifespan=lifespan,
+        docs_url="/docs" if docs else None, redoc_url="/redoc" if docs else None,
+        openapi_url="/openapi.json" if docs else None,
+    )
     app.include_router(public)
     app.include_router(api)
     app.add_api_websocket_route("/v1/stream", stream_endpoint, name="stream")
-    app.mount("/metrics", make_asgi_app(registry=metrics.registry))
+    metrics_app = make_asgi_app(registry=metrics.registry)
+    app.mount("/metrics", metrics_app if settings.metrics_public else _admin_only(metrics_app))
     return app
 
 
@@ -130,3 +153,21 @@ def _where(settings: Settings) -> str:
     from .store.postgres import describe
 
     return describe(settings.database_url.get_secret_value())
+
+
+def _admin_only(inner: ASGIApp) -> ASGIApp:
+    """``/metrics`` behind an admin key (401 without a valid key, 403 with a weaker one)."""
+
+    async def guarded(scope: Scope_, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http":
+            request = Request(scope)
+            context: AppContext = request.app.state.context
+            key = request.headers.get("x-api-key") or request.query_params.get("key")
+            principal = context.authenticate(key, client_host=request.client.host if request.client else None)
+            if principal is None or not principal.can(Scope.ADMIN):
+                code = 401 if principal is None else 403
+                await JSONResponse({"detail": "/metrics needs an admin API key (X-API-Key)"}, code)(scope, receive, send)
+                return
+        await inner(scope, receive, send)
+
+    return guarded

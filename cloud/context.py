@@ -1,14 +1,17 @@
-"""What every request handler shares: settings, store, metrics, the OCR backend, live pages."""
+"""What every request handler shares: settings, store, metrics, the OCR backend, the keys, live pages."""
 
 from __future__ import annotations
 
 import secrets
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader, APIKeyQuery
 
+from .auth import ENVIRONMENT_ADMIN, LOOPBACK_DEVELOPER, KeyRing, Principal, Scope, is_loopback
+from .limits import RateLimiter, SingleFlight
 from .live import LivePages
 from .prometheus import Metrics
 from .settings import Settings
@@ -24,35 +27,58 @@ class AppContext:
     store: SessionStore
     metrics: Metrics
     ocr: OcrBackend
-    live: LivePages
+    pages: LivePages  # every session's pages, stitched as frames arrive
+    keys: KeyRing
+    live: dict[str, Any] = field(default_factory=dict)  # session id -> its StreamConnection
+    asks: SingleFlight = field(default_factory=SingleFlight)  # one reading per session page
+    limiter: RateLimiter | None = None  # asks and page.png per key (from settings when None)
 
-    def key_matches(self, candidate: str | None) -> bool:
-        """True when no key is configured, or ``candidate`` equals it (constant-time)."""
-        expected = self.settings.api_key
-        if expected is None:
-            return True
+    def __post_init__(self) -> None:
+        if self.limiter is None:
+            self.limiter = RateLimiter(self.settings.ask_rate_per_min, self.settings.ask_burst)
+
+    def auth_configured(self) -> bool:
+        return self.settings.api_key is not None or bool(self.keys)
+
+    def authenticate(self, candidate: str | None, *, client_host: str | None) -> Principal | None:
+        """The caller behind ``candidate``, or None (refuse). Without any key configured, only
+        loopback clients are served (unless ``settings.insecure``)."""
+        if not self.auth_configured():
+            return LOOPBACK_DEVELOPER if self.settings.insecure or is_loopback(client_host) else None
         if candidate is None:
-            return False
-        return secrets.compare_digest(candidate.encode(), expected.get_secret_value().encode())
+            return None
+        expected = self.settings.api_key
+        if expected is not None and secrets.compare_digest(candidate.encode(), expected.get_secret_value().encode()):
+            return ENVIRONMENT_ADMIN
+        return self.keys.authenticate(candidate)
 
 
 def get_context(request: Request) -> AppContext:
     return request.app.state.context  # type: ignore[no-any-return]
 
 
-_header_key = APIKeyHeader(name="X-API-Key", auto_error=False, description="the service API key")
-_query_key = APIKeyQuery(name="key", auto_error=False, description="the service API key (for clients without headers)")
+_header_key = APIKeyHeader(name="X-API-Key", auto_error=False, description="a darkread API key")
+_query_key = APIKeyQuery(name="key", auto_error=False, description="a darkread API key (clients without headers)")
 
 
-def require_api_key(
-    request: Request,
-    header: str | None = Security(_header_key),
-    query: str | None = Security(_query_key),
-) -> None:
-    """REST dependency: 401 unless the API key is given in ``X-API-Key`` or ``?key=``."""
-    if not get_context(request).key_matches(header if header is not None else query):
-        raise HTTPException(
-            status_code=status.HTTP_401_UNAUTHORIZED,
-            detail="missing or wrong API key (send it in the X-API-Key header)",
-            headers={"WWW-Authenticate": "APIKey"},
-        )
+def require(scope: Scope) -> Callable[..., Principal]:
+    """REST dependency: the caller, 401 without a valid key, 403 without ``scope``."""
+
+    def dependency(
+        request: Request,
+        header: str | None = Security(_header_key),
+        query: str | None = Security(_query_key),
+    ) -> Principal:
+        client = request.client.host if request.client else None
+        principal = get_context(request).authenticate(header if header is not None else query, client_host=client)
+        if principal is None:
+            raise HTTPException(
+                status_code=status.HTTP_401_UNAUTHORIZED,
+                detail="missing or wrong API key (send it in the X-API-Key header)",
+                headers={"WWW-Authenticate": "APIKey"},
+            )
+        if not principal.can(scope):
+            raise HTTPException(status.HTTP_403_FORBIDDEN, detail=f"this key lacks the {scope.value!r} scope")
+        return principal
+
+    return dependency

@@ -20,12 +20,25 @@ class UnknownSessionError(StoreError):
     """A write named a session that was never opened (or was deleted)."""
 
 
+class SessionOwnedError(StoreError):
+    """The session exists and belongs to another device or stream (seq space)."""
+
+
+class SessionShapeError(StoreError):
+    """A hello names an existing session with another mode or geometry."""
+
+
 class NoPageError(CloudError):
     """The session has nothing to read yet (no frames or pages stored)."""
 
 
 class PostgresUnavailable(CloudError):
     """No PostgreSQL server can be started on this machine for tests or benchmarks (the message says why)."""
+
+
+class DataDirError(CloudError):
+    """The data directory cannot be used: a file, not writable, a corrupt database, or held by
+    another service process."""
 
 
 class ServiceStartError(CloudError):

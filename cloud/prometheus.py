@@ -22,6 +22,10 @@ class Metrics:
         self.pages_stored = Counter("darkread_ws_pages_stored", "Pages durably stored", registry=r)
         self.duplicates = Counter("darkread_ws_duplicates", "Messages dropped as duplicates (re-acked)", registry=r)
         self.errors = Counter("darkread_ws_errors", "Stream errors, by close code", ["code"], registry=r)
+        self.store_failures = Counter(
+            "darkread_ws_store_failures", "Messages whose store path failed (connection closed), by error", ["error"],
+            registry=r,
+        )
         self.ocr_seconds = Histogram(
             "darkread_ocr_seconds",
             "OCR time per request",

@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import asdict, dataclass
@@ -19,7 +20,8 @@ from pydantic import BaseModel, Field
 from darkread.image_codec import encode_png
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
-from .context import AppContext, get_context, require_api_key
+from .auth import Principal, Scope
+from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
 from .store import SessionInfo
 
@@ -87,8 +89,10 @@ class Health(BaseModel):
 
 
 public = APIRouter(tags=["health"])
-api = APIRouter(prefix="/v1", tags=["sessions"], dependencies=[Depends(require_api_key)])
+api = APIRouter(prefix="/v1", tags=["sessions"])
 Context = Annotated[AppContext, Depends(get_context)]
+Reader = Annotated[Principal, Depends(require(Scope.READ))]
+Admin = Annotated[Principal, Depends(require(Scope.ADMIN))]
 
 
 @public.get("/healthz", summary="Liveness: the process answers", response_model=Health)
@@ -112,9 +116,10 @@ async def readyz(context: Context, response: Response) -> Health:
     return Health(status="ready", checks=checks)
 
 
-async def _session(context: AppContext, session_id: str) -> SessionInfo:
+async def _session(context: AppContext, session_id: str, principal: Principal) -> SessionInfo:
+    """The session, 404 also when it belongs to another device (its existence is not revealed)."""
     info = await context.store.session(session_id)
-    if info is None:
+    if info is None or not principal.owns(info.device_id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     return info
 
@@ -160,8 +165,8 @@ async def _ocr(context: AppContext, call: Callable[[], Awaitable[_T]]) -> _T:
 
 
 @api.get("/sessions", summary="List sessions, most recently active first", response_model=list[SessionModel])
-async def list_sessions(context: Context) -> list[SessionModel]:
-    return [SessionModel.of(info) for info in await context.store.sessions()]
+async def list_sessions(context: Context, principal: Reader) -> list[SessionModel]:
+    return [SessionModel.of(info) for info in await context.store.sessions() if principal.owns(info.device_id)]
 
 
 @api.get(
@@ -170,18 +175,19 @@ async def list_sessions(context: Context) -> list[SessionModel]:
     response_model=SessionModel,
     responses={404: {"description": "unknown session"}},
 )
-async def get_session(session_id: SessionId, context: Context) -> SessionModel:
-    return SessionModel.of(await _session(context, session_id))
+async def get_session(session_id: SessionId, context: Context, principal: Reader) -> SessionModel:
+    return SessionModel.of(await _session(context, session_id, principal))
 
 
 @api.delete(
     "/sessions/{session_id}",
-    summary="Delete a session with everything kept for it (frames, pages, readings)",
+    summary="Delete a session with everything kept for it: frames, pages, readings (admin keys)",
     status_code=status.HTTP_204_NO_CONTENT,
-    responses={404: {"description": "unknown session"}},
+    responses={403: {"description": "not an admin key"}, 404: {"description": "unknown session"}},
 )
-async def delete_session(session_id: SessionId, context: Context) -> Response:
-    await context.live.forget(session_id)
+async def delete_session(session_id: SessionId, context: Context, principal: Admin) -> Response:
+    await context.pages.forget(session_id)
+    context.asks.forget(session_id)
     if not await context.store.delete_session(session_id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     return Response(status_code=status.HTTP_204_NO_CONTENT)
@@ -193,11 +199,11 @@ async def delete_session(session_id: SessionId, context: Context) -> Response:
     response_model=list[PageModel],
     responses={404: {"description": "unknown session"}},
 )
-async def list_pages(session_id: SessionId, context: Context) -> list[PageModel]:
-    info = await _session(context, session_id)
+async def list_pages(session_id: SessionId, context: Context, principal: Reader) -> list[PageModel]:
+    info = await _session(context, session_id, principal)
     if info.mode == "pages":
         return []
-    pages = context.live.get(session_id)
+    pages = context.pages.get(session_id)
     await pages.caught_up(context.settings.ask_catch_up_s)
     return [PageModel(**asdict(summary)) for summary in pages.summaries()]
 
@@ -212,13 +218,14 @@ async def list_pages(session_id: SessionId, context: Context) -> list[PageModel]
         409: {"description": "nothing stored yet, or no such page"},
     },
 )
-async def page_png(session_id: SessionId, context: Context, page: PageQuery = None) -> Response:
-    info = await _session(context, session_id)
+async def page_png(session_id: SessionId, context: Context, principal: Reader, page: PageQuery = None) -> Response:
+    info = await _session(context, session_id, principal)
+    _rate_limit(context, principal)
     if info.mode == "pages":
         glasses = await _glasses_page(context, info)
         return Response(encode_png(glasses.image), media_type="image/png", headers={"X-Page-Id": glasses.page_id})
     try:
-        rendered = await context.live.get(session_id).render(page)
+        rendered = await context.pages.get(session_id).render(page)
     except NoPageError as exc:
         raise _no_page(exc) from None
     headers = {"X-Page-Id": _page_id(rendered.index, rendered.version), "X-Page": str(rendered.index),
@@ -243,33 +250,61 @@ def _page_id(index: int, version: int) -> str:
     },
 )
 async def ask(
-    session_id: SessionId, context: Context, request: Annotated[AskRequest | None, Body()] = None,
+    session_id: SessionId, context: Context, principal: Reader, request: Annotated[AskRequest | None, Body()] = None,
     page: PageQuery = None,
 ) -> AskResponse:
     question = (request or AskRequest()).question
     started = time.perf_counter()
-    info = await _session(context, session_id)
+    info = await _session(context, session_id, principal)
+    _rate_limit(context, principal)
+    # one reading per session page however many ask at once; it goes on past the time limit
+    progress = context.pages.get(session_id).stitched_seq if info.mode == "frames" else None  # a newer page: a new reading
+    version = (info.mode, info.last_seq, page, progress)
+    reading = context.asks.run(session_id, version, lambda: _read(context, info, page))
+    limit = context.settings.ask_timeout_s
+    try:
+        answer = await asyncio.wait_for(asyncio.shield(reading), limit)
+    except TimeoutError:
+        context.metrics.ask_errors.labels(reason="ask_timeout").inc()
+        raise HTTPException(
+            status.HTTP_503_SERVICE_UNAVAILABLE, headers={"Retry-After": str(max(1, round(limit)))},
+            detail=f"reading the page takes longer than the {limit:g} s limit; it goes on: ask again shortly",
+        ) from None
+    answer = answer.model_copy(update={"question": question, "latency_ms": round((time.perf_counter() - started) * 1000, 1)})
+    log.info("session %s: read %s with %s in %.0f ms", session_id, answer.page_id, answer.backend, answer.latency_ms)
+    return answer
+
+
+async def _read(context: AppContext, info: SessionInfo, page: int | None) -> AskResponse:
+    """What the OCR engine reads on the page (shared by concurrent asks of it)."""
     if info.mode == "pages":
         glasses = await _glasses_page(context, info)
         result = await _ocr(context, lambda: asyncio.to_thread(context.ocr.read, glasses.image))
         lines = [LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines]
-        answer = AskResponse(text=result.text, backend=context.ocr.name, page_id=glasses.page_id, latency_ms=0.0,
-                             lines=lines, question=question, truncated=result.truncated)  # fmt: skip
-    else:
-        try:
-            live = await _ocr(context, lambda: context.live.ask(session_id, page))
-        except NoPageError as exc:
-            raise _no_page(exc) from None
-        reading = live.reading
-        answer = AskResponse(
-            text=reading.text, backend=context.ocr.name, page_id=_page_id(reading.index, reading.version),
-            page=reading.index, version=reading.version, lines_read=reading.lines_read,
-            frames_pending=live.frames_pending, latency_ms=0.0, question=question, truncated=reading.truncated,
-            lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in reading.lines],
-        )  # fmt: skip
-    answer.latency_ms = round((time.perf_counter() - started) * 1000, 1)
-    log.info("session %s: read %s with %s in %.0f ms", session_id, answer.page_id, answer.backend, answer.latency_ms)
-    return answer
+        return AskResponse(text=result.text, backend=context.ocr.name, page_id=glasses.page_id, latency_ms=0.0,
+                           lines=lines, question="", truncated=result.truncated)  # fmt: skip
+    try:
+        live = await _ocr(context, lambda: context.pages.ask(info.session_id, page))
+    except NoPageError as exc:
+        raise _no_page(exc) from None
+    reading = live.reading
+    return AskResponse(
+        text=reading.text, backend=context.ocr.name, page_id=_page_id(reading.index, reading.version),
+        page=reading.index, version=reading.version, lines_read=reading.lines_read,
+        frames_pending=live.frames_pending, latency_ms=0.0, question="", truncated=reading.truncated,
+        lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in reading.lines],
+    )  # fmt: skip
+
+
+def _rate_limit(context: AppContext, principal: Principal) -> None:
+    assert context.limiter is not None  # noqa: S101 - set in AppContext.__post_init__
+    wait_s = context.limiter.take(principal.key_id)
+    if wait_s > 0:
+        context.metrics.ask_errors.labels(reason="rate_limited").inc()
+        raise HTTPException(
+            status.HTTP_429_TOO_MANY_REQUESTS, headers={"Retry-After": str(max(1, math.ceil(wait_s)))},
+            detail=f"too many requests for this key ({context.settings.ask_rate_per_min:g} per minute)",
+        )
 
 
 @api.get(
@@ -278,8 +313,8 @@ async def ask(
     response_class=StreamingResponse,
     responses={200: {"content": {"text/event-stream": {}}}, 404: {"description": "unknown session"}},
 )
-async def events(session_id: SessionId, context: Context) -> StreamingResponse:
-    info = await _session(context, session_id)
+async def events(session_id: SessionId, context: Context, principal: Reader) -> StreamingResponse:
+    info = await _session(context, session_id, principal)
     if info.mode == "pages":
         raise HTTPException(status.HTTP_409_CONFLICT, detail="live pages are for sessions that stream frames")
     return StreamingResponse(_event_stream(context, session_id), media_type="text/event-stream",
@@ -287,7 +322,7 @@ async def events(session_id: SessionId, context: Context) -> StreamingResponse:
 
 
 async def _event_stream(context: AppContext, session_id: str) -> AsyncIterator[str]:
-    updates = context.live.events(session_id)
+    updates = context.pages.events(session_id)
     next_update = asyncio.ensure_future(anext(updates))
     try:
         while True:

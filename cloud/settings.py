@@ -25,7 +25,13 @@ class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="DARKREAD_", env_file=".env", extra="ignore")
 
     data_dir: Path = Field(Path("darkread-data"), description="SQLite database and page images live here")
-    api_key: SecretStr | None = Field(None, description="required on every request; unset = open service")
+    api_key: SecretStr | None = Field(
+        None, description="one admin key; unset and no keys file = loopback clients only (see auth.py)"
+    )
+    keys_file: Path | None = Field(None, description="per-device keys (default: <data_dir>/keys.json)")
+    insecure: bool = Field(False, description="serve clients on other hosts without any key (never in production)")
+    api_docs: bool = Field(False, description="serve /docs, /redoc and /openapi.json")
+    metrics_public: bool = Field(False, description="serve /metrics without a key (else an admin key is needed)")
     database_url: SecretStr | None = Field(
         None,
         description="postgresql://user:password@host:port/db: keep sessions in PostgreSQL (several instances "
@@ -36,6 +42,9 @@ class Settings(BaseSettings):
     max_message_bytes: int = Field(DEFAULT_MAX_MESSAGE_BYTES, ge=1024, le=64 * 1024 * 1024)
     max_in_flight: int = Field(64, ge=1, description="unacked messages per connection before reading pauses")
     hello_timeout_s: float = Field(10.0, gt=0, description="time a client has to send hello")
+    shutdown_timeout_s: float = Field(
+        10.0, gt=0, description="graceful shutdown deadline: then open connections are cancelled and the store let go"
+    )
 
     # Live pages.
     live_idle_s: float = Field(300.0, gt=0, description="a session's pages leave memory after this idle time")
@@ -57,6 +66,9 @@ class Settings(BaseSettings):
         True, description="correct offline engines' misread glyphs (e/o, i/l) with an English word list"
     )
     ocr_timeout_s: float = Field(60.0, gt=0)
+    ask_timeout_s: float = Field(90.0, gt=0, description="an ask (stitching + OCR) answers 503 after this long")
+    ask_rate_per_min: float = Field(30.0, gt=0, description="asks and page.png per key per minute (sustained)")
+    ask_burst: int = Field(10, ge=1, description="asks and page.png per key at once")
 
     google_base_url: str = "https://vision.googleapis.com"
     google_api_key: SecretStr | None = None
@@ -70,10 +82,18 @@ class Settings(BaseSettings):
     openai_max_output_tokens: int = Field(1024, ge=1)
     openai_max_retries: int = Field(2, ge=0, description="retries after HTTP 429, honouring retry-after")
 
-    @field_validator("api_key", "database_url", "google_api_key", "google_bearer_token", "openai_api_key", mode="before")
+    @field_validator("api_key", mode="before")
+    @classmethod
+    def _empty_key_is_an_error(cls, value: object) -> object:
+        """An empty key is a mistake (an unset variable in a compose file), not "no auth"."""
+        if isinstance(value, str | SecretStr) and not str(getattr(value, "get_secret_value", lambda: value)()).strip():
+            raise ValueError("DARKREAD_API_KEY / --api-key is empty; set a key or leave it unset")
+        return value
+
+    @field_validator("database_url", "google_api_key", "google_bearer_token", "openai_api_key", mode="before")
     @classmethod
     def _empty_is_unset(cls, value: object) -> object:
-        """``DARKREAD_API_KEY=`` (empty) means no key, not the empty key."""
+        """``DARKREAD_OPENAI_API_KEY=`` (empty) means no key, not the empty key."""
         return None if value in ("", None) else value
 
     @field_validator("database_url")
@@ -82,6 +102,9 @@ class Settings(BaseSettings):
         if value is not None and not value.get_secret_value().startswith(("postgresql://", "postgres://")):
             raise ValueError("DARKREAD_DATABASE_URL must be a postgresql:// URL")
         return value
+
+    def keys_path(self) -> Path:
+        return self.keys_file or self.data_dir / "keys.json"
 
     def database_path(self) -> Path:
         return self.data_dir / "darkread.sqlite3"

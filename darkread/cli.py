@@ -27,6 +27,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "darkread.models.train.cli",
     "darkread.edge.calibrate.cli",
     "darkread.eval.cli",
+    "darkread.gaze.cli",
 )
 
 DESCRIPTION = """\

@@ -16,6 +16,8 @@ Each component keeps its own errors in its own ``errors.py``::
      │    └── TreuzellError            edge/sources/evk4/treuzell.py: the EVK4's control protocol failed
      │         └── CommandFailedError  the camera answered a command with an error status
      ├── ModelError                    edge/errors.py: the ONNX model is missing or has the wrong shape
+     ├── RunError                      edge/errors.py: the edge ran but failed (cloud refused the stream,
+     │                                 the replay crashed, a replay made no frames)
      ├── ImageCodecError               darkread/image_codec.py: an image that cannot be encoded or decoded
      ├── ProtocolError                 proto/errors.py: a wire message that cannot be accepted (close 4400)
      │    ├── MessageTooLargeError     more bytes than the receiver allows (1009)
@@ -25,11 +27,18 @@ Each component keeps its own errors in its own ``errors.py``::
      │    │    └── BadMaskError        mask ``shape``/``bits`` inconsistent (4422)
      │    ├── VersionMismatchError     ``hello.v`` is not a protocol version we speak (4409)
      │    ├── UnexpectedMessageError   valid, but not allowed now, e.g. frame before hello (4401)
-     │    └── AuthenticationError      missing or wrong API key in ``hello.token`` (1008)
+     │    ├── AuthenticationError      missing or wrong API key in ``hello.token`` (1008)
+     │    ├── ForbiddenError           the key lacks the scope, or names another device or stream (4403)
+     │    ├── SessionMismatchError     hello changes an existing session's mode or geometry (4412)
+     │    ├── SeqGapError              seq not contiguous after the last one (4416)
+     │    └── SessionBusyError         another stream is connected to the session (4423)
      └── CloudError                    cloud/errors.py: the cloud service could not do what was asked
           ├── StoreError               a session's frames or pages could not be stored or read
-          │    └── UnknownSessionError a write named a session never opened (or deleted)
+          │    ├── UnknownSessionError a write named a session never opened (or deleted)
+          │    ├── SessionOwnedError   the session belongs to another device or stream
+          │    └── SessionShapeError   a hello with another mode or geometry than the session's
           ├── NoPageError              the session has nothing to read yet (or not the page asked for)
+          ├── DataDirError             the data directory is unusable or held by another process
           ├── ServiceStartError        the service did not come up
           ├── PostgresUnavailable      no PostgreSQL server can be started here (tests, benchmarks)
           └── OcrError                 an OCR engine failed (``retryable`` says whether to try again)

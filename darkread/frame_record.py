@@ -21,7 +21,7 @@ class FrameRecord:
     """
 
     frame_id: int
-    t_us: int  # event clock of the window's last event, microseconds
+    t_us: int  # event clock, microseconds: the newest event when the frame was made (no event in it is newer)
     mask: np.ndarray  # uint8 [h, w] ink mask (1 = ink, 0 = paper); 100x200 with the shipped model
     origin: tuple[int, int]  # window top-left (x0, y0) in sensor pixels
     gaze_px: tuple[float, float]  # gaze pixel (u, v) in sensor pixels at t_us

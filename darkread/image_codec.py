@@ -46,6 +46,11 @@ def encode_png(image: np.ndarray) -> bytes:
     return _encode(".png", image)
 
 
+def encode_png_bilevel(image: np.ndarray) -> bytes:
+    """1-bit PNG of a grey image (values >= 128 white): text pages and masks at an eighth of 8-bit PNG."""
+    return _encode(".png", image, [cv2.IMWRITE_PNG_BILEVEL, 1, cv2.IMWRITE_PNG_COMPRESSION, 9])
+
+
 def encode_jpeg(image: np.ndarray, quality: int) -> bytes:
     """JPEG at ``quality`` (0-100) of a grey or RGB uint8 image."""
     return _encode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])

@@ -75,6 +75,7 @@ def read_recording(
     out_dir: str | Path | None = None,
     drain_timeout_s: float = 60.0,
     lexicon: bool = True,
+    infer: str = "on-change",
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says."""
     import httpx
@@ -83,13 +84,24 @@ def read_recording(
     from darkread.cloud.app import create_app
     from darkread.cloud.server import serve_in_thread
     from darkread.cloud.settings import Settings
+    from darkread.edge.builder import build_edge
     from darkread.edge.config import load_config
-    from darkread.edge.daemon import EdgeService
+    from darkread.edge.daemon import Daemon
     from darkread.edge.io.recording import open_recording
+    from darkread.edge.notify import Notifier
 
+    from darkread.cloud.errors import CloudError
+    from darkread.edge.errors import RunError
+
+    if out_dir is None:  # a scratch directory that does not outlive the read
+        with tempfile.TemporaryDirectory(prefix="darkread-read-") as scratch:
+            result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
+                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon)
+        result.page_png = ""
+        return result
     started = time.perf_counter()
     recording = open_recording(path)  # fails early, naming any missing file
-    out = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix="darkread-read-"))
+    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     api_key = secrets.token_urlsafe(16)
     settings = Settings(data_dir=out / "cloud", api_key=SecretStr(api_key), ocr_backend=backend,  # type: ignore[arg-type]
@@ -100,31 +112,32 @@ def read_recording(
         overrides = {
             "source": {"kind": "replay", "path": str(recording.path if recording.path.is_dir() else recording.raw_path), "speed": 0.0},
             "gaze": {"kind": "recording"},
-            "pipeline": {"lossless": True, **({"model": str(model)} if model else {})},
+            "pipeline": {"lossless": True, "infer": infer, **({"model": str(model)} if model else {})},
             "uplink": {"url": server.ws_url, "api_key": api_key, "mode": mode, "spool_dir": str(out / "spool"),
                        "drain_timeout_s": drain_timeout_s},
             "metrics": {"log_every_s": 3600.0},
         }
-        service = EdgeService(load_config(None, environ={}, overrides=overrides))
         t0 = time.perf_counter()
-        service.startup()
-        try:
-            while not service.finished():
-                service.tick()
-                time.sleep(0.02)
-        finally:
-            drained = service.shutdown(drain_timeout_s)
+        edge = build_edge(load_config(None, environ={}, overrides=overrides))
+        daemon = Daemon(edge, Notifier(environ={}), tick_s=0.02, shutdown_timeout_s=drain_timeout_s, handle_signals=False)
+        drained = daemon.run() == 0
         stages["edge"] = time.perf_counter() - t0
         if not drained:
-            raise RuntimeError(f"the cloud did not acknowledge every frame within {drain_timeout_s:g} s")
-        totals = service.metrics.snapshot().totals
-        session_id = service.uplink.session_id
+            raise RunError(f"the cloud did not acknowledge every frame within {drain_timeout_s:g} s")
+        totals = edge.metrics.snapshot().totals
+        session_id = edge.uplink.session_id
         headers = {"X-API-Key": api_key}
         with httpx.Client(base_url=server.url, headers=headers, timeout=settings.ocr_timeout_s + 30) as client:
-            t0 = time.perf_counter()  # the pages grew while the frames arrived: this is the wait for the answer
-            answer = client.post(f"/v1/sessions/{session_id}/ask", json={}).raise_for_status().json()
-            answer_ms = (time.perf_counter() - t0) * 1000
-            page = client.get(f"/v1/sessions/{session_id}/page.png").raise_for_status().content
+            try:
+                t0 = time.perf_counter()  # the pages grew while the frames arrived: this is the wait for the answer
+                answer = client.post(f"/v1/sessions/{session_id}/ask", json={}).raise_for_status().json()
+                answer_ms = (time.perf_counter() - t0) * 1000
+                page = client.get(f"/v1/sessions/{session_id}/page.png").raise_for_status().content
+            except httpx.HTTPStatusError as exc:
+                detail = exc.response.json().get("detail", "") if exc.response.headers.get("content-type", "").startswith(
+                    "application/json") else exc.response.text[:200]
+                raise CloudError(f"{recording.path}: the page could not be read (HTTP {exc.response.status_code}: "
+                                 f"{detail})") from None
         stages["answer"] = answer_ms / 1000
     page_png = out / "page.png"
     page_png.write_bytes(page)
@@ -167,6 +180,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
                         help="OCR backend (default: local, the embedded offline engine); remote ones read DARKREAD_* settings")
     parser.add_argument("--mode", default="frames", choices=["frames", "pages"], help="stream frames (default) or stitch on the glasses")
+    parser.add_argument("--infer", default="on-change", choices=["on-change", "every-window"],
+                        help="on-change (default): one fused view per fixation; every-window: every frame (research)")
     parser.add_argument("--no-lexicon", dest="lexicon", action="store_false",
                         help="report the offline engine's text as read, without the dictionary correction")
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
@@ -185,7 +200,7 @@ def _run(args: argparse.Namespace) -> int:
     else:
         raise ValueError("give a RECORDING directory, or --demo for the shipped sample")
     result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out,
-                           lexicon=args.lexicon)
+                           lexicon=args.lexicon, infer=args.infer)
     if args.json:
         print(json.dumps(result.to_json(), indent=1))
         return 0
@@ -206,7 +221,7 @@ def _print_summary(result: ReadResult, stream: Any) -> None:
     print(
         f"{result.events_in:,} events, {kept:.1%} inside the fovea, {result.frames} frames, "
         f"{result.bytes_sent:,} bytes sent ({result.raw_bytes / max(result.bytes_sent, 1):.0f}x less than the raw "
-        f"event stream), OCR {result.backend}, {result.seconds:.1f} s (the answer {result.answer_ms:.0f} ms after "
-        f"the question); page: {result.page_png}",
+        f"event stream), OCR {result.backend}, {result.seconds:.1f} s (the answer {result.answer_ms:.0f} ms after the "
+        "question); " + (f"page: {result.page_png}" if result.page_png else "the page image is kept with --out DIR"),
         file=stream,
     )

@@ -1,8 +1,10 @@
 """Edge configuration: a TOML file, then ``DARKREAD_EDGE_<SECTION>_<KEY>`` environment overrides,
 then command-line overrides (highest precedence).
 
-Every setting lives in one small frozen dataclass per section; ``edge/systemd/edge.toml`` is the
-documented example.
+Every setting lives in one small frozen dataclass per section, and the part that uses a section
+takes that very type (``Pipeline`` a :class:`PipelineConfig`, ``Uplink`` an :class:`UplinkConfig`);
+``edge/systemd/edge.toml`` is the documented example. The window size and the bin count are not
+settings: they are the reconstruction model's input shape.
 """
 
 from __future__ import annotations
@@ -43,15 +45,21 @@ class GazeConfig:
 class PipelineConfig:
     n_events: int = 1600  # foveated events per voxel grid (and new ones that trigger a frame)
     period_ms: float = 50.0  # also make a frame after this long if any new foveated events arrived
-    fovea_height: int = 100
-    fovea_width: int = 200
-    bins: int = 4
-    model: str = ""  # ONNX path; empty: the shipped model
+    model: str = ""  # ONNX path; empty: the shipped model (its input shape sets window and bins)
     threads: int = 1
     ring_capacity: int = 1 << 19  # 8 MB: 0.5 s at 1 Mev/s, far more than a window needs
     lossless: bool = False  # True: the reader waits for inference instead of skipping windows
     stall_s: float = 5.0  # no events for this long: the watchdog is no longer fed (systemd restarts us)
     sensor_roi: bool = False  # move the sensor's ROI with the foveal window (EVK4: less USB traffic)
+    # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
+    # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
+    infer: str = "on-change"
+    min_interval_ms: float = 100.0  # on-change: at most one inference per this much event time
+    renew_fraction: float = 1.0  # on-change: infer again once this share of n_events is new ...
+    move_px: float = 6.0  # ... or the window moved this far since the last inference
+    min_events: int = 400  # on-change: a frame may have fewer than n_events (low light), not fewer than this
+    first_wait_ms: float = 60.0  # on-change: the first frame of a fixation comes this long into it (landing settled)
+    view_every_ms: float = 250.0  # on-change: a long fixation sends its view this often
 
 
 @dataclass(frozen=True)
@@ -66,8 +74,12 @@ class UplinkConfig:
     drain_timeout_s: float = 30.0
     backoff_initial_s: float = 0.2
     backoff_max_s: float = 10.0
+    ack_timeout_s: float = 15.0  # messages in flight and no ack advancing for this long: reconnect
     max_in_flight: int = 512
     page_every_s: float = 5.0  # pages mode: send the page this often
+    heartbeat_s: float = 5.0
+    open_timeout_s: float = 5.0
+    stable_connection_s: float = 2.0  # a connection that lasted this long resets the backoff
 
 
 @dataclass(frozen=True)
@@ -117,11 +129,16 @@ def _coerce(raw: Any, default: Any, where: str) -> Any:
         raise ValueError(f"config {where}: cannot use {raw!r} (expected {type(default).__name__})") from None
 
 
+FROM_THE_MODEL = {"fovea_height", "fovea_width", "bins"}  # former [pipeline] keys
+
+
 def _section(name: str, values: Mapping[str, Any], base: Any) -> Any:
     cls = _SECTION_TYPES[name]
     known = {f.name for f in dataclasses.fields(cls)}
     updates = {}
     for key, raw in values.items():
+        if name == "pipeline" and key in FROM_THE_MODEL:
+            raise ValueError(f"config: [pipeline] {key} is gone: the window size and bins are the model's input shape")
         if key not in known:
             raise ValueError(f"config: unknown key [{name}] {key} (known: {', '.join(sorted(known))})")
         updates[key] = _coerce(raw, getattr(base, key), f"[{name}] {key}")
@@ -188,4 +205,8 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError("config [source] speed must be >= 0 (0 = as fast as possible)")
     if config.pipeline.n_events <= 0 or config.pipeline.period_ms <= 0:
         raise ValueError("config [pipeline] n_events and period_ms must be positive")
+    if config.pipeline.infer not in {"on-change", "every-window"}:
+        raise ValueError(f"config [pipeline] infer must be 'on-change' or 'every-window', not {config.pipeline.infer!r}")
+    if min(config.pipeline.min_interval_ms, config.pipeline.view_every_ms) <= 0 or config.pipeline.min_events <= 0:
+        raise ValueError("config [pipeline] min_interval_ms, view_every_ms and min_events must be positive")
     return config

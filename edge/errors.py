@@ -40,3 +40,7 @@ class DeviceError(DarkreadError):
 
 class ModelError(DarkreadError):
     """The reconstruction model cannot be loaded or run."""
+
+
+class RunError(DarkreadError):
+    """The edge daemon could not do its job; the message says why (frames stay in the spool)."""

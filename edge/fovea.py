@@ -1,25 +1,42 @@
-"""Foveation: keep only the events in a 100 x 200 (rows x cols) window around the gaze.
+"""Foveation: keep only the events in a window (rows x cols) around the gaze.
 
 Reading needs a few words around the fixation, not the whole sensor; dropping the rest cuts the
 event rate (typically by three quarters on a page) before anything expensive runs. Cropped events
 keep their sensor coordinates; the voxel grid makes them window-relative.
+
+The window's size is the reconstruction model's input (``Reconstructor.voxel``); ``FoveaConfig()``
+is the size the shipped model was trained for. :func:`in_window` is the one window test.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from darkread.edge.events import EVENT_CD_DTYPE, Events
+from darkread.edge.events import Events
 
-BYTES_PER_EVENT = EVENT_CD_DTYPE.itemsize
+WINDOW_HEIGHT = 100  # rows of the shipped model's window
+WINDOW_WIDTH = 200  # columns
+GAZE_TIME_STEP_US = 1000  # offline foveation looks the gaze up once per millisecond (it moves slowly)
 
 
 @dataclass(frozen=True)
 class FoveaConfig:
-    height: int = 100
-    width: int = 200
+    height: int = WINDOW_HEIGHT
+    width: int = WINDOW_WIDTH
+
+
+def in_window(events: Events, x0: int, y0: int, width: int, height: int) -> np.ndarray:
+    """Boolean mask of ``events`` inside [x0, x0 + width) x [y0, y0 + height).
+
+    Subtracting the origin in uint16 wraps coordinates left of / above the window to large values,
+    so one comparison per axis tests both bounds.
+    """
+    dx = events["x"] - np.uint16(x0)
+    dy = events["y"] - np.uint16(y0)
+    return (dx < width) & (dy < height)
 
 
 def window_origins(centers_xy: np.ndarray, sensor_wh: tuple[int, int], cfg: FoveaConfig = FoveaConfig()) -> np.ndarray:
@@ -46,16 +63,15 @@ def window_origin(
 
 
 def crop(events: Events, x0: int, y0: int, cfg: FoveaConfig = FoveaConfig()) -> Events:
-    """Events inside [x0, x0 + width) x [y0, y0 + height), sensor coordinates kept (a copy).
-
-    Subtracting the origin in uint16 wraps coordinates left of / above the window to large values,
-    so one comparison per axis tests both bounds.
-    """
+    """Events inside the window at (x0, y0), sensor coordinates kept (a copy)."""
     if x0 < 0 or y0 < 0:
         raise ValueError(f"window origin must be non-negative, got ({x0}, {y0})")
-    dx = events["x"] - np.uint16(x0)
-    dy = events["y"] - np.uint16(y0)
-    return events[(dx < cfg.width) & (dy < cfg.height)]
+    return events[in_window(events, x0, y0, cfg.width, cfg.height)]
+
+
+def window_events(events: Events, origin: tuple[int, int], cfg: FoveaConfig, n_events: int) -> Events:
+    """The newest ``n_events`` of ``events`` inside the window at ``origin``: what one voxel grid bins."""
+    return crop(events, origin[0], origin[1], cfg)[-n_events:]
 
 
 def crop_along_track(events: Events, origins_xy: np.ndarray, cfg: FoveaConfig = FoveaConfig()) -> Events:
@@ -72,28 +88,32 @@ def crop_along_track(events: Events, origins_xy: np.ndarray, cfg: FoveaConfig = 
     return events[inside]
 
 
-@dataclass
-class FoveaCounter:
-    """Events (and their in-memory bytes, 16 B per EventCD) entering and leaving foveation.
+def origins_along_gaze(
+    t_us: np.ndarray,
+    gaze_px_at: Callable[[np.ndarray], np.ndarray],
+    sensor_wh: tuple[int, int],
+    cfg: FoveaConfig = FoveaConfig(),
+) -> np.ndarray:
+    """(N, 2) window origin per event time (NaN without a gaze), the gaze looked up once per millisecond.
 
-    Bytes are those of the decoded event arrays, not of the EVT3 stream (~2-4 B per event).
+    ``gaze_px_at(t_us [M]) -> [M, 2]`` is e.g. ``GazeMapper.pixels_at``: one call per millisecond
+    of events, not per event.
     """
+    t = np.asarray(t_us, dtype=np.int64)
+    if t.shape[0] == 0:
+        return np.zeros((0, 2))
+    steps, index = np.unique(t // GAZE_TIME_STEP_US, return_inverse=True)
+    centres = np.asarray(gaze_px_at(steps * GAZE_TIME_STEP_US + GAZE_TIME_STEP_US // 2), dtype=np.float64)
+    return window_origins(centres, sensor_wh, cfg)[index.reshape(-1)]
 
-    events_in: int = 0
-    events_out: int = 0
 
-    def add(self, n_in: int, n_out: int) -> None:
-        self.events_in += int(n_in)
-        self.events_out += int(n_out)
-
-    @property
-    def bytes_in(self) -> int:
-        return self.events_in * BYTES_PER_EVENT
-
-    @property
-    def bytes_out(self) -> int:
-        return self.events_out * BYTES_PER_EVENT
-
-    @property
-    def kept_fraction(self) -> float:
-        return self.events_out / self.events_in if self.events_in else 0.0
+def foveate_along_gaze(
+    events: Events,
+    gaze_px_at: Callable[[np.ndarray], np.ndarray],
+    sensor_wh: tuple[int, int],
+    cfg: FoveaConfig = FoveaConfig(),
+) -> Events:
+    """Offline foveation: the events inside the window around the gaze at their own time."""
+    if events.shape[0] == 0:
+        return events[:0]
+    return crop_along_track(events, origins_along_gaze(events["t"], gaze_px_at, sensor_wh, cfg), cfg)

@@ -13,12 +13,36 @@ gaze point that projects off the sensor or behind the camera.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Protocol
+
 import numpy as np
 
 from darkread.edge.io.calibration import Calibration
 from darkread.edge.io.gaze_csv import GazeTrack
 
 READING_DEPTH_PRIOR_M = 0.45
+
+
+@dataclass(frozen=True)
+class GazeSample:
+    """Where the wearer looks at one event time: the event-camera pixel and the CPF angles."""
+
+    pixel: tuple[float, float]  # (u, v) event-camera pixel, on the sensor
+    angles: tuple[float, float]  # (yaw, pitch) radians, projection convention
+
+
+class GazeLookup(Protocol):
+    """Where the wearer looks at an event time (a recorded track or a live feed); the pipeline's only question."""
+
+    def at(self, t_event_us: int) -> GazeSample | None:
+        """The gaze at ``t_event_us`` (event clock), or None without a usable gaze on the sensor."""
+        ...
+
+    def rows(self, t0_event_us: int, t1_event_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The tracker's own rows with event time in (t0, t1]: (t_event_us, yaw, pitch) in radians,
+        NaN for invalid rows; the on-change mode classifies them into fixations, saccades, blinks."""
+        ...
 
 
 def gaze_point_cpf(yaw_rad: np.ndarray, pitch_rad: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
@@ -29,6 +53,28 @@ def gaze_point_cpf(yaw_rad: np.ndarray, pitch_rad: np.ndarray, depth_m: np.ndarr
     direction = np.stack([np.tan(yaw), np.tan(pitch), np.ones(yaw.shape)], axis=-1)
     direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
     return direction * np.where(depth < 0, 0.0, depth)[..., None]
+
+
+def project_gaze(calibration: Calibration, yaw: np.ndarray, pitch: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """(N, 2) event pixels of gaze points; NaN rows off the sensor (or without a gaze)."""
+    uv = calibration.project(calibration.cpf_to_event(gaze_point_cpf(yaw, pitch, depth)))
+    uv[~calibration.on_sensor(uv)] = np.nan
+    return uv
+
+
+def gaze_sample(calibration: Calibration, yaw: float, pitch: float, depth: float) -> GazeSample | None:
+    """One gaze (angles and depth) as a :class:`GazeSample`; None when it misses the sensor."""
+    uv = project_gaze(calibration, np.array([yaw]), np.array([pitch]), np.array([depth]))[0]
+    if np.isnan(uv).any():
+        return None
+    return GazeSample(pixel=(float(uv[0]), float(uv[1])), angles=(float(yaw), float(pitch)))
+
+
+def rows_between(t_us: np.ndarray, yaw: np.ndarray, pitch: np.ndarray, t0: int, t1: int) -> tuple[np.ndarray, ...]:
+    """The rows with ``t0 < t <= t1`` of time-sorted arrays (views, no copies)."""
+    i0 = int(np.searchsorted(t_us, t0, side="right"))
+    i1 = int(np.searchsorted(t_us, t1, side="right"))
+    return t_us[i0:i1], yaw[i0:i1], pitch[i0:i1]
 
 
 class GazeMapper:
@@ -58,6 +104,16 @@ class GazeMapper:
         self._pitch = track.pitch_rad[keep]
         depth = track.depth_m[keep]
         self._depth = np.where(np.isfinite(depth) & (depth > 0), depth, self.depth_prior_m)
+        # every row on the event clock, invalid ones (blinks) as NaN: what the gaze-event classifier reads
+        self._rows_t = track.t_us.astype(np.int64) + self.clock_offset_us
+        self._rows_yaw = np.where(track.valid, track.yaw_rad, np.nan)
+        self._rows_pitch = np.where(track.valid, track.pitch_rad, np.nan)
+        period = float(np.median(np.diff(self._rows_t))) if self._rows_t.shape[0] > 1 else 0.0
+        self.rate_hz = 1e6 / period if period > 0 else 60.0
+
+    def rows(self, t0_event_us: int, t1_event_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The tracker's rows with event time in (t0, t1]: (t_event_us, yaw, pitch), NaN when invalid."""
+        return rows_between(self._rows_t, self._rows_yaw, self._rows_pitch, t0_event_us, t1_event_us)
 
     def angles_and_depth_at(self, t_event_us: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Interpolated (yaw, pitch, depth) per event time; NaN where no usable gaze."""
@@ -82,19 +138,14 @@ class GazeMapper:
 
     def pixels_at(self, t_event_us: np.ndarray) -> np.ndarray:
         """(N, 2) float64 event pixels (x, y); NaN rows where no valid gaze or off the sensor."""
-        yaw, pitch, depth = self.angles_and_depth_at(t_event_us)
-        uv = self.calibration.project(self.calibration.cpf_to_event(gaze_point_cpf(yaw, pitch, depth)))
-        uv[~self.calibration.on_sensor(uv)] = np.nan
-        return uv
+        return project_gaze(self.calibration, *self.angles_and_depth_at(t_event_us))
 
-    def pixel_at(self, t_event_us: int) -> tuple[float, float] | None:
-        uv = self.pixels_at(np.array([t_event_us]))[0]
-        return None if np.isnan(uv).any() else (float(uv[0]), float(uv[1]))
-
-    def angles_at(self, t_event_us: int) -> tuple[float, float] | None:
-        """(yaw, pitch) in radians, projection convention, or None without a usable gaze."""
-        yaw, pitch, _ = self.angles_and_depth_at(np.array([t_event_us]))
-        return None if np.isnan(yaw[0]) else (float(yaw[0]), float(pitch[0]))
+    def at(self, t_event_us: int) -> GazeSample | None:
+        """The gaze at one event time (one interpolation, one projection)."""
+        yaw, pitch, depth = self.angles_and_depth_at(np.array([t_event_us]))
+        if np.isnan(yaw[0]):
+            return None
+        return gaze_sample(self.calibration, float(yaw[0]), float(pitch[0]), float(depth[0]))
 
     def event_time_range(self) -> tuple[int, int] | None:
         """First and last valid gaze sample on the event clock."""

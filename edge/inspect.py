@@ -60,7 +60,10 @@ def _main(args: argparse.Namespace) -> int:
         print(json.dumps(report, indent=1))
     else:
         print(format_report(report))
-    return 0
+    if report["problems"]:  # decoded, but not what the header says: the figures above are nonsense
+        print(f"darkread inspect: error: {report['path']} does not look like a valid recording: "
+              f"{'; '.join(report['problems'])}", file=sys.stderr)
+    return 1 if report["problems"] else 0
 
 
 @dataclass
@@ -110,7 +113,7 @@ def summarize(
     image: bool = False,
 ) -> EventSummary:
     """Totals over event chunks; with a ``GazeMapper``, the events inside the moving gaze window."""
-    from darkread.edge.fovea import crop_along_track, window_origins
+    from darkread.edge.fovea import crop_along_track, origins_along_gaze
 
     summary = EventSummary()
     for events in chunks:
@@ -118,9 +121,8 @@ def summarize(
         if image:
             summary.accumulate_image(events, width, height)
         if mapper is not None and events.shape[0]:
-            centres = mapper.pixels_at(events["t"])
-            summary.gaze_events += int(np.count_nonzero(np.isfinite(centres[:, 0])))
-            origins = window_origins(centres, (width, height))
+            origins = origins_along_gaze(events["t"], mapper.pixels_at, (width, height))
+            summary.gaze_events += int(np.count_nonzero(np.isfinite(origins[:, 0])))
             summary.fovea_events += int(crop_along_track(events, origins).shape[0])
     return summary
 
@@ -135,6 +137,7 @@ def inspect_path(
     progress: bool = True,
 ) -> dict[str, Any]:
     """The inspect report as a JSON-ready dict (see ``darkread inspect --help``)."""
+    from darkread.edge.io.plausibility import TimeCheck, problems
     from darkread.edge.io.raw import RawReader
     from darkread.edge.io.recording import open_recording
 
@@ -160,17 +163,21 @@ def inspect_path(
                 recording.calibration.width, recording.calibration.height, width, height,
             )
 
+    time_check = TimeCheck()
+
     def chunks() -> Iterator[np.ndarray]:
         size = raw_path.stat().st_size
         with _progress(enabled=progress and size >= PROGRESS_MIN_BYTES, name=raw_path.name) as bar:
             for events in reader:
                 bar.update(events.shape[0])
+                time_check.add(events["t"])
                 yield events
 
     summary = summarize(chunks(), width=width, height=height, mapper=mapper, image=png is not None)
     summary.triggers = int(reader.triggers.shape[0])  # the reader keeps the (few) triggers aside
 
     report = _report(path, header, summary, width, height)
+    report["problems"] = problems(reader.stats, header.format, width, height, time_check)
     if recording is not None and track is not None:
         report.update(
             gaze_samples=len(track),
@@ -249,6 +256,7 @@ def format_report(report: dict[str, Any]) -> str:
         ]
     if "png" in report:
         lines.append(f"  picture     {report['png']}")
+    lines += [f"  PROBLEM     {problem}" for problem in report.get("problems", [])]
     return "\n".join(lines)
 
 

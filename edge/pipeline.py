@@ -3,11 +3,24 @@
 Two threads meet here. The source's reader thread calls :meth:`Pipeline.sink`, which only pushes
 the chunk into the :class:`EventRing` and counts how many of its events fall inside the *current*
 foveal window. The reconstruction thread wakes when ``n_events`` new foveated events arrived (or
-every ``period_ms``), looks up the gaze at the newest event, and runs the pure core
-:func:`make_frame` (choose window -> crop -> voxel -> infer). If inference fell behind, it jumps to
-the newest window and counts the windows it skipped; the ring is fixed-size, so memory never grows
-with load. In ``lossless`` mode (offline replays) the reader thread reconstructs each window
-itself, so it waits for inference instead of skipping.
+every ``period_ms``), takes the newest event time ``t`` as the frame's one timestamp, looks up the
+gaze at ``t``, places the window there, collects exactly the window's newest ``n_events`` (up to
+``t``) and runs the pure core :func:`make_frame` (voxel -> infer). If inference fell behind, it
+jumps to the newest window and counts the windows it skipped; the ring is fixed-size, so memory
+never grows with load. In ``lossless`` mode (offline replays) the reader thread reconstructs each
+window itself, so it waits for inference instead of skipping.
+
+That is the ``every-window`` mode. The default, ``on-change`` (``[pipeline] infer``), lets the gaze
+decide (:mod:`darkread.edge.view_trigger`): every chunk the reader hands over is one processing
+step that feeds the gaze-event classifier; no inference during saccades and blinks; during a
+fixation one when enough new events arrived or the window moved, at most every
+``min_interval_ms``; the fixation's frames are fused into one view
+(:mod:`darkread.edge.view_fusion`) that goes to ``on_frame`` when the fixation ends and every
+``view_every_ms`` during a long one. The same step runs on the reconstruction thread live and on
+the reader thread in lossless replays.
+
+The window's size and the bin count come from the model (``voxel``, see ``Reconstructor.voxel``);
+the loop's settings are the config's :class:`~darkread.edge.config.PipelineConfig`.
 """
 
 from __future__ import annotations
@@ -16,16 +29,20 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from darkread.edge.config import PipelineConfig
 from darkread.edge.events import Events
-from darkread.edge.fovea import FoveaConfig, crop, window_origin
-from darkread.edge.telemetry import EdgeMetrics
+from darkread.edge.fovea import FoveaConfig, in_window, window_origin
+from darkread.edge.gaze import GazeLookup, GazeSample
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
+from darkread.edge.telemetry import EdgeMetrics
+from darkread.edge.view_fusion import ViewFuser, ViewRecord
+from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 from darkread.frame_record import FrameRecord
 
@@ -35,37 +52,19 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 MIN_HISTORY_EVENTS = 4096
+MAX_HISTORY_EVENTS = 1 << 16  # usual cap of the ring events searched for a window's events
 
 Infer = Callable[[np.ndarray], np.ndarray]
 """Voxel grid [bins, H, W] float32 -> ink mask [H, W] uint8 (a ``Reconstructor``)."""
 
 
-class GazeLookup(Protocol):
-    """Where the wearer looks at an event time (``GazeMapper`` or a live feed)."""
-
-    def pixel_at(self, t_event_us: int) -> tuple[float, float] | None: ...
-    def angles_at(self, t_event_us: int) -> tuple[float, float] | None: ...
-
-
-@dataclass(frozen=True)
-class PipelineSettings:
-    n_events: int = 1600  # foveated events per voxel grid; that many new ones trigger a frame
-    period_ms: float = 50.0  # a frame at least this often when some new foveated events arrived
-    fovea: FoveaConfig = field(default_factory=FoveaConfig)
-    bins: int = 4
-    history_events: int = 1 << 16  # usual cap of the ring events searched for a window's events
-    lossless: bool = False  # the reader reconstructs (waits for inference) instead of skipping windows
-    stall_s: float = 5.0  # no events for this long: stop feeding the watchdog (a sensor always has noise)
-    sensor_roi: bool = False  # follow the window with the source's ROI (less USB traffic; sees only the window)
-
-    @property
-    def voxel(self) -> VoxelConfig:
-        return VoxelConfig(bins=self.bins, n_events=self.n_events, height=self.fovea.height, width=self.fovea.width)
-
-
 @dataclass(frozen=True)
 class FrameResult(FrameRecord):
-    """The frame record of one reconstructed foveal window, with how it was made."""
+    """The frame record of one reconstructed foveal window, with how it was made.
+
+    ``t_us`` is the frame's one timestamp (event clock): the newest event when it was made, the
+    time its gaze was looked up and the last time its events may have.
+    """
 
     gaze_rad: tuple[float, float]  # (yaw, pitch), radians
     events_used: int
@@ -85,41 +84,35 @@ def count_in_window(events: Events, origin: tuple[int, int] | None, cfg: FoveaCo
     """How many ``events`` fall inside the window at ``origin`` (0 without a window)."""
     if origin is None or events.shape[0] == 0:
         return 0
-    dx = events["x"] - np.uint16(origin[0])  # uint16 wrap: one comparison tests both bounds
-    dy = events["y"] - np.uint16(origin[1])
-    return int(np.count_nonzero((dx < cfg.width) & (dy < cfg.height)))
-
-
-def window_events(recent: Events, origin: tuple[int, int], settings: PipelineSettings) -> Events:
-    """The newest ``n_events`` of ``recent`` inside the window at ``origin``."""
-    inside = crop(recent, origin[0], origin[1], settings.fovea)
-    return inside[-settings.n_events :]
+    return int(np.count_nonzero(in_window(events, origin[0], origin[1], cfg.width, cfg.height)))
 
 
 def make_frame(
-    events: Events,
-    gaze_px: tuple[float, float],
-    gaze_rad: tuple[float, float],
-    sensor_wh: tuple[int, int],
-    settings: PipelineSettings,
+    window: Events,
+    origin: tuple[int, int],
+    gaze: GazeSample,
+    t_us: int,
+    voxel: VoxelConfig,
     infer: Infer,
     frame_id: int,
 ) -> FrameResult | None:
-    """Choose the window at the gaze, crop, bin, infer. None when the window holds no events."""
-    origin = window_origin(gaze_px, sensor_wh, settings.fovea)
-    window = window_events(events, origin, settings)
+    """Bin the window's events and infer. None when the window holds no events.
+
+    ``window`` are exactly the events to bin (``fovea.window_events``), all inside the window at
+    ``origin``; ``t_us`` is the frame's timestamp, the time ``gaze`` was looked up.
+    """
     if window.shape[0] == 0:
         return None
-    voxel = voxel_grid(window, origin[0], origin[1], settings.voxel)
+    grid = voxel_grid(window, origin[0], origin[1], voxel)
     started = time.perf_counter()
-    mask = np.asarray(infer(voxel), dtype=np.uint8)
+    mask = np.asarray(infer(grid), dtype=np.uint8)
     inference_ms = (time.perf_counter() - started) * 1e3
     return FrameResult(
         frame_id=frame_id,
-        t_us=int(window["t"][-1]),
+        t_us=int(t_us),
         origin=origin,
-        gaze_px=(float(gaze_px[0]), float(gaze_px[1])),
-        gaze_rad=(float(gaze_rad[0]), float(gaze_rad[1])),
+        gaze_px=gaze.pixel,
+        gaze_rad=gaze.angles,
         events_used=int(window.shape[0]),
         mask=mask,
         inference_ms=inference_ms,
@@ -128,8 +121,9 @@ def make_frame(
 
 # -- the threads ---------------------------------------------------------------------------------
 
-FrameHandler = Callable[[FrameResult, float], None]
-"""Receives each frame and the ``time.monotonic()`` at which its newest event arrived."""
+FrameHandler = Callable[[FrameResult | ViewRecord, float], None]
+"""Receives each frame (every-window) or view (on-change) and the ``time.monotonic()`` at which the
+data that completed it arrived (its newest event, or the chunk that ended the fixation)."""
 
 
 class Pipeline:
@@ -141,9 +135,9 @@ class Pipeline:
         gaze: GazeLookup,
         infer: Infer,
         on_frame: FrameHandler,
-        settings: PipelineSettings = PipelineSettings(),
+        settings: PipelineConfig = PipelineConfig(),
+        voxel: VoxelConfig = VoxelConfig(),
         metrics: EdgeMetrics | None = None,
-        ring_capacity: int = 1 << 19,
         watchdog: Callable[[], object] | None = None,
     ) -> None:
         self.source = source
@@ -151,8 +145,10 @@ class Pipeline:
         self.infer = infer
         self.on_frame = on_frame
         self.settings = settings
+        self.voxel = voxel
+        self.fovea = voxel.fovea
         self.metrics = metrics or EdgeMetrics()
-        self.ring = EventRing(ring_capacity)
+        self.ring = EventRing(settings.ring_capacity)
         self.watchdog = watchdog
         self.sensor_wh = (int(source.width), int(source.height))
         self.frames_made = 0
@@ -169,15 +165,30 @@ class Pipeline:
         self._step_lock = threading.Lock()
         self._source_done = threading.Event()
         self._thread: threading.Thread | None = None
+        self._last_t: int | None = None
+        self.on_change = settings.infer == "on-change"
+        if self.on_change:
+            self.gate = GazeGate(gaze)
+            self.trigger = ViewTrigger(settings)
+            self.fuser = ViewFuser()
+            self.views_made = 0
+            self._chunks = 0  # chunks not yet looked at by a processing step
+            self._fixation: int | None = None  # the current fixation's key (its first row, event clock)
+            self._fixation_events = 0  # window events since it started
+            self._since_infer = 0  # window events since the last inference
 
     # -- reader thread ----------------------------------------------------------------------
     def sink(self, events: Events) -> None:
         if events.shape[0] == 0:
             return
         self.ring.push(events)
-        n_foveated = count_in_window(events, self._origin, self.settings.fovea)
+        n_foveated = count_in_window(events, self._origin, self.fovea)
         self.metrics.add("events_in", int(events.shape[0]))
         self.metrics.add("events_foveated", n_foveated)
+        t_newest = int(events["t"][-1])
+        if self._last_t is not None and t_newest > self._last_t:
+            self.metrics.add("event_us", t_newest - self._last_t)  # reading time covered: the CPU-per-second figure
+        self._last_t = t_newest
         if self.ring.dropped != self._ring_dropped:
             self.metrics.add("events_dropped", self.ring.dropped - self._ring_dropped)
             self._ring_dropped = self.ring.dropped
@@ -186,6 +197,15 @@ class Pipeline:
             self._new_foveated += n_foveated if self._origin is not None else int(events.shape[0])
             self._new_events += int(events.shape[0])
             self._last_arrival = time.monotonic()
+            if self.on_change:
+                self._chunks += 1
+                if not self.settings.lossless:
+                    self._cond.notify()
+        if self.on_change:
+            if self.settings.lossless:
+                self._change_step()
+            return
+        with self._cond:
             due = self._new_foveated >= self.settings.n_events
             if self.settings.lossless:
                 due = due or self._event_period_due(int(events["t"][-1]))
@@ -241,14 +261,19 @@ class Pipeline:
         while True:
             with self._cond:
                 self._cond.wait_for(
-                    lambda: (self._new_foveated >= k and not lossless) or self._source_done.is_set(), timeout=period_s
+                    lambda: (not lossless and (self._chunks if self.on_change else self._new_foveated >= k))
+                    or self._source_done.is_set(),
+                    timeout=period_s,
                 )
                 final = self._source_done.is_set()
             if self.watchdog is not None and self._alive():
                 self.watchdog()
             if lossless and not final:
                 continue  # the reader makes every frame (on the event clock); the timer only feeds the watchdog
-            self._process(self._take())
+            if self.on_change:
+                self._change_step(final=final)
+            else:
+                self._process(self._take())
             if final:
                 return
 
@@ -274,24 +299,23 @@ class Pipeline:
                 self._step(new, arrival)
 
     def _step(self, new_foveated: int, arrival: float) -> None:
-        t_newest = self.ring.newest_t
-        if t_newest is None:
+        t_frame = self.ring.newest_t  # the frame's one timestamp: its gaze, its stamp, its newest event
+        if t_frame is None:
             return
-        gaze_px = self.gaze.pixel_at(t_newest)
-        gaze_rad = self.gaze.angles_at(t_newest) if gaze_px is not None else None
-        if gaze_px is None or gaze_rad is None:
+        gaze = self.gaze.at(t_frame)
+        if gaze is None:
             self.metrics.add("frames_no_gaze")  # events arrived, but nowhere to look
             self._origin = None
             return
-        origin = window_origin(gaze_px, self.sensor_wh, self.settings.fovea)
+        origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
         moved = origin != self._origin
         self._origin = origin
         if moved and self.settings.sensor_roi:
-            self.source.set_roi(origin[0], origin[1], self.settings.fovea.width, self.settings.fovea.height)
+            self.source.set_roi(origin[0], origin[1], self.fovea.width, self.fovea.height)
         if new_foveated == 0 and not moved:
             return
-        recent = self._recent_events(origin)
-        frame = make_frame(recent, gaze_px, gaze_rad, self.sensor_wh, self.settings, self.infer, self.frames_made)
+        window = self._recent_events(origin, t_frame)
+        frame = make_frame(window, origin, gaze, t_frame, self.voxel, self.infer, self.frames_made)
         if frame is None:
             return
         self.frames_made += 1
@@ -299,24 +323,100 @@ class Pipeline:
         self.metrics.observe_inference(frame.inference_ms)
         self.on_frame(frame, arrival)
 
-    def _recent_events(self, origin: tuple[int, int]) -> Events:
-        """The newest ``n_events`` inside the window, searching back through the ring as needed.
+    # -- on-change: one processing step per chunk ----------------------------------------------
+    def _change_step(self, final: bool = False) -> None:
+        """Feed the gaze classifier up to the newest event; end, extend or start the fixation's view."""
+        with self._step_lock:
+            with self._cond:
+                new, arrival = self._new_foveated, self._last_arrival
+                self._new_foveated = self._chunks = 0
+            t = self.ring.newest_t
+            if t is None:
+                return
+            status = self.gate.update(t)
+            key = None if final else fixation_key(status)
+            # a later key is a new fixation; an earlier one is the classifier merging two halves of this one
+            if self._fixation is not None and (key is None or key > self._fixation):
+                self._end_view(arrival, t if final else min(t, status.since_us))
+                self._fixation = None
+            if key is None:
+                return  # saccade, blink, no gaze: nothing to infer
+            if self._fixation is None:
+                self._fixation, self._fixation_events, self._since_infer = key, 0, 0
+                self.trigger.reset()
+            self._fixation_events += new
+            self._since_infer += new
+            if len(self.fuser) and t - self.fuser.t0_us >= self.settings.view_every_ms * 1e3:
+                self._send_view(arrival)  # a long fixation: its view so far, the next one starts afresh
+            last = self.trigger.last_infer_us
+            if last is not None and t - last < self.settings.min_interval_ms * 1e3:
+                return  # the bounded rate, checked before anything costs
+            gaze = self.gaze.at(t)
+            if gaze is None:
+                return
+            origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
+            if origin != self._origin and self.settings.sensor_roi:
+                self.source.set_roi(origin[0], origin[1], self.fovea.width, self.fovea.height)
+            self._origin = origin
+            if self.trigger.due(t, self._fixation, self._since_infer, self._fixation_events, origin):
+                self._infer_into_view(origin, gaze, t, self._fixation)
+
+    def _infer_into_view(self, origin: tuple[int, int], gaze: GazeSample, t: int, t_from: int) -> bool:
+        """One frame of the current fixation (its events only, up to ``n_events``), fused into the view."""
+        window = self._recent_events(origin, t, t_from=t_from)
+        if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
+            return False
+        frame = make_frame(window, origin, gaze, t, self.voxel, self.infer, self.frames_made)
+        if frame is None:
+            return False
+        self.frames_made += 1
+        self.metrics.add("frames")
+        self.metrics.observe_inference(frame.inference_ms)
+        self.fuser.add(frame, frame.events_used, frame.gaze_rad)
+        self.trigger.inferred(t, origin)
+        self._since_infer = 0
+        return True
+
+    def _end_view(self, arrival: float, t_end: int) -> None:
+        """The fixation ended at ``t_end``: a fixation too short for a frame gets one now; send its view."""
+        lasted = self._fixation is not None and t_end - self._fixation >= self.gate.cfg.min_fixation_ms * 1e3
+        if not len(self.fuser) and lasted and self._origin is not None:  # (not a landing the classifier revised)
+            gaze = self.gaze.at(t_end)
+            if gaze is not None:
+                origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
+                self._infer_into_view(origin, gaze, t_end, self._fixation)
+        if len(self.fuser):
+            self._send_view(arrival)
+
+    def _send_view(self, arrival: float) -> None:
+        view = self.fuser.view(self.views_made)
+        self.fuser = ViewFuser(self.fuser.n_levels, self.fuser.radius)
+        self.views_made += 1
+        self.metrics.add("views")
+        self.on_frame(view, arrival)
+
+    def _recent_events(self, origin: tuple[int, int], t_until: int, t_from: int | None = None) -> Events:
+        """Exactly the window's events for one frame: the newest ``n_events`` inside the window at
+        ``origin`` with ``t <= t_until`` (and ``t >= t_from``), searching back through the ring as needed.
 
         The search starts from twice the depth the previous window needed, so a frame copies a
         few thousand ring events, not the whole history.
         """
-        k, cfg = self.settings.n_events, self.settings.fovea
+        k, cfg = self.settings.n_events, self.fovea
         n = self._history
         while True:
             recent = self.ring.last(n)
-            dx = recent["x"] - np.uint16(origin[0])
-            dy = recent["y"] - np.uint16(origin[1])
-            inside = np.flatnonzero((dx < cfg.width) & (dy < cfg.height))
-            if inside.shape[0] >= k or n >= len(self.ring):
+            if recent.shape[0] and recent["t"][-1] > t_until:  # the reader pushed newer events meanwhile
+                recent = recent[: int(np.searchsorted(recent["t"], t_until, side="right"))]
+            inside = np.flatnonzero(in_window(recent, origin[0], origin[1], cfg.width, cfg.height))
+            reached_start = t_from is not None and recent.shape[0] and int(recent["t"][0]) <= t_from
+            if inside.shape[0] >= k or n >= len(self.ring) or reached_start:
                 break
             n *= 2
+        if t_from is not None and inside.shape[0]:
+            inside = inside[recent["t"][inside] >= t_from]
         used = inside[-k:]
         if used.shape[0]:
             depth = recent.shape[0] - int(used[0])
-            self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), self.settings.history_events))
+            self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), MAX_HISTORY_EVENTS))
         return recent[used]

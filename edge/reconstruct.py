@@ -3,6 +3,10 @@
 The network outputs logits; the frame is ``logits > 0`` (sigmoid 0.5), so no sigmoid runs at
 inference. Ink mask convention: uint8, 1 = ink, 0 = paper.
 
+The window geometry and the bin count are the model's input shape ``[batch, bins, height,
+width]``, read here once (:attr:`Reconstructor.voxel`); the pipeline, the uplink's ``hello`` and
+the page stitcher take them from there, so a model trained for another window just works.
+
 Session settings follow the measured single-core figures: full graph optimisation, a fixed
 number of intra-op threads (1 = deterministic and fastest for this size), no spin-waiting
 (spinning burns battery on the glasses between windows), and a few warm-up runs at load so
@@ -18,12 +22,13 @@ from pathlib import Path
 
 import numpy as np
 import onnxruntime as ort
+
 from darkread.edge.errors import ModelError
+from darkread.edge.voxel import VoxelConfig
 
 log = logging.getLogger(__name__)
 
 MODEL_FILENAME = "binary_unet.onnx"
-EXPECTED_INPUT_SHAPE: tuple[int, int, int] = (4, 100, 200)
 
 
 def default_model_path() -> Path:
@@ -62,12 +67,14 @@ class Reconstructor:
             raise ModelError(f"{path}: expected one input and one output, found {len(inputs)} and {len(outputs)}")
         in_dims = _static_dims(inputs[0].shape)
         out_dims = _static_dims(outputs[0].shape)
-        if in_dims is None or len(in_dims) != 4 or in_dims[1:] != EXPECTED_INPUT_SHAPE:
-            raise ModelError(f"{path}: input shape {inputs[0].shape}, expected [batch, 4, 100, 200]")
-        if out_dims is None or len(out_dims) != 4 or out_dims[1:] != (1, *EXPECTED_INPUT_SHAPE[1:]):
-            raise ModelError(f"{path}: output shape {outputs[0].shape}, expected [batch, 1, 100, 200]")
+        if in_dims is None or len(in_dims) != 4 or min(in_dims[1:]) < 1:
+            raise ModelError(f"{path}: input shape {inputs[0].shape}, expected [batch, bins, height, width] with fixed sizes")
+        bins, height, width = in_dims[1:]
+        if out_dims is None or len(out_dims) != 4 or out_dims[1:] != (1, height, width):
+            raise ModelError(f"{path}: output shape {outputs[0].shape}, expected [batch, 1, {height}, {width}]")
         self.path = path
-        self.input_shape: tuple[int, int, int] = EXPECTED_INPUT_SHAPE
+        self.voxel = VoxelConfig(bins=bins, height=height, width=width)
+        self.input_shape: tuple[int, int, int] = self.voxel.shape
         self._input_name = inputs[0].name
         self._batch_fixed = in_dims[0] if in_dims[0] > 0 else None
         zeros = np.zeros((1, *self.input_shape), np.float32)
@@ -82,11 +89,12 @@ class Reconstructor:
         return out
 
     def logits(self, voxel: np.ndarray) -> np.ndarray:
-        """[4,100,200] -> float32 [100,200]; [B,4,100,200] -> [B,100,200]."""
+        """[bins,H,W] -> float32 [H,W]; [B,bins,H,W] -> [B,H,W] (the model's input shape)."""
         array = np.asarray(voxel)
         single = array.ndim == 3
         if array.shape[-3:] != self.input_shape or array.ndim not in (3, 4):
-            raise ValueError(f"voxel grid must be [4,100,200] or [B,4,100,200], got {list(array.shape)}")
+            shape = ",".join(map(str, self.input_shape))
+            raise ValueError(f"voxel grid must be [{shape}] or [B,{shape}], got {list(array.shape)}")
         batch = np.ascontiguousarray(array[None] if single else array, dtype=np.float32)
         if batch.shape[0] == 0:
             return np.zeros((0, *self.input_shape[1:]), np.float32)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import sqlite3
 import threading
+import uuid
 from pathlib import Path
 
 logger = logging.getLogger(__name__)
@@ -49,7 +50,12 @@ class Spool:
             self.path: Path | None = None
             target = ":memory:"
         else:
-            Path(directory).mkdir(parents=True, exist_ok=True)
+            if Path(directory).exists() and not Path(directory).is_dir():
+                raise ValueError(f"spool {directory} is a file, not a directory")
+            try:
+                Path(directory).mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise ValueError(f"spool directory {directory} cannot be created: {exc.strerror or exc}") from None
             self.path = Path(directory) / SPOOL_FILE
             target = str(self.path)
         self._lock = threading.Lock()
@@ -83,8 +89,20 @@ class Spool:
             return self._meta("session_id")
 
     def set_session_id(self, session_id: str) -> None:
+        """Bind the spool to ``session_id``; a new session gets a new stream id (seq space)."""
         with self._lock:
+            if self._meta("session_id") != session_id or self._meta("stream_id") is None:
+                self._set_meta("stream_id", uuid.uuid4().hex)
             self._set_meta("session_id", session_id)
+
+    def stream_id(self) -> str:
+        """Names this spool's seq space to the cloud (``hello.stream_id``): the session's owner."""
+        with self._lock:
+            value = self._meta("stream_id")
+            if value is None:
+                value = uuid.uuid4().hex
+                self._set_meta("stream_id", value)
+            return value
 
     # -- messages -------------------------------------------------------------------------
     def append(self, seq: int, payload: bytes) -> None:
@@ -124,7 +142,8 @@ class Spool:
         return [(int(seq), bytes(payload)) for seq, payload in rows]
 
     def discard(self, seq: int) -> None:
-        """Remove one message the cloud will never accept (e.g. larger than its limit)."""
+        """Remove one message the cloud will never accept (e.g. larger than its limit); the
+        uplink sends an empty placeholder under its seq, so the cloud sees no gap."""
         with self._lock:
             row = self._db.execute("SELECT LENGTH(payload) FROM messages WHERE seq = ?", (seq,)).fetchone()
             if row is not None:

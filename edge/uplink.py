@@ -25,13 +25,13 @@ import threading
 import time
 import uuid
 from collections.abc import Iterator
-from dataclasses import dataclass
 
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
-from darkread.edge.telemetry import EdgeMetrics
+from darkread.edge.config import UplinkConfig
 from darkread.edge.spool import Spool
+from darkread.edge.telemetry import EdgeMetrics
 from darkread.proto.errors import CloseCode, ProtocolError
 from darkread.proto.messages import (
     DEFAULT_MAX_MESSAGE_BYTES,
@@ -54,6 +54,11 @@ LATENCY_TRACKED = 8192
 MESSAGE_REJECTED_CODES = frozenset({
     CloseCode.MESSAGE_TOO_BIG, CloseCode.MALFORMED, CloseCode.BAD_MASK,
 })  # the close names one bad message, not a bad connection  # seqs whose submit time is remembered for the event-to-wire latency
+# the cloud will never take this stream: retrying cannot help, frames stay in the spool
+FATAL_CODES = frozenset({
+    CloseCode.POLICY_VIOLATION, CloseCode.FORBIDDEN, CloseCode.TAKEN_OVER, CloseCode.SESSION_MISMATCH,
+    CloseCode.SEQ_GAP, CloseCode.SESSION_BUSY, CloseCode.VERSION_MISMATCH,
+})
 
 
 def split_urls(urls: str) -> tuple[str, ...]:
@@ -61,21 +66,19 @@ def split_urls(urls: str) -> tuple[str, ...]:
     return tuple(part.strip() for part in urls.split(",") if part.strip())
 
 
-@dataclass(frozen=True)
-class UplinkSettings:
-    url: str  # one websocket URL, or several comma-separated (failover in order)
-    api_key: str = ""
-    device_id: str = ""
-    session_id: str = ""  # empty: the spool's session if it holds unsent frames, else a new one
-    mode: str = "frames"
-    sensor_wh: tuple[int, int] = (1280, 720)
-    fovea_hw: tuple[int, int] = (100, 200)
-    backoff_initial_s: float = 0.2
-    backoff_max_s: float = 10.0
-    max_in_flight: int = 512
-    heartbeat_s: float = 5.0
-    open_timeout_s: float = 5.0
-    stable_connection_s: float = 2.0  # a connection that lasted this long resets the backoff
+class CloudRefusedError(ConnectionError):
+    """The cloud answered with a fatal error (``code``, ``message``)."""
+
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(f"cloud error {code}: {message}")
+        self.code = code
+        self.message = message
+
+
+def placeholder(seq: int) -> bytes:
+    """An empty gaze batch under ``seq``: stands in for a message the spool dropped, so the
+    cloud sees contiguous seqs (it refuses gaps)."""
+    return encode(Gaze(seq=seq, t_us=(), px=()))
 
 
 def backoff_delays(initial_s: float, max_s: float, rng: random.Random) -> Iterator[float]:
@@ -94,8 +97,19 @@ def default_device_id() -> str:
 class Uplink:
     """Owns the websocket client thread; thread-safe :meth:`submit`, graceful :meth:`stop`."""
 
-    def __init__(self, settings: UplinkSettings, spool: Spool, metrics: EdgeMetrics | None = None) -> None:
+    def __init__(
+        self,
+        settings: UplinkConfig,
+        spool: Spool,
+        metrics: EdgeMetrics | None = None,
+        *,
+        sensor_wh: tuple[int, int],
+        fovea_hw: tuple[int, int],
+    ) -> None:
+        """``sensor_wh`` (the source's size) and ``fovea_hw`` (the model's window) go into ``hello``."""
         self.settings = settings
+        self.sensor_wh = (int(sensor_wh[0]), int(sensor_wh[1]))
+        self.fovea_hw = (int(fovea_hw[0]), int(fovea_hw[1]))
         self.spool = spool
         self.metrics = metrics or EdgeMetrics()
         self.metrics.spool_depth = lambda: spool.depth
@@ -104,9 +118,11 @@ class Uplink:
         pending_session = spool.session_id() if spool.depth else None
         self.session_id = settings.session_id or pending_session or f"{self.device_id}-{uuid.uuid4().hex[:12]}"
         spool.set_session_id(self.session_id)
+        self.stream_id = spool.stream_id()
         self.acked_seq = -1
         self.connected = threading.Event()
         self.last_error = ""
+        self.fatal_error = ""  # set when the cloud refused the stream for good (no more retries)
         self._submit_lock = threading.Lock()
         self._latency_lock = threading.Lock()
         self._submitted_at: dict[int, float] = {}
@@ -119,6 +135,8 @@ class Uplink:
         self._rng = random.Random()
         self._connected_since: float | None = None
         self._rejected: tuple[int, str] | None = None  # close code and reason naming a bad message
+        self._cloud_error = ""  # the last error message the cloud sent (the close reason is cut short)
+        self._ack_progress = (-1, time.monotonic())  # (acked seq, when it last advanced)
         self.urls = split_urls(settings.url)
         if not self.urls:
             raise ValueError("uplink: no cloud URL given")
@@ -160,12 +178,12 @@ class Uplink:
     def wait_drained(self, timeout_s: float) -> bool:
         """Block until every spooled message is acknowledged (or the timeout)."""
         deadline = time.monotonic() + timeout_s
-        while self.spool.depth > 0:
+        while self.spool.depth > 0 and not self.fatal_error:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return False
             self._drained.wait(min(remaining, 0.05))
-        return True
+        return self.spool.depth == 0
 
     def stop(self, drain_timeout_s: float = 10.0) -> bool:
         """Flush (wait for acks up to the timeout), then close; True when the spool is empty."""
@@ -201,7 +219,7 @@ class Uplink:
         delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
         first = True
         failed_in_a_row = 0  # connections that ended without a welcome, across instances
-        while not self._stopping:
+        while not self._stopping and not self.fatal_error:
             if not first:
                 self.metrics.add("reconnects")
             first = False
@@ -211,12 +229,25 @@ class Uplink:
                 await self._connection(url)
             except InvalidStatus as exc:
                 self.last_error = f"cloud refused the connection: HTTP {exc.response.status_code}"
-                logger.error("%s at %s (check the API key and URL)", self.last_error, url)
+                if exc.response.status_code in (401, 403):
+                    self._fail(f"{self.last_error}: the API key is missing, wrong or lacks the stream scope")
+                else:
+                    logger.error("%s at %s (check the URL)", self.last_error, url)
+            except CloudRefusedError as exc:
+                self.last_error = str(exc)
+                if exc.code in FATAL_CODES:
+                    self._fail(f"cloud refused session {self.session_id}: {exc.message}")
+                else:
+                    logger.warning("uplink to %s lost: %s", url, self.last_error)
             except ConnectionClosed as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
-                logger.warning("uplink to %s lost: %s", url, self.last_error)
-                if exc.rcvd is not None and exc.rcvd.code in MESSAGE_REJECTED_CODES:
-                    self._rejected = (exc.rcvd.code, exc.rcvd.reason)  # dropped after the next welcome
+                code = exc.rcvd.code if exc.rcvd is not None else None
+                if code in FATAL_CODES:
+                    self._fail(f"cloud refused session {self.session_id}: {self._cloud_error or exc.rcvd.reason}")  # type: ignore[union-attr]
+                else:
+                    logger.warning("uplink to %s lost: %s", url, self.last_error)
+                if code in MESSAGE_REJECTED_CODES:
+                    self._rejected = (code, exc.rcvd.reason)  # type: ignore[union-attr]  # dropped after the next welcome
             except (OSError, InvalidHandshake, TimeoutError, ProtocolError) as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
                 logger.warning("uplink to %s lost: %s", url, self.last_error)
@@ -225,7 +256,7 @@ class Uplink:
                 logger.error("uplink URL is not valid: %s", exc)
             finally:
                 self.connected.clear()
-            if self._stopping:
+            if self._stopping or self.fatal_error:
                 break
             connected = self._connected_since is not None
             lasted = connected and time.monotonic() - self._connected_since >= self.settings.stable_connection_s
@@ -247,6 +278,12 @@ class Uplink:
             self.metrics.add("failovers")
             logger.warning("uplink fails over from %s to %s", previous, self.url)
 
+    def _fail(self, reason: str) -> None:
+        """Stop retrying: the cloud will not take this stream. Frames stay in the spool."""
+        self.fatal_error = reason
+        logger.error("%s; %d messages stay in the spool", reason, self.spool.depth)
+        self._drained.set()
+
     async def _sleep_or_stop(self, delay_s: float) -> None:
         assert self._wake is not None
         deadline = time.monotonic() + delay_s
@@ -267,16 +304,21 @@ class Uplink:
                 device_id=self.device_id,
                 session_id=self.session_id,
                 mode=s.mode,  # type: ignore[arg-type]
-                sensor=s.sensor_wh,
-                fovea=s.fovea_hw,
+                sensor=self.sensor_wh,
+                fovea=self.fovea_hw,
                 resume_from_seq=self.acked_seq if self.acked_seq >= 0 else None,
+                stream_id=self.stream_id,
             )
             await ws.send(encode(hello))
             welcome = decode(await asyncio.wait_for(ws.recv(), s.open_timeout_s), max_bytes=DEFAULT_MAX_MESSAGE_BYTES)
             if isinstance(welcome, Error):
-                raise ConnectionError(f"cloud error {welcome.code}: {welcome.message}")
+                raise CloudRefusedError(welcome.code, welcome.message)
             if not isinstance(welcome, Welcome):
                 raise ConnectionError(f"expected welcome, got {welcome.TYPE}")
+            if welcome.last_acked_seq > self.spool.last_allocated_seq:
+                raise CloudRefusedError(CloseCode.FORBIDDEN, (
+                    f"the cloud holds seqs up to {welcome.last_acked_seq} of session {self.session_id}, more than this "
+                    f"spool ever numbered ({self.spool.last_allocated_seq}): another device streams to it"))
             self._on_ack(welcome.last_acked_seq)
             self._drop_rejected(welcome.last_acked_seq)
             self._connected_since = time.monotonic()
@@ -293,6 +335,7 @@ class Uplink:
         receiver = asyncio.create_task(self._receive(ws))
         cursor = max(welcome.last_acked_seq, self.acked_seq)
         last_heartbeat = time.monotonic()
+        self._ack_progress = (self.acked_seq, time.monotonic())
         try:
             while True:
                 if receiver.done():
@@ -301,6 +344,7 @@ class Uplink:
                 if self._stopping:
                     await ws.close()
                     return
+                self._check_ack_progress(cursor)
                 if cursor - self.acked_seq >= self.settings.max_in_flight:
                     self._acked.clear()
                     await self._wait_any(receiver, self._acked.wait(), 1.0)
@@ -309,10 +353,13 @@ class Uplink:
                 limit = min(64, self.settings.max_in_flight - (cursor - self.acked_seq))
                 batch = self.spool.pending(after_seq=cursor, limit=limit)
                 for seq, payload in batch:
+                    while cursor + 1 < seq:  # dropped from the spool (full, or rejected): keep seqs contiguous
+                        await ws.send(placeholder(cursor + 1))
+                        cursor += 1
                     if len(payload) > welcome.max_message_bytes:
                         logger.error("message seq %d (%d bytes) exceeds the cloud's limit; dropped", seq, len(payload))
                         self.spool.discard(seq)
-                        continue
+                        payload = placeholder(seq)
                     await ws.send(payload)
                     cursor = seq
                     self._sent(seq, len(payload))
@@ -320,9 +367,20 @@ class Uplink:
                     if time.monotonic() - last_heartbeat >= self.settings.heartbeat_s:
                         await ws.send(encode(self._heartbeat()))
                         last_heartbeat = time.monotonic()
-                    await self._wait_any(receiver, self._wake.wait(), self.settings.heartbeat_s)
+                    await self._wait_any(receiver, self._wake.wait(), min(self.settings.heartbeat_s, self.settings.ack_timeout_s / 2))
         finally:
             receiver.cancel()
+
+    def _check_ack_progress(self, cursor: int) -> None:
+        """Messages in flight and the ack not advancing for ``ack_timeout_s``: the connection is
+        stuck (a cloud that stopped committing, a half-open socket), so reconnect and resend."""
+        now = time.monotonic()
+        if self.acked_seq != self._ack_progress[0] or cursor <= self.acked_seq:
+            self._ack_progress = (self.acked_seq, now)
+        elif now - self._ack_progress[1] > self.settings.ack_timeout_s:
+            self.metrics.add("ack_timeouts")
+            raise TimeoutError(f"no ack for {self.settings.ack_timeout_s:g} s with {cursor - self.acked_seq} "
+                               "messages in flight")
 
     async def _wait_any(self, receiver: asyncio.Task[None], awaitable: object, timeout_s: float) -> None:
         waiter = asyncio.ensure_future(awaitable)  # type: ignore[arg-type]
@@ -342,6 +400,7 @@ class Uplink:
                 log = logger.error if message.fatal else logger.warning
                 log("cloud error %d: %s", message.code, message.message)
                 self.last_error = f"cloud error {message.code}: {message.message}"
+                self._cloud_error = message.message
         raise ConnectionError("cloud closed the connection")
 
     def _drop_rejected(self, last_stored_seq: int) -> None:
@@ -360,6 +419,8 @@ class Uplink:
             logger.error("cloud rejected message seq %d (close %d: %s); dropped from the spool", seq, code, reason)
 
     def _on_ack(self, seq: int) -> None:
+        if seq > self.spool.last_allocated_seq:
+            raise CloudRefusedError(CloseCode.FORBIDDEN, f"the cloud acknowledged seq {seq}, which this edge never sent")
         if seq > self.acked_seq:
             removed = self.spool.ack(seq)
             self.metrics.add("messages_acked", removed)
@@ -385,4 +446,4 @@ class Uplink:
         )
 
 
-__all__ = ["Uplink", "UplinkSettings", "backoff_delays", "split_urls"]
+__all__ = ["Uplink", "backoff_delays", "split_urls"]

@@ -15,39 +15,46 @@ from dataclasses import dataclass
 import numpy as np
 
 from darkread.edge.events import Events
+from darkread.edge.fovea import WINDOW_HEIGHT, WINDOW_WIDTH, FoveaConfig
 
 
 @dataclass(frozen=True)
 class VoxelConfig:
+    """The grid's shape; the edge reads it from the model's input (``Reconstructor.voxel``)."""
+
     bins: int = 4
-    n_events: int = 1600
-    height: int = 100
-    width: int = 200
+    height: int = WINDOW_HEIGHT
+    width: int = WINDOW_WIDTH
     normalize: bool = True
 
     def __post_init__(self) -> None:
-        if self.bins < 1 or self.n_events < 1 or self.height < 1 or self.width < 1:
+        if self.bins < 1 or self.height < 1 or self.width < 1:
             raise ValueError(f"VoxelConfig fields must be positive: {self}")
+
+    @property
+    def fovea(self) -> FoveaConfig:
+        """The window the grid covers."""
+        return FoveaConfig(height=self.height, width=self.width)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.bins, self.height, self.width
 
 
 def voxel_grid(
     events: Events, x0: int = 0, y0: int = 0, cfg: VoxelConfig = VoxelConfig(), *, out: np.ndarray | None = None
 ) -> np.ndarray:
-    """float32 [bins, height, width] of the last ``cfg.n_events`` events inside the window at (x0, y0).
+    """float32 [bins, height, width] of ``events``, which all lie in the window at (x0, y0).
 
-    Coordinates become window-relative; events outside the window are ignored before the last
-    ``n_events`` are taken. No events -> all zeros. ``out`` (float32, C-contiguous, that shape) is
-    filled and returned instead of a new array: a loop that reuses it avoids allocating and
-    page-faulting a fresh 320 KB grid per window.
+    The caller chooses the events (``fovea.window_events``: the window's newest ``n_events``); this
+    function trusts them and only makes coordinates window-relative. No events -> all zeros.
+    ``out`` (float32, C-contiguous, that shape) is filled and returned instead of a new array: a
+    loop that reuses it avoids allocating and page-faulting a fresh 320 KB grid per window.
     """
     bins, height, width = cfg.bins, cfg.height, cfg.width
     plane = height * width
     x = events["x"].astype(np.intp) - x0
     y = events["y"].astype(np.intp) - y0
-    inside = (x >= 0) & (x < width) & (y >= 0) & (y < height)
-    if not inside.all():
-        events, x, y = events[inside], x[inside], y[inside]
-    events, x, y = events[-cfg.n_events :], x[-cfg.n_events :], y[-cfg.n_events :]
     grid = _output(out, bins * plane)
     if events.shape[0] == 0:
         return grid.reshape(bins, height, width)

@@ -24,6 +24,11 @@ class CloseCode(IntEnum):
     UNEXPECTED = 4401  # a valid message that is not allowed now (e.g. frame before hello)
     VERSION_MISMATCH = 4409  # hello.v differs from the server's protocol version
     BAD_MASK = 4422  # mask shape/bit length wrong, or frame shape differs from hello.fovea
+    FORBIDDEN = 4403  # the key may not do this: scope, another device's id or session
+    TAKEN_OVER = 4408  # a newer connection of the same stream took the session over
+    SESSION_MISMATCH = 4412  # hello's mode or geometry differs from the existing session's
+    SEQ_GAP = 4416  # a seq that does not follow the last one (a gap, or a wild value)
+    SESSION_BUSY = 4423  # another stream is connected to this session
 
 
 class ProtocolError(DarkreadError):
@@ -62,3 +67,19 @@ class UnexpectedMessageError(ProtocolError):
 
 class AuthenticationError(ProtocolError):
     close_code = CloseCode.POLICY_VIOLATION
+
+
+class ForbiddenError(ProtocolError):
+    close_code = CloseCode.FORBIDDEN
+
+
+class SessionMismatchError(ProtocolError):
+    close_code = CloseCode.SESSION_MISMATCH
+
+
+class SeqGapError(ProtocolError):
+    close_code = CloseCode.SEQ_GAP
+
+
+class SessionBusyError(ProtocolError):
+    close_code = CloseCode.SESSION_BUSY

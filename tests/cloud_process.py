@@ -1,5 +1,4 @@
-"""``darkread cloud serve`` as a real subprocess on 127.0.0.1 (it can be SIGKILLed), and the small
-things integration tests around it share: a free port, a stand-in reconstruction model."""
+"""``darkread cloud serve`` as a real subprocess on 127.0.0.1 (it can be SIGKILLed), and a free port."""
 
 from __future__ import annotations
 
@@ -12,8 +11,6 @@ import time
 import urllib.request
 from pathlib import Path
 
-import pytest
-
 API_KEY = "integration-key"
 
 
@@ -21,24 +18,6 @@ def free_port() -> int:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
-
-
-def tiny_model(path: Path) -> Path:
-    """A stand-in reconstructor with the shipped model's I/O (sum over the time bins)."""
-    onnx = pytest.importorskip("onnx")
-    from onnx import TensorProto, helper
-
-    x = helper.make_tensor_value_info("voxel", TensorProto.FLOAT, ["batch", 4, 100, 200])
-    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["batch", 1, 100, 200])
-    axes = helper.make_tensor("axes", TensorProto.INT64, [1], [1])
-    node = helper.make_node("ReduceSum", ["voxel", "axes"], ["logits"], keepdims=1)
-    model = helper.make_model(
-        helper.make_graph([node], "sum_bins", [x], [y], initializer=[axes]),
-        opset_imports=[helper.make_opsetid("", 17)],
-    )
-    model.ir_version = 8
-    onnx.save(model, str(path))
-    return path
 
 
 class CloudProcess:

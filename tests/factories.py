@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from darkread.edge.events import EVENT_CD_DTYPE
@@ -18,6 +20,67 @@ def random_events(
     ev["p"] = rng.integers(0, 2, n)
     ev["t"] = t0 + np.sort(rng.integers(0, max(1, int(n / rate_hz * 1e6)), n))
     return ev
+
+
+def sum_bins_model(path: Path, shape: tuple[int, int, int] | None = None) -> Path:
+    """A stand-in reconstruction model (logits = sum over the time bins) of input ``shape``
+    (bins, height, width; default the shipped model's)."""
+    import pytest
+
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper
+
+    from darkread.edge.voxel import VoxelConfig
+
+    bins, height, width = shape or VoxelConfig().shape
+    x = helper.make_tensor_value_info("voxel", TensorProto.FLOAT, ["batch", bins, height, width])
+    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["batch", 1, height, width])
+    axes = helper.make_tensor("axes", TensorProto.INT64, [1], [1])
+    node = helper.make_node("ReduceSum", ["voxel", "axes"], ["logits"], keepdims=1)
+    model = helper.make_model(
+        helper.make_graph([node], "sum_bins", [x], [y], initializer=[axes]),
+        opset_imports=[helper.make_opsetid("", 17)],
+    )
+    model.ir_version = 8
+    onnx.save(model, str(path))
+    return path
+
+
+def synthetic_recording(root: Path, n_events: int = 30_000, box_xywh: tuple[int, int, int, int] = (540, 310, 200, 100)) -> Path:
+    """A recording directory whose events all fall in one box, the gaze fixed on the sensor centre."""
+    from darkread.edge.io.calibration import Calibration, save_calibration
+    from darkread.edge.io.gaze_csv import write_gaze_csv
+    from darkread.edge.io.raw import write_raw
+
+    x0, y0, w, h = box_xywh
+    root.mkdir()
+    ev = random_events(n_events, width=w, height=h, t0=1_000, rate_hz=100_000, seed=7)
+    ev["x"] += x0
+    ev["y"] += y0
+    _, keep = np.unique(np.stack([ev["t"], ev["y"].astype(np.int64), ev["x"].astype(np.int64)]), axis=1, return_index=True)
+    write_raw(root / "events.raw", ev[np.sort(keep)])
+    t = np.arange(0, 400_000, 16_667)
+    zeros = np.zeros(t.shape[0])
+    write_gaze_csv(root / "general_eye_gaze.csv", t, zeros, zeros, zeros, np.full(t.shape[0], 0.45))
+    save_calibration(root / "calibration.json", Calibration(
+        width=1280, height=720, fx=600.0, fy=600.0, cx=640.0, cy=360.0, distortion=(0.0, 0.0, 0.0, 0.0),
+        T_event_cpf=np.diag([-1.0, -1.0, 1.0, 1.0]), gaze_to_event_time_offset_us=0,
+    ))
+    (root / "text.txt").write_text("synthetic")
+    (root / "meta.json").write_text("{}")
+    return root
+
+
+def pixel_at(lookup, t_event_us: int) -> tuple[float, float] | None:  # noqa: ANN001
+    """The gaze pixel a ``GazeLookup`` gives at an event time (None without a gaze on the sensor)."""
+    sample = lookup.at(t_event_us)
+    return None if sample is None else sample.pixel
+
+
+def angles_at(lookup, t_event_us: int) -> tuple[float, float] | None:  # noqa: ANN001
+    """The gaze angles (yaw, pitch) a ``GazeLookup`` gives at an event time."""
+    sample = lookup.at(t_event_us)
+    return None if sample is None else sample.angles
 
 
 def pangram_session(motion: str, lux: float = 1000.0):

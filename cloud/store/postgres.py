@@ -42,7 +42,7 @@ from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .blobs import BlobStore
 from .changes import ChangeFeed, Listener
-from .migrations import migrate
+from .migrations import Step, migrate, statements
 from .records import (
     GazeRecord,
     PageBreak,
@@ -53,6 +53,7 @@ from .records import (
     StoreError,
     UnknownSessionError,
     WriteResult,
+    check_owner,
 )
 from .sqlite import _page_key, decode_mask_png
 
@@ -106,6 +107,10 @@ MIGRATIONS: tuple[str, ...] = (
         data bytea NOT NULL
     )
     """,
+    # 1 -> 2: a session belongs to the stream (spool, seq space) that opened it
+    """
+    ALTER TABLE sessions ADD COLUMN stream_id text NOT NULL DEFAULT ''
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -127,13 +132,11 @@ _COLUMNS: dict[str, tuple[tuple[str, str], ...]] = {
 
 
 def _insert_sql(table: str) -> str:
-    """One statement for a batch's rows of ``table``; rows of sessions that do not exist (never
-    opened, or deleted meanwhile) are left out instead of failing the batch on the foreign key."""
+    """One statement for all of a batch's accepted rows of ``table``."""
     names = ", ".join(name for name, _ in _COLUMNS[table])
     arrays = ", ".join(f"%s::{kind}[]" for _, kind in _COLUMNS[table])
     return (
-        f"INSERT INTO {table} ({names}) SELECT * FROM unnest({arrays}) AS r({names})"  # noqa: S608 - names are ours
-        " WHERE EXISTS (SELECT 1 FROM sessions s WHERE s.session_id = r.session_id)"
+        f"INSERT INTO {table} ({names}) SELECT * FROM unnest({arrays})"  # noqa: S608 - names are ours
         " ON CONFLICT DO NOTHING RETURNING session_id, seq"
     )
 
@@ -142,8 +145,7 @@ _INSERT = {table: _insert_sql(table) for table in _COLUMNS}
 _LOCK_SESSIONS = (
     "SELECT session_id, last_seq FROM sessions WHERE session_id = ANY(%s) ORDER BY session_id FOR NO KEY UPDATE"
 )
-# Every seq of a batch is stored afterwards (now or before: a duplicate), so a session's last_seq
-# is the greater of its own and the batch's highest; only sessions that advance are told.
+# The batch's accepted seqs continue each session's stored ones, so its last_seq is the highest.
 _ADVANCE = f"""
     WITH batch AS (SELECT * FROM unnest(%s::text[], %s::bigint[]) AS t(session_id, top))
     UPDATE sessions s SET last_seq = batch.top, updated_s = %s
@@ -178,15 +180,18 @@ class _PostgresSchema:
         row = self.conn.execute("SELECT max(version) FROM schema_version").fetchone()
         return int(row[0]) if row and row[0] is not None else 0
 
-    def apply(self, statements: list[str], new_version: int) -> None:
+    def apply(self, step: Step, new_version: int) -> None:
         with self.conn.transaction():
-            for statement in statements:
-                self.conn.execute(statement)  # type: ignore[call-overload]
+            if callable(step):
+                step(self.conn)
+            else:
+                for statement in statements(step):
+                    self.conn.execute(statement)  # type: ignore[call-overload]
             self.conn.execute("DELETE FROM schema_version")
             self.conn.execute("INSERT INTO schema_version (version) VALUES (%s)", (new_version,))
 
 
-def migrate_database(url: str, scripts: Sequence[str] = MIGRATIONS) -> int:
+def migrate_database(url: str, scripts: Sequence[Step] = MIGRATIONS) -> int:
     """Bring the database at ``url`` to the current schema (blocking); the version it was at.
     StoreError names the database (never its password) when it cannot be reached or migrated."""
     try:
@@ -291,7 +296,7 @@ class _BatchWriter:
 
     async def _commit(self, batch: list[_Insert]) -> None:
         try:
-            known, stored = await self._transaction(batch)
+            outcomes, last_seqs = await self._transaction(batch)
         except Exception as exc:  # noqa: BLE001 - whatever failed, the writer lives on and every caller hears of it
             log.error("PostgreSQL commit of %d records failed: %s", len(batch), _first_line(exc))
             for job in batch:
@@ -299,49 +304,54 @@ class _BatchWriter:
                     job.done.set_exception(StoreError(f"commit failed: {type(exc).__name__}: {_first_line(exc)}"))
             return
         advanced: dict[str, int] = {}
-        for job in batch:
+        for job, outcome in zip(batch, outcomes, strict=True):
             if job.done.done():  # the caller gave up (its connection closed)
                 continue
-            if job.session_id not in known:
-                job.done.set_exception(UnknownSessionError(f"unknown session {job.session_id!r}"))
+            if isinstance(outcome, StoreError):
+                job.done.set_exception(outcome)
                 continue
-            key = (job.table, job.session_id, job.seq)
-            was_stored = key in stored
-            stored.discard(key)  # a second copy of the same seq in this batch is a duplicate
-            job.done.set_result(WriteResult(stored=was_stored, last_seq=known[job.session_id]))
-            if was_stored:
-                advanced[job.session_id] = known[job.session_id]
+            job.done.set_result(WriteResult(stored=outcome, last_seq=last_seqs[job.session_id]))
+            if outcome:
+                advanced[job.session_id] = last_seqs[job.session_id]
         for session_id, last_seq in advanced.items():
             self.changes.publish(session_id, last_seq)
 
-    async def _transaction(self, batch: list[_Insert]) -> tuple[dict[str, int], set[tuple[str, str, int]]]:
-        """Insert the batch; the last_seq of every known session in it and the keys stored.
+    async def _transaction(self, batch: list[_Insert]) -> tuple[list[bool | StoreError], dict[str, int]]:
+        """Commit the batch: per job stored (True), a duplicate (False) or its error; and each
+        session's last_seq after it.
 
-        The statements do not depend on each other's results, so they go out pipelined: the
-        whole transaction costs one round trip (and one WAL flush at commit)."""
+        Two round trips: the sessions' rows are locked and their last_seq read; then the accepted
+        rows (each seq the one after its session's last, duplicates answered without a write, a
+        gap refused so no frame is ever hidden behind the resume point), the last_seq advance and
+        the commit go out pipelined."""
         sessions = sorted({job.session_id for job in batch})
-        rows_of: dict[str, list[tuple[Any, ...]]] = defaultdict(list)
-        tops: dict[str, int] = {}
-        for job in batch:
-            rows_of[job.table].append(job.row)
-            tops[job.session_id] = max(tops.get(job.session_id, -1), job.seq)
         conn = await self._connection()
         try:
             async with conn.pipeline(), conn.transaction():
                 locked = await conn.execute(_LOCK_SESSIONS, (sessions,))
+                last_seqs = {session_id: int(last_seq) for session_id, last_seq in await locked.fetchall()}
+                outcomes, accepted = _accept(batch, last_seqs)
+                rows_of: dict[str, list[tuple[Any, ...]]] = defaultdict(list)
+                for job in accepted:
+                    rows_of[job.table].append(job.row)
                 inserts = [
                     await conn.execute(_INSERT[table], [list(column) for column in zip(*rows, strict=True)])
                     for table, rows in rows_of.items()
                 ]
-                advance = await conn.execute(_ADVANCE, (list(tops), list(tops.values()), time.time(), self.instance_id))
-            known = {session_id: int(last_seq) for session_id, last_seq in await locked.fetchall()}
-            stored = {(table, session_id, int(seq)) for table, cursor in zip(rows_of, inserts, strict=True)
-                      for session_id, seq in await cursor.fetchall()}  # fmt: skip
-            known.update({session_id: int(last_seq) for session_id, last_seq, _ in await advance.fetchall()})
+                tops = {job.session_id: last_seqs[job.session_id] for job in accepted}
+                if tops:
+                    await conn.execute(_ADVANCE, (list(tops), list(tops.values()), time.time(), self.instance_id))
+            inserted = {(table, session_id, int(seq)) for table, cursor in zip(rows_of, inserts, strict=True)
+                        for session_id, seq in await cursor.fetchall()}  # fmt: skip
         except BaseException:
             await self._drop_connection()
             raise
-        return known, stored
+        for index, job in enumerate(batch):
+            if outcomes[index] is True and (job.table, job.session_id, job.seq) not in inserted:
+                outcomes[index] = StoreError(  # the database was changed behind the resume point
+                    f"seq {job.seq} of session {job.session_id!r} is stored already, beyond its resume point"
+                )
+        return outcomes, last_seqs
 
     async def _connection(self) -> psycopg.AsyncConnection[Any]:
         """The writer's own connection (no pool checkout per batch), reopened after a failure."""
@@ -353,6 +363,26 @@ class _BatchWriter:
         if self._conn is not None:
             await self._conn.close()
             self._conn = None
+
+
+def _accept(batch: list[_Insert], last_seqs: dict[str, int]) -> tuple[list[bool | StoreError], list[_Insert]]:
+    """Decide each job against its session's last stored seq, in batch order (``last_seqs`` is
+    advanced in place): the next seq is stored, an older one is a duplicate, a later one a gap."""
+    outcomes: list[bool | StoreError] = []
+    accepted: list[_Insert] = []
+    for job in batch:
+        last = last_seqs.get(job.session_id)
+        if last is None:
+            outcomes.append(UnknownSessionError(f"unknown session {job.session_id!r}"))
+        elif job.seq <= last:
+            outcomes.append(False)
+        elif job.seq == last + 1:
+            last_seqs[job.session_id] = job.seq
+            accepted.append(job)
+            outcomes.append(True)
+        else:  # an earlier message of the stream failed: never leave a hole
+            outcomes.append(StoreError(f"seq {job.seq} of session {job.session_id!r} does not follow the stored seq {last}"))
+    return outcomes, accepted
 
 
 class PostgresStore:
@@ -419,17 +449,25 @@ class PostgresStore:
             async with self.pool.connection() as conn:
                 cursor = await conn.execute(
                     "INSERT INTO sessions (session_id, device_id, mode, sensor_w, sensor_h, fovea_h, fovea_w,"
-                    " created_s, updated_s) VALUES (%s, %s, %s, %s, %s, %s, %s, %s, %s)"
-                    " ON CONFLICT (session_id) DO UPDATE SET device_id = excluded.device_id, mode = excluded.mode,"
-                    " sensor_w = excluded.sensor_w, sensor_h = excluded.sensor_h, fovea_h = excluded.fovea_h,"
-                    " fovea_w = excluded.fovea_w, updated_s = excluded.updated_s RETURNING last_seq",
-                    (spec.session_id, spec.device_id, spec.mode, *spec.sensor, *spec.fovea, now, now),
+                    " created_s, updated_s, stream_id) VALUES (%s, %s, %s, %s, %s, %s, %s, %s, %s, %s)"
+                    " ON CONFLICT (session_id) DO NOTHING RETURNING last_seq",
+                    (spec.session_id, spec.device_id, spec.mode, *spec.sensor, *spec.fovea, now, now, spec.stream_id),
+                )
+                if await cursor.fetchone() is not None:
+                    return -1
+                cursor = await conn.execute(
+                    "UPDATE sessions SET updated_s = %s WHERE session_id = %s RETURNING device_id, stream_id, mode,"
+                    " sensor_w, sensor_h, fovea_h, fovea_w, last_seq",
+                    (now, spec.session_id),
                 )
                 row = await cursor.fetchone()
         except _DB_ERRORS as exc:
             raise StoreError(f"session {spec.session_id!r} could not be opened: {_first_line(exc)}") from exc
-        assert row is not None  # noqa: S101 - RETURNING of an upsert always yields the row
-        return int(row[0])
+        if row is None:  # deleted between the two statements: open it afresh
+            return await self.open_session(spec)
+        stored = SessionSpec(spec.session_id, row[0], row[2], (row[3], row[4]), (row[5], row[6]), row[1])
+        check_owner(spec, stored)
+        return int(row[7])
 
     async def _sequenced(self, table: str, session_id: str, seq: int, row: tuple[Any, ...]) -> WriteResult:
         self._check_open()
@@ -473,11 +511,14 @@ class PostgresStore:
         await asyncio.to_thread(self.blobs.delete_prefix, f"pages/{session_id}")
         return existed
 
-    async def close(self) -> None:
+    async def close(self, timeout_s: float = 30.0) -> None:
         if self._closed:
             return
         self._closed = True
-        await self._writer.close()
+        try:
+            await asyncio.wait_for(self._writer.close(), timeout_s)
+        except TimeoutError:
+            log.warning("PostgreSQL writer did not finish within %.0f s; its pending writes are left behind", timeout_s)
         self._listener.cancel()
         try:
             await self._listener

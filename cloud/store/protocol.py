@@ -17,9 +17,12 @@ from .records import GazeRecord, PageBreak, PageRecord, SessionInfo, SessionSpec
 
 class SessionStore(Protocol):
     async def open_session(self, spec: SessionSpec) -> int:
-        """Create the session or refresh its metadata; its highest stored seq (-1 if none)."""
+        """Create the session, or resume it when ``spec`` is its owner (same device and stream) with
+        the same mode and geometry (else SessionOwnedError / SessionShapeError); its highest stored
+        seq (-1 if none)."""
 
-    async def add_frame(self, session_id: str, frame: StoredFrame) -> WriteResult: ...
+    async def add_frame(self, session_id: str, frame: StoredFrame) -> WriteResult:
+        """Seqs are contiguous: a seq past the stored one + 1 is a StoreError, never a hole."""
 
     async def add_page(self, session_id: str, page: PageRecord) -> WriteResult: ...
 
@@ -52,5 +55,5 @@ class SessionStore(Protocol):
     async def ping(self) -> bool:
         """True when the backend answers (readiness)."""
 
-    async def close(self) -> None:
-        """Finish pending writes and release the backend; later writes raise StoreError."""
+    async def close(self, timeout_s: float = 30.0) -> None:
+        """Finish pending writes (at most ``timeout_s``) and release the backend; later writes raise StoreError."""

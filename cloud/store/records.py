@@ -12,13 +12,13 @@ import numpy as np
 
 from darkread.frame_record import FrameRecord
 
-from ..errors import StoreError, UnknownSessionError
+from ..errors import SessionOwnedError, SessionShapeError, StoreError, UnknownSessionError
 
 Box = tuple[int, int, int, int]  # x0, y0, x1, y1
 
 __all__ = [
-    "GazeRecord", "PageBreak", "PageRecord", "SessionInfo", "SessionSpec", "StoreError", "StoredFrame",
-    "UnknownSessionError", "WriteResult",
+    "GazeRecord", "PageBreak", "PageRecord", "SessionInfo", "SessionOwnedError", "SessionShapeError", "SessionSpec",
+    "StoreError", "StoredFrame", "UnknownSessionError", "WriteResult",
 ]  # fmt: skip
 
 
@@ -31,6 +31,25 @@ class SessionSpec:
     mode: str  # "frames" (the cloud stitches) or "pages" (the glasses stitch)
     sensor: tuple[int, int]  # (width, height)
     fovea: tuple[int, int]  # (height, width)
+    stream_id: str = ""  # the client's spool (its seq space); "" for a client that names none
+
+
+def check_owner(spec: SessionSpec, stored: SessionSpec) -> None:
+    """Raise unless ``spec`` may resume the stored session: same device, same stream (seq space),
+    same mode and geometry (SessionOwnedError, SessionShapeError)."""
+    if spec.device_id != stored.device_id:
+        raise SessionOwnedError(f"session {spec.session_id!r} belongs to device {stored.device_id!r}")
+    if spec.stream_id != stored.stream_id:
+        raise SessionOwnedError(
+            f"session {spec.session_id!r} belongs to another stream of {stored.device_id!r} (another spool, whose "
+            "seqs would collide); use a new session id"
+        )
+    wanted, known = (spec.mode, tuple(spec.sensor), tuple(spec.fovea)), (stored.mode, stored.sensor, stored.fovea)
+    if wanted != known:
+        raise SessionShapeError(
+            f"session {spec.session_id!r} is {known[0]} with sensor {known[1]} and fovea {known[2]}; hello says "
+            f"{wanted[0]} with sensor {wanted[1]} and fovea {wanted[2]}"
+        )
 
 
 @dataclass(frozen=True)

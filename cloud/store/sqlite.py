@@ -6,8 +6,9 @@ Layout under ``data_dir``::
     pages/<session>/<seq>.png   page images (through ``FileBlobs``; rows hold only the key)
 
 The schema version lives in ``PRAGMA user_version``; ``MIGRATIONS[i]`` takes a database from
-version i to i + 1 and all pending ones run at start-up, in one transaction each (the mechanism
-both backends share, ``migrations.py``). Duplicates
+version i to i + 1 (an SQL script, or a function for a step that must look first) and all
+pending ones run at start-up, in one transaction each (the mechanism both backends share,
+``migrations.py``). Duplicates
 are found by the database: every sequenced table's primary key is (session_id, seq).
 """
 
@@ -32,6 +33,7 @@ from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .blobs import BlobStore, FileBlobs
 from .changes import ChangeFeed, Listener
+from .migrations import Step, statements
 from .migrations import migrate as run_migrations
 from .records import (
     GazeRecord,
@@ -43,13 +45,14 @@ from .records import (
     StoreError,
     UnknownSessionError,
     WriteResult,
+    check_owner,
 )
 from .writer import GroupCommitWriter
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 
-MIGRATIONS: tuple[str, ...] = (
+MIGRATIONS: tuple[str | Callable[[sqlite3.Connection], object], ...] = (
     # 0 -> 1: the original schema (databases from before versioning already have it)
     """
     CREATE TABLE IF NOT EXISTS sessions (
@@ -89,6 +92,11 @@ MIGRATIONS: tuple[str, ...] = (
         PRIMARY KEY (session_id, seq)
     );
     """,
+    # 2 -> 3: sessions belong to the stream (spool, seq space) that opened them; databases the
+    # unversioned store wrote since session ownership already have the column
+    lambda conn: None
+    if "stream_id" in {row[1] for row in conn.execute("PRAGMA table_info(sessions)")}
+    else conn.execute("ALTER TABLE sessions ADD COLUMN stream_id TEXT NOT NULL DEFAULT ''"),
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 _SEQUENCED = ("frames", "pages", "gaze", "page_breaks")
@@ -103,11 +111,14 @@ class _SqliteSchema:
     def version(self) -> int:
         return int(self.conn.execute("PRAGMA user_version").fetchone()[0])
 
-    def apply(self, statements: list[str], new_version: int) -> None:
+    def apply(self, step: Step, new_version: int) -> None:
         self.conn.execute("BEGIN IMMEDIATE")
         try:
-            for statement in statements:
-                self.conn.execute(statement)
+            if callable(step):
+                step(self.conn)
+            else:
+                for statement in statements(step):
+                    self.conn.execute(statement)
             self.conn.execute(f"PRAGMA user_version = {int(new_version)}")
             self.conn.execute("COMMIT")
         except sqlite3.Error:
@@ -176,14 +187,20 @@ class SqliteStore:
         def work(conn: sqlite3.Connection) -> int:
             now = time.time()
             row = conn.execute(
-                "INSERT INTO sessions (session_id, device_id, mode, sensor_w, sensor_h, fovea_h, fovea_w,"
-                " created_s, updated_s) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)"
-                " ON CONFLICT(session_id) DO UPDATE SET device_id=excluded.device_id, mode=excluded.mode,"
-                " sensor_w=excluded.sensor_w, sensor_h=excluded.sensor_h, fovea_h=excluded.fovea_h,"
-                " fovea_w=excluded.fovea_w, updated_s=excluded.updated_s RETURNING last_seq",
-                (spec.session_id, spec.device_id, spec.mode, *spec.sensor, *spec.fovea, now, now),
-            ).fetchone()
-            return int(row[0])
+                "SELECT device_id, stream_id, mode, sensor_w, sensor_h, fovea_h, fovea_w, last_seq FROM sessions"
+                " WHERE session_id = ?", (spec.session_id,),
+            ).fetchone()  # fmt: skip
+            if row is None:
+                conn.execute(
+                    "INSERT INTO sessions (session_id, device_id, mode, sensor_w, sensor_h, fovea_h, fovea_w,"
+                    " created_s, updated_s, stream_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (spec.session_id, spec.device_id, spec.mode, *spec.sensor, *spec.fovea, now, now, spec.stream_id),
+                )
+                return -1
+            stored = SessionSpec(spec.session_id, row[0], row[2], (row[3], row[4]), (row[5], row[6]), row[1])
+            check_owner(spec, stored)
+            conn.execute("UPDATE sessions SET updated_s = ? WHERE session_id = ?", (now, spec.session_id))
+            return int(row[7])
 
         return await self._writer.submit(work)
 
@@ -192,10 +209,16 @@ class SqliteStore:
         0 when the key was already there (a resend)."""
 
         def work(conn: sqlite3.Connection) -> WriteResult:
+            row = conn.execute("SELECT last_seq FROM sessions WHERE session_id = ?", (session_id,)).fetchone()
+            if row is None:
+                raise UnknownSessionError(f"unknown session {session_id!r}")
+            if seq > int(row[0]) + 1:  # an earlier message of the stream failed: never leave a hole
+                raise StoreError(f"seq {seq} of session {session_id!r} does not follow the stored seq {row[0]}")
             if insert(conn) == 0:
-                row = conn.execute("SELECT last_seq FROM sessions WHERE session_id = ?", (session_id,)).fetchone()
-                if row is None:
-                    raise UnknownSessionError(f"unknown session {session_id!r}")
+                if seq > int(row[0]):  # a row past the resume point: the database was changed behind our back
+                    raise sqlite3.IntegrityError(
+                        f"seq {seq} of session {session_id!r} is stored already, beyond its resume point {row[0]}"
+                    )
                 return WriteResult(stored=False, last_seq=int(row[0]))
             row = conn.execute(
                 "UPDATE sessions SET last_seq = MAX(last_seq, ?), updated_s = ? WHERE session_id = ? RETURNING last_seq",
@@ -266,8 +289,8 @@ class SqliteStore:
         await asyncio.to_thread(self.blobs.delete_prefix, f"pages/{session_id}")
         return existed
 
-    async def close(self) -> None:
-        await asyncio.to_thread(self._writer.close)
+    async def close(self, timeout_s: float = 30.0) -> None:
+        await asyncio.to_thread(self._writer.close, timeout_s)
 
     # --- reads --------------------------------------------------------------------------------
 

@@ -64,11 +64,15 @@ class GroupCommitWriter:
         return future
 
     def close(self, timeout_s: float = 30.0) -> None:
-        """Let queued writes commit, then stop the thread."""
+        """Let queued writes commit, then stop the thread; a writer stuck longer than
+        ``timeout_s`` (a locked database) is left behind (a daemon thread) so shutdown keeps its
+        deadline."""
         if not self._closed:
             self._closed = True
             self._jobs.put(None)
             self._thread.join(timeout=timeout_s)
+            if self._thread.is_alive():
+                log.error("store writer still busy after %g s; leaving it (uncommitted writes are not acked)", timeout_s)
 
     def _loop(self) -> None:
         conn = self._connect()

@@ -1,7 +1,9 @@
 """``make bench``: every benchmark measures darkread next to a reference measured in the same run.
 
 Each module in this package defines ``run(ctx: BenchContext) -> list[Figure]``. The runner prints
-one table and writes ``bench.json`` (one key per figure, the unit in the key).
+one table and writes ``bench.json`` (one key per figure, the unit in the key). ``ctx.smoke`` asks
+for the smallest inputs and a single repetition: every figure is produced, none is meaningful
+(``tests/bench`` runs each benchmark that way and checks the keys it writes).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 BENCH_MODULES: tuple[str, ...] = (
     "darkread.bench.decode",
     "darkread.bench.fovea",
+    "darkread.bench.gaze",
     "darkread.bench.synth",
     "darkread.bench.inference",
     "darkread.bench.edge",
@@ -45,7 +48,12 @@ class BenchContext:
     shared_data: Path | None
     scratch: Path
     quick: bool = False
+    smoke: bool = False  # tiny inputs, one repetition: checks that every figure is made, not its value
     notes: list[str] = field(default_factory=list)
+
+    def runs(self, full: int, quick: int, smoke: int = 1) -> int:
+        """How many repetitions (or how large an input) for the chosen mode."""
+        return smoke if self.smoke else quick if self.quick else full
 
 
 def best_median_s(call: Callable[[], object], runs: int, repeats: int = 3, warmup: int = 5) -> float:

@@ -15,16 +15,22 @@ from darkread.bench import BENCH_MODULES, BenchContext, Figure
 from darkread.paths import find_shared_data
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m darkread.bench", description=__doc__)
     parser.add_argument("--only", nargs="*", help="run only these benchmark modules (e.g. decode fovea)")
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
+    parser.add_argument("--smoke", action="store_true",
+                        help="tiny inputs, one repetition: every figure is written, none is meaningful (for tests)")
     parser.add_argument("--out", default="bench.json", help="where to write the figures (default bench.json)")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    known = [name.rsplit(".", 1)[-1] for name in BENCH_MODULES]
+    unknown = sorted(set(args.only or ()) - set(known))
+    if unknown:
+        parser.error(f"no benchmark named {', '.join(unknown)} (known: {', '.join(known)})")
     logging.basicConfig(level=logging.WARNING)
     figures: list[Figure] = []
     with tempfile.TemporaryDirectory(prefix="darkread-bench-") as scratch:
-        ctx = BenchContext(shared_data=find_shared_data(), scratch=Path(scratch), quick=args.quick)
+        ctx = BenchContext(shared_data=find_shared_data(), scratch=Path(scratch), quick=args.quick, smoke=args.smoke)
         for name in BENCH_MODULES:
             short = name.rsplit(".", 1)[-1]
             if args.only and short not in args.only:

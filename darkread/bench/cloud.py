@@ -134,13 +134,13 @@ def _store_alone(open_store: Callable[[], Awaitable[SessionStore]], count: int) 
     return asyncio.run(write())
 
 
-def _ingest_rates(data_dir: Path, database_url: str | None, total: int, time_limit_s: float) -> dict[int, float]:
+def _ingest_rates(data_dir: Path, database_url: str | None, total: int, time_limit_s: float, least: int) -> dict[int, float]:
     """Frames/s acknowledged by one instance with 1, 10 and 50 streams."""
     process, port = _start_server(data_dir, database_url)
     try:
         url = f"ws://127.0.0.1:{port}/v1/stream"
         return {
-            streams: asyncio.run(_ingest(url, streams, max(total // streams, 20), time_limit_s, f"s{streams}"))
+            streams: asyncio.run(_ingest(url, streams, max(total // streams, least), time_limit_s, f"s{streams}"))
             for streams in STREAMS
         }
     finally:
@@ -163,7 +163,7 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
         killed_at.append(time.monotonic())
         instances[0] = list(_start_server(ctx.scratch / "replay-a", database_url, port=port))
 
-    sessions, seconds = 50, 15.0 if ctx.quick else 60.0
+    sessions, seconds = ctx.runs(50, 50, 4), float(ctx.runs(60, 15, 2))
     logging.getLogger("darkread.edge.uplink").setLevel(logging.ERROR)  # 25 failovers, one line each
     try:
         urls = [f"ws://127.0.0.1:{port}/v1/stream" for _, port in instances]
@@ -192,14 +192,15 @@ def run(ctx: BenchContext) -> list[Figure]:
     from darkread.cloud.store.pg_server import PostgresUnavailable, TemporaryPostgres
     from darkread.cloud.store.postgres import PostgresStore
 
-    total = 1500 if ctx.quick else 6000  # frames per configuration, split over the streams
-    time_limit_s = 10.0 if ctx.quick else 30.0
+    total = ctx.runs(6000, 1500, 100)  # frames per configuration, split over the streams
+    time_limit_s = float(ctx.runs(30, 10, 10))
+    least = 2 if ctx.smoke else 20  # frames per stream
 
     async def open_sqlite() -> SessionStore:
         return SqliteStore(ctx.scratch / "store-alone")
 
     alone = _store_alone(open_sqlite, total)
-    sqlite = _ingest_rates(ctx.scratch / "cloud-bench", None, total, time_limit_s)
+    sqlite = _ingest_rates(ctx.scratch / "cloud-bench", None, total, time_limit_s, least)
     figures = [
         Figure(
             key=f"cloud_ingest_frames_per_s_{streams}",
@@ -220,7 +221,7 @@ def run(ctx: BenchContext) -> list[Figure]:
     try:
         alone_url = pg.create_database("alone")
         pg_alone = _store_alone(lambda: PostgresStore.open(alone_url), total)
-        rates = _ingest_rates(ctx.scratch / "cloud-bench-pg", pg.create_database("ingest"), total, time_limit_s)
+        rates = _ingest_rates(ctx.scratch / "cloud-bench-pg", pg.create_database("ingest"), total, time_limit_s, least)
         figures += [
             Figure(
                 key=f"cloud_ingest_pg_frames_per_s_{streams}",

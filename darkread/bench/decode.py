@@ -38,7 +38,7 @@ def _best(fn: Callable[[], object], repeat: int) -> float:
 
 
 def _inputs(ctx: BenchContext) -> dict[str, Path]:
-    if ctx.shared_data is not None:
+    if ctx.shared_data is not None and not ctx.smoke:
         found = {name: ctx.shared_data / rel for name, rel in FILES.items()}
         found = {name: path for name, path in found.items() if path.is_file()}
         if found:
@@ -47,7 +47,7 @@ def _inputs(ctx: BenchContext) -> dict[str, Path]:
     import numpy as np
 
     rng = np.random.default_rng(0)
-    n = 500_000
+    n = 20_000 if ctx.smoke else 500_000
     events = make_events(
         rng.integers(0, 1280, n),
         rng.integers(0, 720, n),
@@ -56,7 +56,8 @@ def _inputs(ctx: BenchContext) -> dict[str, Path]:
     )
     path = ctx.scratch / "synthetic.raw"
     path.write_bytes(format_raw_header(1280, 720) + encode_evt3(events))
-    ctx.notes.append("decode: ../shared/data not found; measured on a synthetic encoded stream")
+    if not ctx.smoke:
+        ctx.notes.append("decode: ../shared/data not found; measured on a synthetic encoded stream")
     return {"synthetic": path}
 
 
@@ -100,7 +101,7 @@ def run(ctx: BenchContext) -> list[Figure]:
     except ImportError:
         evt3 = None
         ctx.notes.append("decode: evt3 package not installed; no reference decoder")
-    repeat = 3 if ctx.quick else 9
+    repeat = ctx.runs(9, 3)
     figures: list[Figure] = []
     results: dict[str, dict] = {}
     for name, path in _inputs(ctx).items():

@@ -6,16 +6,14 @@
   is shared; the wall-clock factor is printed beside it. Reference: decoding
   the same file alone (``RawReader``), the ceiling of any replay.
 * Event-to-wire latency: replay paced at wall-clock speed through the real uplink to a local
-  websocket server that acknowledges every frame; from the arrival of a window's newest event to
+  websocket server that acknowledges every frame (``ack_server.AckServer``); from the arrival of a window's newest event to
   the frame handed to the socket. Reference: inference alone in the same run.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import os
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,15 +21,37 @@ from pathlib import Path
 import numpy as np
 
 from darkread.bench import BenchContext, Figure
+from darkread.bench.ack_server import AckServer
 from darkread.paths import SAMPLE_RECORDING
+
+
+SMOKE_SECONDS = 0.3
 
 
 def _recording(ctx: BenchContext) -> Path | None:
     if (SAMPLE_RECORDING / "events.raw").is_file():
-        return SAMPLE_RECORDING
-    if ctx.shared_data is not None and (ctx.shared_data / "sample_recording" / "events.raw").is_file():
-        return ctx.shared_data / "sample_recording"
-    return None
+        found = SAMPLE_RECORDING
+    elif ctx.shared_data is not None and (ctx.shared_data / "sample_recording" / "events.raw").is_file():
+        found = ctx.shared_data / "sample_recording"
+    else:
+        return None
+    return _first_seconds(found, ctx.scratch / "smoke_recording", SMOKE_SECONDS) if ctx.smoke else found
+
+
+def _first_seconds(recording: Path, out: Path, seconds: float) -> Path:
+    """A copy of ``recording`` cut to its first ``seconds`` of events (the smoke run's input)."""
+    import shutil
+
+    from darkread.edge.io.raw import read_raw, write_raw
+
+    out.mkdir(parents=True, exist_ok=True)
+    for name in ("general_eye_gaze.csv", "calibration.json", "text.txt"):
+        if (recording / name).is_file():
+            shutil.copy(recording / name, out / name)
+    raw = read_raw(recording / "events.raw")
+    t = raw.events["t"]
+    write_raw(out / "events.raw", raw.events[t < t[0] + int(seconds * 1e6)], width=raw.header.width, height=raw.header.height)
+    return out
 
 
 def _model(ctx: BenchContext) -> Path | None:
@@ -45,9 +65,12 @@ def _model(ctx: BenchContext) -> Path | None:
         from onnx import TensorProto, helper
     except ImportError:
         raise RuntimeError("no shipped model and no `onnx` package to build a stand-in") from None
-    x = helper.make_tensor_value_info("voxel", TensorProto.FLOAT, ["batch", 4, 100, 200])
-    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["batch", 1, 100, 200])
-    weight = helper.make_tensor("w", TensorProto.FLOAT, [1, 4, 3, 3], np.full(36, 0.1, np.float32).tolist())
+    from darkread.edge.voxel import VoxelConfig
+
+    bins, height, width = VoxelConfig().shape  # the window the shipped model was trained for
+    x = helper.make_tensor_value_info("voxel", TensorProto.FLOAT, ["batch", bins, height, width])
+    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["batch", 1, height, width])
+    weight = helper.make_tensor("w", TensorProto.FLOAT, [1, bins, 3, 3], np.full(bins * 9, 0.1, np.float32).tolist())
     node = helper.make_node("Conv", ["voxel", "w"], ["logits"], pads=[1, 1, 1, 1])
     model = helper.make_model(
         helper.make_graph([node], "standin", [x], [y], initializer=[weight]),
@@ -87,66 +110,34 @@ def _decode_only_cpu_s(raw_path: Path) -> float:
     return time.process_time() - started
 
 
-def _run_edge(recording: Path, model: Path | None, speed: float | None, on_frame_factory) -> tuple[float, float, object, object]:  # noqa: ANN001
-    """(wall s, process CPU s, source, metrics) of one replay through the loop."""
-    from darkread.edge.gaze import GazeMapper
-    from darkread.edge.io.recording import open_recording
-    from darkread.edge.telemetry import EdgeMetrics
-    from darkread.edge.pipeline import Pipeline, PipelineSettings
-    from darkread.edge.reconstruct import Reconstructor
-    from darkread.edge.sources.replay import ReplaySource
+def _run_edge(
+    recording: Path, model: Path | None, speed: float, on_frame: object = None, uplink_url: str = ""
+) -> tuple[float, float, object, object]:
+    """(wall s, process CPU s, source, metrics) of one replay through the edge ``build_edge`` wires.
 
-    rec = open_recording(recording)
-    source = ReplaySource(rec.raw_path, speed=speed)
-    gaze = GazeMapper(rec.calibration, rec.gaze())
-    reconstructor = Reconstructor(model, threads=1)
-    metrics = EdgeMetrics()
-    on_frame = on_frame_factory(metrics)
-    pipeline = Pipeline(source, gaze, reconstructor, on_frame, PipelineSettings(lossless=speed is None), metrics)
+    ``speed`` 0 replays as fast as possible (lossless); ``on_frame`` takes the frames instead of
+    the uplink (then ``uplink_url`` is unused).
+    """
+    from darkread.edge.builder import build_edge
+    from darkread.edge.config import load_config
+
+    config = load_config(None, environ={}, overrides={
+        "source": {"kind": "replay", "path": str(recording), "speed": speed},
+        "gaze": {"kind": "recording"},
+        "pipeline": {"threads": 1, **({"model": str(model)} if model else {})},
+        "uplink": {"url": uplink_url or "ws://127.0.0.1:1/v1/stream", "device_id": "bench"},
+        "metrics": {"log_every_s": 3600.0},
+    })
+    edge = build_edge(config, on_frame=on_frame)  # type: ignore[arg-type]
     started, cpu_started = time.perf_counter(), time.process_time()
-    pipeline.start()
-    source.wait()
-    pipeline.stop()
+    edge.startup(wait_connected_s=5.0)
+    edge.source.wait()
+    edge.pipeline.stop()
     wall, cpu = time.perf_counter() - started, time.process_time() - cpu_started
-    if pipeline.error is not None:
-        raise RuntimeError(f"edge loop failed: {pipeline.error}")
-    return wall, cpu, source, metrics
-
-
-class _AckServer:
-    """A local websocket endpoint that speaks just enough of the protocol to ack every message."""
-
-    def __init__(self) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
-        self.port = asyncio.run_coroutine_threadsafe(self._start(), self.loop).result(10)
-
-    async def _start(self) -> int:
-        from websockets.asyncio.server import serve
-
-        self.server = await serve(self._handle, "127.0.0.1", 0)
-        return int(self.server.sockets[0].getsockname()[1])
-
-    async def _handle(self, ws) -> None:  # noqa: ANN001
-        from darkread.proto.messages import Ack, Welcome, decode, encode
-
-        hello = decode(await ws.recv(), max_bytes=1 << 22)
-        await ws.send(encode(Welcome(session_id=hello.session_id, last_acked_seq=-1, max_message_bytes=1 << 22)))
-        async for data in ws:
-            seq = getattr(decode(data, max_bytes=1 << 22), "seq", None)
-            if seq is not None:
-                await ws.send(encode(Ack(seq=seq)))
-
-    def close(self) -> None:
-        async def stop() -> None:
-            self.server.close()
-            await self.server.wait_closed()
-
-        asyncio.run_coroutine_threadsafe(stop(), self.loop).result(10)
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(10)
-        self.loop.close()
+    edge.shutdown(5.0)
+    if edge.pipeline.error is not None:
+        raise RuntimeError(f"edge loop failed: {edge.pipeline.error}")
+    return wall, cpu, edge.source, edge.metrics
 
 
 def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
@@ -169,8 +160,6 @@ def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
 
 def run(ctx: BenchContext) -> list[Figure]:
     from darkread.edge.io.recording import open_recording
-    from darkread.edge.spool import Spool
-    from darkread.edge.uplink import Uplink, UplinkSettings
     from darkread.proto.messages import encode
 
     recording = _recording(ctx)
@@ -179,14 +168,14 @@ def run(ctx: BenchContext) -> list[Figure]:
         return []
     model = _model(ctx)
     meta = open_recording(recording).meta
-    repeats = 1 if ctx.quick else 3
+    repeats = ctx.runs(3, 1)
 
-    def encode_only(metrics):  # noqa: ANN001, ANN202
-        return lambda frame, arrival: encode(frame.to_message())
+    def encode_only(frame, arrival):  # noqa: ANN001, ANN202
+        encode(frame.to_message())
 
     with _one_core() as pinned:
         decode_s = min(_decode_only_cpu_s(recording / "events.raw") for _ in range(repeats))
-        runs = [_run_edge(recording, model, None, encode_only) for _ in range(repeats)]
+        runs = [_run_edge(recording, model, 0.0, on_frame=encode_only) for _ in range(repeats)]
     wall, cpu, source, metrics = min(runs, key=lambda r: r[1])
     span_s = source.stats["recording_s"]
     rtf = span_s / cpu  # CPU seconds: on a shared host the wall clock also counts other processes
@@ -194,19 +183,9 @@ def run(ctx: BenchContext) -> list[Figure]:
     if not pinned:
         ctx.notes.append("edge: could not pin to one core; the real-time factor used all cores")
 
-    server = _AckServer()
+    server = AckServer()
     try:
-        uplinks: list[Uplink] = []
-
-        def to_uplink(metrics):  # noqa: ANN001, ANN202
-            uplink = Uplink(UplinkSettings(url=f"ws://127.0.0.1:{server.port}/v1/stream", device_id="bench"), Spool(None), metrics)
-            uplink.start()
-            uplink.connected.wait(5)
-            uplinks.append(uplink)
-            return lambda frame, arrival: uplink.submit(frame.to_message(), submitted_at=arrival)
-
-        _, _, _, paced = _run_edge(recording, model, 1.0, to_uplink)
-        uplinks[0].stop(drain_timeout_s=5)
+        _, _, _, paced = _run_edge(recording, model, 1.0, uplink_url=server.url)
     finally:
         server.close()
     sent_kb_s = paced.totals["bytes_sent"] / 1e3 / span_s

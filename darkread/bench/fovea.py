@@ -17,6 +17,7 @@ import numpy as np
 
 from darkread.bench import BenchContext, Figure, best_median_s
 from darkread.edge.events import EVENT_CD_DTYPE
+from darkread.edge.config import PipelineConfig
 from darkread.edge.fovea import FoveaConfig, crop
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 
@@ -63,9 +64,9 @@ def add_at_voxel_grid(events: np.ndarray, x0: int, y0: int, cfg: VoxelConfig = V
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    runs = 50 if ctx.quick else 300
+    runs = ctx.runs(300, 50, 3)
     sensor_slice = _events(SLICE_EVENTS, 1280, 720, seed=1)
-    window = _events(VoxelConfig().n_events, 200, 100, X0, Y0, seed=2)
+    window = _events(PipelineConfig().n_events, 200, 100, X0, Y0, seed=2)
 
     crop_us = best_median_us(lambda: crop(sensor_slice, X0, Y0), runs)
     naive_crop_us = best_median_us(lambda: naive_crop(sensor_slice, X0, Y0), runs)

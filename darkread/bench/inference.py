@@ -66,7 +66,7 @@ def run(ctx: BenchContext) -> list[Figure]:
     if not fp32.is_file():
         ctx.notes.append(f"inference: no shipped model at {fp32}; run `darkread train all`")
         return []
-    runs = 20 if ctx.quick else 100
+    runs = ctx.runs(100, 20, 3)
     reference_ms, reference = reference_latency_ms(runs)
     figures = [
         Figure("inference_ms_fp32", onnx_latency_ms(fp32, runs), "U-Net fp32 ORT, 1 core (ms/window)", reference, "<= 3 ms (goal 2)"),

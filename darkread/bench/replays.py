@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from darkread.edge.spool import Spool
-from darkread.edge.uplink import Uplink, UplinkSettings
+from darkread.edge.config import UplinkConfig
+from darkread.edge.uplink import Uplink
 from darkread.proto.messages import Frame, pack_mask
 
 FRAME_RATE_HZ = 30.0  # what one pair of glasses sends at most
@@ -67,11 +68,11 @@ def run_replays(
     uplinks = []
     for i in range(sessions):
         order = urls[i % len(urls) :] + urls[: i % len(urls)]
-        settings = UplinkSettings(
+        settings = UplinkConfig(
             url=",".join(order), api_key=api_key, device_id=f"{prefix}-{i}", session_id=f"{prefix}-{i}",
             backoff_initial_s=0.05, backoff_max_s=0.5, max_in_flight=256,
         )  # fmt: skip
-        uplinks.append(Uplink(settings, Spool(None)))
+        uplinks.append(Uplink(settings, Spool(None), sensor_wh=(1280, 720), fovea_hw=(100, 200)))
     for uplink in uplinks:
         uplink.start()
     submitted = [0] * sessions

@@ -67,8 +67,8 @@ def run(ctx: BenchContext) -> list[Figure]:
     if scan is None:
         ctx.notes.append(f"stitch: skipped, the synthetic reading generator {_SCAN} is not here")
         return []
-    page = scan.render_page()
-    seeds = [0] if ctx.quick else [0, 1, 2]
+    page = scan.render_page(scan.PARAGRAPH.split(". ")[0] + ".") if ctx.smoke else scan.render_page()
+    seeds = [0] if ctx.quick or ctx.smoke else [0, 1, 2]
     ours_s = naive_s = 0.0
     frames_total = 0
     f1: dict[str, list[float]] = {"ours": [], "naive": [], "ours_tol": [], "naive_tol": []}

@@ -24,22 +24,24 @@ from darkread.models.synth.session import SessionSpec, make_session
 from darkread.models.synth.shards import FOVEA, SAMPLES_PER_PAGE, make_samples
 
 
-def samples_per_s(n_pages: int, seed: int = 100) -> float:
+def samples_per_s(n_pages: int, seed: int = 100, per_page: int = SAMPLES_PER_PAGE) -> float:
     start = time.perf_counter()
     n = 0
     for page in range(n_pages):
-        v, _, _ = make_samples(SessionSpec(duration_s=4.0), seed + page, SAMPLES_PER_PAGE)
+        v, _, _ = make_samples(SessionSpec(duration_s=4.0), seed + page, per_page)
         n += v.shape[0]
     return n / (time.perf_counter() - start)
 
 
-def render_only_samples_per_s(n_pages: int, steps_per_sample: int = 40, seed: int = 100) -> float:
+def render_only_samples_per_s(
+    n_pages: int, steps_per_sample: int = 40, seed: int = 100, per_page: int = SAMPLES_PER_PAGE
+) -> float:
     start = time.perf_counter()
     n = 0
     rng = np.random.default_rng(seed)
     for page in range(n_pages):
         session = make_session(SessionSpec(duration_s=4.0), seed + page)
-        for _ in range(SAMPLES_PER_PAGE):
+        for _ in range(per_page):
             x0, y0 = int(rng.integers(0, 1080)), int(rng.integers(0, 620))
             region = Region.of(session.calib, x0, y0, FOVEA.width, FOVEA.height)
             t = float(rng.uniform(0.3, 3.0))
@@ -59,10 +61,11 @@ def sim_seconds_per_wall_s(seconds: float) -> float:
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    pages = 1 if ctx.quick else 4
-    sps = samples_per_s(pages)
-    render = render_only_samples_per_s(pages)
-    sim = sim_seconds_per_wall_s(0.3 if ctx.quick else 1.0)
+    pages = ctx.runs(4, 1)
+    per_page = ctx.runs(SAMPLES_PER_PAGE, SAMPLES_PER_PAGE, 1)
+    sps = samples_per_s(pages, per_page=per_page)
+    render = render_only_samples_per_s(pages, per_page=per_page)
+    sim = sim_seconds_per_wall_s(1.0 if not (ctx.quick or ctx.smoke) else 0.1 if ctx.smoke else 0.3)
     return [
         Figure(
             key="synth_samples_per_s",

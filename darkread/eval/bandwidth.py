@@ -16,14 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from darkread.edge.events import Events
 from darkread.image_codec import encode_jpeg, encode_png, read_image
 
 JPEG_QUALITIES: tuple[int, ...] = (100, 80, 60, 40, 20)
 PAPER_FOVEATION_REMOVED = 0.98
 PAPER_FRAMES_VS_RGB = 20.0
 PAPER_PAGE_VS_RGB = 2400.0
-GAZE_TIME_STEP_US = 1000  # gaze is looked up once per millisecond of events (it moves slowly)
 
 
 def image_sizes(image: np.ndarray, qualities: tuple[int, ...] = JPEG_QUALITIES) -> dict[str, int]:
@@ -43,27 +41,16 @@ def raw_data_bytes(raw_path: str | Path) -> int:
     return Path(raw_path).stat().st_size - int(header.data_offset)
 
 
-def foveate_along_gaze(events: Events, gaze_px_at: Any, sensor_wh: tuple[int, int]) -> Events:
-    """Events inside the 100 x 200 window around the gaze at their own time (NaN gaze: dropped).
+def frame_message_bytes(shape: tuple[int, int] | None = None) -> int:
+    """Bytes of one encoded ``Frame`` wire message (a packed 1-bit mask: size does not depend on content).
 
-    ``gaze_px_at(t_us [N]) -> [N, 2]`` is e.g. ``GazeMapper.pixels_at``; it is called once per
-    millisecond of events, not per event.
+    ``shape`` (rows, cols) defaults to the shipped model's window.
     """
-    from darkread.edge.fovea import crop_along_track, window_origins
-
-    if events.shape[0] == 0:
-        return events[:0]
-    t = events["t"].astype(np.int64)
-    steps, index = np.unique(t // GAZE_TIME_STEP_US, return_inverse=True)
-    centres = np.asarray(gaze_px_at(steps * GAZE_TIME_STEP_US + GAZE_TIME_STEP_US // 2), dtype=np.float64)
-    origins = window_origins(centres, sensor_wh)
-    return crop_along_track(events, origins[index.reshape(-1)])
-
-
-def frame_message_bytes(shape: tuple[int, int] = (100, 200)) -> int:
-    """Bytes of one encoded ``Frame`` wire message (a packed 1-bit mask: size does not depend on content)."""
+    from darkread.edge.fovea import FoveaConfig
     from darkread.proto.messages import Frame, encode, pack_mask
 
+    if shape is None:
+        shape = (FoveaConfig().height, FoveaConfig().width)
     mask_shape, bits = pack_mask(np.zeros(shape, dtype=np.uint8))
     message = Frame(
         seq=2**31, frame_id=2**31, t_us=2**40, origin=(1080, 620), gaze_px=(640.5, 360.5), gaze_rad=(0.1, -0.1),
@@ -148,7 +135,8 @@ def measure_bandwidth(
     from darkread.edge.io.gaze_csv import read_gaze_csv
     from darkread.edge.io.raw import read_raw
     from darkread.edge.io.recording import open_recording
-    from darkread.edge.pipeline import PipelineSettings
+    from darkread.edge.config import PipelineConfig
+    from darkread.edge.fovea import foveate_along_gaze
 
     recording = open_recording(recording_dir)
     raw = read_raw(recording.raw_path)
@@ -162,7 +150,7 @@ def measure_bandwidth(
         duration_s = (int(events["t"][-1]) - int(events["t"][0])) * 1e-6
     measured = frames is not None and frame_stream_bytes is not None
     if frames is None:
-        frames = math.ceil(foveated.shape[0] / PipelineSettings().n_events)
+        frames = math.ceil(foveated.shape[0] / PipelineConfig().n_events)
     if frame_stream_bytes is None:
         frame_stream_bytes = frames * frame_message_bytes()
     return Bandwidth(

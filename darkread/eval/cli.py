@@ -19,8 +19,10 @@ Two forms:
       write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
       text kinds, three font families incl. one held out of training, x-heights 7-12, motion
       still/normal/walking, and nine 30-lux paragraphs). Each recording ends when the page has been
-      read once; texts come from the corpus part never used for training. --small: 17 short
-      recordings, one axis varied at a time (CI-sized).
+      read once; texts come from the corpus part never used for training; six more replay a real
+      reader's fixations (30 and 10 lux paragraphs, three motions; names end in _human). --small:
+      17 short recordings, one axis varied at a time (CI-sized). --match PATTERN: only those
+      recordings (e.g. --match '*lux30_*_human').
 
   darkread eval SUITE_DIR [--out docs/eval] [--backend local] [--jobs N]
       read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
@@ -36,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
         description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small] [--jobs N]",
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small] [--match PATTERN] [--jobs N]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
@@ -55,6 +57,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--note", action="append", default=[], metavar="TEXT", help="a line for the report's header (repeatable)")
     parser.add_argument("--small", action="store_true", help="make-suite: the small (CI) suite")
     parser.add_argument("--limit", type=int, metavar="N", help="make-suite: only the first N recordings")
+    parser.add_argument("--match", metavar="PATTERN",
+                        help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
+                             "'*lux30_*_human' for the real-scanpath recordings at 30 lux")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="worker processes (make-suite and evaluation; default 1)")
     parser.set_defaults(func=_run)
@@ -73,7 +78,7 @@ def _make_suite(args: argparse.Namespace) -> int:
 
     if not args.make_suite_out:
         raise ValueError("give the output folder: darkread eval make-suite OUT [--small]")
-    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs)
+    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
     return 0
 

@@ -27,6 +27,7 @@ from darkread.eval.tables import (
     headline_table,
     pct,
     per_recording_table,
+    scanpath_table,
 )
 
 REPORT_NAME = "README.md"
@@ -37,7 +38,9 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
     """Write ``README.md``, ``results.json`` and the PNG plots into ``out_dir``; returns the Markdown path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    results = sorted(results, key=lambda r: str(r.name))
+    every = sorted(results, key=lambda r: str(r.name))
+    results = [r for r in every if r.scanpath == "model"]  # the tables below: the reading model's scanpaths
+    human = [r for r in every if r.scanpath != "model"]
     plot_cer_vs(results, "lux", out / "cer_vs_lux.png", xlabel="illuminance at the page (lux, log scale)", logx=True,
                 title="CER vs light: darkread and one RGB snapshot")
     sizes, sizes_label = sweep_subset(results, "xheight_px")
@@ -46,7 +49,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
     plot_cer_vs_lux_by_motion(results, out / "cer_vs_lux_by_motion.png")
     backends_png = plot_backends(results, out / "ocr_backends_by_kind.png")
     examples_png = plot_examples(results, out / "examples.png")
-    (out / RESULTS_NAME).write_text(json.dumps([r.raw for r in results], indent=1))
+    (out / RESULTS_NAME).write_text(json.dumps([r.raw for r in every], indent=1))
 
     dk, rgb = mean(r.rate("darkread") for r in results), mean(r.rate("rgb") for r in results)
     md = [
@@ -68,6 +71,10 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         "## Paragraphs at 30 lux (the paper's headline)",
         "",
         *headline_table(results),
+        "",
+        "## Real readers' scanpaths",
+        "",
+        *scanpath_table(results, human),
         "",
         "## CER vs light",
         "",

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-CONDITIONS = ("lux", "motion", "kind", "font", "xheight_px")  # what the report groups recordings by
+CONDITIONS = ("lux", "motion", "kind", "font", "xheight_px", "scanpath")  # what the report groups recordings by
 
 
 def _number(value: Any) -> float | None:
@@ -123,6 +123,7 @@ class RecordingResult:
     bandwidth: Bandwidth | None
     failures: tuple[str, ...]  # "section: error" of every stage that failed
     raw: dict[str, Any] = field(repr=False, compare=False)
+    scanpath: str = "model"  # "human": a real reader's fixations replayed (the reading model otherwise)
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> RecordingResult:
@@ -135,7 +136,7 @@ class RecordingResult:
             duration_s=_number(doc.get("duration_s")), commit=doc.get("commit"), evaluated=doc.get("evaluated"),
             darkread=DarkreadRead.from_dict(doc.get("darkread")), rgb=RgbRead.from_dict(doc.get("rgb")),
             backends=backends, bandwidth=Bandwidth.from_dict(doc.get("bandwidth")),
-            failures=_failures(doc), raw=dict(doc),
+            failures=_failures(doc), raw=dict(doc), scanpath=str(doc.get("scanpath") or "model"),
         )
 
     def condition(self, key: str) -> Any:

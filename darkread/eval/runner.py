@@ -80,6 +80,7 @@ def conditions(recording_dir: Path) -> dict[str, Any]:
         "held_out_font": font in HELD_OUT_FONTS if font else None,
         "xheight_px": meta.get("xheight_px"),
         "duration_s": meta.get("duration_s"),
+        "scanpath": (meta.get("scanpath") or {}).get("kind", "model"),
         "reference_chars": len((recording_dir / "text.txt").read_text(encoding="utf-8")),
     }
 

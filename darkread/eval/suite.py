@@ -52,6 +52,7 @@ class SuiteEntry:
     seed: int
     read_once: bool = True
     split: str = "val"
+    scanpath: str = "model"  # "human": the shipped real reader's fixations replayed on the page
 
     def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
         from darkread.models.synth.recording import RecordingSpec
@@ -60,18 +61,24 @@ class SuiteEntry:
             lux=self.lux, motion=self.motion, kind=self.kind, seconds=self.seconds, seed=self.seed, font=self.font,
             xheight_px=self.xheight_px, n_lines=self.n_lines, line_chars=self.line_chars,
             description=f"darkread evaluation suite: {self.name}", split=self.split, read_once=self.read_once,
+            scanpath=self.scanpath,
         )
 
 
 SECONDS_PER_LINE_CAP = 2.5  # the upper bound of a read-once recording; readers need ~1-1.5 s per line
+# the real reader (oz) makes 10-19 fixations per line of 67 characters, replayed on a line of 28
+HUMAN_SECONDS_PER_LINE_CAP = 4.5
+HUMAN_BLOCK: tuple[tuple[float, str], ...] = tuple((lux, motion) for lux in (30.0, 10.0) for motion in MOTIONS)
 
 
-def _entry(index: int, lux: float, motion: str, kind: str, font: str, xheight: float, *, small: bool) -> SuiteEntry:
+def _entry(index: int, lux: float, motion: str, kind: str, font: str, xheight: float, *, small: bool,
+           scanpath: str = "model") -> SuiteEntry:
     n_lines, line_chars = (3, 20) if small else ((4, 28) if kind == "paragraph" else (3, 28))
-    seconds = 1.0 + SECONDS_PER_LINE_CAP * n_lines
+    seconds = 1.0 + (HUMAN_SECONDS_PER_LINE_CAP if scanpath == "human" else SECONDS_PER_LINE_CAP) * n_lines
     slug = font.lower().replace(" ", "")
-    name = f"{index:03d}_lux{lux:g}_{motion}_{kind}_{slug}_xh{xheight:g}"
-    return SuiteEntry(name, float(lux), motion, kind, font, float(xheight), seconds, n_lines, line_chars, BASE_SEED + index)
+    name = f"{index:03d}_lux{lux:g}_{motion}_{kind}_{slug}_xh{xheight:g}" + ("_human" if scanpath == "human" else "")
+    return SuiteEntry(name, float(lux), motion, kind, font, float(xheight), seconds, n_lines, line_chars, BASE_SEED + index,
+                      scanpath=scanpath)
 
 
 def suite_entries(*, small: bool = False) -> list[SuiteEntry]:
@@ -93,7 +100,21 @@ def suite_entries(*, small: bool = False) -> list[SuiteEntry]:
                     k += 1
         conditions += [(100.0, "normal", "paragraph", font, xh) for font in FONTS for xh in XHEIGHTS_PX]
         conditions += [(30.0, motion, "paragraph", font, 10.0) for motion in MOTIONS for font in FONTS]
-    return [_entry(i, *c, small=small) for i, c in enumerate(conditions)]
+    entries = [_entry(i, *c, small=small) for i, c in enumerate(conditions)]
+    if not small:  # real-scanpath block (appended: the seeds and names above stay as they were)
+        entries += [_entry(len(entries) + i, lux, motion, "paragraph", "DejaVu Sans", 10.0, small=False, scanpath="human")
+                    for i, (lux, motion) in enumerate(HUMAN_BLOCK)]
+    return entries
+
+
+def spec_document(entry: SuiteEntry) -> dict:
+    """What ``spec.json`` holds: the recording spec, without the fields left at their defaults that
+    older suites did not have (so their recordings stay complete)."""
+    doc = asdict(entry.recording_spec())
+    for key, default in (("scanpath", "model"), ("scanpath_file", None)):
+        if doc.get(key) == default:
+            doc.pop(key, None)
+    return doc
 
 
 def _write_entry(out: Path, entry: SuiteEntry) -> None:
@@ -101,7 +122,7 @@ def _write_entry(out: Path, entry: SuiteEntry) -> None:
     from darkread.models.synth.recording import write_recording
 
     folder = out / entry.name
-    spec_doc = asdict(entry.recording_spec())
+    spec_doc = spec_document(entry)
     spec_path = folder / SPEC_NAME
     if spec_path.is_file() and json.loads(spec_path.read_text()) == spec_doc and (folder / "meta.json").is_file():
         return
@@ -110,15 +131,24 @@ def _write_entry(out: Path, entry: SuiteEntry) -> None:
 
 
 def make_suite(
-    out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1
+    out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
+    match: str | None = None,
 ) -> list[SuiteEntry]:
     """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
-    ``spec.json`` matches) are kept, so an interrupted run resumes."""
+    ``spec.json`` matches) are kept, so an interrupted run resumes. ``match``: only the recordings
+    whose name matches this shell pattern (e.g. ``*lux30_*_human``)."""
     from tqdm import tqdm
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    entries = suite_entries(small=small)[:only]
+    entries = suite_entries(small=small)
+    if match:
+        from fnmatch import fnmatch
+
+        entries = [e for e in entries if fnmatch(e.name, match) or match in e.name]
+        if not entries:
+            raise ValueError(f"--match {match!r}: no recording of the suite has such a name")
+    entries = entries[:only]
     (out / SUITE_NAME).write_text(
         json.dumps({"small": small, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)

@@ -97,6 +97,28 @@ def headline_table(results: Sequence[RecordingResult], *, lux: float = 30.0, kin
     return lines
 
 
+def scanpath_table(model: Sequence[RecordingResult], human: Sequence[RecordingResult], kind: str = "paragraph") -> list[str]:
+    """CER of the recordings replaying a real reader's fixations next to the reading model's, per
+    light level and motion (the report's other tables hold the reading model's recordings only)."""
+    if not human:
+        return ["No recordings with a real reader's scanpath in these results (`darkread eval make-suite` adds six)."]
+    lines = [
+        "The same kind of pages read along a real reader's fixations (one reader of the oz data, EyeLink, replayed "
+        "line by line onto the page with its durations, regressions, skips, sweep undershoot and vertical drift; "
+        "`darkread synth recording --scanpath human`) and along the reading model's.",
+        "",
+        "| lux | motion | real scanpath: n | CER (mean) | worst | reading model: n | CER (mean) |",
+        "|---:|---|---:|---:|---:|---:|---:|",
+    ]
+    for (lux, motion), members in group_by(human, ("lux", "motion")).items():
+        same = [r for r in model if r.lux == lux and r.motion == motion and r.kind == kind]
+        cers = [r.rate("darkread") for r in members]
+        worst = max((c for c in cers if c is not None), default=None)
+        lines.append(f"| {lux:g} | {motion} | {len(members)} | {pct(mean(cers))} | {pct(worst)} | {len(same)} | "
+                     f"{pct(mean(r.rate('darkread') for r in same))} |")
+    return lines
+
+
 def _sizes(rows: Sequence[Bandwidth]) -> str:
     sizes = sorted({tuple(b.rgb_wh) for b in rows if b.rgb_wh})
     return " or ".join(f"{w} x {h}" for w, h in sizes) if sizes else "unknown size"

@@ -120,8 +120,3 @@ def calibrate_intrinsics(
         n_corners=int(sum(len(d) for d in used)),
         poses=poses,
     )
-
-
-def intrinsics_from_events(events: np.ndarray, spec: BoardSpec, width: int, height: int) -> IntrinsicsResult:
-    views = detect_views(events, spec, width, height)
-    return calibrate_intrinsics([v.detection for v in views if v.detection is not None], width, height)

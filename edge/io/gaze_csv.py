@@ -241,12 +241,16 @@ class _Table:
             cell = row[col].strip()
             try:
                 out[i] = int(cell)
+            except OverflowError:
+                raise GazeCsvError(
+                    f"{self.path}, line {line}: column {name}: {cell[:24]!r}... is beyond the 64-bit timestamp range"
+                ) from None
             except ValueError:
                 try:
                     value = float(cell)
                 except ValueError:
                     value = math.nan
-                if not value.is_integer():
+                if not value.is_integer() or abs(value) >= 2**63:
                     raise GazeCsvError(
                         f"{self.path}, line {line}: column {name}: {cell!r} is not an integer timestamp"
                     ) from None

@@ -1,7 +1,7 @@
 """Gaze sources: MPS CSV replay, a UDP datagram feed for any eye tracker, Aria Gen2 live gaze.
 
-All of them answer the pipeline's two questions, ``pixel_at(t_event_us)`` and
-``angles_at(t_event_us)``, on the **event clock**. Gaze arrives on its own device clock;
+All of them answer the pipeline's one question, ``at(t_event_us) -> GazeSample | None``, on the
+**event clock**. Gaze arrives on its own device clock;
 ``clock_offset_us`` (``t_event = t_device + offset``, from ``calibration.json``) maps it and can
 be changed while running (e.g. after re-synchronising the clocks).
 
@@ -20,12 +20,12 @@ while running, e.g. after the tracker re-synchronised its clock.
 
 from __future__ import annotations
 
+import bisect
 import json
 import logging
 import math
 import socket
 import threading
-from collections import deque
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -34,7 +34,7 @@ import msgpack
 import numpy as np
 
 from darkread.edge.errors import DeviceError
-from darkread.edge.gaze import READING_DEPTH_PRIOR_M, GazeMapper, gaze_point_cpf
+from darkread.edge.gaze import READING_DEPTH_PRIOR_M, GazeMapper, GazeSample, gaze_sample
 from darkread.edge.io.calibration import Calibration
 from darkread.edge.io.gaze_csv import read_gaze_csv
 
@@ -57,7 +57,8 @@ class LiveGaze:
     """The newest gaze samples of a live feed (bounded), looked up on the event clock.
 
     Between two samples the angles are interpolated; after the newest sample it is held for
-    ``max_age_us``; older than that (or before the first sample) there is no gaze.
+    ``max_age_us``; older than that (or before the first sample) there is no gaze. Samples live in
+    plain lists searched by bisection, trimmed in batches, so a lookup copies nothing.
     """
 
     def __init__(
@@ -73,45 +74,62 @@ class LiveGaze:
         self.clock_offset_us = int(calibration.gaze_to_event_time_offset_us if clock_offset_us is None else clock_offset_us)
         self.max_age_us = int(max_age_us)
         self.depth_prior_m = float(depth_prior_m)
-        self._samples: deque[tuple[int, float, float, float]] = deque(maxlen=capacity)
+        self.capacity = int(capacity)
+        self._times: list[int] = []  # device clock, increasing
+        self._values: list[tuple[float, float, float]] = []  # (yaw, pitch, depth)
         self._lock = threading.Lock()
         self.received = 0
 
     def push(self, t_device_us: int, yaw_rad: float, pitch_rad: float, depth_m: float | None = None) -> None:
         depth = depth_m if depth_m is not None and math.isfinite(depth_m) and depth_m > 0 else self.depth_prior_m
         with self._lock:
-            if self._samples and t_device_us <= self._samples[-1][0]:
+            if self._times and t_device_us <= self._times[-1]:
                 return  # out of order or repeated: keep the track monotonic
-            self._samples.append((int(t_device_us), float(yaw_rad), float(pitch_rad), float(depth)))
+            self._times.append(int(t_device_us))
+            self._values.append((float(yaw_rad), float(pitch_rad), float(depth)))
+            if len(self._times) > 2 * self.capacity:  # amortised: one trim per ``capacity`` pushes
+                del self._times[: -self.capacity], self._values[: -self.capacity]
             self.received += 1
 
-    def _sample_at(self, t_event_us: int) -> tuple[float, float, float] | None:
+    def _interpolate(self, t_event_us: int) -> tuple[float, float, float] | None:
+        """(yaw, pitch, depth) at an event time, or None outside the held track."""
         t = int(t_event_us) - self.clock_offset_us
         with self._lock:
-            if not self._samples:
+            times, values = self._times, self._values
+            if not times or t < times[0] or t > times[-1] + self.max_age_us:
                 return None
-            track = np.array(self._samples, dtype=np.float64)
-        times = track[:, 0]
-        if t < times[0] or t > times[-1] + self.max_age_us:
-            return None
-        if t >= times[-1]:
-            return float(track[-1, 1]), float(track[-1, 2]), float(track[-1, 3])
-        yaw, pitch, depth = (float(np.interp(t, times, track[:, i])) for i in (1, 2, 3))
-        return yaw, pitch, depth
+            if t >= times[-1]:
+                return values[-1]
+            right = bisect.bisect_right(times, t)  # times[right - 1] <= t < times[right]
+            t0, t1 = times[right - 1], times[right]
+            v0, v1 = values[right - 1], values[right]
+        w = (t - t0) / (t1 - t0)
+        return v0[0] + w * (v1[0] - v0[0]), v0[1] + w * (v1[1] - v0[1]), v0[2] + w * (v1[2] - v0[2])
 
-    def angles_at(self, t_event_us: int) -> tuple[float, float] | None:
-        sample = self._sample_at(t_event_us)
-        return None if sample is None else (sample[0], sample[1])
+    @property
+    def rate_hz(self) -> float:
+        """The feed's row rate, from the rows held (Aria: 10 to 90 Hz); 60 until two arrived."""
+        with self._lock:
+            times = self._times[-64:]
+        if len(times) < 2:
+            return 60.0
+        period = float(np.median(np.diff(times)))
+        return 1e6 / period if period > 0 else 60.0
 
-    def pixel_at(self, t_event_us: int) -> tuple[float, float] | None:
-        sample = self._sample_at(t_event_us)
-        if sample is None:
-            return None
-        point = gaze_point_cpf(np.array([sample[0]]), np.array([sample[1]]), np.array([sample[2]]))
-        uv = self.calibration.project(self.calibration.cpf_to_event(point))
-        if not bool(self.calibration.on_sensor(uv)[0]) or np.isnan(uv).any():
-            return None
-        return float(uv[0, 0]), float(uv[0, 1])
+    def rows(self, t0_event_us: int, t1_event_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The held rows with event time in (t0, t1]: (t_event_us, yaw, pitch)."""
+        lo, hi = int(t0_event_us) - self.clock_offset_us, int(t1_event_us) - self.clock_offset_us
+        with self._lock:
+            i0 = bisect.bisect_right(self._times, lo)
+            i1 = bisect.bisect_right(self._times, hi)
+            times, values = self._times[i0:i1], self._values[i0:i1]
+        t = np.asarray(times, dtype=np.int64) + self.clock_offset_us
+        angles = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+        return t, angles[:, 0], angles[:, 1]
+
+    def at(self, t_event_us: int) -> GazeSample | None:
+        value = self._interpolate(t_event_us)
+        return None if value is None else gaze_sample(self.calibration, *value)
 
 
 def _finite(value: Any, name: str) -> float:

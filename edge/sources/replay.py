@@ -1,8 +1,10 @@
 """Replay of a recorded RAW file as a live :class:`EventSource` (CI, benchmarks, demos).
 
-A reader thread decodes the file into ``slice_us`` time slices and hands them to the sink, paced
-at wall-clock speed (``speed=1``), N times faster (``speed=N``) or as fast as the sink takes them
-(``speed=None``). ``set_roi`` crops in software, as the sensor's ROI would.
+A reader thread cuts the file into ``slice_us`` time slices with the OpenEB-style
+:class:`~darkread.edge.io.iterator.EventsIterator` and hands the non-empty ones to the sink, paced
+by :class:`~darkread.edge.io.iterator.PacedReplay` at wall-clock speed (``speed=1``), N times
+faster (``speed=N``) or as fast as the sink takes them (``speed=None``). ``set_roi`` crops in
+software, as the sensor's ROI would.
 """
 
 from __future__ import annotations
@@ -10,12 +12,14 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-
-from darkread.edge.events import Events, empty_events
+from darkread.edge.events import Events
+from darkread.edge.fovea import in_window
+from darkread.edge.io.iterator import EventsIterator, PacedReplay
+from darkread.edge.io.plausibility import TimeCheck
 from darkread.edge.io.raw_header import read_raw_header
 from darkread.edge.sources.base import EventSink
 
@@ -57,6 +61,9 @@ class ReplaySource:
         self.chunk_bytes = int(chunk_bytes)
         self.finished = threading.Event()
         self.error: BaseException | None = None
+        self.problems: list[str] = []  # what makes the stream implausible (set when the replay ends)
+        self._reader: Any = None
+        self._time_check = TimeCheck()
         self._roi: tuple[int, int, int, int] | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -65,7 +72,6 @@ class ReplaySource:
         self._first_t: int | None = None
         self._last_t: int | None = None
         self._wall_s = 0.0
-        self._anchor: tuple[float, int] | None = None  # (wall clock, event time) of the first slice
 
     def start(self, sink: EventSink) -> None:
         if self._thread is not None:
@@ -100,17 +106,30 @@ class ReplaySource:
         }
 
     def _slice_iter(self) -> Iterable[Events]:
-        from darkread.edge.io.raw import RawReader
+        """The file's time slices, paced; the pause between two slices ends early on ``stop``.
 
-        return time_slices(RawReader(self.raw_path, chunk_bytes=self.chunk_bytes), self.slice_us)
+        The clock is anchored at the first slice, so opening and decoding the file does not make
+        the first slices late.
+        """
+        slices = EventsIterator(self.raw_path, delta_t=self.slice_us, chunk_bytes=self.chunk_bytes)
+        self._reader = slices.reader
+        return PacedReplay(slices, self.speed, clock=time.perf_counter, sleep=self._stop.wait)
+
+    def _judge(self) -> None:
+        """After the replay: name what makes the stream implausible (``problems``)."""
+        from darkread.edge.io.plausibility import problems
+
+        if self._reader is None:
+            return
+        header = self._reader.header
+        self.problems = problems(self._reader.stats, header.format, header.width, header.height, self._time_check)
+        for problem in self.problems:
+            logger.warning("%s: %s", self.raw_path, problem)
 
     def _apply_roi(self, events: Events) -> Events:
         if self._roi is None:
             return events
-        x0, y0, w, h = self._roi
-        dx = events["x"] - np.uint16(x0)
-        dy = events["y"] - np.uint16(y0)
-        return events[(dx < w) & (dy < h)]
+        return events[in_window(events, *self._roi)]
 
     def _run(self, sink: EventSink) -> None:
         started = time.perf_counter()
@@ -118,12 +137,13 @@ class ReplaySource:
             for events in self._slice_iter():
                 if self._stop.is_set():
                     break
+                if events.shape[0] == 0:
+                    continue
                 self._slices += 1
                 if self._first_t is None:
                     self._first_t = int(events["t"][0])
-                if self.speed is not None and not self._wait_until(events):
-                    break
                 self._last_t = int(events["t"][-1])
+                self._time_check.add(events["t"])
                 events = self._apply_roi(events)
                 if events.shape[0] == 0:
                     continue
@@ -134,46 +154,8 @@ class ReplaySource:
             logger.exception("replay of %s failed", self.raw_path)
         finally:
             self._wall_s = time.perf_counter() - started
+            if self.error is None and not self._stop.is_set():
+                self._judge()
             self.finished.set()
             logger.info("replay of %s ended: %s", self.raw_path.name, {k: round(v, 3) for k, v in self.stats.items()})
 
-    def _wait_until(self, events: Events) -> bool:
-        """Sleep until the wall clock reaches the slice's last event; False when stopped meanwhile.
-
-        The clock is anchored at the first slice, so opening and decoding the file does not make
-        the first slices late.
-        """
-        assert self.speed is not None
-        t_last = int(events["t"][-1])
-        if self._anchor is None:
-            self._anchor = (time.perf_counter(), t_last)
-        anchor_wall, anchor_t = self._anchor
-        due = anchor_wall + (t_last - anchor_t) / 1e6 / self.speed
-        delay = due - time.perf_counter()
-        return delay <= 0 or not self._stop.wait(delay)
-
-
-def time_slices(chunks: Iterable[Events], slice_us: int) -> Iterator[Events]:
-    """Re-cut decoded chunks into slices on a ``slice_us`` time grid; empty slices are skipped.
-
-    A slice is yielded once a later event proves it complete (or at the end of the stream).
-    """
-    carry = empty_events()
-    for chunk in chunks:
-        events = np.concatenate([carry, chunk]) if carry.shape[0] else chunk
-        if events.shape[0] == 0:
-            continue
-        t = events["t"]
-        open_from = (int(t[-1]) // slice_us) * slice_us  # the newest slice may still grow
-        cut = int(np.searchsorted(t, open_from, side="left"))
-        carry = events[cut:]
-        yield from _split_on_grid(events[:cut], slice_us)
-    yield from _split_on_grid(carry, slice_us)
-
-
-def _split_on_grid(events: Events, slice_us: int) -> Iterator[Events]:
-    if events.shape[0] == 0:
-        return
-    keys = events["t"] // slice_us
-    starts = np.flatnonzero(np.diff(keys)) + 1
-    yield from np.split(events, starts)

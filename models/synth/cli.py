@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from pathlib import Path
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +42,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     rec.add_argument("--xheight", type=float, default=None, help="x-height in event pixels (5..16; default random)")
     rec.add_argument("--lines", type=int, default=None, help="number of printed lines (default 3..10)")
     rec.add_argument("--line-chars", type=int, default=None, help="characters per line (default 20..50)")
+    rec.add_argument("--scanpath", choices=("model", "human"), default="model",
+                     help="model: the reading model's eye movements; human: a real reader's fixations replayed on "
+                          "this page line by line (durations, regressions, skips, sweep undershoot, vertical drift; "
+                          "shipped: one reader of the oz data, MIT licence)")
+    rec.add_argument("--scanpath-file", default=None, metavar="FILE.json",
+                     help="with --scanpath human: another human scanpath (the form of "
+                          "models/synth/data/human_scanpath_oz.json; see models/synth/human_scanpath.py)")
     rec.set_defaults(func=_recording)
 
     ds = sub.add_parser(
@@ -92,7 +100,11 @@ def _recording(args: argparse.Namespace) -> int:
         line_chars=args.line_chars,
         split=args.text_split,
         read_once=args.read_once,
+        scanpath="human" if args.scanpath_file else args.scanpath,
+        scanpath_file=args.scanpath_file,
     )
+    if args.scanpath_file and not Path(args.scanpath_file).is_file():
+        raise FileNotFoundError(f"--scanpath-file {args.scanpath_file}: no such file")
     meta = write_recording(args.out, spec)
     print(f"{args.out}: {meta['event_count']} events over {meta['duration_s']} s ({meta['event_rate_hz']:.0f} ev/s)")
     return 0

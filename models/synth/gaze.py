@@ -69,7 +69,7 @@ def _fixation_ms(rng: np.random.Generator, short: bool = False) -> float:
     return float(np.clip(rng.lognormal(math.log(215.0), 0.3), FIXATION_MIN_MS, FIXATION_MAX_MS))
 
 
-def _saccade_ms(amplitude_deg: float, forward: bool) -> float:
+def saccade_ms(amplitude_deg: float, forward: bool) -> float:
     """Main sequence: ~21 ms + 2.2 ms per degree (forward saccades kept within 20-40 ms)."""
     d = 21.0 + 2.2 * abs(amplitude_deg)
     return float(np.clip(d, 20.0, 40.0) if forward else np.clip(d, 20.0, 80.0))
@@ -122,13 +122,20 @@ def reading_scanpath(
             new_line, new_char, kind = line, char + step + float(rng.normal(0, 0.3)), "forward"
         nx, ny = position(new_line, min(new_char, len(page.lines[new_line]) - 1.0))
         amp_deg = math.hypot(nx - x, ny - y) * deg_per_texel
-        sdur = _saccade_ms(amp_deg, forward=(kind == "forward")) / 1000.0
+        sdur = saccade_ms(amp_deg, forward=(kind == "forward")) / 1000.0
         saccades.append((t, sdur))
         t += sdur
         line, char = new_line, min(new_char, len(page.lines[new_line]) - 1.0)
 
-    # dense trajectory
-    grid = np.arange(0.0, t + dt_s, dt_s)
+    return trajectory(fixations, saccades, t, rng, dt_s)
+
+
+def trajectory(fixations: list[Fixation], saccades: list[tuple[float, float]], t_end_s: float,
+               rng: np.random.Generator, dt_s: float = 0.001) -> Scanpath:
+    """The dense gaze track of a fixation sequence: still during fixations, a minimum-jerk
+    movement over each saccade ((start, duration) of the saccade into the next fixation); blinks
+    every few seconds."""
+    grid = np.arange(0.0, t_end_s + dt_s, dt_s)
     xy = np.empty((grid.size, 2))
     starts = np.array([f.t0_s for f in fixations])
     idx = np.clip(np.searchsorted(starts, grid, side="right") - 1, 0, len(fixations) - 1)
@@ -143,7 +150,7 @@ def reading_scanpath(
         xy[sel] = fx[k] + (fx[k + 1] - fx[k]) * prof[:, None]
     blinks = []
     tb = float(rng.uniform(1.0, 4.0))
-    while tb < t:
+    while tb < t_end_s:
         dur = float(rng.uniform(0.1, 0.3))
         blinks.append((tb, tb + dur))
         tb += dur + float(rng.uniform(2.0, 6.0))

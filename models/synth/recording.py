@@ -50,6 +50,8 @@ class RecordingSpec:
     description: str = "synthetic reading session"
     split: str = "train"  # "val": texts never used for training (evaluation)
     read_once: bool = False  # stop once the page was read (``seconds`` is then the upper bound)
+    scanpath: str = "model"  # "human": a real reader's fixations replayed (models/synth/human_scanpath.py)
+    scanpath_file: str | None = None
 
 
 def session_spec(spec: RecordingSpec) -> SessionSpec:
@@ -57,6 +59,7 @@ def session_spec(spec: RecordingSpec) -> SessionSpec:
     return SessionSpec(
         split=spec.split, lux=spec.lux, motion=spec.motion, kind=spec.kind, font=spec.font,
         xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
+        scanpath=spec.scanpath, scanpath_file=spec.scanpath_file,
     )
 
 
@@ -240,6 +243,10 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         "page": {k: round(float(v), 4) for k, v in session.extras.items()},
         "generator": "darkread.models.synth",
     }
+    if spec.scanpath != "model" or spec.scanpath_file is not None:
+        from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath
+
+        meta["scanpath"] = {"kind": "human", "source": HumanScanpath.load(spec.scanpath_file or SHIPPED).source}
     (out / "meta.json").write_text(json.dumps(meta, indent=2))
     log.info("wrote %s: %d events in %.1f s wall", out, events.size, time.perf_counter() - t_wall)
     return meta

@@ -38,6 +38,11 @@ class SessionSpec:
     n_lines: int | None = None
     line_chars: int | None = None
     duration_s: float = 10.0
+    scanpath: str = "model"  # "model": the reading model; "human": a real reader's fixations replayed
+    scanpath_file: str | None = None  # a human scanpath file (default: the shipped oz reader)
+
+
+SCANPATHS = ("model", "human")
 
 
 @dataclass
@@ -105,7 +110,15 @@ def make_session(spec: SessionSpec, seed: int) -> Session:
         surround = paper  # usually the sheet extends beyond the field of view (no page edge in view)
     scene = Scene(page, reflect, calib, rot, centre, random_motion(motion_level, rng), lux, surround)
     deg_per_texel = math.degrees(texel_m / distance)
-    scanpath = reading_scanpath(page, spec.duration_s + 1.0, deg_per_texel, rng, start_line=0)
+    if spec.scanpath == "model" and spec.scanpath_file is None:
+        scanpath = reading_scanpath(page, spec.duration_s + 1.0, deg_per_texel, rng, start_line=0)
+    elif spec.scanpath in SCANPATHS:
+        from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath, replay_scanpath
+
+        human = HumanScanpath.load(spec.scanpath_file or SHIPPED)
+        scanpath = replay_scanpath(page, human, spec.duration_s + 1.0, deg_per_texel, rng)
+    else:
+        raise ValueError(f"scanpath {spec.scanpath!r}: use one of {', '.join(SCANPATHS)}")
     return Session(
         spec=spec,
         seed=int(seed),

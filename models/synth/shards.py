@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from darkread.edge.config import PipelineConfig
 from darkread.edge.fovea import FoveaConfig, window_origin
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 from darkread.mask_bits import pack_rows
@@ -29,6 +30,7 @@ log = logging.getLogger(__name__)
 
 FOVEA = FoveaConfig()
 VOXEL = VoxelConfig()
+N_EVENTS = PipelineConfig().n_events  # events per voxel grid, as the edge bins them
 SAMPLES_PER_PAGE = 8
 SHARD_SIZE = 250
 MAX_WINDOW_S = 0.5  # give up collecting events after this much simulated time
@@ -60,7 +62,7 @@ def simulate_window(
     t_start_s: float,
     rng: np.random.Generator,
     *,
-    n_events: int = VOXEL.n_events,
+    n_events: int = N_EVENTS,
     max_s: float = MAX_WINDOW_S,
 ) -> tuple[np.ndarray, float]:
     """Events of ``region`` from ``t_start_s`` until ``n_events`` have fired; returns (events, t_end_s).
@@ -122,7 +124,7 @@ def make_samples(
         x0, y0 = gaze_window_origin(session, scene, t_s, rng)
         region = Region.of(scene.calib, x0, y0, FOVEA.width, FOVEA.height)
         events, t_end = simulate_window(scene, params, region, t_s, rng)
-        voxels[i] = voxel_grid(events, x0, y0, VOXEL).astype(np.float16)
+        voxels[i] = voxel_grid(events[-N_EVENTS:], x0, y0, VOXEL).astype(np.float16)  # region events: all inside
         targets[i] = scene.ink_mask(region, t_end)
         metas.append(
             SampleMeta(
@@ -265,7 +267,8 @@ def build_dataset(
         "held_out": bool(held_out),
         "fonts": font_split,
         "text_split": "val" if split == "val" else "train",
-        "voxel": asdict(VOXEL),
+        "voxel": {"bins": VOXEL.bins, "n_events": N_EVENTS, "height": VOXEL.height, "width": VOXEL.width,
+                  "normalize": VOXEL.normalize},
         "fovea": asdict(FOVEA),
         "target": "uint8 1 = ink, 0 = paper; ideal ink mask warped into the window at t_end; np.packbits on axis -1",
         "parameters": {

@@ -113,13 +113,14 @@ def match_target(
 
 def recording_windows(path: str | Path, every_ms: float = 40.0, max_windows: int = 400) -> tuple[np.ndarray, dict[str, Any], str]:
     """Voxel grids [n,4,100,200] the edge would reconstruct from ``path``, its meta and its text."""
-    from darkread.edge.fovea import window_origin
+    from darkread.edge.config import PipelineConfig
+    from darkread.edge.fovea import window_events, window_origin
     from darkread.edge.gaze import GazeMapper
     from darkread.edge.io.evt3 import decode_evt3
     from darkread.edge.io.raw_header import read_raw_header
     from darkread.edge.io.recording import open_recording
-    from darkread.edge.pipeline import PipelineSettings, window_events
-    from darkread.edge.voxel import voxel_grid
+    from darkread.edge.pipeline import MAX_HISTORY_EVENTS
+    from darkread.edge.voxel import VoxelConfig, voxel_grid
 
     rec = open_recording(path)
     if not rec.text:
@@ -129,18 +130,18 @@ def recording_windows(path: str | Path, every_ms: float = 40.0, max_windows: int
     if len(events) == 0:
         raise ValueError(f"{path}: no events")
     mapper = GazeMapper(rec.calibration, rec.gaze())
-    settings = PipelineSettings()
+    n_events, voxel = PipelineConfig().n_events, VoxelConfig()
     times = np.arange(int(events["t"][0]) + 100_000, int(events["t"][-1]), int(every_ms * 1000))[:max_windows]
     ends = np.searchsorted(events["t"], times, side="right")
     voxels = []
     for t, end in zip(times, ends):
-        gaze = mapper.pixel_at(int(t))
+        gaze = mapper.at(int(t))
         if gaze is None:
             continue
-        origin = window_origin(gaze, (header.width, header.height), settings.fovea)
-        window = window_events(events[max(0, end - settings.history_events) : end], origin, settings)
-        if len(window) >= settings.n_events // 2:
-            voxels.append(voxel_grid(window, origin[0], origin[1], settings.voxel))
+        origin = window_origin(gaze.pixel, (header.width, header.height), voxel.fovea)
+        window = window_events(events[max(0, end - MAX_HISTORY_EVENTS) : end], origin, voxel.fovea, n_events)
+        if len(window) >= n_events // 2:
+            voxels.append(voxel_grid(window, origin[0], origin[1], voxel))
     stack = np.stack(voxels).astype(np.float32) if voxels else np.zeros((0, 4, *WINDOW_HW), np.float32)
     return stack, rec.meta, rec.text
 

@@ -72,6 +72,7 @@ def make_settings(tmp_path: Path) -> Callable[..., Settings]:
         # a question waits for every frame stored before it (a loaded CI host stitches slowly)
         values: dict[str, object] = {
             "data_dir": tmp_path / "data", "api_key": API_KEY, "max_message_bytes": 65536, "ask_catch_up_s": 60.0,
+            "ask_rate_per_min": 6000.0, "ask_burst": 100,  # wearers asking every few seconds (limits: test_ask_limits)
         }  # fmt: skip
         values.update(overrides)
         return Settings(_env_file=None, **values)  # type: ignore[arg-type, call-arg]

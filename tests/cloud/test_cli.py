@@ -34,7 +34,7 @@ def test_serve_starts_and_is_ready(tmp_path: Path) -> None:
         deadline = time.monotonic() + 20
         while True:
             try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/readyz", timeout=5) as response:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/readyz", timeout=30) as response:
                     ready = json.loads(response.read())
                 break
             except OSError:

@@ -82,7 +82,7 @@ def test_a_restart_rebuilds_the_same_pages_and_answers(make_settings: Any, run_s
             assert http.delete("/v1/sessions/keep").status_code == 204
             assert http.get("/v1/sessions/keep/pages").status_code == 404
             assert http.post("/v1/sessions/keep/ask").status_code == 404
-        assert server.context.live.live_sessions == 0
+        assert server.context.pages.live_sessions == 0
         assert asyncio.run(server.context.store.frames("keep")) == []
     for old, new in zip(before, after):
         assert (new["page"], new["version"], new["text"]) == (old["page"], old["version"], old["text"])
@@ -147,9 +147,9 @@ def test_idle_sessions_leave_memory_and_expire(make_settings: Any, run_server: A
         with httpx.Client(base_url=server.url, headers=AUTH, timeout=30) as http:
             assert http.get("/v1/sessions/old/pages").json()[0]["index"] == 0
             deadline = time.monotonic() + 10
-            while server.context.live.live_sessions and time.monotonic() < deadline:
+            while server.context.pages.live_sessions and time.monotonic() < deadline:
                 time.sleep(0.05)  # the sweep frees the idle session's pages
-            assert server.context.live.live_sessions == 0
+            assert server.context.pages.live_sessions == 0
             assert http.get("/v1/sessions/old").json()["frames"] == 12  # the data stays
             server.context.settings.session_expire_s = 1e-6
             time.sleep(0.01)

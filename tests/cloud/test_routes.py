@@ -127,14 +127,15 @@ def test_list_and_delete_sessions(server: Any, client: httpx.Client) -> None:
 
 def test_metrics_endpoint_exposes_stream_counters(server: Any, client: httpx.Client) -> None:
     send_page(server, "sess-metrics", page_mask())
-    text = client.get("/metrics/").text
+    text = client.get("/metrics/", headers=AUTH).text  # an admin key
     assert "darkread_ws_connections_total 1.0" in text
     assert "darkread_ws_pages_stored_total 1.0" in text
     assert 'darkread_ws_messages_total{type="page"} 1.0' in text
 
 
-def test_openapi_documents_every_route(client: httpx.Client) -> None:
-    spec = client.get("/openapi.json").json()
+def test_openapi_documents_every_route(make_settings: Any, run_server: Any) -> None:
+    with run_server(make_settings(api_docs=True)) as live, httpx.Client(base_url=live.url) as client:
+        spec = client.get("/openapi.json").json()
     expected = {
         ("/healthz", "get"), ("/readyz", "get"), ("/v1/sessions", "get"), ("/v1/sessions/{session_id}", "get"),
         ("/v1/sessions/{session_id}", "delete"), ("/v1/sessions/{session_id}/page.png", "get"),

@@ -22,9 +22,13 @@ def test_environment_variables_are_read(monkeypatch: pytest.MonkeyPatch, tmp_pat
     assert "s3cret" not in repr(settings) and "s3cret" not in str(settings.model_dump())
 
 
-def test_empty_key_means_no_key(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_empty_key_is_an_error_not_no_key(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DARKREAD_API_KEY", "")
-    assert Settings(_env_file=None).api_key is None  # type: ignore[call-arg]
+    with pytest.raises(ValidationError, match="empty"):
+        Settings(_env_file=None)  # type: ignore[call-arg]
+    monkeypatch.setenv("DARKREAD_OPENAI_API_KEY", "")
+    monkeypatch.delenv("DARKREAD_API_KEY")
+    assert Settings(_env_file=None).openai_api_key is None  # type: ignore[call-arg]
 
 
 @pytest.mark.parametrize(("name", "value"), [("DARKREAD_OCR_BACKEND", "easyocr"), ("DARKREAD_MAX_MESSAGE_BYTES", "10")])

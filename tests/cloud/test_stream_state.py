@@ -11,6 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from darkread.cloud.auth import ENVIRONMENT_ADMIN, KeyRing
 from darkread.cloud.context import AppContext
 from darkread.cloud.live import LivePages
 from darkread.cloud.prometheus import Metrics
@@ -36,9 +37,10 @@ def context(tmp_path_factory: pytest.TempPathFactory) -> Iterator[AppContext]:
     data = Path(tmp_path_factory.mktemp("state"))
     store = SqliteStore(data)
     settings = Settings(_env_file=None, data_dir=data, max_message_bytes=4096)  # type: ignore[call-arg]
-    live = LivePages(store, NoOcr())  # type: ignore[arg-type]
-    yield AppContext(settings=settings, store=store, metrics=Metrics(), ocr=NoOcr(), live=live)  # type: ignore[arg-type]
-    asyncio.run(live.close())
+    pages = LivePages(store, NoOcr())  # type: ignore[arg-type]
+    yield AppContext(settings=settings, store=store, metrics=Metrics(), ocr=NoOcr(), pages=pages,  # type: ignore[arg-type]
+                     keys=KeyRing(data / "keys.json"))
+    asyncio.run(pages.close())
     asyncio.run(store.close())
 
 
@@ -60,7 +62,7 @@ message_maps = st.dictionaries(
 @given(st.one_of(st.binary(max_size=200), message_maps.map(lambda m: msgpack.packb(m, use_bin_type=True))))
 def test_anything_after_hello_is_handled_or_refused(context: AppContext, data: bytes) -> None:
     async def scenario() -> None:
-        connection = StreamConnection(context, authenticated=True)
+        connection = StreamConnection(context, principal=ENVIRONMENT_ADMIN)
         assert isinstance(await connection.handle(encode(HELLO)), Welcome)
         assert connection.state is StreamState.STREAMING
         try:
@@ -72,14 +74,14 @@ def test_anything_after_hello_is_handled_or_refused(context: AppContext, data: b
             assert result.last_seq >= 0
         else:
             assert outgoing is None  # a heartbeat
-        await context.live.forget("fuzz")  # its pages belong to this event loop
+        await context.pages.forget("fuzz")  # its pages belong to this event loop
 
     asyncio.run(scenario())
 
 
 def test_only_hello_opens_a_connection(context: AppContext) -> None:
     async def scenario() -> None:
-        connection = StreamConnection(context, authenticated=True)
+        connection = StreamConnection(context, principal=ENVIRONMENT_ADMIN)
         with pytest.raises(UnexpectedMessageError, match="expected hello"):
             await connection.handle(encode(Ack(seq=1)))
         assert connection.state is StreamState.AWAIT_HELLO

@@ -1,4 +1,4 @@
-"""Foveation: window placement and clamping, crops, moving-gaze crops, counters."""
+"""Foveation: window placement and clamping, the window test, crops, moving-gaze crops."""
 
 from __future__ import annotations
 
@@ -7,7 +7,15 @@ import pytest
 from factories import random_events
 
 from darkread.edge.events import make_events
-from darkread.edge.fovea import FoveaConfig, FoveaCounter, crop, crop_along_track, window_origin, window_origins
+from darkread.edge.fovea import (
+    FoveaConfig,
+    crop,
+    crop_along_track,
+    in_window,
+    origins_along_gaze,
+    window_origin,
+    window_origins,
+)
 
 SENSOR = (1280, 720)
 
@@ -76,11 +84,24 @@ def test_crop_along_track_with_a_fixed_origin_equals_crop() -> None:
     assert np.array_equal(crop_along_track(events, origins), crop(events, 540, 310))
 
 
-def test_counter_counts_events_and_bytes() -> None:
-    counter = FoveaCounter()
+def test_in_window_is_the_naive_four_comparisons() -> None:
     events = random_events(10_000, seed=1)
-    counter.add(events.shape[0], crop(events, 540, 310).shape[0])
-    assert counter.bytes_in == 16 * 10_000 == events.nbytes
-    assert counter.bytes_out == 16 * counter.events_out
+    inside = in_window(events, 540, 310, 200, 100)
+    assert np.array_equal(events[inside], naive_crop(events, 540, 310))
     # a 100x200 window is 2.2 % of the sensor; uniform events follow that share
-    assert counter.kept_fraction == pytest.approx(200 * 100 / (1280 * 720), abs=0.005)
+    assert inside.mean() == pytest.approx(200 * 100 / (1280 * 720), abs=0.005)
+    assert not in_window(make_events([539, 740, 600], [320, 320, 410], 1, [0, 1, 2]), 540, 310, 200, 100).any()
+
+
+def test_origins_along_gaze_look_up_the_gaze_once_per_millisecond() -> None:
+    asked: list[np.ndarray] = []
+
+    def gaze(t_us: np.ndarray) -> np.ndarray:
+        asked.append(np.asarray(t_us))
+        return np.tile([640.0, 360.0], (len(t_us), 1))
+
+    t = np.array([10, 20, 999, 1000, 2500, 2501])
+    origins = origins_along_gaze(t, gaze, SENSOR)
+    assert origins.tolist() == [[540, 310]] * 6
+    assert asked[0].tolist() == [500, 1500, 2500]  # the middle of each millisecond holding events
+    assert origins_along_gaze(np.array([], np.int64), gaze, SENSOR).shape == (0, 2)

@@ -8,6 +8,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 import pytest
+from factories import angles_at, pixel_at
 
 from darkread.edge.errors import DeviceError
 from darkread.edge.io.calibration import Calibration, load_calibration
@@ -32,28 +33,28 @@ def test_live_gaze_projects_and_interpolates_on_the_event_clock() -> None:
     live = LiveGaze(calibration(offset_us=1_000), max_age_us=50_000)
     live.push(0, 0.0, 0.0, 0.5)
     live.push(10_000, 0.2, 0.0, 0.5)
-    assert live.pixel_at(1_000) == pytest.approx((640.0, 360.0))
-    yaw, pitch = live.angles_at(6_000)  # device 5000: halfway
+    assert pixel_at(live, 1_000) == pytest.approx((640.0, 360.0))
+    yaw, pitch = angles_at(live, 6_000)  # device 5000: halfway
     assert yaw == pytest.approx(0.1) and pitch == 0.0
-    u, _ = live.pixel_at(11_000)
+    u, _ = pixel_at(live, 11_000)
     assert u == pytest.approx(640.0 - 600.0 * np.tan(0.2))  # positive yaw looks to the wearer's left
-    assert live.pixel_at(0) is None  # before the first sample
-    assert live.pixel_at(11_000 + 50_000) is not None  # newest sample held for max_age
-    assert live.pixel_at(11_000 + 50_001) is None  # too old
+    assert pixel_at(live, 0) is None  # before the first sample
+    assert pixel_at(live, 11_000 + 50_000) is not None  # newest sample held for max_age
+    assert pixel_at(live, 11_000 + 50_001) is None  # too old
 
 
 def test_live_gaze_clock_offset_is_adjustable_at_run_time() -> None:
     live = LiveGaze(calibration(offset_us=0))
     live.push(5_000, 0.0, 0.1)
-    assert live.angles_at(4_000) is None
+    assert angles_at(live, 4_000) is None
     live.clock_offset_us = -1_000
-    assert live.angles_at(4_000) == pytest.approx((0.0, 0.1))
+    assert angles_at(live, 4_000) == pytest.approx((0.0, 0.1))
 
 
 def test_live_gaze_off_sensor_or_out_of_order() -> None:
     live = LiveGaze(calibration(offset_us=0))
     live.push(1_000, 1.4, 0.0)  # far to the side: off the sensor
-    assert live.angles_at(1_000) is not None and live.pixel_at(1_000) is None
+    assert live.received == 1 and live.at(1_000) is None  # held, but its pixel misses the sensor
     live.push(500, 0.0, 0.0)  # older than the newest: ignored
     assert live.received == 1
 
@@ -101,7 +102,7 @@ def test_udp_feed_receives_and_counts_rejects() -> None:
         feed.stop()
     assert feed.stats == {"gaze_received": 2.0, "gaze_rejected": 2.0}
     assert live.clock_offset_us == 1000  # set at run time by the control datagram
-    assert live.angles_at(1200) == pytest.approx((0.0, 0.05))
+    assert angles_at(live, 1200) == pytest.approx((0.0, 0.05))
 
 
 def test_udp_port_in_use_is_a_device_error() -> None:
@@ -129,7 +130,7 @@ def test_csv_gaze_replay_of_the_sample(shared_sample_recording: Path) -> None:
     mapper = csv_gaze(shared_sample_recording / "general_eye_gaze.csv", calib)
     first, last = mapper.event_time_range()
     middle = (first + last) // 2
-    u, v = mapper.pixel_at(middle)
+    u, v = pixel_at(mapper, middle)
     assert 0 <= u < 1280 and 0 <= v < 720
-    assert mapper.angles_at(middle) is not None
-    assert mapper.pixel_at(first - 1_000_000) is None
+    assert angles_at(mapper, middle) is not None
+    assert pixel_at(mapper, first - 1_000_000) is None

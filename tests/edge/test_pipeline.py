@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 import urllib.request
@@ -7,20 +8,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from factories import random_events
+from factories import random_events, sum_bins_model
 
+from darkread.edge.config import PipelineConfig
 from darkread.edge.events import EVENT_CD_DTYPE, Events, empty_events
-from darkread.edge.fovea import FoveaConfig
-from darkread.edge.telemetry import EdgeMetrics, MetricsServer
-from darkread.edge.pipeline import (
-    FrameResult,
-    Pipeline,
-    PipelineSettings,
-    count_in_window,
-    make_frame,
-    window_events,
-)
+from darkread.edge.fovea import FoveaConfig, window_events, window_origin
+from darkread.edge.gaze import GazeSample
+from darkread.edge.pipeline import FrameResult, Pipeline, count_in_window, make_frame
 from darkread.edge.sources.base import EventSource
+from darkread.edge.telemetry import EdgeMetrics, MetricsServer
+from darkread.edge.voxel import VoxelConfig
 from darkread.proto.messages import decode, encode
 
 SENSOR = (1280, 720)
@@ -31,15 +28,19 @@ def ink_where_events(voxel: np.ndarray) -> np.ndarray:
     return (np.abs(voxel).sum(axis=0) > 0).astype(np.uint8)
 
 
+def every_window(**settings: object) -> PipelineConfig:
+    """This module tests the every-window loop (a frame per n_events); on-change: test_view_trigger.py."""
+    return PipelineConfig(infer="every-window", **settings)  # type: ignore[arg-type]
+
+
 class FixedGaze:
     def __init__(self, px: tuple[float, float] | None = (640.0, 360.0)) -> None:
         self.px = px
+        self.asked: list[int] = []  # the event times the pipeline looked the gaze up at
 
-    def pixel_at(self, t_event_us: int) -> tuple[float, float] | None:
-        return self.px
-
-    def angles_at(self, t_event_us: int) -> tuple[float, float] | None:
-        return None if self.px is None else (0.01, -0.02)
+    def at(self, t_event_us: int) -> GazeSample | None:
+        self.asked.append(t_event_us)
+        return None if self.px is None else GazeSample(self.px, (0.01, -0.02))
 
 
 class ListSource:
@@ -101,26 +102,33 @@ def test_count_in_window_matches_bounds() -> None:
 
 
 def test_window_events_are_the_newest_inside() -> None:
-    settings = PipelineSettings(n_events=100)
     ev = random_events(20000, seed=2)
-    window = window_events(ev, (500, 300), settings)
+    window = window_events(ev, (500, 300), FoveaConfig(), 100)
     assert window.shape[0] == 100
     assert np.all((window["x"] >= 500) & (window["x"] < 700) & (window["y"] >= 300) & (window["y"] < 400))
     inside_all = ev[(ev["x"] >= 500) & (ev["x"] < 700) & (ev["y"] >= 300) & (ev["y"] < 400)]
     assert np.array_equal(window, inside_all[-100:])
 
 
+def window_at(events: Events, gaze_px: tuple[float, float], n_events: int = 1600) -> tuple[Events, tuple[int, int]]:
+    """What the loop bins for a gaze: the window placed at the gaze, its newest events."""
+    origin = window_origin(gaze_px, SENSOR)
+    return window_events(events, origin, FoveaConfig(), n_events), origin
+
+
 def test_make_frame_carries_window_gaze_and_mask() -> None:
-    settings = PipelineSettings(n_events=1600)
     ev = np.concatenate([random_events(3000, seed=3), events_in_box(2000, 540, 310, 200, 100, t0=10_000, seed=4)])
     ev.sort(order="t", kind="stable")
-    frame = make_frame(ev, (640.2, 359.6), (0.1, -0.2), SENSOR, settings, ink_where_events, frame_id=7)
+    window, origin = window_at(ev, (640.2, 359.6))
+    t_frame = int(ev["t"][-1])
+    gaze = GazeSample((640.2, 359.6), (0.1, -0.2))
+    frame = make_frame(window, origin, gaze, t_frame, VoxelConfig(), ink_where_events, frame_id=7)
     assert isinstance(frame, FrameResult)
     assert frame.frame_id == 7
     assert frame.origin == (540, 310)
     assert frame.events_used == 1600
     assert frame.mask.shape == (100, 200) and frame.mask.dtype == np.uint8
-    assert frame.t_us == int(window_events(ev, (540, 310), settings)["t"][-1])
+    assert frame.t_us == t_frame  # the frame's one timestamp: where its gaze was looked up
     assert frame.gaze_px == (640.2, 359.6) and frame.gaze_rad == (0.1, -0.2)
     message = decode(encode(frame.to_message()), max_bytes=1 << 20)
     assert np.array_equal(message.mask(), frame.mask)
@@ -128,35 +136,45 @@ def test_make_frame_carries_window_gaze_and_mask() -> None:
 
 
 def test_make_frame_clamps_at_the_border_and_skips_empty_windows() -> None:
-    settings = PipelineSettings()
     ev = events_in_box(500, 0, 0, 50, 50)
-    frame = make_frame(ev, (3.0, 2.0), (0.0, 0.0), SENSOR, settings, ink_where_events, 0)
+    window, origin = window_at(ev, (3.0, 2.0))
+    frame = make_frame(window, origin, GazeSample((3.0, 2.0), (0.0, 0.0)), 0, VoxelConfig(), ink_where_events, 0)
     assert frame is not None and frame.origin == (0, 0) and frame.events_used == 500
-    assert make_frame(ev, (1000.0, 600.0), (0.0, 0.0), SENSOR, settings, ink_where_events, 0) is None
+    window, origin = window_at(ev, (1000.0, 600.0))
+    assert make_frame(window, origin, GazeSample((1000.0, 600.0), (0.0, 0.0)), 0, VoxelConfig(), ink_where_events, 0) is None
 
 
 def test_make_frame_with_an_onnx_reconstructor(tmp_path: Path) -> None:
-    onnx = pytest.importorskip("onnx")
-    from onnx import TensorProto, helper
-
     from darkread.edge.reconstruct import Reconstructor
 
-    x = helper.make_tensor_value_info("voxel", TensorProto.FLOAT, ["batch", 4, 100, 200])
-    y = helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["batch", 1, 100, 200])
-    axes = helper.make_tensor("axes", TensorProto.INT64, [1], [1])
-    node = helper.make_node("ReduceSum", ["voxel", "axes"], ["logits"], keepdims=1)
-    graph = helper.make_graph([node], "sum_bins", [x], [y], initializer=[axes])
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
-    model.ir_version = 8
-    path = tmp_path / "tiny.onnx"
-    onnx.save(model, str(path))
-
-    reconstructor = Reconstructor(path, warmup=1)
+    reconstructor = Reconstructor(sum_bins_model(tmp_path / "tiny.onnx"), warmup=1)
     ev = events_in_box(2000, 540, 310, 200, 100)
     ev["p"] = 1
-    frame = make_frame(ev, (640.0, 360.0), (0.0, 0.0), SENSOR, PipelineSettings(), reconstructor, 0)
+    window, origin = window_at(ev, (640.0, 360.0))
+    frame = make_frame(window, origin, GazeSample((640.0, 360.0), (0.0, 0.0)), 0, reconstructor.voxel, reconstructor, 0)
     assert frame is not None and frame.mask.shape == (100, 200)
     assert frame.mask.sum() > 0 and frame.inference_ms >= 0
+
+
+def test_a_model_with_another_window_size_just_works(tmp_path: Path) -> None:
+    """Window and bins come from the model's input shape: a 2x64x96 model makes 64x96 frames."""
+    from darkread.edge.reconstruct import Reconstructor
+
+    reconstructor = Reconstructor(sum_bins_model(tmp_path / "small.onnx", (2, 64, 96)), warmup=1)
+    assert reconstructor.voxel == VoxelConfig(bins=2, height=64, width=96)
+    ev = events_in_box(16_000, 640 - 48, 360 - 32, 96, 64)  # all inside the small window at the gaze
+    ev["p"] = 1
+    frames: list[FrameResult] = []
+    source = ListSource(chunked(ev, 200))
+    pipeline = Pipeline(source, FixedGaze(), reconstructor, lambda f, t: frames.append(f),
+                        every_window(lossless=True), reconstructor.voxel)
+    pipeline.start()
+    assert source.done.wait(5)
+    pipeline.stop()
+    assert pipeline.error is None and frames
+    assert all(f.mask.shape == (64, 96) and f.mask.any() for f in frames)
+    assert {f.origin for f in frames} == {(640 - 48, 360 - 32)}  # centred on the gaze
+    assert len(frames) >= 9 and all(f.events_used == 1600 for f in frames[:-1])
 
 
 # -- the threaded loop -----------------------------------------------------------------------
@@ -166,13 +184,13 @@ def chunked(events: Events, size: int) -> list[Events]:
     return [events[i : i + size] for i in range(0, events.shape[0], size)]
 
 
-def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineSettings, infer=ink_where_events):
+def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, infer=ink_where_events):
     frames: list[tuple[FrameResult, float]] = []
     metrics = EdgeMetrics()
     pings = []
     pipeline = Pipeline(
-        source, gaze, infer, lambda f, t: frames.append((f, t)), settings, metrics,
-        ring_capacity=1 << 16, watchdog=lambda: pings.append(1),
+        source, gaze, infer, lambda f, t: frames.append((f, t)), dataclasses.replace(settings, ring_capacity=1 << 16),
+        metrics=metrics, watchdog=lambda: pings.append(1),
     )
     assert isinstance(source, EventSource)
     pipeline.start()
@@ -185,8 +203,9 @@ def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineSettings
 def test_lossless_pipeline_makes_one_frame_per_window() -> None:
     ev = events_in_box(16_000, 540, 310, 200, 100)  # all inside the window at the gaze
     source = ListSource(chunked(ev, 200))
-    settings = PipelineSettings(n_events=1600, period_ms=1000.0, lossless=True)
-    frames, metrics, pings = run_pipeline(source, FixedGaze(), settings)
+    settings = every_window(n_events=1600, period_ms=1000.0, lossless=True)
+    gaze = FixedGaze()
+    frames, metrics, pings = run_pipeline(source, gaze, settings)
     # every 1600 new foveated events make a frame (the first places the window), plus the remainder
     assert 9 <= len(frames) <= 11
     assert [f.frame_id for f, _ in frames] == list(range(len(frames)))
@@ -195,6 +214,8 @@ def test_lossless_pipeline_makes_one_frame_per_window() -> None:
     assert metrics.totals["events_in"] == 16_000
     assert frames[-1][0].t_us == int(ev["t"][-1])  # the last frame reaches the end of the stream
     assert pings and len(metrics.inference_ms) == len(frames)
+    # one timestamp per frame: its stamp is where its gaze was looked up, and no newer event is in it
+    assert {f.t_us for f, _ in frames} <= set(gaze.asked)
 
 
 def test_slow_inference_skips_to_the_newest_window_and_counts() -> None:
@@ -205,7 +226,7 @@ def test_slow_inference_skips_to_the_newest_window_and_counts() -> None:
         return ink_where_events(voxel)
 
     source = ListSource(chunked(ev, 1000), pause_s=0.002)
-    frames, metrics, _ = run_pipeline(source, FixedGaze(), PipelineSettings(period_ms=5.0), infer=slow)
+    frames, metrics, _ = run_pipeline(source, FixedGaze(), every_window(period_ms=5.0), infer=slow)
     windows = 40_000 // 1600
     assert len(frames) < windows
     assert metrics.totals["frames_skipped"] > 0
@@ -216,7 +237,7 @@ def test_slow_inference_skips_to_the_newest_window_and_counts() -> None:
 def test_no_gaze_means_no_frames_counted() -> None:
     ev = events_in_box(5000, 540, 310, 200, 100)
     source = ListSource(chunked(ev, 500), pause_s=0.002)
-    frames, metrics, _ = run_pipeline(source, FixedGaze(None), PipelineSettings(period_ms=2.0))
+    frames, metrics, _ = run_pipeline(source, FixedGaze(None), every_window(period_ms=2.0))
     assert frames == []
     assert metrics.totals["frames_no_gaze"] > 0
 
@@ -224,10 +245,10 @@ def test_no_gaze_means_no_frames_counted() -> None:
 def test_ring_bounds_memory_and_counts_drops() -> None:
     ev = random_events(100_000, seed=5)
     source = ListSource(chunked(ev, 50_000))
-    settings = PipelineSettings(period_ms=1.0)
+    settings = every_window(period_ms=1.0, ring_capacity=1 << 15)
     frames: list = []
     metrics = EdgeMetrics()
-    pipeline = Pipeline(source, FixedGaze(), ink_where_events, lambda f, t: frames.append(f), settings, metrics, ring_capacity=1 << 15)
+    pipeline = Pipeline(source, FixedGaze(), ink_where_events, lambda f, t: frames.append(f), settings, metrics=metrics)
     pipeline.start()
     source.done.wait(5)
     pipeline.stop()
@@ -252,9 +273,22 @@ def test_metrics_snapshot_rates_and_percentiles() -> None:
     assert snap.inference_ms_p50 == pytest.approx(50.5)
     assert snap.latency_ms_p99 == pytest.approx(9.901)
     assert snap.bandwidth_vs_raw() == pytest.approx(50 / (500 * 2.0))
-    assert "frames" in snap.log_line()
+    assert "inferences" in snap.log_line() and "views" in snap.log_line()
     now[0] = 3.0
     assert metrics.snapshot().rates["events_in"] == 0.0  # rates cover the last interval only
+
+
+def test_status_line_reports_views_inferences_cpu_and_bytes() -> None:
+    now = [0.0]
+    metrics = EdgeMetrics(clock=lambda: now[0])
+    metrics.add("views", 8)
+    metrics.add("frames", 20)
+    metrics.add("event_us", 2_000_000)  # two seconds of reading
+    metrics.add("bytes_sent", 12_000)
+    now[0] = 2.0
+    snap = dataclasses.replace(metrics.snapshot(), cpu_s=0.1)
+    assert snap.cpu_per_reading_s == pytest.approx(0.05)
+    assert snap.status_line() == "4.0 views/s, 10.0 inferences/s, CPU 0.050 s per reading s, 6.0 kB/s"
 
 
 def test_metrics_http_endpoint_serves_prometheus_text() -> None:
@@ -284,7 +318,7 @@ def test_watchdog_is_no_longer_fed_when_the_source_stalls() -> None:
     ev = events_in_box(2000, 540, 310, 200, 100)
     source = ListSource(chunked(ev, 500))
     pings: list[float] = []
-    settings = PipelineSettings(period_ms=5.0, stall_s=0.1)
+    settings = every_window(period_ms=5.0, stall_s=0.1)
     pipeline = Pipeline(source, FixedGaze(), ink_where_events, lambda f, t: None, settings,
                         watchdog=lambda: pings.append(time.monotonic()))
     pipeline.start()
@@ -300,10 +334,10 @@ def test_sensor_roi_follows_the_window() -> None:
     ev = events_in_box(8000, 540, 310, 200, 100)
     source = ListSource(chunked(ev, 200))
     gaze = FixedGaze((640.0, 360.0))
-    frames, _, _ = run_pipeline(source, gaze, PipelineSettings(lossless=True, sensor_roi=True))
+    frames, _, _ = run_pipeline(source, gaze, every_window(lossless=True, sensor_roi=True))
     assert frames and source.rois == [(540, 310, 200, 100)]  # programmed once: the gaze did not move
     plain = ListSource(chunked(ev, 200))
-    run_pipeline(plain, FixedGaze(), PipelineSettings(lossless=True))
+    run_pipeline(plain, FixedGaze(), every_window(lossless=True))
     assert plain.rois == []
 
 
@@ -313,7 +347,7 @@ def test_lossless_replay_is_reproducible() -> None:
     ev = events_in_box(12_000, 540, 310, 200, 100)  # 12 ms of events at 1 Mev/s
     runs = []
     for pause_s in (0.0, 0.004):
-        settings = PipelineSettings(n_events=1600, period_ms=2.0, lossless=True)
+        settings = every_window(n_events=1600, period_ms=2.0, lossless=True)
         frames, _, _ = run_pipeline(ListSource(chunked(ev, 300), pause_s=pause_s), FixedGaze(), settings)
         runs.append([(f.t_us, f.events_used) for f, _ in frames])
     assert len(runs[0]) > 12 // 2 and runs[0][-1][0] == int(ev["t"][-1])  # the event-clock period adds frames

@@ -58,9 +58,14 @@ def test_missing_model_is_a_model_error(tmp_path: Path) -> None:
 def test_model_of_the_wrong_shape_is_a_model_error(tmp_path: Path) -> None:
     torch = pytest.importorskip("torch")
     path = tmp_path / "wrong.onnx"
-    torch.onnx.export(torch.nn.Conv2d(3, 1, 1), (torch.zeros(1, 3, 64, 64),), str(path), opset_version=17, dynamo=False)
-    with pytest.raises(ModelError, match="input shape"):
+    # any window size is fine (it becomes the fovea), but the ink image must cover that window
+    torch.onnx.export(torch.nn.Conv2d(3, 1, 1, stride=2), (torch.zeros(1, 3, 64, 64),), str(path), opset_version=17, dynamo=False)
+    with pytest.raises(ModelError, match="output shape"):
         Reconstructor(path)
+    flat = tmp_path / "flat.onnx"
+    torch.onnx.export(torch.nn.Linear(8, 8), (torch.zeros(1, 8),), str(flat), opset_version=17, dynamo=False)
+    with pytest.raises(ModelError, match="input shape"):
+        Reconstructor(flat)
 
 
 def test_garbage_file_is_a_model_error(tmp_path: Path) -> None:

@@ -11,7 +11,7 @@ from factories import random_events
 from darkread.edge.events import Events, empty_events
 from darkread.edge.io.raw import read_raw, write_raw
 from darkread.edge.sources.base import EventSource
-from darkread.edge.sources.replay import ReplaySource, parse_speed, time_slices
+from darkread.edge.sources.replay import ReplaySource, parse_speed
 
 
 def unique_events(n: int, duration_us: int, seed: int = 0) -> Events:
@@ -42,23 +42,6 @@ class Collector:
 
     def events(self) -> Events:
         return np.concatenate(self.chunks) if self.chunks else empty_events()
-
-
-def test_time_slices_cut_on_the_grid_and_keep_every_event() -> None:
-    ev = random_events(10_000, rate_hz=1e6, seed=3)
-    chunks = [ev[i : i + 777] for i in range(0, len(ev), 777)]
-    slices = list(time_slices(chunks, 1000))
-    assert np.array_equal(np.concatenate(slices), ev)
-    for piece in slices:
-        assert piece.shape[0] > 0
-        assert piece["t"][0] // 1000 == piece["t"][-1] // 1000
-    keys = [int(p["t"][0]) // 1000 for p in slices]
-    assert keys == sorted(set(keys))
-
-
-def test_time_slices_of_nothing() -> None:
-    assert list(time_slices([], 1000)) == []
-    assert list(time_slices([empty_events()], 1000)) == []
 
 
 def test_replay_as_fast_as_possible_delivers_every_event(raw_file) -> None:

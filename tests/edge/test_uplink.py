@@ -15,9 +15,10 @@ from websockets.asyncio.server import ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
-from darkread.edge.telemetry import EdgeMetrics
+from darkread.edge.config import UplinkConfig
 from darkread.edge.spool import Spool
-from darkread.edge.uplink import Uplink, UplinkSettings, backoff_delays
+from darkread.edge.telemetry import EdgeMetrics
+from darkread.edge.uplink import Uplink, backoff_delays
 from darkread.proto.messages import Ack, Frame, Hello, Welcome, decode, encode, pack_mask
 
 KEY = "test-key"
@@ -118,10 +119,15 @@ def frame(frame_id: int) -> Frame:
     )
 
 
-def settings(url: str, **kwargs: object) -> UplinkSettings:
+def settings(url: str, **kwargs: object) -> UplinkConfig:
     base = dict(url=url, api_key=KEY, device_id="glasses-1", backoff_initial_s=0.02, backoff_max_s=0.1)
     base.update(kwargs)
-    return UplinkSettings(**base)  # type: ignore[arg-type]
+    return UplinkConfig(**base)  # type: ignore[arg-type]
+
+
+def make_uplink(config: UplinkConfig, spool: Spool, metrics: EdgeMetrics | None = None) -> Uplink:
+    """An uplink for a 1280x720 sensor and the 100x200 window (what its hello announces)."""
+    return Uplink(config, spool, metrics, sensor_wh=(1280, 720), fovea_hw=(100, 200))
 
 
 @pytest.fixture
@@ -134,7 +140,7 @@ def server():
 
 def test_frames_delivered_in_order_and_acked(server: ProtoServer) -> None:
     metrics = EdgeMetrics()
-    uplink = Uplink(settings(server.url), Spool(None), metrics)
+    uplink = make_uplink(settings(server.url), Spool(None), metrics)
     uplink.start()
     seqs = [uplink.submit(frame(i), submitted_at=time.monotonic()) for i in range(30)]
     assert uplink.stop(drain_timeout_s=5)
@@ -151,7 +157,7 @@ def test_network_drops_lose_nothing_and_duplicate_nothing() -> None:
     server = ProtoServer(drop_after=7)
     server.start()
     try:
-        uplink = Uplink(settings(server.url), Spool(None))
+        uplink = make_uplink(settings(server.url), Spool(None))
         uplink.start()
         for i in range(40):
             uplink.submit(frame(i))
@@ -165,7 +171,7 @@ def test_network_drops_lose_nothing_and_duplicate_nothing() -> None:
 
 
 def test_cloud_restart_mid_stream_resends_spooled_frames(server: ProtoServer) -> None:
-    uplink = Uplink(settings(server.url), Spool(None))
+    uplink = make_uplink(settings(server.url), Spool(None))
     uplink.start()
     for i in range(10):
         uplink.submit(frame(i))
@@ -186,7 +192,7 @@ def test_a_closed_instance_fails_over_to_the_next_on_the_same_database() -> None
     a.start()
     b.start()
     try:
-        uplink = Uplink(settings(f"{a.url}, {b.url}"), Spool(None))
+        uplink = make_uplink(settings(f"{a.url}, {b.url}"), Spool(None))
         uplink.start()
         for i in range(10):
             uplink.submit(frame(i))
@@ -207,7 +213,7 @@ def test_an_instance_that_refuses_connections_is_skipped_without_backing_off(ser
     with socket.socket() as probe:  # a port nobody listens on
         probe.bind(("127.0.0.1", 0))
         dead = f"ws://127.0.0.1:{probe.getsockname()[1]}/v1/stream"
-    uplink = Uplink(settings(f"{dead},{server.url}", backoff_initial_s=30, backoff_max_s=30), Spool(None))
+    uplink = make_uplink(settings(f"{dead},{server.url}", backoff_initial_s=30, backoff_max_s=30), Spool(None))
     started = time.monotonic()
     uplink.start()
     for i in range(5):
@@ -219,7 +225,7 @@ def test_an_instance_that_refuses_connections_is_skipped_without_backing_off(ser
 
 def test_edge_restart_resends_from_disk_spool(tmp_path: Path, server: ProtoServer) -> None:
     server.kill()
-    first = Uplink(settings(server.url), Spool(tmp_path))
+    first = make_uplink(settings(server.url), Spool(tmp_path))
     first.start()
     for i in range(12):
         first.submit(frame(i))
@@ -227,7 +233,7 @@ def test_edge_restart_resends_from_disk_spool(tmp_path: Path, server: ProtoServe
     first.spool.close()
 
     server.start()
-    second = Uplink(settings(server.url), Spool(tmp_path))
+    second = make_uplink(settings(server.url), Spool(tmp_path))
     assert second.session_id == first.session_id
     second.start()
     for i in range(12, 15):
@@ -236,7 +242,7 @@ def test_edge_restart_resends_from_disk_spool(tmp_path: Path, server: ProtoServe
     assert server.stored[first.session_id] == list(range(15))
 
     second.spool.close()
-    third = Uplink(settings(server.url), Spool(tmp_path))  # nothing pending: a new session
+    third = make_uplink(settings(server.url), Spool(tmp_path))  # nothing pending: a new session
     assert third.session_id != first.session_id
     third.start()
     assert third.submit(frame(15)) == 15  # seqs never go back
@@ -245,7 +251,7 @@ def test_edge_restart_resends_from_disk_spool(tmp_path: Path, server: ProtoServe
 
 
 def test_wrong_key_is_refused_and_kept_in_spool(server: ProtoServer) -> None:
-    uplink = Uplink(settings(server.url, api_key="wrong"), Spool(None))
+    uplink = make_uplink(settings(server.url, api_key="wrong"), Spool(None))
     uplink.start()
     uplink.submit(frame(0))
     assert wait_for(lambda: "403" in uplink.last_error)
@@ -255,7 +261,7 @@ def test_wrong_key_is_refused_and_kept_in_spool(server: ProtoServer) -> None:
 
 
 def test_in_flight_window_is_respected(server: ProtoServer) -> None:
-    uplink = Uplink(settings(server.url, max_in_flight=4), Spool(None))
+    uplink = make_uplink(settings(server.url, max_in_flight=4), Spool(None))
     uplink.start()
     for i in range(20):
         uplink.submit(frame(i))
@@ -274,7 +280,7 @@ def test_backoff_grows_with_jitter_and_caps() -> None:
 
 def test_backoff_restarts_small_after_a_stable_connection(server: ProtoServer) -> None:
     server.kill()
-    uplink = Uplink(settings(server.url, backoff_initial_s=0.02, backoff_max_s=5.0, stable_connection_s=0.05), Spool(None))
+    uplink = make_uplink(settings(server.url, backoff_initial_s=0.02, backoff_max_s=5.0, stable_connection_s=0.05), Spool(None))
     delays: list[float] = []
     sleep = uplink._sleep_or_stop
 
@@ -300,7 +306,7 @@ def test_a_message_the_cloud_rejects_is_dropped_not_resent_forever() -> None:
     server = ProtoServer(reject_frame_id=3)
     server.start()
     try:
-        uplink = Uplink(settings(server.url), Spool(None))
+        uplink = make_uplink(settings(server.url), Spool(None))
         uplink.start()
         for i in range(8):
             uplink.submit(frame(i))

@@ -7,15 +7,16 @@ import pytest
 from factories import random_events
 
 from darkread.edge.events import make_events
+from darkread.edge.fovea import window_events
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 
 
-def reference_voxel_grid(events, x0, y0, cfg):
-    """E2VID events_to_voxel_grid, written plainly with np.add.at."""
+def reference_voxel_grid(events, x0, y0, cfg, n_events=1600):
+    """E2VID events_to_voxel_grid of the window's newest ``n_events``, written plainly with np.add.at."""
     x = events["x"].astype(int) - x0
     y = events["y"].astype(int) - y0
     keep = (x >= 0) & (x < cfg.width) & (y >= 0) & (y < cfg.height)
-    events, x, y = events[keep][-cfg.n_events :], x[keep][-cfg.n_events :], y[keep][-cfg.n_events :]
+    events, x, y = events[keep][-n_events:], x[keep][-n_events:], y[keep][-n_events:]
     grid = np.zeros((cfg.bins, cfg.height, cfg.width))
     if len(events) == 0:
         return grid.astype(np.float32)
@@ -44,16 +45,17 @@ def test_matches_reference_on_random_events(bins: int, normalize: bool) -> None:
     events = random_events(3000, width=200, height=100, seed=bins)
     events["x"] += 540
     events["y"] += 310
-    ours = voxel_grid(events, 540, 310, cfg)
+    ours = voxel_grid(window_events(events, (540, 310), cfg.fovea, 1600), 540, 310, cfg)
     assert ours.dtype == np.float32 and ours.shape == (bins, 100, 200)
     assert np.allclose(ours, reference_voxel_grid(events, 540, 310, cfg), atol=1e-5)
 
 
 def test_events_outside_the_window_are_ignored_and_last_n_taken() -> None:
+    """The window's events are chosen before binning (``window_events``); the grid trusts them."""
     events = random_events(5000, seed=9)  # whole sensor
-    cfg = VoxelConfig(n_events=100, normalize=False)
-    ours = voxel_grid(events, 540, 310, cfg)
-    assert np.allclose(ours, reference_voxel_grid(events, 540, 310, cfg), atol=1e-6)
+    cfg = VoxelConfig(normalize=False)
+    ours = voxel_grid(window_events(events, (540, 310), cfg.fovea, 100), 540, 310, cfg)
+    assert np.allclose(ours, reference_voxel_grid(events, 540, 310, cfg, n_events=100), atol=1e-6)
     inside = events[(events["x"] >= 540) & (events["x"] < 740) & (events["y"] >= 310) & (events["y"] < 410)]
     polarity = np.where(inside["p"][-100:] > 0, 1.0, -1.0)
     assert ours.sum() == pytest.approx(polarity.sum(), abs=1e-4)  # each event adds its polarity once

@@ -9,9 +9,9 @@ import pytest
 from darkread.edge.io.evt3_encode import encode_evt3
 from darkread.proto.messages import Frame, encode, pack_mask
 
+from darkread.edge.fovea import foveate_along_gaze
 from darkread.eval.bandwidth import (
     Bandwidth,
-    foveate_along_gaze,
     frame_message_bytes,
     image_sizes,
     measure_bandwidth,

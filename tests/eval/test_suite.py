@@ -101,3 +101,20 @@ def test_cli_make_suite_form(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert "0 recordings" in capsys.readouterr().out
     with pytest.raises(ValueError, match="output folder"):
         main(["-vv", "eval", "make-suite"])
+
+
+def test_real_scanpath_block_is_appended_and_old_specs_stay_complete() -> None:
+    from darkread.eval.suite import HUMAN_BLOCK, spec_document
+
+    entries = suite_entries()
+    human = [e for e in entries if e.scanpath == "human"]
+    assert [(e.lux, e.motion) for e in human] == list(HUMAN_BLOCK)
+    assert all(e.name.endswith("_human") and e.kind == "paragraph" for e in human)
+    assert entries[: len(entries) - len(human)] == [e for e in entries if e.scanpath == "model"]  # appended
+    assert "scanpath" not in spec_document(entries[0])  # a suite written before the block still matches
+    assert spec_document(human[0])["scanpath"] == "human"
+
+
+def test_make_suite_match_selects_recordings_by_name(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="no recording"):
+        make_suite(tmp_path, match="*nothing-like-this*", progress=False)

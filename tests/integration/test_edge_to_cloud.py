@@ -18,10 +18,13 @@ import time
 from pathlib import Path
 
 import pytest
-from cloud_process import API_KEY, CloudProcess, free_port, tiny_model
+from cloud_process import API_KEY, CloudProcess, free_port
+from factories import sum_bins_model
 
+from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
-from darkread.edge.daemon import Daemon, EdgeService, Notifier
+from darkread.edge.daemon import Daemon
+from darkread.edge.notify import Notifier
 from darkread.paths import SAMPLE_RECORDING
 
 pytestmark = pytest.mark.slow
@@ -50,7 +53,7 @@ def test_cloud_killed_mid_stream_every_frame_delivered_once(tmp_path: Path, reco
             overrides={
                 "source": {"kind": "replay", "path": str(recording), "speed": 1.0},
                 "gaze": {"kind": "recording"},
-                "pipeline": {"model": str(tiny_model(tmp_path / "tiny.onnx"))},
+                "pipeline": {"model": str(sum_bins_model(tmp_path / "tiny.onnx"))},
                 "uplink": {
                     "url": f"ws://127.0.0.1:{port}/v1/stream", "api_key": API_KEY,
                     "spool_dir": str(tmp_path / "spool"), "backoff_initial_s": 0.05, "backoff_max_s": 0.3,
@@ -71,29 +74,32 @@ def test_cloud_killed_mid_stream_every_frame_delivered_once(tmp_path: Path, reco
 
         threading.Thread(target=listen, daemon=True).start()
         environ = {"NOTIFY_SOCKET": str(tmp_path / "notify.sock"), "WATCHDOG_USEC": "100000"}
-        service = EdgeService(config, Notifier(environ))
-        daemon = Daemon(service, service.notifier, tick_s=0.02)
+        notifier = Notifier(environ)
+        service = build_edge(config, watchdog=notifier.watchdog_tick)
+        daemon = Daemon(service, notifier, tick_s=0.02)
         result: list[int] = []
         edge = threading.Thread(target=lambda: result.append(daemon.run()))
         edge.start()
 
+        def sent() -> int:  # frames handed to the uplink so far: the spool numbers them from 0
+            return service.uplink.spool.last_allocated_seq + 1
+
         deadline = time.monotonic() + 10
-        while len(service.sent_seqs) < 10 and time.monotonic() < deadline:
+        while sent() < 10 and time.monotonic() < deadline:
             time.sleep(0.02)
-        assert len(service.sent_seqs) >= 10, "the edge made no frames"
+        assert sent() >= 10, "the edge made no frames"
         cloud.kill()  # mid-stream: frames in flight and unacknowledged
-        killed_at = len(service.sent_seqs)
+        killed_at = sent()
         time.sleep(0.5)  # frames keep coming and go to the spool
-        assert len(service.sent_seqs) > killed_at
+        assert sent() > killed_at
         cloud.start()  # same data dir, same port
 
         edge.join(timeout=40)
         assert not edge.is_alive()
         assert result == [0], "the edge did not drain its spool"
-        sent = list(service.sent_seqs)
         stored = cloud.stored_seqs(service.uplink.session_id)
-        assert stored == sent  # every frame exactly once, in order
-        assert sent == list(range(len(sent)))
+        assert stored == list(range(sent()))  # every frame exactly once, in order
+        assert sent() == service.metrics.totals["frames"]
         assert service.metrics.totals["reconnects"] >= 1
         assert service.uplink.spool.depth == 0
 
@@ -118,7 +124,7 @@ def test_edge_run_cli_stitches_pages_on_the_glasses(tmp_path: Path, recording: P
         run = subprocess.run(
             [sys.executable, "-m", "darkread", "edge", "run", "--replay", str(recording),
              "--cloud", f"ws://127.0.0.1:{port}/v1/stream", "--speed", "max", "--mode", "pages",
-             "--model", str(tiny_model(tmp_path / "tiny.onnx")), "--spool", str(tmp_path / "spool"),
+             "--model", str(sum_bins_model(tmp_path / "tiny.onnx")), "--spool", str(tmp_path / "spool"),
              "--session", "cli-pages", "--drain-timeout", "15"],
             env=env, capture_output=True, text=True, timeout=60,
         )

@@ -12,6 +12,8 @@ from darkread.cloud.store import (
     GazeRecord,
     PageBreak,
     PageRecord,
+    SessionOwnedError,
+    SessionShapeError,
     SessionSpec,
     SessionStore,
     StoredFrame,
@@ -43,21 +45,35 @@ def page(seq: int, ink_row: int = 3) -> PageRecord:
 async def test_a_new_session_starts_before_seq_zero_and_resumes_at_its_highest_seq(store: SessionStore) -> None:
     assert await store.open_session(spec("s")) == -1
     await store.add_frame("s", frame(0))
-    await store.add_frame("s", frame(4))
-    assert await store.open_session(spec("s", device="other")) == 4
+    await store.add_frame("s", frame(1))
+    assert await store.open_session(spec("s")) == 1
     info = await store.session("s")
-    assert info is not None and info.device_id == "other" and info.last_seq == 4 and info.frames == 2
+    assert info is not None and info.device_id == "g" and info.last_seq == 1 and info.frames == 2
     assert info.sensor == (1280, 720) and info.fovea == (100, 200) and info.mode == "frames"
     assert await store.session("ghost") is None
 
 
-async def test_a_resent_seq_is_acknowledged_not_stored_again(store: SessionStore) -> None:
+async def test_a_resent_seq_is_acknowledged_not_stored_again_and_a_gap_is_refused(store: SessionStore) -> None:
     await store.open_session(spec("s"))
-    results = [await store.add_frame("s", frame(seq)) for seq in (0, 1, 1, 0, 5, 5, 3)]
+    results = [await store.add_frame("s", frame(seq)) for seq in (0, 1, 1, 0, 2, 2)]
     assert [(r.stored, r.last_seq) for r in results] == [
-        (True, 0), (True, 1), (False, 1), (False, 1), (True, 5), (False, 5), (True, 5),
+        (True, 0), (True, 1), (False, 1), (False, 1), (True, 2), (False, 2),
     ]  # fmt: skip
-    assert [f.seq for f in await store.frames("s")] == [0, 1, 3, 5]
+    with pytest.raises(StoreError, match="does not follow the stored seq 2"):
+        await store.add_frame("s", frame(5))  # a hole would hide a lost frame behind the resume point
+    assert [f.seq for f in await store.frames("s")] == [0, 1, 2]
+
+
+async def test_a_session_belongs_to_the_stream_that_opened_it(store: SessionStore) -> None:
+    await store.open_session(SessionSpec("s", "g", "frames", (1280, 720), (100, 200), stream_id="spool-a"))
+    await store.add_frame("s", frame(0))
+    with pytest.raises(SessionOwnedError, match="device"):
+        await store.open_session(SessionSpec("s", "other", "frames", (1280, 720), (100, 200), stream_id="spool-a"))
+    with pytest.raises(SessionOwnedError, match="another stream"):
+        await store.open_session(SessionSpec("s", "g", "frames", (1280, 720), (100, 200), stream_id="spool-b"))
+    with pytest.raises(SessionShapeError, match="fovea"):
+        await store.open_session(SessionSpec("s", "g", "frames", (1280, 720), (50, 200), stream_id="spool-a"))
+    assert await store.open_session(SessionSpec("s", "g", "frames", (1280, 720), (100, 200), stream_id="spool-a")) == 0
 
 
 async def test_frames_come_back_as_written_oldest_first_in_pages(store: SessionStore) -> None:
@@ -105,19 +121,19 @@ async def test_writes_to_an_unknown_session_fail_and_leave_nothing(store: Sessio
 async def test_pages_gaze_and_page_breaks_share_the_session_seq(store: SessionStore) -> None:
     await store.open_session(spec("p", mode="pages"))
     assert await store.latest_page("p") is None
-    assert await store.add_page("p", page(2)) == WriteResult(stored=True, last_seq=2)
-    assert await store.add_page("p", page(2, ink_row=9)) == WriteResult(stored=False, last_seq=2)
-    assert await store.add_gaze("p", GazeRecord(3, (1, 2), ((3.0, 4.0), (5.0, 6.0)))) == WriteResult(True, 3)
-    assert await store.add_page_break("p", PageBreak(4, 123)) == WriteResult(True, 4)
-    assert await store.add_page_break("p", PageBreak(4, 123)) == WriteResult(False, 4)
-    await store.add_page("p", page(5, ink_row=11))
+    assert await store.add_page("p", page(0)) == WriteResult(stored=True, last_seq=0)
+    assert await store.add_page("p", page(0, ink_row=9)) == WriteResult(stored=False, last_seq=0)
+    assert await store.add_gaze("p", GazeRecord(1, (1, 2), ((3.0, 4.0), (5.0, 6.0)))) == WriteResult(True, 1)
+    assert await store.add_page_break("p", PageBreak(2, 123)) == WriteResult(True, 2)
+    assert await store.add_page_break("p", PageBreak(2, 123)) == WriteResult(False, 2)
+    await store.add_page("p", page(3, ink_row=11))
     latest = await store.latest_page("p")
-    assert latest is not None and (latest.seq, latest.page_id, latest.t_us) == (5, 7, 9_000)
+    assert latest is not None and (latest.seq, latest.page_id, latest.t_us) == (3, 7, 9_000)
     assert latest.lines == ((0, 0, 5, 5), (1, 2, 3, 4))
-    np.testing.assert_array_equal(latest.mask, page(5, ink_row=11).mask)
-    assert await store.page_breaks("p") == [PageBreak(4, 123)]
+    np.testing.assert_array_equal(latest.mask, page(3, ink_row=11).mask)
+    assert await store.page_breaks("p") == [PageBreak(2, 123)]
     info = await store.session("p")
-    assert info is not None and info.pages == 2 and info.frames == 0 and info.last_seq == 5
+    assert info is not None and info.pages == 2 and info.frames == 0 and info.last_seq == 3
 
 
 async def test_everything_survives_a_restart(open_store) -> None:  # noqa: ANN001 - the fixture's opener
@@ -153,7 +169,7 @@ async def test_delete_removes_everything_of_one_session(store: SessionStore) -> 
     assert await store.frames("s") == [] and await store.page_breaks("s") == []
     assert await store.delete_session("s") is False
     with pytest.raises(UnknownSessionError):
-        await store.add_frame("s", frame(3))
+        await store.add_frame("s", frame(0))
     assert await store.open_session(spec("s")) == -1  # a new session of the same name starts afresh
     assert await store.latest_page("keep") is not None
 

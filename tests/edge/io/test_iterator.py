@@ -7,7 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from darkread.edge.events import EVENT_CD_DTYPE, make_events
+from factories import random_events
+
+from darkread.edge.events import EVENT_CD_DTYPE, empty_events, make_events
 from darkread.edge.io.iterator import EventsIterator, PacedReplay
 from darkread.edge.io.raw import read_raw, write_raw
 
@@ -118,3 +120,20 @@ def test_paced_replay_does_not_sleep_when_the_consumer_is_late() -> None:
     assert replay.max_lag_s == pytest.approx(0.4)
     with pytest.raises(ValueError):
         PacedReplay(slices, speed=0)
+
+
+def test_non_empty_windows_cut_on_the_grid_and_keep_every_event() -> None:
+    ev = random_events(10_000, rate_hz=1e6, seed=3)
+    chunks = [ev[i : i + 777] for i in range(0, len(ev), 777)]
+    slices = [w for w in EventsIterator(chunks, delta_t=1000) if len(w)]  # what the replay delivers
+    assert np.array_equal(np.concatenate(slices), ev)
+    for piece in slices:
+        assert piece.shape[0] > 0
+        assert piece["t"][0] // 1000 == piece["t"][-1] // 1000
+    keys = [int(p["t"][0]) // 1000 for p in slices]
+    assert keys == sorted(set(keys))
+
+
+def test_windows_of_nothing() -> None:
+    assert list(EventsIterator([], delta_t=1000)) == []
+    assert list(EventsIterator([empty_events()], delta_t=1000)) == []

@@ -1,0 +1,258 @@
+"""``build_edge(config)``: the one place the edge is wired, for the daemon, ``darkread read`` and the bench.
+
+Like uvicorn's ``Config.load()``, building opens what can fail early (the recording or the camera,
+the gaze feed's port, the model, the spool) and starts nothing; :class:`Edge` is the application
+the :class:`~darkread.edge.daemon.Daemon` runs: ``startup`` starts the threads, ``tick`` does the
+periodic duties, ``shutdown`` drains within a deadline. The window size and bin count come from
+the model (``Reconstructor.voxel``) and reach the pipeline, the uplink's ``hello`` and nothing else.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from darkread.edge.config import EdgeConfig, GazeConfig, SourceConfig
+from darkread.edge.errors import RunError
+from darkread.edge.gaze import GazeLookup
+from darkread.edge.io.calibration import Calibration
+from darkread.edge.pipeline import FrameHandler, FrameResult, Pipeline
+from darkread.edge.reconstruct import Reconstructor
+from darkread.edge.sources.base import EventSource
+from darkread.edge.telemetry import EdgeMetrics, MetricsServer
+from darkread.edge.view_fusion import ViewRecord
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class Edge:
+    """The wired edge: source, gaze, reconstructor, pipeline and where frames go (uplink, pages, or a caller)."""
+
+    config: EdgeConfig
+    source: EventSource
+    pipeline: Pipeline
+    reconstructor: Reconstructor
+    metrics: EdgeMetrics
+    uplink: Any = None  # None when frames go to the caller
+    pages: Any = None  # pages mode: the PageBuilder
+    feeds: list[Any] = field(default_factory=list)  # live gaze feeds, started and stopped with the edge
+    _metrics_server: MetricsServer | None = field(default=None, init=False)
+    _last_log: float = field(default_factory=time.monotonic, init=False)
+
+    # -- the Service the daemon runs ---------------------------------------------------------
+    def startup(self, wait_connected_s: float = 0.0) -> str:
+        """Start the threads; ``wait_connected_s`` first gives the uplink that long to reach the cloud
+        (frames spool meanwhile anyway; a benchmark waits so its first frames are not timed in a queue)."""
+        cfg = self.config
+        if cfg.metrics.port:
+            self._metrics_server = MetricsServer(self.metrics, cfg.metrics.host, cfg.metrics.port)
+            self._metrics_server.start()
+        if self.uplink is not None:
+            self.uplink.start()
+            if wait_connected_s > 0:
+                self.uplink.connected.wait(wait_connected_s)
+        for feed in self.feeds:
+            feed.start()
+        self.pipeline.start()
+        target = (
+            f"sending {cfg.uplink.mode} to {cfg.uplink.url} (session {self.uplink.session_id})"
+            if self.uplink is not None else "frames to the caller"
+        )
+        return (
+            f"{cfg.source.kind} {self.source.width}x{self.source.height} open, "
+            f"model {self.reconstructor.path.name} warm, {target}"
+        )
+
+    def tick(self) -> str | None:
+        if self.pipeline.error is not None:
+            raise RunError(f"reconstruction loop failed: {self.pipeline.error}") from self.pipeline.error
+        source_error = getattr(self.source, "error", None)
+        if source_error is not None:
+            raise RunError(f"event source failed: {source_error}") from source_error
+        if self.uplink is not None and self.uplink.fatal_error:
+            raise RunError(self.uplink.fatal_error)
+        if self.pages is not None and self.pages.due():
+            self._send_page()
+        if time.monotonic() - self._last_log < self.config.metrics.log_every_s:
+            return None
+        self._last_log = time.monotonic()
+        snap = self.metrics.snapshot()
+        logger.info("%s", snap.log_line())
+        if self.uplink is None:
+            return snap.status_line()
+        state = "connected" if self.uplink.connected.is_set() else f"offline ({self.uplink.last_error or 'connecting'})"
+        return f"{snap.status_line()}, spool {snap.spool_depth}, uplink {state}"
+
+    def finished(self) -> bool:
+        finished = getattr(self.source, "finished", None)
+        return bool(finished is not None and finished.is_set()) or not self.pipeline.running
+
+    def verify(self) -> None:
+        """After a run that ended by itself: raise what failed while draining, a replay that looked
+        corrupt, or one that produced no frames (a recording that cannot be read is not a success)."""
+        self.tick()
+        problems = getattr(self.source, "problems", [])
+        if problems:
+            raise RunError(f"{self.config.source.path} does not look like a valid recording: {'; '.join(problems)}")
+        totals = self.metrics.totals
+        if self.config.source.kind == "replay" and totals["frames"] == 0:
+            if totals["events_in"] == 0:
+                why = "no events decoded"
+            elif totals["events_foveated"] == 0:
+                why = f"{int(totals['events_in']):,} events, none inside the gaze window (no valid gaze on the sensor?)"
+            else:
+                why = f"{int(totals['events_foveated']):,} events inside the gaze window, too few for a frame"
+            raise RunError(f"the replay of {self.config.source.path} produced no frames: {why}")
+
+    def shutdown(self, timeout_s: float) -> bool:
+        """Stop the source (the last frame comes from what is buffered), send the last page, drain."""
+        self.pipeline.stop()
+        for feed in self.feeds:
+            feed.stop()
+        if self.pages is not None:
+            self._send_page(final=True)
+        drained = True
+        if self.uplink is not None:
+            drained = self.uplink.stop(drain_timeout_s=timeout_s)
+            self.uplink.spool.close()
+        if self._metrics_server is not None:
+            self._metrics_server.stop()
+        close = getattr(self.source, "close", None)
+        if close is not None:
+            close()
+        logger.info("final: %s", self.metrics.snapshot().log_line())
+        return drained
+
+    def _send_page(self, final: bool = False) -> None:
+        message = self.pages.message(self.pipeline.ring.newest_t or 0, final=final)
+        if message is not None:
+            self.uplink.submit(message)
+            self.metrics.add("pages")
+
+
+def build_edge(
+    config: EdgeConfig,
+    *,
+    watchdog: Callable[[], object] | None = None,
+    on_frame: FrameHandler | None = None,
+) -> Edge:
+    """Wire the edge described by ``config``; nothing runs until ``Edge.startup()``.
+
+    ``watchdog`` is called from the processing loop while events flow (systemd's watchdog ping);
+    ``on_frame``, when given, receives the frames instead of an uplink (the bench's encode-only run).
+    """
+    from darkread.edge.io.evt3 import warm_up as warm_up_decoder
+
+    metrics = EdgeMetrics()
+    with contextlib.ExitStack() as undo:  # a failure half-way closes what was opened
+        source, calibration, gaze_track = _open_source(config.source, metrics)
+        close = getattr(source, "close", None)
+        if close is not None:
+            undo.callback(close)
+        feeds: list[Any] = []
+        gaze = _open_gaze(config.gaze, calibration, gaze_track, feeds)
+        for feed in feeds:
+            undo.callback(feed.stop)
+        warm_up_decoder()  # READY only once the first chunk can be decoded without a JIT pause
+        reconstructor = Reconstructor(config.pipeline.model or None, threads=config.pipeline.threads)
+        voxel = reconstructor.voxel
+        uplink = pages = None
+        if on_frame is None:
+            uplink = _open_uplink(config, metrics, (source.width, source.height), (voxel.height, voxel.width))
+            undo.callback(uplink.spool.close)
+            if config.uplink.mode == "pages":
+                from darkread.edge.pages import PageBuilder
+
+                pages = PageBuilder(config.uplink.page_every_s)
+                on_frame = _to_pages(pages)
+            else:
+                on_frame = _to_uplink(uplink)
+        settings = config.pipeline
+        if config.source.kind == "replay" and config.source.speed == 0:
+            settings = dataclasses.replace(settings, lossless=True)  # no clock to keep up with: make every window
+        pipeline = Pipeline(source, gaze, reconstructor, on_frame, settings, voxel, metrics, watchdog=watchdog)
+        undo.pop_all()
+    return Edge(config, source, pipeline, reconstructor, metrics, uplink=uplink, pages=pages, feeds=feeds)
+
+
+def _to_uplink(uplink: Any) -> FrameHandler:
+    def submit(frame: FrameResult | ViewRecord, arrival: float) -> None:
+        uplink.submit(frame.to_message(), submitted_at=arrival)
+
+    return submit
+
+
+def _to_pages(pages: Any) -> FrameHandler:
+    def add(frame: FrameResult | ViewRecord, arrival: float) -> None:
+        pages.add(frame)
+
+    return add
+
+
+def _open_source(cfg: SourceConfig, metrics: EdgeMetrics) -> tuple[EventSource, Calibration, Any]:
+    """The event source, its calibration and (for a replayed recording) its gaze track loader."""
+    from darkread.edge.io.calibration import load_calibration
+
+    if cfg.kind == "replay":
+        from darkread.edge.io.recording import open_recording
+        from darkread.edge.sources.replay import ReplaySource
+
+        if not cfg.path:
+            raise ValueError(
+                "nothing to read: pass --replay RECORDING, or a --config whose [source] names a "
+                "recording (path) or the camera (kind = \"evk4\")"
+            )
+        recording = open_recording(cfg.path, gaze=cfg.gaze_csv or None, calibration=cfg.calibration or None)
+        source = ReplaySource(recording.raw_path, speed=cfg.speed or None)
+        calibrated = (recording.calibration.width, recording.calibration.height)
+        if calibrated != (source.width, source.height):
+            logger.warning("%s: calibration is for %dx%d but the RAW header says %dx%d: gaze lands in the wrong place",
+                           cfg.path, *calibrated, source.width, source.height)
+        n_events = recording.meta.get("event_count")
+        if isinstance(n_events, int) and n_events > 0:  # the bandwidth ratio against this very stream
+            metrics.raw_bytes_per_event = recording.raw_path.stat().st_size / n_events
+        return source, recording.calibration, recording.gaze
+    from darkread.edge.sources.evk4.camera import Evk4Camera
+
+    if not cfg.calibration:
+        raise ValueError("the camera needs a calibration.json: [source] calibration")
+    calibration = load_calibration(cfg.calibration)
+    camera = Evk4Camera(serial=cfg.serial or None)
+    camera.open()
+    return camera, calibration, None
+
+
+def _open_gaze(cfg: GazeConfig, calibration: Calibration, gaze_track: Any, feeds: list[Any]) -> GazeLookup:
+    """The gaze lookup; a live feed is appended to ``feeds`` (started and stopped with the edge)."""
+    from darkread.edge.gaze import GazeMapper
+    from darkread.edge.sources.gaze_feeds import AriaGen2GazeFeed, LiveGaze, UdpGazeFeed, csv_gaze
+
+    if cfg.kind == "recording":
+        if gaze_track is None:
+            raise ValueError("[gaze] kind 'recording' needs a replayed recording; use csv, udp or aria")
+        return GazeMapper(calibration, gaze_track(), clock_offset_us=cfg.clock_offset_us, depth_prior_m=cfg.depth_prior_m)
+    if cfg.kind == "csv":
+        if not cfg.path:
+            raise ValueError("[gaze] kind 'csv' needs [gaze] path")
+        return csv_gaze(cfg.path, calibration, clock_offset_us=cfg.clock_offset_us, depth_prior_m=cfg.depth_prior_m)
+    live = LiveGaze(
+        calibration, clock_offset_us=cfg.clock_offset_us, max_age_us=int(cfg.max_age_ms * 1000),
+        depth_prior_m=cfg.depth_prior_m,
+    )
+    feeds.append(UdpGazeFeed(live, cfg.udp_host, cfg.udp_port) if cfg.kind == "udp" else AriaGen2GazeFeed(live))
+    return live
+
+
+def _open_uplink(config: EdgeConfig, metrics: EdgeMetrics, sensor_wh: tuple[int, int], fovea_hw: tuple[int, int]) -> Any:
+    from darkread.edge.spool import Spool
+    from darkread.edge.uplink import Uplink
+
+    cfg = config.uplink
+    spool = Spool(cfg.spool_dir or None, max_bytes=int(cfg.spool_max_mb * 1024 * 1024))
+    return Uplink(cfg, spool, metrics, sensor_wh=sensor_wh, fovea_hw=fovea_hw)

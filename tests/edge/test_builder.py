@@ -1,0 +1,133 @@
+"""``build_edge``: the one wiring of the edge, run by the daemon on synthetic recordings (no ../shared needed)."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+from factories import sum_bins_model, synthetic_recording
+
+from darkread.bench.ack_server import AckServer
+from darkread.edge.builder import build_edge
+from darkread.edge.config import load_config
+from darkread.edge.daemon import Daemon
+from darkread.edge.errors import ModelError
+from darkread.edge.notify import Notifier
+from darkread.edge.spool import Spool
+
+
+def replay_config(recording: Path, model: Path, url: str, spool: Path, infer: str = "every-window", **uplink: object):  # noqa: ANN201
+    return load_config(None, environ={}, overrides={
+        "source": {"kind": "replay", "path": str(recording), "speed": 0.0},
+        "pipeline": {"model": str(model), "infer": infer},
+        "uplink": {"url": url, "spool_dir": str(spool), "session_id": "synthetic-1", **uplink},
+        "metrics": {"log_every_s": 0.0},
+    })
+
+
+@pytest.mark.slow  # a whole edge: decoder start-up, model load, websocket
+def test_the_daemon_replays_a_recording_into_the_cloud(tmp_path: Path, notify_socket) -> None:
+    cloud = AckServer()
+    try:
+        config = replay_config(synthetic_recording(tmp_path / "rec"), sum_bins_model(tmp_path / "m.onnx"),
+                               cloud.url, tmp_path / "spool")
+        notifier = Notifier({"NOTIFY_SOCKET": notify_socket.path})
+        edge = build_edge(config, watchdog=notifier.watchdog_tick)
+        assert Daemon(edge, notifier, tick_s=0.005).run() == 0
+    finally:
+        cloud.close()
+    frames = edge.metrics.totals["frames"]
+    assert frames >= 15  # 30k events in the window: one frame per 1600 (lossless at max speed)
+    assert cloud.stored["synthetic-1"] == list(range(frames))  # every frame stored once, in order
+    spool = Spool(tmp_path / "spool")  # and the spool agrees: all of them sent, none left
+    assert spool.depth == 0 and spool.last_allocated_seq == frames - 1
+    spool.close()
+    assert edge.metrics.totals["frames_skipped"] == 0
+    assert notify_socket.received()[0].startswith("READY=1\nSTATUS=replay 1280x720 open, model m.onnx warm")
+    assert cloud.hellos[0].fovea == (100, 200)
+
+
+@pytest.mark.slow
+def test_on_change_sends_one_view_per_fixation_stretch(tmp_path: Path) -> None:
+    """The default mode: the synthetic gaze rests on the text, so the views come every view_every_ms,
+    each fusing the frames inferred at most every min_interval_ms."""
+    cloud = AckServer()
+    try:
+        config = replay_config(synthetic_recording(tmp_path / "rec"), sum_bins_model(tmp_path / "m.onnx"),
+                               cloud.url, tmp_path / "spool", infer="on-change")
+        edge = build_edge(config)
+        assert Daemon(edge, Notifier(environ={}), tick_s=0.005).run() == 0
+    finally:
+        cloud.close()
+    views, frames = edge.metrics.totals["views"], edge.metrics.totals["frames"]
+    assert 1 <= views <= frames
+    assert cloud.stored["synthetic-1"] == list(range(views))  # one message per view, every one stored
+    assert cloud.hellos[0].v == 2
+
+
+@pytest.mark.slow
+def test_a_model_with_another_window_size_sets_the_fovea_everywhere(tmp_path: Path) -> None:
+    """The window and the bins come from the model: frames, their origin and the hello follow it."""
+    cloud = AckServer()
+    try:
+        recording = synthetic_recording(tmp_path / "rec", box_xywh=(640 - 48, 360 - 32, 96, 64))
+        config = replay_config(recording, sum_bins_model(tmp_path / "small.onnx", (2, 64, 96)), cloud.url, tmp_path / "spool")
+        edge = build_edge(config)
+        assert edge.pipeline.voxel.shape == (2, 64, 96)
+        assert Daemon(edge, Notifier({}), tick_s=0.005).run() == 0
+    finally:
+        cloud.close()
+    assert cloud.hellos[0].fovea == (64, 96)
+    frames = edge.metrics.totals["frames"]
+    assert frames >= 15 and cloud.stored["synthetic-1"] == list(range(frames))
+
+
+def test_frames_can_go_to_the_caller_instead_of_an_uplink(tmp_path: Path) -> None:
+    config = replay_config(synthetic_recording(tmp_path / "rec", n_events=8_000), sum_bins_model(tmp_path / "m.onnx"),
+                           "ws://127.0.0.1:1/v1/stream", tmp_path / "spool")
+    frames = []
+    edge = build_edge(config, on_frame=lambda frame, arrival: frames.append(frame))
+    assert edge.uplink is None
+    assert edge.startup().endswith("frames to the caller")
+    assert edge.source.wait(10)
+    assert edge.shutdown(1.0)
+    assert len(frames) == edge.metrics.totals["frames"] >= 4
+    assert all(f.mask.shape == (100, 200) and f.origin == (540, 310) for f in frames)
+    assert not (tmp_path / "spool").exists()  # no uplink, no spool
+
+
+def test_a_failed_build_closes_what_it_opened(tmp_path: Path) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    config = load_config(None, environ={}, overrides={
+        "source": {"kind": "replay", "path": str(synthetic_recording(tmp_path / "rec", n_events=1_000)), "speed": 0.0},
+        "gaze": {"kind": "udp", "udp_port": port},
+        "pipeline": {"model": str(tmp_path / "absent.onnx")},
+    })
+    with pytest.raises(ModelError, match="not found"):
+        build_edge(config)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as again:  # the gaze feed's port was released
+        again.bind(("127.0.0.1", port))
+
+
+def test_pages_are_built_from_frames_and_sent_when_due() -> None:
+    from darkread.edge.pages import PageBuilder
+    from darkread.edge.pipeline import FrameResult
+
+    now = [0.0]
+    pages = PageBuilder(every_s=5.0, clock=lambda: now[0])
+    assert not pages.due() and pages.message(t_us=1) is None  # nothing stitched yet: nothing to send
+    rng = np.random.default_rng(0)
+    text = (rng.random((100, 2000)) < 0.2).astype(np.uint8)  # a line of "ink" the gaze sweeps along
+    for i in range(40):
+        x = 40 * i
+        pages.add(FrameResult(frame_id=i, t_us=1_000 * i, mask=text[:, x : x + 200], origin=(300 + x, 300),
+                              gaze_px=(400.0 + x, 350.0), gaze_rad=(0.0, 0.0), events_used=1600, inference_ms=1.0))
+    now[0] = 5.0
+    assert pages.due()
+    message = pages.message(t_us=99, final=True)
+    assert message is not None and message.t_us == 99 and message.mask().any()
+    assert not pages.due()  # the clock restarts with every page
