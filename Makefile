@@ -7,8 +7,9 @@ PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 EXTRAS ?= edge,cloud,dev,train,gaze
+PYTEST_ARGS ?=  # e.g. make test PYTEST_ARGS="-m postgres"
 
-.PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps speech-deps browser-deps ocr-deps
+.PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
@@ -45,13 +46,21 @@ ocr-deps:  ## Tesseract (an optional second local OCR engine) and libcairo2 for 
 		ldconfig -p | grep -q libcairo.so.2 || ($(APT_INSTALL) libcairo2 >/dev/null) || true; \
 	else echo "ocr-deps: not root or no apt-get; Tesseract stays optional"; fi
 
-test: system-deps $(STAMP)  ## run the whole test suite (installs espeak-ng, Chromium, Tesseract, libcairo2 when root)
-	$(PY) -m pytest -q
+postgres-deps:  ## Debian's PostgreSQL server (initdb, pg_ctl) for the tests and benchmarks, when run as root
+	@if ls /usr/lib/postgresql/*/bin/pg_ctl >/dev/null 2>&1 || command -v pg_ctl >/dev/null; then :; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
+		echo "postgres-deps: installing Debian's postgresql"; \
+		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends postgresql >/dev/null) \
+			|| echo "postgres-deps: apt-get install postgresql failed; the postgres tests will say so"; \
+	else echo "postgres-deps: no PostgreSQL server binaries and not root: install postgresql (the postgres tests skip, or fail under CI)"; fi
 
-test-fast: $(STAMP)  ## unit tests only (no integration tests)
+test: system-deps postgres-deps $(STAMP)  ## run the whole test suite (installs espeak-ng, Chromium, Tesseract, libcairo2, PostgreSQL when root)
+	$(PY) -m pytest -q $(PYTEST_ARGS)
+
+test-fast: $(STAMP) postgres-deps  ## unit tests only (no integration tests)
 	$(PY) -m pytest -q -m "not slow"
 
-bench: $(STAMP)  ## benchmarks; prints a table and writes bench.json
+bench: $(STAMP) postgres-deps  ## benchmarks; prints a table and writes bench.json
 	$(PY) -m darkread.bench
 
 demo: $(STAMP) speech-deps  ## read the shipped sample recording aloud and compare with its printed text

@@ -36,13 +36,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
             "GET /v1/sessions/{id}/page.png, /healthz, /readyz, /metrics (admin key) and, with "
             "DARKREAD_API_DOCS=1, the API docs at /docs. Without any key (DARKREAD_API_KEY or "
             "`darkread cloud keys add`) only 127.0.0.1 is served. Every option can also be set as an "
-            "environment variable (DARKREAD_DATA_DIR, DARKREAD_API_KEY, DARKREAD_OCR_BACKEND, ...)."
+            "environment variable (DARKREAD_DATA_DIR, DARKREAD_DATABASE_URL, DARKREAD_API_KEY, DARKREAD_OCR_BACKEND, ...)."
         ),
     )
     serve.add_argument("--host", default="127.0.0.1",
                        help="address to listen on (default 127.0.0.1; any other address needs a key)")
     serve.add_argument("--port", type=int, default=8000, help="TCP port (default 8000)")
     serve.add_argument("--data-dir", type=Path, help="where the SQLite database and page images live")
+    serve.add_argument(
+        "--database-url", metavar="URL",
+        help="postgresql://user:password@host:port/db: sessions in PostgreSQL, shared by every instance "
+        "pointed at it (prefer DARKREAD_DATABASE_URL: arguments show up in ps); default: SQLite in --data-dir",
+    )  # fmt: skip
     serve.add_argument("--api-key", help="an admin API key (prefer DARKREAD_API_KEY: arguments show up in ps)")
     serve.add_argument("--insecure", action="store_true",
                        help="serve other hosts without any key (a closed test network only)")
@@ -74,7 +79,8 @@ def _settings(args: argparse.Namespace) -> object:
     from darkread.cloud.settings import Settings
 
     overrides: dict[str, object] = {}
-    for option, field in (("data_dir", "data_dir"), ("api_key", "api_key"), ("ocr", "ocr_backend")):
+    for option, field in (("data_dir", "data_dir"), ("api_key", "api_key"), ("database_url", "database_url"),
+                          ("ocr", "ocr_backend")):  # fmt: skip
         value = getattr(args, option, None)
         if value is not None:
             overrides[field] = value
@@ -125,6 +131,16 @@ def _serve(args: argparse.Namespace) -> int:
     except DataDirError as exc:
         print(f"darkread cloud: error: {exc}", file=sys.stderr)
         return 1
+    if settings.database_url is not None:  # type: ignore[attr-defined]
+        from darkread.cloud.errors import StoreError
+        from darkread.cloud.store.postgres import migrate_database
+
+        try:  # a wrong URL or password: one line (without the password), before uvicorn starts
+            migrate_database(settings.database_url.get_secret_value())  # type: ignore[attr-defined]
+        except StoreError as exc:
+            datadir.release(held)
+            print(f"darkread cloud: error: {exc}", file=sys.stderr)
+            return 1
     app = create_app(settings)  # type: ignore[arg-type]
     # uvicorn refuses larger websocket messages itself (close 1009); leave room so that our own
     # check answers first with an error message naming the limit.

@@ -1,4 +1,4 @@
-"""What every request handler shares: settings, store, metrics, the OCR backend and the keys."""
+"""What every request handler shares: settings, store, metrics, the OCR backend, the keys, live pages."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ from fastapi.security import APIKeyHeader, APIKeyQuery
 
 from .auth import ENVIRONMENT_ADMIN, LOOPBACK_DEVELOPER, KeyRing, Principal, Scope, is_loopback
 from .limits import RateLimiter, SingleFlight
+from .live import LivePages
 from .prometheus import Metrics
-from .pages import PageAssembler
 from .settings import Settings
-from .store import Store
+from .store import SessionStore
 
 if TYPE_CHECKING:
     from .ocr.base import OcrBackend
@@ -24,10 +24,10 @@ if TYPE_CHECKING:
 @dataclass
 class AppContext:
     settings: Settings
-    store: Store
+    store: SessionStore
     metrics: Metrics
     ocr: OcrBackend
-    pages: PageAssembler
+    pages: LivePages  # every session's pages, stitched as frames arrive
     keys: KeyRing
     live: dict[str, Any] = field(default_factory=dict)  # session id -> its StreamConnection
     asks: SingleFlight = field(default_factory=SingleFlight)  # one reading per session page

@@ -16,6 +16,10 @@ class StoreError(CloudError):
     """The store could not persist or read something (disk full, database locked, closed)."""
 
 
+class UnknownSessionError(StoreError):
+    """A write named a session that was never opened (or was deleted)."""
+
+
 class SessionOwnedError(StoreError):
     """The session exists and belongs to another device or stream (seq space)."""
 
@@ -26,6 +30,10 @@ class SessionShapeError(StoreError):
 
 class NoPageError(CloudError):
     """The session has nothing to read yet (no frames or pages stored)."""
+
+
+class PostgresUnavailable(CloudError):
+    """No PostgreSQL server can be started on this machine for tests or benchmarks (the message says why)."""
 
 
 class DataDirError(CloudError):

@@ -3,24 +3,32 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import json
 import logging
 import math
 import time
-from dataclasses import asdict
-from typing import Annotated, Literal
+from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import asdict, dataclass
+from typing import Annotated, Literal, TypeVar
+
+import numpy as np
+from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
+from fastapi.responses import StreamingResponse
+from pydantic import BaseModel, Field
 
 from darkread.image_codec import encode_png
-from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
-from pydantic import BaseModel, Field
+from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .auth import Principal, Scope
 from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
-from .ocr.base import OcrResult
-from .pages import PageImage
 from .speech import WAV_MEDIA_TYPE, wants_wav
 from .speech_http import require_speech_engine, speak
 from .store import SessionInfo
+
+_T = TypeVar("_T")
+KEEPALIVE_S = 15.0
 
 log = logging.getLogger(__name__)
 
@@ -57,11 +65,24 @@ class LineModel(BaseModel):
 class AskResponse(BaseModel):
     text: str = Field(description="the text read from the page, lines top to bottom")
     backend: str = Field(description="the OCR engine that read it")
-    page_id: str = Field(description="which page: page-<id> (glasses) or frames-<first>-<last> (stitched)")
-    latency_ms: float = Field(description="time to assemble the page and read it")
+    page_id: str = Field(description="which page: page-<id> (glasses) or stitched-<page>-v<version>")
+    page: int | None = Field(None, description="the page read (stitched sessions): 0 = the session's first")
+    version: int | None = Field(None, description="the page's version (frames stitched into it) that was read")
+    lines_read: int | None = Field(None, description="lines OCR read for this version; the others had not changed")
+    frames_pending: bool = Field(False, description="frames stored before the question were still being stitched")
+    latency_ms: float = Field(description="time from the question to the answer")
     lines: list[LineModel]
     question: str
     truncated: bool = Field(False, description="the engine stopped early (token limit); text is incomplete")
+
+
+class PageModel(BaseModel):
+    index: int = Field(description="page number, 0 = the session's first")
+    version: int = Field(description="frames stitched into it so far")
+    first_seq: int
+    last_seq: int
+    started_by: str = Field(description="first, break (the glasses said so), lost (registration lost), size")
+    finished: bool = Field(description="a later page has started; this one no longer changes")
 
 
 class Health(BaseModel):
@@ -88,7 +109,7 @@ async def healthz() -> Health:
     responses={503: {"model": Health, "description": "a dependency is not ready"}},
 )
 async def readyz(context: Context, response: Response) -> Health:
-    store_ok = await asyncio.to_thread(context.store.ping)
+    store_ok = await context.store.ping()
     ocr_ok = await asyncio.to_thread(context.ocr.ready)
     checks = {"store": store_ok, f"ocr:{context.ocr.name}": ocr_ok}
     if not all(checks.values()):
@@ -99,23 +120,55 @@ async def readyz(context: Context, response: Response) -> Health:
 
 async def _session(context: AppContext, session_id: str, principal: Principal) -> SessionInfo:
     """The session, 404 also when it belongs to another device (its existence is not revealed)."""
-    info = await asyncio.to_thread(context.store.session, session_id)
+    info = await context.store.session(session_id)
     if info is None or not principal.owns(info.device_id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     return info
 
 
-async def _page(context: AppContext, info: SessionInfo) -> PageImage:
+PageQuery = Annotated[int | None, Query(ge=0, description="page number (0 = the first); default: the current page")]
+
+
+@dataclass(frozen=True)
+class _GlassesPage:
+    """A page the glasses stitched (mode "pages"): read whole, as sent."""
+
+    page_id: str
+    image: np.ndarray
+
+
+async def _glasses_page(context: AppContext, info: SessionInfo) -> _GlassesPage:
+    stored = await context.store.latest_page(info.session_id)
+    if stored is None:
+        raise HTTPException(status.HTTP_409_CONFLICT, detail=f"session {info.session_id!r} has not sent a page yet")
+    return _GlassesPage(f"page-{stored.page_id}", ink_mask_to_paper(stored.mask))
+
+
+def _no_page(exc: NoPageError) -> HTTPException:
+    return HTTPException(status.HTTP_409_CONFLICT, detail=str(exc))
+
+
+async def _ocr(context: AppContext, call: Callable[[], Awaitable[_T]]) -> _T:
+    """Run an OCR call off the event loop with the ask timeout; engine errors as HTTP errors."""
+    backend = context.ocr
     try:
-        return await asyncio.to_thread(context.pages.current_page, info.session_id, info.mode, info.last_seq)
-    except NoPageError as exc:
-        raise HTTPException(status.HTTP_409_CONFLICT, detail=str(exc)) from None
+        with context.metrics.ocr_seconds.labels(backend=backend.name).time():
+            return await asyncio.wait_for(call(), context.settings.ocr_timeout_s)
+    except TimeoutError:
+        context.metrics.ask_errors.labels(reason="timeout").inc()
+        raise HTTPException(status.HTTP_504_GATEWAY_TIMEOUT, detail=f"{backend.name}: OCR timed out") from None
+    except OcrUnavailableError as exc:
+        context.metrics.ask_errors.labels(reason="unavailable").inc()
+        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=str(exc)) from None
+    except OcrError as exc:
+        context.metrics.ask_errors.labels(reason="retryable" if exc.retryable else "failed").inc()
+        code = status.HTTP_503_SERVICE_UNAVAILABLE if exc.retryable else status.HTTP_502_BAD_GATEWAY
+        raise HTTPException(code, detail=str(exc)) from None
 
 
 @api.get("/sessions", summary="List sessions, most recently active first", response_model=list[SessionModel])
 async def list_sessions(context: Context, principal: Reader) -> list[SessionModel]:
-    infos = await asyncio.to_thread(context.store.sessions)
-    return [SessionModel.of(info) for info in infos if principal.owns(info.device_id)]
+    return [SessionModel.of(info) for info in await context.store.sessions() if principal.owns(info.device_id)]
 
 
 @api.get(
@@ -130,45 +183,72 @@ async def get_session(session_id: SessionId, context: Context, principal: Reader
 
 @api.delete(
     "/sessions/{session_id}",
-    summary="Delete a session with its frames and pages (admin keys)",
+    summary="Delete a session with everything kept for it: frames, pages, readings (admin keys)",
     status_code=status.HTTP_204_NO_CONTENT,
     responses={403: {"description": "not an admin key"}, 404: {"description": "unknown session"}},
 )
 async def delete_session(session_id: SessionId, context: Context, principal: Admin) -> Response:
-    if not await asyncio.to_thread(context.store.delete_session, session_id):
-        raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
-    context.pages.forget(session_id)
+    await context.pages.forget(session_id)
     context.asks.forget(session_id)
+    if not await context.store.delete_session(session_id):
+        raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @api.get(
+    "/sessions/{session_id}/pages",
+    summary="The session's pages: a new one starts when the wearer moves to other text",
+    response_model=list[PageModel],
+    responses={404: {"description": "unknown session"}},
+)
+async def list_pages(session_id: SessionId, context: Context, principal: Reader) -> list[PageModel]:
+    info = await _session(context, session_id, principal)
+    if info.mode == "pages":
+        return []
+    pages = context.pages.get(session_id)
+    await pages.caught_up(context.settings.ask_catch_up_s)
+    return [PageModel(**asdict(summary)) for summary in pages.summaries()]
+
+
+@api.get(
     "/sessions/{session_id}/page.png",
-    summary="The session's current page as a PNG (black text on white)",
+    summary="A page of the session as a PNG (black text on white); default the current one",
     response_class=Response,
     responses={
         200: {"content": {"image/png": {}}, "description": "the page"},
         404: {"description": "unknown session"},
-        409: {"description": "nothing stored yet"},
+        409: {"description": "nothing stored yet, or no such page"},
     },
 )
-async def page_png(session_id: SessionId, context: Context, principal: Reader) -> Response:
+async def page_png(session_id: SessionId, context: Context, principal: Reader, page: PageQuery = None) -> Response:
     info = await _session(context, session_id, principal)
     _rate_limit(context, principal)
-    page = await _page(context, info)
-    return Response(encode_png(page.image), media_type="image/png", headers={"X-Page-Id": page.page_id})
+    if info.mode == "pages":
+        glasses = await _glasses_page(context, info)
+        return Response(encode_png(glasses.image), media_type="image/png", headers={"X-Page-Id": glasses.page_id})
+    try:
+        rendered = await context.pages.get(session_id).render(page)
+    except NoPageError as exc:
+        raise _no_page(exc) from None
+    headers = {"X-Page-Id": _page_id(rendered.index, rendered.version), "X-Page": str(rendered.index),
+               "X-Page-Version": str(rendered.version)}  # fmt: skip
+    return Response(encode_png(rendered.grey), media_type="image/png", headers=headers)
+
+
+def _page_id(index: int, version: int) -> str:
+    return f"stitched-{index}-v{version}"
 
 
 @api.post(
     "/sessions/{session_id}/ask",
-    summary="Read the session's current page and answer (JSON, or spoken: Accept: audio/wav or ?format=wav)",
+    summary="Read a page of the session (default the current one) and answer (JSON, or spoken: Accept: audio/wav or ?format=wav)",
     response_model=AskResponse,
     responses={
         200: {"content": {WAV_MEDIA_TYPE: {}}, "description": "the answer (JSON), or spoken as a RIFF WAV"},
         404: {"description": "unknown session"},
-        409: {"description": "nothing stored yet"},
+        409: {"description": "nothing stored yet, or no such page"},
         502: {"description": "the OCR engine failed"},
-        503: {"description": "the OCR engine, stitcher or speech engine is unavailable"},
+        503: {"description": "the OCR engine or the speech engine is unavailable"},
         504: {"description": "the OCR engine timed out"},
     },
 )
@@ -177,6 +257,7 @@ async def ask(
     context: Context,
     principal: Reader,
     request: Annotated[AskRequest | None, Body()] = None,
+    page: PageQuery = None,
     format_: Annotated[Literal["json", "wav"] | None, Query(alias="format", description="wav: the answer spoken")] = None,
     accept: Annotated[str | None, Header()] = None,
 ) -> AskResponse | Response:
@@ -187,28 +268,43 @@ async def ask(
     started = time.perf_counter()
     info = await _session(context, session_id, principal)
     _rate_limit(context, principal)
-    reading = context.asks.run(session_id, (info.mode, info.last_seq), lambda: _read(context, info))
+    # one reading per session page however many ask at once; it goes on past the time limit
+    progress = context.pages.get(session_id).stitched_seq if info.mode == "frames" else None  # a newer page: a new reading
+    version = (info.mode, info.last_seq, page, progress)
+    reading = context.asks.run(session_id, version, lambda: _read(context, info, page))
     limit = context.settings.ask_timeout_s
     try:
-        page, result = await asyncio.wait_for(asyncio.shield(reading), limit)
-    except TimeoutError:  # the reading goes on for the next ask of this page
+        answer = await asyncio.wait_for(asyncio.shield(reading), limit)
+    except TimeoutError:
         context.metrics.ask_errors.labels(reason="ask_timeout").inc()
         raise HTTPException(
             status.HTTP_503_SERVICE_UNAVAILABLE, headers={"Retry-After": str(max(1, round(limit)))},
             detail=f"reading the page takes longer than the {limit:g} s limit; it goes on: ask again shortly",
         ) from None
-    latency_ms = (time.perf_counter() - started) * 1000
-    log.info("session %s: read %s with %s in %.0f ms", session_id, page.page_id, context.ocr.name, latency_ms)
-    answer = AskResponse(
-        text=result.text,
-        backend=context.ocr.name,
-        page_id=page.page_id,
-        latency_ms=round(latency_ms, 1),
-        lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines],
-        question=question,
-        truncated=result.truncated,
-    )
+    answer = answer.model_copy(update={"question": question, "latency_ms": round((time.perf_counter() - started) * 1000, 1)})
+    log.info("session %s: read %s with %s in %.0f ms", session_id, answer.page_id, answer.backend, answer.latency_ms)
     return await speak(context.settings, answer, session_id) if spoken else answer
+
+
+async def _read(context: AppContext, info: SessionInfo, page: int | None) -> AskResponse:
+    """What the OCR engine reads on the page (shared by concurrent asks of it)."""
+    if info.mode == "pages":
+        glasses = await _glasses_page(context, info)
+        result = await _ocr(context, lambda: asyncio.to_thread(context.ocr.read, glasses.image))
+        lines = [LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines]
+        return AskResponse(text=result.text, backend=context.ocr.name, page_id=glasses.page_id, latency_ms=0.0,
+                           lines=lines, question="", truncated=result.truncated)  # fmt: skip
+    try:
+        live = await _ocr(context, lambda: context.pages.ask(info.session_id, page))
+    except NoPageError as exc:
+        raise _no_page(exc) from None
+    reading = live.reading
+    return AskResponse(
+        text=reading.text, backend=context.ocr.name, page_id=_page_id(reading.index, reading.version),
+        page=reading.index, version=reading.version, lines_read=reading.lines_read,
+        frames_pending=live.frames_pending, latency_ms=0.0, question="", truncated=reading.truncated,
+        lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in reading.lines],
+    )  # fmt: skip
 
 
 def _rate_limit(context: AppContext, principal: Principal) -> None:
@@ -222,23 +318,34 @@ def _rate_limit(context: AppContext, principal: Principal) -> None:
         )
 
 
-async def _read(context: AppContext, info: SessionInfo) -> tuple[PageImage, OcrResult]:
-    """The session's page and what the OCR engine reads on it (shared by concurrent asks)."""
-    page = await _page(context, info)
-    backend = context.ocr
+@api.get(
+    "/sessions/{session_id}/events",
+    summary="Server-Sent Events: `page` updates (page, version, the lines read so far) while the wearer reads",
+    response_class=StreamingResponse,
+    responses={200: {"content": {"text/event-stream": {}}}, 404: {"description": "unknown session"}},
+)
+async def events(session_id: SessionId, context: Context, principal: Reader) -> StreamingResponse:
+    info = await _session(context, session_id, principal)
+    if info.mode == "pages":
+        raise HTTPException(status.HTTP_409_CONFLICT, detail="live pages are for sessions that stream frames")
+    return StreamingResponse(_event_stream(context, session_id), media_type="text/event-stream",
+                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})  # fmt: skip
+
+
+async def _event_stream(context: AppContext, session_id: str) -> AsyncIterator[str]:
+    updates = context.pages.events(session_id)
+    next_update = asyncio.ensure_future(anext(updates))
     try:
-        with context.metrics.ocr_seconds.labels(backend=backend.name).time():
-            result = await asyncio.wait_for(
-                asyncio.to_thread(backend.read, page.image), context.settings.ocr_timeout_s
-            )
-    except TimeoutError:
-        context.metrics.ask_errors.labels(reason="timeout").inc()
-        raise HTTPException(status.HTTP_504_GATEWAY_TIMEOUT, detail=f"{backend.name}: OCR timed out") from None
-    except OcrUnavailableError as exc:
-        context.metrics.ask_errors.labels(reason="unavailable").inc()
-        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, detail=str(exc)) from None
-    except OcrError as exc:
-        context.metrics.ask_errors.labels(reason="retryable" if exc.retryable else "failed").inc()
-        code = status.HTTP_503_SERVICE_UNAVAILABLE if exc.retryable else status.HTTP_502_BAD_GATEWAY
-        raise HTTPException(code, detail=str(exc)) from None
-    return page, result
+        while True:
+            done, _ = await asyncio.wait({next_update}, timeout=KEEPALIVE_S)
+            if not done:
+                yield ": keep-alive\n\n"
+                continue
+            event = next_update.result()
+            yield f"event: page\nid: {event['page']}-{event['version']}\ndata: {json.dumps(event)}\n\n"
+            next_update = asyncio.ensure_future(anext(updates))
+    finally:
+        next_update.cancel()
+        with contextlib.suppress(asyncio.CancelledError, StopAsyncIteration):
+            await next_update  # the generator must be at rest before it is closed
+        await updates.aclose()

@@ -34,6 +34,11 @@ class Settings(BaseSettings):
     insecure: bool = Field(False, description="serve clients on other hosts without any key (never in production)")
     api_docs: bool = Field(False, description="serve /docs, /redoc and /openapi.json")
     metrics_public: bool = Field(False, description="serve /metrics without a key (else an admin key is needed)")
+    database_url: SecretStr | None = Field(
+        None,
+        description="postgresql://user:password@host:port/db: keep sessions in PostgreSQL (several instances "
+        "share it); unset = SQLite in data_dir",
+    )
 
     # Stream limits.
     max_message_bytes: int = Field(DEFAULT_MAX_MESSAGE_BYTES, ge=1024, le=64 * 1024 * 1024)
@@ -43,8 +48,19 @@ class Settings(BaseSettings):
         10.0, gt=0, description="graceful shutdown deadline: then open connections are cancelled and the store let go"
     )
 
-    # Page assembly.
-    max_frames_per_page: int = Field(4000, ge=1, description="most recent frames stitched into a page")
+    # Live pages.
+    live_idle_s: float = Field(300.0, gt=0, description="a session's pages leave memory after this idle time")
+    session_expire_s: float = Field(
+        0.0, ge=0, description="sessions idle this long are deleted with everything stored; 0 keeps them"
+    )
+    ask_catch_up_s: float = Field(2.0, ge=0, description="an ask first waits at most this for frames stored before it")
+    page_lost_after_s: float = Field(0.25, gt=0, description="registration lost this long (event time) starts a page")
+    max_page_pixels: int = Field(2_000_000, ge=10_000, description="a page whose canvas outgrows this starts anew")
+    min_stitch_gap_ms: float = Field(
+        0.0, ge=0, description="skip frames this close in time to the last stitched one at the same gaze (0 = stitch all)"
+    )
+    stitch_threads: int = Field(2, ge=1, description="threads stitching frames into pages (all sessions)")
+    ocr_threads: int = Field(1, ge=1, description="threads rendering and reading pages (all sessions)")
 
     # OCR. "local" is the embedded rapidocr engine.
     ocr_backend: OcrBackendName = "local"
@@ -88,11 +104,18 @@ class Settings(BaseSettings):
             raise ValueError("DARKREAD_API_KEY / --api-key is empty; set a key or leave it unset")
         return value
 
-    @field_validator("google_api_key", "google_bearer_token", "openai_api_key", mode="before")
+    @field_validator("database_url", "google_api_key", "google_bearer_token", "openai_api_key", mode="before")
     @classmethod
     def _empty_is_unset(cls, value: object) -> object:
         """``DARKREAD_OPENAI_API_KEY=`` (empty) means no key, not the empty key."""
         return None if value in ("", None) else value
+
+    @field_validator("database_url")
+    @classmethod
+    def _postgres_url(cls, value: SecretStr | None) -> SecretStr | None:
+        if value is not None and not value.get_secret_value().startswith(("postgresql://", "postgres://")):
+            raise ValueError("DARKREAD_DATABASE_URL must be a postgresql:// URL")
+        return value
 
     def keys_path(self) -> Path:
         return self.keys_file or self.data_dir / "keys.json"

@@ -42,12 +42,26 @@ from darkread.proto.errors import (
     SessionMismatchError,
     UnexpectedMessageError,
 )
-from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, Message, Page, View, Welcome, decode, encode
+from darkread.proto.messages import (
+    Ack,
+    Error,
+    Frame,
+    Gaze,
+    Heartbeat,
+    Hello,
+    Message,
+    NewPage,
+    Page,
+    View,
+    Welcome,
+    decode,
+    encode,
+)
 
 from .auth import Principal, Scope
 from .context import AppContext
 from .errors import SessionOwnedError, SessionShapeError
-from .store import WriteResult
+from .store import GazeRecord, PageBreak, PageRecord, SessionSpec, StoredFrame, WriteResult
 
 log = logging.getLogger(__name__)
 
@@ -62,8 +76,9 @@ class StreamState(Enum):
 class _Pending:
     """A message handed to the store; the sender acks it once ``result`` resolves."""
 
-    result: asyncio.Future[WriteResult]
+    result: asyncio.Future[WriteResult]  # a task started on arrival, so writes queue in order
     kind: str
+    session_id: str
 
 
 @dataclass(frozen=True)
@@ -142,7 +157,7 @@ class StreamConnection:
         self._claim(message)
         self.hello = message
         try:
-            last_seq = await self.context.store.open_session(message)
+            last_seq = await self.context.store.open_session(session_spec(message))
         except SessionOwnedError as exc:
             self.release()
             raise ForbiddenError(str(exc)) from None
@@ -161,6 +176,7 @@ class StreamConnection:
             last_acked_seq=last_seq,
             max_message_bytes=self.context.settings.max_message_bytes,
             v=message.v,  # a version 1 client gets a version 1 answer
+            features=("new_page",),
         )
 
     def _contiguous(self, seq: int) -> None:
@@ -178,24 +194,46 @@ class StreamConnection:
             raise UnexpectedMessageError(f"{message.TYPE} with version 2 content in a version 1 session")
         if isinstance(message, View):  # a fixation's fused view: stored and stitched as its thresholded frame
             message = message.as_frame()
-        if isinstance(message, Frame | Page | Gaze):
+        if isinstance(message, Frame | Page | Gaze | NewPage):
             self._contiguous(message.seq)
         if isinstance(message, Frame):
             if self.hello.mode != "frames":
                 raise UnexpectedMessageError("frame received but hello.mode is 'pages'")
             if message.shape != self.hello.fovea:
                 raise BadMaskError(f"frame shape {message.shape} differs from hello.fovea {self.hello.fovea}")
-            return _Pending(store.add_frame(session_id, message), "frame")
+            return _Pending(asyncio.ensure_future(store.add_frame(session_id, stored_frame(message))), "frame", session_id)
         if isinstance(message, Page):
             if self.hello.mode != "pages":
                 raise UnexpectedMessageError("page received but hello.mode is 'frames'")
-            return _Pending(store.add_page(session_id, message), "page")
+            record = PageRecord(message.seq, message.page_id, message.t_us, message.mask(), message.lines)
+            return _Pending(asyncio.ensure_future(store.add_page(session_id, record)), "page", session_id)
         if isinstance(message, Gaze):
-            return _Pending(store.add_gaze(session_id, message), "gaze")
+            gaze = GazeRecord(message.seq, message.t_us, message.px)
+            return _Pending(asyncio.ensure_future(store.add_gaze(session_id, gaze)), "gaze", session_id)
+        if isinstance(message, NewPage):
+            if self.hello.mode != "frames":
+                raise UnexpectedMessageError("new_page received but hello.mode is 'pages'")
+            mark = PageBreak(message.seq, message.t_us)
+            return _Pending(asyncio.ensure_future(store.add_page_break(session_id, mark)), "new_page", session_id)
         if isinstance(message, Heartbeat):
             log.debug("session %s heartbeat t_us=%d %s", session_id, message.t_us, message.stats)
             return None
         raise UnexpectedMessageError(f"{message.TYPE} is not allowed after hello")
+
+
+def session_spec(hello: Hello) -> SessionSpec:
+    """What the store keeps of a hello: the session, its owner (device and stream) and geometry."""
+    return SessionSpec(hello.session_id, hello.device_id, hello.mode, tuple(hello.sensor), tuple(hello.fovea),
+                       stream_id=hello.stream_id or "")  # fmt: skip
+
+
+def stored_frame(frame: Frame) -> StoredFrame:
+    """The wire frame as the store keeps it: its frame record, seq, gaze angles and event count."""
+    record = frame.record()
+    return StoredFrame(
+        record.frame_id, record.t_us, record.mask, record.origin, record.gaze_px,
+        seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used,
+    )  # fmt: skip
 
 
 async def stream_endpoint(websocket: WebSocket) -> None:
@@ -287,6 +325,8 @@ async def _send_loop(websocket: WebSocket, outbox: asyncio.Queue[_Outgoing | Non
                     continue  # a later message of a connection that already failed
             else:
                 if result.stored:
+                    if item.kind in ("frame", "new_page"):
+                        context.pages.notify(item.session_id)  # the session's pages take it up
                     if item.kind == "frame":
                         metrics.frames_stored.inc()
                     elif item.kind == "page":

@@ -35,11 +35,13 @@ Each component keeps its own errors in its own ``errors.py``::
      │    └── SessionBusyError         another stream is connected to the session (4423)
      └── CloudError                    cloud/errors.py: the cloud service could not do what was asked
           ├── StoreError               a session's frames or pages could not be stored or read
+          │    ├── UnknownSessionError a write named a session never opened (or deleted)
           │    ├── SessionOwnedError   the session belongs to another device or stream
           │    └── SessionShapeError   a hello with another mode or geometry than the session's
-          ├── NoPageError              the session has nothing to read yet
+          ├── NoPageError              the session has nothing to read yet (or not the page asked for)
           ├── DataDirError             the data directory is unusable or held by another process
           ├── ServiceStartError        the service did not come up
+          ├── PostgresUnavailable      no PostgreSQL server can be started here (tests, benchmarks)
           ├── OcrError                 an OCR engine failed (``retryable`` says whether to try again)
           │    └── OcrUnavailableError the engine is not installed or not configured
           └── SpeechError              the speech engine failed or timed out (spoken answers)

@@ -42,7 +42,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     run.add_argument("--gaze", choices=["recording", "csv", "udp", "aria"], help="gaze source (default: the recording's for a replay)")
     run.add_argument("--gaze-port", type=int, metavar="PORT", help="UDP port of the gaze feed")
-    run.add_argument("--cloud", metavar="URL", help="websocket URL, e.g. ws://127.0.0.1:8000/v1/stream")
+    run.add_argument(
+        "--cloud", metavar="URL", action="append",
+        help="websocket URL, e.g. ws://127.0.0.1:8000/v1/stream; repeat it (or separate with commas) for several "
+        "cloud instances on one database: on a failed connect or a closed connection the edge moves to the next",
+    )  # fmt: skip
     run.add_argument("--api-key", metavar="KEY", help="cloud API key (prefer DARKREAD_EDGE_UPLINK_API_KEY)")
     run.add_argument("--mode", choices=["frames", "pages"], help="send frames (default) or pages stitched on the glasses")
     run.add_argument("--spool", metavar="DIR", help="spool directory for unacknowledged frames (default: in memory)")
@@ -80,7 +84,9 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
         out["gaze"]["kind"] = args.gaze
     if args.gaze_port is not None:
         out["gaze"]["udp_port"] = args.gaze_port
-    for option, key in (("cloud", "url"), ("api_key", "api_key"), ("mode", "mode"), ("spool", "spool_dir"),
+    if args.cloud:
+        out["uplink"]["url"] = ",".join(args.cloud)
+    for option, key in (("api_key", "api_key"), ("mode", "mode"), ("spool", "spool_dir"),
                         ("session", "session_id"), ("drain_timeout", "drain_timeout_s")):
         value = getattr(args, option)
         if value is not None:

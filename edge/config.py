@@ -64,7 +64,7 @@ class PipelineConfig:
 
 @dataclass(frozen=True)
 class UplinkConfig:
-    url: str = "ws://127.0.0.1:8000/v1/stream"
+    url: str = "ws://127.0.0.1:8000/v1/stream"  # or several instances: a TOML list, or comma-separated
     api_key: str = ""
     device_id: str = ""  # empty: the host name
     session_id: str = ""  # empty: resume the spool's session if frames wait in it, else a new one
@@ -122,6 +122,8 @@ def _coerce(raw: Any, default: Any, where: str) -> Any:
             return int(raw)
         if isinstance(default, float):
             return float(raw)
+        if isinstance(raw, list) and where == "[uplink] url":  # several cloud instances (failover)
+            return ",".join(str(item) for item in raw)
         return str(raw)
     except ValueError:
         raise ValueError(f"config {where}: cannot use {raw!r} (expected {type(default).__name__})") from None
@@ -187,6 +189,12 @@ def load_config(
 
 
 def validate(config: EdgeConfig) -> EdgeConfig:
+    urls = [part.strip() for part in config.uplink.url.split(",") if part.strip()]
+    if not urls:
+        raise ValueError("config [uplink] url: no cloud URL given")
+    for url in urls:
+        if not url.startswith(("ws://", "wss://")):
+            raise ValueError(f"config [uplink] url: {url!r} is not a ws:// or wss:// URL")
     if config.uplink.mode not in {"frames", "pages"}:
         raise ValueError(f"config [uplink] mode must be 'frames' or 'pages', not {config.uplink.mode!r}")
     if config.source.kind not in {"replay", "evk4"}:

@@ -37,6 +37,7 @@ COUNTERS = (
     "messages_acked",
     "messages_rejected",
     "reconnects",
+    "failovers",
     "ack_timeouts",
     "pages",
 )

@@ -7,6 +7,11 @@ drops from the spool whatever ``welcome.last_acked_seq`` covers, sends the rest 
 (at most ``max_in_flight`` unacknowledged) and deletes messages as cumulative acks arrive. Any
 failure reconnects with exponential backoff and jitter and resends from the spool; the cloud drops
 duplicates by seq. Nothing is lost unless the bounded spool overflows (counted as drops).
+
+``url`` may list several cloud instances (comma-separated) sharing one database: a failed
+connect or a closed connection moves to the next one at once, and backoff starts only after
+every instance failed in a row. The next instance's welcome says what the database holds, so
+the resume point is the same whichever instance answers.
 """
 
 from __future__ import annotations
@@ -55,6 +60,11 @@ FATAL_CODES = frozenset({
     CloseCode.POLICY_VIOLATION, CloseCode.FORBIDDEN, CloseCode.TAKEN_OVER, CloseCode.SESSION_MISMATCH,
     CloseCode.SEQ_GAP, CloseCode.SESSION_BUSY, CloseCode.VERSION_MISMATCH,
 })
+
+
+def split_urls(urls: str) -> tuple[str, ...]:
+    """``"ws://a/v1/stream, ws://b/v1/stream"`` -> both URLs, in order (blanks dropped)."""
+    return tuple(part.strip() for part in urls.split(",") if part.strip())
 
 
 def placeholder(seq: int) -> bytes:
@@ -119,6 +129,15 @@ class Uplink:
         self._rejected: tuple[int, str] | None = None  # close code and reason naming a bad message
         self._cloud_error = ""  # the last error message the cloud sent (the close reason is cut short)
         self._ack_progress = (-1, time.monotonic())  # (acked seq, when it last advanced)
+        self.urls = split_urls(settings.url)
+        if not self.urls:
+            raise ValueError("uplink: no cloud URL given")
+        self._url_index = 0
+
+    @property
+    def url(self) -> str:
+        """The cloud instance the uplink uses now (or tries next)."""
+        return self.urls[self._url_index]
 
     # -- called from other threads ---------------------------------------------------------
     def start(self) -> None:
@@ -191,37 +210,39 @@ class Uplink:
         ready.set()
         delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
         first = True
+        failed_in_a_row = 0  # connections that ended without a welcome, across instances
         while not self._stopping and not self.fatal_error:
             if not first:
                 self.metrics.add("reconnects")
             first = False
             self._connected_since = None
+            url = self.url
             try:
-                await self._connection()
+                await self._connection(url)
             except InvalidStatus as exc:
                 self.last_error = f"cloud refused the connection: HTTP {exc.response.status_code}"
                 if exc.response.status_code in (401, 403):
                     self._fail(f"{self.last_error}: the API key is missing, wrong or lacks the stream scope")
                 else:
-                    logger.error("%s (check the URL)", self.last_error)
+                    logger.error("%s at %s (check the URL)", self.last_error, url)
             except CloudRefusedError as exc:
                 self.last_error = str(exc)
                 if exc.code in FATAL_CODES:
                     self._fail(f"cloud refused session {self.session_id}: {exc.message}")
                 else:
-                    logger.warning("uplink to %s lost: %s", self.settings.url, self.last_error)
+                    logger.warning("uplink to %s lost: %s", url, self.last_error)
             except ConnectionClosed as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
                 code = exc.rcvd.code if exc.rcvd is not None else None
                 if code in FATAL_CODES:
                     self._fail(f"cloud refused session {self.session_id}: {self._cloud_error or exc.rcvd.reason}")  # type: ignore[union-attr]
                 else:
-                    logger.warning("uplink to %s lost: %s", self.settings.url, self.last_error)
+                    logger.warning("uplink to %s lost: %s", url, self.last_error)
                 if code in MESSAGE_REJECTED_CODES:
                     self._rejected = (code, exc.rcvd.reason)  # type: ignore[union-attr]  # dropped after the next welcome
             except (OSError, InvalidHandshake, TimeoutError, ProtocolError) as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
-                logger.warning("uplink to %s lost: %s", self.settings.url, self.last_error)
+                logger.warning("uplink to %s lost: %s", url, self.last_error)
             except InvalidURI as exc:
                 self.last_error = str(exc)
                 logger.error("uplink URL is not valid: %s", exc)
@@ -229,11 +250,25 @@ class Uplink:
                 self.connected.clear()
             if self._stopping or self.fatal_error:
                 break
-            stable_s = self.settings.stable_connection_s
-            if self._connected_since is not None and time.monotonic() - self._connected_since >= stable_s:
+            connected = self._connected_since is not None
+            lasted = connected and time.monotonic() - self._connected_since >= self.settings.stable_connection_s
+            if lasted:
                 # a connection that worked for a while: the next outage starts from a short delay again
                 delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
+            failed_in_a_row = 0 if connected else failed_in_a_row + 1
+            if self._rejected is None:  # a rejected message is no reason to leave a working instance
+                self._fail_over()
+            if len(self.urls) > 1 and (lasted or (not connected and failed_in_a_row % len(self.urls) != 0)):
+                continue  # the next instance may answer at once; back off only after a whole round failed
             await self._sleep_or_stop(next(delays))
+
+    def _fail_over(self) -> None:
+        """Move to the next cloud instance (a no-op with one URL)."""
+        if len(self.urls) > 1:
+            previous = self.url
+            self._url_index = (self._url_index + 1) % len(self.urls)
+            self.metrics.add("failovers")
+            logger.warning("uplink fails over from %s to %s", previous, self.url)
 
     def _fail(self, reason: str) -> None:
         """Stop retrying: the cloud will not take this stream. Frames stay in the spool."""
@@ -251,11 +286,11 @@ class Uplink:
             except TimeoutError:
                 return
 
-    async def _connection(self) -> None:
+    async def _connection(self, url: str) -> None:
         s = self.settings
         headers = {"X-API-Key": s.api_key} if s.api_key else None
         async with connect(
-            s.url, additional_headers=headers, open_timeout=s.open_timeout_s, max_size=DEFAULT_MAX_MESSAGE_BYTES
+            url, additional_headers=headers, open_timeout=s.open_timeout_s, max_size=DEFAULT_MAX_MESSAGE_BYTES
         ) as ws:
             hello = Hello(
                 device_id=self.device_id,
@@ -283,7 +318,7 @@ class Uplink:
             self.last_error = ""
             logger.info(
                 "uplink connected to %s, session %s, cloud has up to seq %d, %d to send",
-                s.url, self.session_id, welcome.last_acked_seq, self.spool.depth,
+                url, self.session_id, welcome.last_acked_seq, self.spool.depth,
             )
             await self._stream(ws, welcome)
 
@@ -403,4 +438,4 @@ class Uplink:
         )
 
 
-__all__ = ["Uplink", "backoff_delays"]
+__all__ = ["Uplink", "backoff_delays", "split_urls"]

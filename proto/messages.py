@@ -270,6 +270,9 @@ class Welcome(_Checked):
     last_acked_seq: int = _spec(lambda v, n: _int(v, n, -1, INT64_MAX))
     max_message_bytes: int = _spec(lambda v, n: _int(v, n, 1, 2**31))
     v: int = _spec(_int, PROTOCOL_VERSION)
+    # optional message types this server accepts beyond the version's core set (e.g. "new_page");
+    # a client sends those only when listed, so old servers and old clients keep working
+    features: tuple[str, ...] | None = _spec(_optional(_list_of(lambda v, n: _text(v, n, 64))), None)
 
 
 @dataclass(frozen=True)
@@ -401,6 +404,16 @@ def _bits_from_wire(cls: type[Frame] | type[Page], values: dict[str, Any]) -> No
 
 
 @dataclass(frozen=True)
+class NewPage(_Checked):
+    """client -> server (mode "frames", if ``welcome.features`` lists "new_page"): the wearer
+    moved to other text; frames after this seq start a new page."""
+
+    TYPE: ClassVar[str] = "new_page"
+    seq: int = _spec(_seq)
+    t_us: int = _spec(_int)
+
+
+@dataclass(frozen=True)
 class Gaze(_Checked):
     """client -> server, an optional batch of gaze samples (same length lists)."""
 
@@ -437,9 +450,9 @@ class Error(_Checked):
     fatal: bool = _spec(_bool)
 
 
-Message: TypeAlias = Hello | Welcome | Frame | Page | View | Gaze | Heartbeat | Ack | Error
+Message: TypeAlias = Hello | Welcome | Frame | Page | View | NewPage | Gaze | Heartbeat | Ack | Error
 MESSAGE_TYPES: dict[str, type[Message]] = {
-    cls.TYPE: cls for cls in (Hello, Welcome, Frame, Page, View, Gaze, Heartbeat, Ack, Error)
+    cls.TYPE: cls for cls in (Hello, Welcome, Frame, Page, View, NewPage, Gaze, Heartbeat, Ack, Error)
 }
 
 
@@ -530,6 +543,7 @@ __all__ = [
     "Hello",
     "Message",
     "Mode",
+    "NewPage",
     "Page",
     "View",
     "Welcome",

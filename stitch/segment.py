@@ -43,6 +43,11 @@ class LineSegmenter:
             decided.append(self._decide())
         return decided
 
+    @property
+    def pending(self) -> int:
+        """Frames pushed but not yet decided."""
+        return len(self._pending)
+
     def flush(self) -> list[tuple[FrameRecord, bool]]:
         decided = []
         while self._pending:

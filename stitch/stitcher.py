@@ -8,10 +8,12 @@ before it, then refined by correlation against the page and the growing strip.
 
 from __future__ import annotations
 
+import copy
 import logging
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal, NamedTuple
 
 import cv2
 import numpy as np
@@ -82,11 +84,24 @@ def predict_correction(
     return intercept + slope * (min(float(t_us), times[-1] + max_ahead_us) - centre)
 
 
+Outcome = Literal["blank", "dropped", "placed", "registered"]
+"""What became of a frame: too little ink; no trustworthy match (left out); put where predicted
+(nothing to match against there); matched and blended in."""
+
+
+class Placement(NamedTuple):
+    frame: FrameRecord
+    outcome: Outcome
+    score: float  # the match score it was placed with (0 when not registered)
+
+
 class PageStitcher:
     """Incremental stitcher: ``add`` frames in time order as they arrive, ask for ``page`` any time.
 
     Frames are decided ``cfg.sweep_confirm_frames`` frames late (a return sweep must be confirmed);
-    ``flush`` integrates the undecided tail, ``page`` does not change the state.
+    ``add`` and ``flush`` return each decided frame with its ``Outcome``. ``flush`` integrates the
+    undecided tail, ``page`` does not change the state, ``snapshot`` is the page as if the
+    reading ended now (the state is kept, so frames can follow).
     """
 
     def __init__(self, cfg: StitchConfig = StitchConfig()) -> None:
@@ -103,19 +118,37 @@ class PageStitcher:
         self._used = 0
         self._dropped = 0
         self._positions: dict[int, tuple[float, float]] = {}
+        self._score = 0.0  # the last decided frame's match score
 
-    def add(self, frame: FrameRecord) -> None:
+    def add(self, frame: FrameRecord) -> list[Placement]:
         if min(frame.mask.shape) < MIN_FRAME_SIDE:
             raise ValueError(
                 f"frame {frame.frame_id}: the stitcher needs masks of at least {MIN_FRAME_SIDE}x{MIN_FRAME_SIDE}, "
                 f"got shape {frame.mask.shape}"
             )
-        for decided, new_line in self._segmenter.push(frame):
-            self._integrate(decided, new_line)
+        return [self._place(decided, new_line) for decided, new_line in self._segmenter.push(frame)]
 
-    def flush(self) -> None:
-        for decided, new_line in self._segmenter.flush():
-            self._integrate(decided, new_line)
+    def flush(self) -> list[Placement]:
+        return [self._place(decided, new_line) for decided, new_line in self._segmenter.flush()]
+
+    def _place(self, frame: FrameRecord, new_line: bool) -> Placement:
+        self._score = 0.0
+        outcome = self._integrate(frame, new_line)
+        return Placement(frame, outcome, self._score)
+
+    def snapshot(self) -> StitchedPage:
+        """The page with the undecided frames integrated too, leaving this stitcher as it was."""
+        if not self._segmenter.pending:
+            return self.page()
+        ended = copy.deepcopy(self)
+        ended.flush()
+        return ended.page()
+
+    @property
+    def canvas_pixels(self) -> int:
+        """Pixels the page's canvas spans (memory grows with it: 12 bytes each, plus the strip)."""
+        h, w = self._page.canvas.shape
+        return int(h * w)
 
     @property
     def frames_used(self) -> int:
@@ -139,12 +172,12 @@ class PageStitcher:
         self._page.add_strip(strip)
         self._lines.append(_FinishedLine.of(strip))
 
-    def _integrate(self, frame: FrameRecord, new_line: bool) -> None:
+    def _integrate(self, frame: FrameRecord, new_line: bool) -> Outcome:
         cfg = self.cfg
         mask = frame.mask
         if mask.mean() < cfg.min_ink_fraction:
             self._dropped += 1
-            return
+            return "blank"
         if new_line:
             self._finish_line()
         if self._strip is None:
@@ -169,15 +202,15 @@ class PageStitcher:
                 reg, rejected = found, False
         if rejected:
             self._dropped += 1
-            return
+            return "dropped"
         if reg is None:
             score = 0.0  # nothing to compare with yet: placed as predicted, first to be replaced
         elif reg.score < cfg.min_match_score:
             self._dropped += 1
             log.debug("frame %d dropped: match score %.2f", frame.frame_id, reg.score)
-            return
+            return "dropped"
         else:
-            score = reg.score
+            score = self._score = reg.score
             x = px + reg.shift_xy[0] + (reg.subpixel_xy[0] if cfg.subpixel else 0.0)
             y = py + reg.shift_xy[1] + (reg.subpixel_xy[1] if cfg.subpixel else 0.0)
             correction = np.array([x, y]) - np.asarray(frame.origin)
@@ -191,6 +224,7 @@ class PageStitcher:
         self._strip.add(mask, x, y, score, gaze_xy, frame.frame_id, cfg, roll)
         self._positions[frame.frame_id] = (x, y)
         self._used += 1
+        return "placed" if reg is None else "registered"
 
     def _weak(self, score: float) -> bool:
         """A match well below the recent ones: likely the neighbouring line (one pitch off, a frame's

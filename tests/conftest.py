@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import uuid
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 
 from darkread.paths import find_shared_data
+
+if TYPE_CHECKING:
+    from darkread.cloud.store.pg_server import TemporaryPostgres
 
 
 @pytest.fixture(scope="session")
@@ -31,6 +39,36 @@ def real_events_dir(shared_data: Path) -> Path:
 @pytest.fixture(scope="session")
 def aria_dir(shared_data: Path) -> Path:
     return shared_data / "aria" / "projectaria_tools"
+
+
+def postgres_required() -> bool:
+    """CI (and ``DARKREAD_REQUIRE_POSTGRES=1``) must run the PostgreSQL tests, never skip them."""
+    return bool(os.environ.get("CI")) or os.environ.get("DARKREAD_REQUIRE_POSTGRES") == "1"
+
+
+@pytest.fixture(scope="session")
+def postgres_server() -> Iterator[TemporaryPostgres]:
+    """One real PostgreSQL server for the session, in a temporary directory on 127.0.0.1."""
+    from darkread.cloud.store.pg_server import PostgresUnavailable, TemporaryPostgres
+
+    server = TemporaryPostgres()
+    try:
+        server.start()
+    except (PostgresUnavailable, OSError, subprocess.SubprocessError) as exc:
+        log_tail = server.log_tail()
+        server.stop()
+        reason = f"PostgreSQL server could not be started: {exc}" + (f"\n{log_tail}" if log_tail else "")
+        if postgres_required():
+            pytest.fail(f"{reason} (required because CI or DARKREAD_REQUIRE_POSTGRES=1 is set)", pytrace=False)
+        pytest.skip(reason)
+    yield server
+    server.stop()
+
+
+@pytest.fixture
+def postgres_url(postgres_server: TemporaryPostgres) -> str:
+    """The URL of a new, empty database on the session's server."""
+    return postgres_server.create_database(f"t{uuid.uuid4().hex[:16]}")
 
 
 @pytest.fixture(scope="session")

@@ -24,6 +24,7 @@ BENCH_MODULES: tuple[str, ...] = (
     "darkread.bench.inference",
     "darkread.bench.edge",
     "darkread.bench.cloud",
+    "darkread.bench.ask",
     "darkread.bench.stitch",
     "darkread.bench.ocr",
 )

@@ -1,6 +1,11 @@
 """Cloud ingest: frames per second acknowledged (stored and committed) with 1, 10 and 50
 concurrent websocket streams on loopback, next to the store alone (no network, no protocol)
-measured in the same run.
+measured in the same run; on SQLite, then on PostgreSQL (a real server started for the run with
+fsync on, as SQLite's synchronous=FULL), each PostgreSQL figure next to SQLite's.
+
+Then 50 replays at real time (30 frames/s each) spread over two instances on one PostgreSQL; the
+first instance is SIGKILLed halfway and restarted, its replays fail over: every frame must be
+stored exactly once (``replays.py``).
 
 The service runs in its own process (``darkread cloud serve``) so client and server do not share
 an interpreter lock; each stream pipelines up to 32 unacknowledged frames, as the edge uplink does.
@@ -9,19 +14,28 @@ an interpreter lock; each stream pipelines up to 32 unacknowledged frames, as th
 from __future__ import annotations
 
 import asyncio
+import logging
 import os
+import signal
 import socket
 import subprocess
 import sys
 import time
+from collections.abc import Awaitable, Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from darkread.bench import BenchContext, Figure
 from darkread.proto.messages import Ack, Frame, Hello, Welcome, decode, encode, pack_mask
 
+if TYPE_CHECKING:
+    from darkread.cloud.store import SessionStore
+    from darkread.cloud.store.pg_server import TemporaryPostgres
+
 API_KEY = "bench-key"
+STREAMS = (1, 10, 50)
 WINDOW = 32  # unacknowledged frames per stream
 FRAME_RATE_HZ = 30  # what one pair of glasses sends at most
 
@@ -42,16 +56,18 @@ def _free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def _start_server(data_dir: Path) -> tuple[subprocess.Popen[bytes], int]:
-    port = _free_port()
+def _start_server(data_dir: Path, database_url: str | None = None, port: int = 0) -> tuple[subprocess.Popen[bytes], int]:
+    port = port or _free_port()
     env = {**os.environ, "DARKREAD_API_KEY": API_KEY}
+    if database_url:
+        env["DARKREAD_DATABASE_URL"] = database_url
     process = subprocess.Popen(
         [sys.executable, "-m", "darkread.cli", "-q", "cloud", "serve", "--port", str(port), "--data-dir", str(data_dir)],
         env=env,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         if process.poll() is not None:
             raise RuntimeError("the cloud service exited during start-up")
@@ -61,7 +77,7 @@ def _start_server(data_dir: Path) -> tuple[subprocess.Popen[bytes], int]:
         except OSError:
             time.sleep(0.1)
     process.terminate()
-    raise RuntimeError("the cloud service did not start within 30 s")
+    raise RuntimeError("the cloud service did not start within 60 s")
 
 
 async def _one_stream(url: str, session_id: str, frames: list[bytes], deadline: float) -> int:
@@ -92,53 +108,131 @@ async def _ingest(url: str, streams: int, frames_per_stream: int, time_limit_s: 
     return sum(counts) / (time.monotonic() - started)
 
 
-def _store_alone(data_dir: Path, count: int) -> float:
-    from darkread.cloud.store import Store
+def _store_alone(open_store: Callable[[], Awaitable[SessionStore]], count: int) -> float:
+    from darkread.cloud.stream import stored_frame
     from darkread.proto.messages import decode as decode_message
 
-    store = Store(data_dir)
-    frames = [decode_message(data, max_bytes=1 << 20) for data in _frame_bytes(count)]
+    frames = [stored_frame(decode_message(data, max_bytes=1 << 20)) for data in _frame_bytes(count)]  # type: ignore[arg-type]
 
     async def write() -> float:
-        hello = Hello(device_id="bench", session_id="alone", mode="frames", sensor=(1280, 720), fovea=(100, 200))
-        await store.open_session(hello)
-        started = time.perf_counter()
-        pending = []
-        for frame in frames:
-            pending.append(store.add_frame("alone", frame))  # type: ignore[arg-type]
-            if len(pending) >= WINDOW:
-                await pending.pop(0)
-        await asyncio.gather(*pending)
-        return count / (time.perf_counter() - started)
+        from darkread.cloud.store import SessionSpec
 
-    try:
-        return asyncio.run(write())
-    finally:
-        store.close()
+        store = await open_store()
+        try:
+            await store.open_session(SessionSpec("alone", "bench", "frames", (1280, 720), (100, 200)))
+            started = time.perf_counter()
+            pending: list[asyncio.Future[object]] = []
+            for frame in frames:
+                pending.append(asyncio.ensure_future(store.add_frame("alone", frame)))
+                if len(pending) >= WINDOW:
+                    await pending.pop(0)
+            await asyncio.gather(*pending)
+            return count / (time.perf_counter() - started)
+        finally:
+            await store.close()
+
+    return asyncio.run(write())
 
 
-def run(ctx: BenchContext) -> list[Figure]:
-    total = ctx.runs(6000, 1500, 100)  # frames per configuration, split over the streams
-    time_limit_s = float(ctx.runs(30, 10, 10))
-    least = 2 if ctx.smoke else 20  # frames per stream
-    alone = _store_alone(ctx.scratch / "store-alone", total)
-    reference = f"store alone, no network: {alone:.0f} frames/s"
-    process, port = _start_server(ctx.scratch / "cloud-bench")
-    figures = []
+def _ingest_rates(data_dir: Path, database_url: str | None, total: int, time_limit_s: float, least: int) -> dict[int, float]:
+    """Frames/s acknowledged by one instance with 1, 10 and 50 streams."""
+    process, port = _start_server(data_dir, database_url)
     try:
         url = f"ws://127.0.0.1:{port}/v1/stream"
-        for streams in (1, 10, 50):
-            rate = asyncio.run(_ingest(url, streams, max(total // streams, least), time_limit_s, f"s{streams}"))
-            figures.append(
-                Figure(
-                    key=f"cloud_ingest_frames_per_s_{streams}",
-                    value=rate,
-                    label=f"cloud ingest, {streams} stream(s) [frames/s]",
-                    reference=reference,
-                    goal=f">= {streams * FRAME_RATE_HZ} ({FRAME_RATE_HZ} frames/s per stream)",
-                )
-            )
+        return {
+            streams: asyncio.run(_ingest(url, streams, max(total // streams, least), time_limit_s, f"s{streams}"))
+            for streams in STREAMS
+        }
     finally:
         process.terminate()
         process.wait(timeout=30)
+
+
+def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
+    """50 paced replays over two instances, the first killed halfway and restarted."""
+    from darkread.bench.replays import count_stored_in, run_replays
+
+    database_url = pg.create_database("replays")
+    instances = [list(_start_server(ctx.scratch / f"replay-{name}", database_url)) for name in "ab"]
+    killed_at: list[float] = []
+
+    def kill_and_restart_a() -> None:
+        process, port = instances[0]
+        process.send_signal(signal.SIGKILL)
+        process.wait(timeout=10)
+        killed_at.append(time.monotonic())
+        instances[0] = list(_start_server(ctx.scratch / "replay-a", database_url, port=port))
+
+    sessions, seconds = ctx.runs(50, 50, 4), float(ctx.runs(60, 15, 2))
+    logging.getLogger("darkread.edge.uplink").setLevel(logging.ERROR)  # 25 failovers, one line each
+    try:
+        urls = [f"ws://127.0.0.1:{port}/v1/stream" for _, port in instances]
+        outcome = run_replays(urls, API_KEY, count_stored_in(database_url), sessions=sessions, seconds=seconds,
+                              at_half=kill_and_restart_a)  # fmt: skip
+    finally:
+        for process, _ in instances:
+            process.terminate()
+            process.wait(timeout=30)
+    what = f"{sessions} replays at 1x over 2 instances, {outcome.seconds:.0f} s, A SIGKILLed halfway"
+    ctx.notes.append(
+        f"{what}: {outcome.submitted} frames submitted, {outcome.stored} stored, {outcome.lost} lost, "
+        f"{outcome.duplicated} duplicated, {outcome.wrong_sessions} sessions with gaps, {outcome.failovers} failovers"
+    )
+    reference = f"submitted: {outcome.submitted}"
+    return [
+        Figure("cloud_pg_replays_frames_stored", outcome.stored, f"{what}: frames stored", reference, "= submitted"),
+        Figure("cloud_pg_replays_frames_lost", outcome.lost, "  ... frames lost", reference, "0"),
+        Figure("cloud_pg_replays_frames_duplicated", outcome.duplicated, "  ... frames stored twice", reference, "0"),
+        Figure("cloud_pg_replays_failovers", outcome.failovers, "  ... uplink failovers", "", f">= {sessions // 2}"),
+    ]
+
+
+def run(ctx: BenchContext) -> list[Figure]:
+    from darkread.cloud.store import SqliteStore
+    from darkread.cloud.store.pg_server import PostgresUnavailable, TemporaryPostgres
+    from darkread.cloud.store.postgres import PostgresStore
+
+    total = ctx.runs(6000, 1500, 100)  # frames per configuration, split over the streams
+    time_limit_s = float(ctx.runs(30, 10, 10))
+    least = 2 if ctx.smoke else 20  # frames per stream
+
+    async def open_sqlite() -> SessionStore:
+        return SqliteStore(ctx.scratch / "store-alone")
+
+    alone = _store_alone(open_sqlite, total)
+    sqlite = _ingest_rates(ctx.scratch / "cloud-bench", None, total, time_limit_s, least)
+    figures = [
+        Figure(
+            key=f"cloud_ingest_frames_per_s_{streams}",
+            value=rate,
+            label=f"cloud ingest, SQLite, {streams} stream(s) [frames/s]",
+            reference=f"store alone, no network: {alone:.0f} frames/s",
+            goal=f">= {streams * FRAME_RATE_HZ} ({FRAME_RATE_HZ} frames/s per stream)",
+        )
+        for streams, rate in sqlite.items()
+    ]
+    pg = TemporaryPostgres(durable=True)
+    try:
+        pg.start()
+    except PostgresUnavailable as exc:
+        pg.stop()
+        ctx.notes.append(f"PostgreSQL figures skipped: {exc}")
+        return figures
+    try:
+        alone_url = pg.create_database("alone")
+        pg_alone = _store_alone(lambda: PostgresStore.open(alone_url), total)
+        rates = _ingest_rates(ctx.scratch / "cloud-bench-pg", pg.create_database("ingest"), total, time_limit_s, least)
+        figures += [
+            Figure(
+                key=f"cloud_ingest_pg_frames_per_s_{streams}",
+                value=rate,
+                label=f"cloud ingest, PostgreSQL, {streams} stream(s) [frames/s]",
+                reference=f"SQLite {sqlite[streams]:.0f}; PG store alone {pg_alone:.0f}",
+                goal=f">= {streams * FRAME_RATE_HZ} ({FRAME_RATE_HZ} frames/s per stream)",
+            )
+            for streams, rate in rates.items()
+        ]
+        figures += _replays(ctx, pg)
+    finally:
+        pg.stop()
     return figures

@@ -69,7 +69,11 @@ def api_key() -> str:
 @pytest.fixture
 def make_settings(tmp_path: Path) -> Callable[..., Settings]:
     def make(**overrides: object) -> Settings:
-        values: dict[str, object] = {"data_dir": tmp_path / "data", "api_key": API_KEY, "max_message_bytes": 65536}
+        # a question waits for every frame stored before it (a loaded CI host stitches slowly)
+        values: dict[str, object] = {
+            "data_dir": tmp_path / "data", "api_key": API_KEY, "max_message_bytes": 65536, "ask_catch_up_s": 60.0,
+            "ask_rate_per_min": 6000.0, "ask_burst": 100,  # wearers asking every few seconds (limits: test_ask_limits)
+        }  # fmt: skip
         values.update(overrides)
         return Settings(_env_file=None, **values)  # type: ignore[arg-type, call-arg]
 

@@ -45,7 +45,7 @@ def test_an_integrity_error_closes_within_a_second_and_the_stream_resumes(server
     while metrics.active._value.get() != 0 and time.monotonic() < deadline:
         time.sleep(0.01)
     assert metrics.active._value.get() == 0
-    assert [f.seq for f in server.context.store.frames("clash", 100)] == list(range(6))
+    assert [f.seq for f in asyncio.run(server.context.store.frames("clash"))] == list(range(6))
     print(f"store failure: connection closed {elapsed * 1000:.0f} ms after the failing frame")
 
 

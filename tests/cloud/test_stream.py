@@ -12,6 +12,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from darkread.cloud.errors import StoreError
+from darkread.cloud.store import StoredFrame
 from darkread.cloud.stream import close_reason
 from darkread.proto.errors import CloseCode
 from darkread.proto.messages import Ack, Error, Frame, Hello, Page, View, Welcome, decode, encode, pack_mask
@@ -76,11 +77,11 @@ def test_frames_are_acked_after_they_are_stored(server: LiveServer) -> None:
                 await ws.send(encode(frame(seq)))
                 ack = decode(await ws.recv(), max_bytes=LIMIT)
                 assert ack == Ack(seq=seq)
-                stored = server.context.store.frames("sess-a", 100)  # stored before the ack arrived
+                stored = await server.context.store.frames("sess-a")  # stored before the ack arrived
                 assert [f.seq for f in stored] == list(range(seq + 1))
 
     asyncio.run(scenario())
-    stored = server.context.store.frames("sess-a", 100)
+    stored = asyncio.run(server.context.store.frames("sess-a"))
     np.testing.assert_array_equal(stored[3].mask, frame(3).mask())
     assert stored[3].origin == (500, 300) and stored[3].gaze_px == (600.0, 350.0)
 
@@ -102,7 +103,7 @@ def test_version_2_views_and_compressed_frames_are_stored_as_frames(server: Live
             assert decode(await ws.recv(), max_bytes=LIMIT) == Ack(seq=1)
 
     asyncio.run(scenario())
-    stored = server.context.store.frames("sess-v2", 100)
+    stored = asyncio.run(server.context.store.frames("sess-v2"))
     np.testing.assert_array_equal(stored[0].mask, frame(0).mask())
     np.testing.assert_array_equal(stored[1].mask, (levels >= 2).astype(np.uint8))
 
@@ -119,7 +120,7 @@ def test_a_version_1_client_is_still_served_and_kept_to_version_1(server: LiveSe
             assert code == CloseCode.UNEXPECTED
 
     asyncio.run(scenario())
-    assert [f.seq for f in server.context.store.frames("sess-v1", 100)] == [0]
+    assert [f.seq for f in asyncio.run(server.context.store.frames("sess-v1"))] == [0]
 
 
 def test_pipelined_frames_are_acked_in_order(server: LiveServer) -> None:
@@ -131,7 +132,7 @@ def test_pipelined_frames_are_acked_in_order(server: LiveServer) -> None:
             return [decode(await ws.recv(), max_bytes=LIMIT).seq for _ in range(100)]  # type: ignore[union-attr]
 
     assert asyncio.run(scenario()) == list(range(100))
-    assert server.context.store.session("sess-pipe").frames == 100  # type: ignore[union-attr]
+    assert asyncio.run(server.context.store.session("sess-pipe")).frames == 100  # type: ignore[union-attr]
 
 
 def test_resume_reports_last_stored_seq_and_duplicates_are_reacked_not_stored(server: LiveServer) -> None:
@@ -146,7 +147,7 @@ def test_resume_reports_last_stored_seq_and_duplicates_are_reacked_not_stored(se
         assert acks == [Ack(seq=3), Ack(seq=3), Ack(seq=4)]
 
     asyncio.run(scenario())
-    assert [f.seq for f in server.context.store.frames("sess-r", 100)] == [0, 1, 2, 3, 4]
+    assert [f.seq for f in asyncio.run(server.context.store.frames("sess-r"))] == [0, 1, 2, 3, 4]
 
 
 def test_sessions_survive_a_restart(make_settings: Any, run_server: Any) -> None:
@@ -161,7 +162,7 @@ def test_sessions_survive_a_restart(make_settings: Any, run_server: Any) -> None
             return welcome
 
         assert asyncio.run(reconnect()).last_acked_seq == 6
-        assert len(second.context.store.frames("sess-keep", 100)) == 7
+        assert len(asyncio.run(second.context.store.frames("sess-keep"))) == 7
 
 
 def _raw_frame(**changes: Any) -> bytes:
@@ -225,7 +226,7 @@ def test_missing_key_closes_with_policy_violation(server: LiveServer) -> None:
         assert error.code == code == CloseCode.POLICY_VIOLATION
 
     asyncio.run(scenario())
-    assert server.context.store.session("no-key") is None
+    assert asyncio.run(server.context.store.session("no-key")) is None
 
 
 def test_key_in_query_or_hello_token_is_accepted(server: LiveServer) -> None:
@@ -264,9 +265,9 @@ def test_pages_mode_stores_pages_as_png(server: LiveServer) -> None:
             assert decode(await ws.recv(), max_bytes=LIMIT) == Ack(seq=0)
 
     asyncio.run(scenario())
-    page = server.context.store.latest_page("sess-pages")
-    assert page is not None and page.page_id == 7 and page.lines == [(5, 20, 80, 30)]
-    np.testing.assert_array_equal(page.image(), np.where(mask == 1, 0, 255))
+    page = asyncio.run(server.context.store.latest_page("sess-pages"))
+    assert page is not None and page.page_id == 7 and page.lines == ((5, 20, 80, 30),)
+    np.testing.assert_array_equal(page.mask, mask)
 
 
 def test_metrics_count_connections_messages_and_bytes(server: LiveServer) -> None:
@@ -282,10 +283,10 @@ def test_storage_failure_closes_with_internal_error_and_the_client_can_resume(se
     store = server.context.store
     real_add_frame = store.add_frame
 
-    def failing_add_frame(session_id: str, message: Frame) -> Any:
-        if message.seq == 2:
-            return store._submit(lambda _conn: (_ for _ in ()).throw(StoreError("disk full")))
-        return real_add_frame(session_id, message)
+    async def failing_add_frame(session_id: str, record: StoredFrame) -> Any:
+        if record.seq == 2:
+            raise StoreError("disk full")
+        return await real_add_frame(session_id, record)
 
     monkeypatch.setattr(store, "add_frame", failing_add_frame)
 

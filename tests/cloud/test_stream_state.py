@@ -13,10 +13,10 @@ from hypothesis import strategies as st
 
 from darkread.cloud.auth import ENVIRONMENT_ADMIN, KeyRing
 from darkread.cloud.context import AppContext
+from darkread.cloud.live import LivePages
 from darkread.cloud.prometheus import Metrics
-from darkread.cloud.pages import PageAssembler
 from darkread.cloud.settings import Settings
-from darkread.cloud.store import Store
+from darkread.cloud.store import SqliteStore
 from darkread.cloud.stream import StreamConnection, StreamState, _Pending
 from darkread.proto.errors import ProtocolError, UnexpectedMessageError
 from darkread.proto.messages import Ack, Hello, Welcome, encode
@@ -35,11 +35,13 @@ class NoOcr:
 @pytest.fixture(scope="module")
 def context(tmp_path_factory: pytest.TempPathFactory) -> Iterator[AppContext]:
     data = Path(tmp_path_factory.mktemp("state"))
-    store = Store(data)
+    store = SqliteStore(data)
     settings = Settings(_env_file=None, data_dir=data, max_message_bytes=4096)  # type: ignore[call-arg]
-    yield AppContext(settings=settings, store=store, metrics=Metrics(), ocr=NoOcr(), pages=PageAssembler(store, 100),
+    pages = LivePages(store, NoOcr())  # type: ignore[arg-type]
+    yield AppContext(settings=settings, store=store, metrics=Metrics(), ocr=NoOcr(), pages=pages,  # type: ignore[arg-type]
                      keys=KeyRing(data / "keys.json"))
-    store.close()
+    asyncio.run(pages.close())
+    asyncio.run(store.close())
 
 
 HELLO = Hello(device_id="d", session_id="fuzz", mode="frames", sensor=(1280, 720), fovea=(100, 200))
@@ -72,6 +74,7 @@ def test_anything_after_hello_is_handled_or_refused(context: AppContext, data: b
             assert result.last_seq >= 0
         else:
             assert outgoing is None  # a heartbeat
+        await context.pages.forget("fuzz")  # its pages belong to this event loop
 
     asyncio.run(scenario())
 

@@ -74,6 +74,26 @@ def test_unit_file_is_notify_with_watchdog_and_hardening() -> None:
         assert directives["SupplementaryGroups"]
 
 
+def test_several_cloud_urls_from_repeated_options_toml_lists_and_the_environment(tmp_path: Path) -> None:
+    import argparse
+
+    from darkread.edge.cli import overrides_from_args, register
+    from darkread.edge.uplink import split_urls
+
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["edge", "run", "--cloud", "ws://a:1/v1/stream", "--cloud", "ws://b:1/v1/stream,ws://c:1/v1/stream"])
+    config = load_config(None, environ={}, overrides=overrides_from_args(args))
+    assert split_urls(config.uplink.url) == ("ws://a:1/v1/stream", "ws://b:1/v1/stream", "ws://c:1/v1/stream")
+    toml = tmp_path / "edge.toml"
+    toml.write_text('[uplink]\nurl = ["ws://a:1/v1/stream", "wss://b/v1/stream"]\n')
+    assert split_urls(load_config(toml, environ={}).uplink.url) == ("ws://a:1/v1/stream", "wss://b/v1/stream")
+    environ = {"DARKREAD_EDGE_UPLINK_URL": "ws://x:1/v1/stream, ws://y:1/v1/stream"}
+    assert split_urls(load_config(None, environ=environ).uplink.url) == ("ws://x:1/v1/stream", "ws://y:1/v1/stream")
+    with pytest.raises(ValueError, match="not a ws:// or wss:// URL"):
+        load_config(None, environ={"DARKREAD_EDGE_UPLINK_URL": "ws://x:1/v1/stream,http://y"})
+
+
 def test_edge_run_options_become_config_overrides(tmp_path: Path) -> None:
     import argparse
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import random
+import socket
 import threading
 import time
 from pathlib import Path
@@ -31,9 +32,13 @@ class ProtoServer:
     """
 
     def __init__(
-        self, drop_after: int | None = None, reject_frame_id: int | None = None, stall_after: int | None = None
+        self,
+        drop_after: int | None = None,
+        reject_frame_id: int | None = None,
+        stall_after: int | None = None,
+        stored: dict[str, list[int]] | None = None,
     ) -> None:
-        self.stored: dict[str, list[int]] = {}
+        self.stored: dict[str, list[int]] = {} if stored is None else stored  # shared: instances on one database
         self.stall_after = stall_after  # the first connection stops acking after this many (commits hang)
         self.connections = 0
         self.reject_frame_id = reject_frame_id
@@ -189,6 +194,43 @@ def test_cloud_restart_mid_stream_resends_spooled_frames(server: ProtoServer) ->
     server.start()  # same port, same storage
     assert uplink.stop(drain_timeout_s=5)
     assert server.stored[uplink.session_id] == list(range(25))
+
+
+def test_a_closed_instance_fails_over_to_the_next_on_the_same_database() -> None:
+    database: dict[str, list[int]] = {}
+    a, b = ProtoServer(stored=database), ProtoServer(stored=database)
+    a.start()
+    b.start()
+    try:
+        uplink = make_uplink(settings(f"{a.url}, {b.url}"), Spool(None))
+        uplink.start()
+        for i in range(10):
+            uplink.submit(frame(i))
+        assert uplink.wait_drained(5)
+        a.kill()
+        for i in range(10, 30):
+            uplink.submit(frame(i))
+        assert uplink.stop(drain_timeout_s=5)
+        assert database[uplink.session_id] == list(range(30))  # nothing lost, nothing twice
+        assert uplink.url == b.url and uplink.metrics.totals["failovers"] >= 1
+        assert [h.session_id for h in b.hellos] == [uplink.session_id]
+    finally:
+        a.close()
+        b.close()
+
+
+def test_an_instance_that_refuses_connections_is_skipped_without_backing_off(server: ProtoServer) -> None:
+    with socket.socket() as probe:  # a port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        dead = f"ws://127.0.0.1:{probe.getsockname()[1]}/v1/stream"
+    uplink = make_uplink(settings(f"{dead},{server.url}", backoff_initial_s=30, backoff_max_s=30), Spool(None))
+    started = time.monotonic()
+    uplink.start()
+    for i in range(5):
+        uplink.submit(frame(i))
+    assert uplink.stop(drain_timeout_s=5)
+    assert time.monotonic() - started < 5  # the 30 s backoff waits only after every instance failed
+    assert server.stored[uplink.session_id] == list(range(5))
 
 
 def test_edge_restart_resends_from_disk_spool(tmp_path: Path, server: ProtoServer) -> None:

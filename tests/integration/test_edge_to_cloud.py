@@ -9,17 +9,16 @@ from __future__ import annotations
 
 import contextlib
 import os
-import signal
 import socket
 import sqlite3
 import subprocess
 import sys
 import threading
 import time
-import urllib.request
 from pathlib import Path
 
 import pytest
+from cloud_process import API_KEY, CloudProcess, free_port
 from factories import sum_bins_model
 
 from darkread.edge.builder import build_edge
@@ -29,51 +28,9 @@ from darkread.edge.notify import Notifier
 from darkread.paths import SAMPLE_RECORDING
 
 pytestmark = pytest.mark.slow
-API_KEY = "integration-key"
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-class Cloud:
-    def __init__(self, data_dir: Path, port: int) -> None:
-        self.data_dir, self.port = data_dir, port
-        self.process: subprocess.Popen[bytes] | None = None
-
-    def start(self) -> None:
-        env = dict(os.environ, DARKREAD_API_KEY=API_KEY)
-        self.process = subprocess.Popen(
-            [sys.executable, "-m", "darkread", "-q", "cloud", "serve", "--host", "127.0.0.1",
-             "--port", str(self.port), "--data-dir", str(self.data_dir)],
-            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        )
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            if self.process.poll() is not None:
-                raise RuntimeError(f"cloud exited with {self.process.returncode}")
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/healthz", timeout=0.5):
-                    return
-            except OSError:
-                time.sleep(0.1)
-        raise RuntimeError("cloud did not come up within 20 s")
-
-    def kill(self) -> None:
-        if self.process is not None and self.process.poll() is None:
-            self.process.send_signal(signal.SIGKILL)
-            self.process.wait(5)
-
-    def stop(self) -> None:
-        if self.process is not None and self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(10)
-            except subprocess.TimeoutExpired:
-                self.kill()
-
+class Cloud(CloudProcess):
     def stored_seqs(self, session_id: str) -> list[int]:
         with sqlite3.connect(self.data_dir / "darkread.sqlite3") as db:
             return [seq for (seq,) in db.execute("SELECT seq FROM frames WHERE session_id = ? ORDER BY seq", (session_id,))]

@@ -50,8 +50,9 @@ def test_read_json_has_the_per_stage_figures(tmp_path: Path) -> None:
         capture_output=True, text=True, timeout=300, check=True,
     )
     figures = json.loads(run.stdout)
-    for key in ("text", "events_in", "events_foveated", "frames", "bytes_sent", "page_png", "backend", "seconds"):
+    for key in ("text", "events_in", "events_foveated", "frames", "bytes_sent", "page_png", "backend", "seconds", "answer_ms"):
         assert key in figures, key
+    assert 0 < figures["answer_ms"] < figures["seconds"] * 1000
     assert figures["text"].strip()
     if spoken:  # the answer spoken: a WAV as long as its words at 140 words per minute
         assert figures["speech_wav"] == say[1] and f"spoken answer written to {say[1]}" in run.stderr

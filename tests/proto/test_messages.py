@@ -28,6 +28,7 @@ from darkread.proto.messages import (
     Gaze,
     Heartbeat,
     Hello,
+    NewPage,
     Page,
     Welcome,
     decode,
@@ -65,6 +66,7 @@ EXAMPLES = {
         bits=SMALL_BITS,
     ),
     "page": Page(seq=9, page_id=1, t_us=2000000, shape=(4, 5), bits=SMALL_BITS, lines=((1, 1, 4, 3),)),
+    "new_page": NewPage(seq=11, t_us=3000000),
     "gaze": Gaze(seq=10, t_us=(1, 2), px=((1.5, 2.5), (3.0, 4.0))),
     "heartbeat": Heartbeat(t_us=5, stats={"fps": 30.0}),
     "ack": Ack(seq=10),
@@ -85,6 +87,7 @@ GOLDEN = {
     "7473c403038800a56c696e6573919401010403",
     "gaze": "84a474797065a467617a65a37365710aa4745f7573920102a270789292cb3ff8000000000000cb400400000000000092"
     "cb4008000000000000cb4010000000000000",
+    "new_page": "83a474797065a86e65775f70616765a37365710ba4745f7573ce002dc6c0",
     "heartbeat": "83a474797065a9686561727462656174a4745f757305a5737461747381a3667073cb403e000000000000",
     "ack": "82a474797065a361636ba37365710a",
     "error": "84a474797065a56572726f72a4636f6465cd1130a76d657373616765a3626164a5666174616cc3",
@@ -93,6 +96,13 @@ GOLDEN = {
 
 def test_examples_cover_every_message_type() -> None:
     assert set(EXAMPLES) == set(GOLDEN) == set(MESSAGE_TYPES) - {"view"}  # view: version 2, tests/proto/test_codecs.py
+
+
+def test_welcome_features_are_optional_both_ways() -> None:
+    """A server that lists no features sends version-1 bytes unchanged; one that does is understood."""
+    listed = Welcome(session_id="s-0001", last_acked_seq=-1, max_message_bytes=4194304, features=("new_page",))
+    assert decode(encode(listed), max_bytes=LIMIT).features == ("new_page",)
+    assert decode(bytes.fromhex(GOLDEN["welcome"]), max_bytes=LIMIT).features is None
 
 
 @pytest.mark.parametrize("kind", sorted(EXAMPLES))

@@ -1,0 +1,101 @@
+"""Paging and line reading without a server: pure functions of the frames they are given."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+from page_readings import LINES, reading_frames
+
+from darkread.cloud.live import LineReader, Paginator, PagingConfig
+from darkread.cloud.ocr.base import OcrLine, OcrResult
+from darkread.cloud.store import StoredFrame
+from darkread.cloud.stream import stored_frame
+
+OTHER_LINES = ["a second page of text comes", "after the first one was read", "by the same pair of glasses"]
+
+
+def frames(lines: list[str] = LINES, first_seq: int = 0, t0_us: int = 0, seed: int = 0) -> list:
+    return [stored_frame(f) for f in reading_frames(seed=seed, lines=lines, first_seq=first_seq, t0_us=t0_us)]
+
+
+def paginate(records: list, cfg: PagingConfig = PagingConfig(), breaks: tuple[int, ...] = ()) -> Paginator:
+    paginator = Paginator(cfg=cfg)
+    for record in records:
+        if record.seq in breaks:
+            paginator.page_break()
+        paginator.add(record)
+    return paginator
+
+
+def summary(paginator: Paginator) -> list[tuple[int, str, int, int, int]]:
+    return [(p.index, p.started_by, p.first_seq, p.last_seq, p.version) for p in paginator.pages]
+
+
+def test_the_same_frames_give_the_same_pages() -> None:
+    first = frames()
+    both = first + frames(OTHER_LINES, first_seq=len(first), t0_us=first[-1].t_us + 200_000, seed=1)
+    once, again = paginate(both), paginate(both)
+    assert summary(once) == summary(again)
+    assert [p.started_by for p in once.pages] == ["first", "lost"]
+    np.testing.assert_array_equal(once.render(once.pages[1]).grey, again.render(again.pages[1]).grey)
+
+
+def test_a_page_break_starts_a_page_and_the_old_one_is_finished() -> None:
+    records = frames()
+    paginator = paginate(records, breaks=(20,))
+    assert [(p.started_by, p.first_seq) for p in paginator.pages] == [("first", 0), ("break", 20)]
+    old = paginator.pages[0]
+    assert old.finished and old.rendered is not None and old.rendered.last_seq == 19
+    assert paginator.render(old) is old.rendered  # a finished page keeps its last render
+
+
+def test_a_page_that_outgrows_the_pixel_bound_starts_anew() -> None:
+    paginator = paginate(frames(), PagingConfig(max_page_pixels=200_000))
+    assert len(paginator.pages) > 1 and {p.started_by for p in paginator.pages[1:]} == {"size"}
+
+
+def test_frames_at_the_same_gaze_within_the_gap_are_skipped() -> None:
+    records = frames()
+    every = paginate(records)
+    thinned = paginate(records, PagingConfig(min_stitch_gap_us=100_000, same_place_px=60))
+    assert thinned.skipped > 0 and thinned.current.version < every.current.version
+
+
+@dataclass
+class CountingOcr:
+    """Reads a line image as its ink count, and counts the calls."""
+
+    name: str = "counting"
+    calls: list[tuple[int, int]] = field(default_factory=list)
+
+    def read(self, image: np.ndarray) -> OcrResult:
+        self.calls.append(image.shape)
+        text = f"ink {(image < 128).sum()}"
+        return OcrResult(text, [OcrLine(text, (0, 0, image.shape[1], image.shape[0]), 1.0)])
+
+    def ready(self) -> bool:
+        return True
+
+
+def test_a_version_is_read_once_and_unchanged_lines_are_not_read_again() -> None:
+    paginator = paginate(frames())
+    page = paginator.render(paginator.current)
+    assert page is not None and len(page.bands) == len(LINES)
+    ocr = CountingOcr()
+    reader = LineReader(ocr)
+    first = reader.read(page)
+    assert first.lines_read == len(LINES) and len(ocr.calls) == len(LINES)
+    assert reader.read(page) is first and len(ocr.calls) == len(LINES)  # the same version: cached
+    moved = type(page)(page.index, page.version + 1, page.grey, page.ink, page.bands, page.first_seq, page.last_seq)
+    second = reader.read(moved)
+    assert second.lines_read == 0 and [ln.text for ln in second.lines] == [ln.text for ln in first.lines]
+    assert {ln.read_at_version for ln in second.lines} == {page.version}
+
+
+def test_a_frame_too_small_to_stitch_is_refused_and_changes_nothing() -> None:
+    paginator = Paginator()
+    with pytest.raises(ValueError, match="too small"):
+        paginator.add(StoredFrame(0, 0, np.ones((4, 4), np.uint8), (0, 0), (0.0, 0.0), seq=0))
+    assert paginator.pages == [] and paginator.current is None

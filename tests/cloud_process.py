@@ -1,0 +1,87 @@
+"""``darkread cloud serve`` as a real subprocess on 127.0.0.1 (it can be SIGKILLed), and a free port."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+API_KEY = "integration-key"
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+class CloudProcess:
+    """One cloud instance: SQLite in ``data_dir``, or the PostgreSQL database at ``database_url``."""
+
+    def __init__(self, data_dir: Path, port: int | None = None, *, database_url: str | None = None,
+                 api_key: str = API_KEY, log_path: Path | None = None) -> None:  # fmt: skip
+        self.data_dir, self.port = data_dir, port or free_port()
+        self.database_url, self.api_key = database_url, api_key
+        self.log_path = log_path
+        self.process: subprocess.Popen[bytes] | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    @property
+    def ws_url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}/v1/stream"
+
+    def start(self, timeout_s: float = 30) -> None:
+        self.launch()
+        self.wait_ready(timeout_s)
+
+    def launch(self) -> None:
+        """Start the process without waiting (start several instances side by side)."""
+        # a loaded machine stitches slowly: an ask waits for every stored frame, as the tests check
+        env = dict(os.environ, DARKREAD_API_KEY=self.api_key, DARKREAD_ASK_CATCH_UP_S="60")
+        if self.database_url:
+            env["DARKREAD_DATABASE_URL"] = self.database_url
+        log = open(self.log_path, "ab") if self.log_path else subprocess.DEVNULL  # noqa: SIM115 - closed below
+        try:
+            self.process = subprocess.Popen(
+                [sys.executable, "-m", "darkread", "-q", "cloud", "serve", "--host", "127.0.0.1",
+                 "--port", str(self.port), "--data-dir", str(self.data_dir)],
+                env=env, stdout=log, stderr=log,
+            )  # fmt: skip
+        finally:
+            if log is not subprocess.DEVNULL:
+                log.close()  # the child has its own copy
+
+    def wait_ready(self, timeout_s: float = 30) -> None:
+        assert self.process is not None  # noqa: S101 - launch() first
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.process.poll() is not None:
+                raise RuntimeError(f"cloud exited with {self.process.returncode}")
+            try:
+                with urllib.request.urlopen(f"{self.url}/healthz", timeout=0.5):
+                    return
+            except OSError:
+                time.sleep(0.1)
+        raise RuntimeError(f"cloud did not come up within {timeout_s:g} s")
+
+    def kill(self) -> None:
+        """SIGKILL: no shutdown, no flush, connections cut."""
+        if self.process is not None and self.process.poll() is None:
+            self.process.send_signal(signal.SIGKILL)
+            self.process.wait(5)
+
+    def stop(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(10)
+            except subprocess.TimeoutExpired:
+                self.kill()
