@@ -10,10 +10,10 @@ import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import asdict, dataclass
-from typing import Annotated, TypeVar
+from typing import Annotated, Literal, TypeVar
 
 import numpy as np
-from fastapi import APIRouter, Body, Depends, HTTPException, Path, Query, Response, status
+from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
 from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 
@@ -23,6 +23,8 @@ from darkread.stitch.stitched_page import ink_mask_to_paper
 from .auth import Principal, Scope
 from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
+from .speech import WAV_MEDIA_TYPE, wants_wav
+from .speech_http import require_speech_engine, speak
 from .store import SessionInfo
 
 _T = TypeVar("_T")
@@ -239,21 +241,30 @@ def _page_id(index: int, version: int) -> str:
 
 @api.post(
     "/sessions/{session_id}/ask",
-    summary="Read a page of the session (default the current one) and answer",
+    summary="Read a page of the session (default the current one) and answer (JSON, or spoken: Accept: audio/wav or ?format=wav)",
     response_model=AskResponse,
     responses={
+        200: {"content": {WAV_MEDIA_TYPE: {}}, "description": "the answer (JSON), or spoken as a RIFF WAV"},
         404: {"description": "unknown session"},
         409: {"description": "nothing stored yet, or no such page"},
         502: {"description": "the OCR engine failed"},
-        503: {"description": "the OCR engine is unavailable"},
+        503: {"description": "the OCR engine, stitcher or speech engine is unavailable"},
         504: {"description": "the OCR engine timed out"},
     },
 )
 async def ask(
-    session_id: SessionId, context: Context, principal: Reader, request: Annotated[AskRequest | None, Body()] = None,
+    session_id: SessionId,
+    context: Context,
+    principal: Reader,
+    request: Annotated[AskRequest | None, Body()] = None,
     page: PageQuery = None,
-) -> AskResponse:
+    format_: Annotated[Literal["json", "wav"] | None, Query(alias="format", description="wav: the answer spoken")] = None,
+    accept: Annotated[str | None, Header()] = None,
+) -> AskResponse | Response:
     question = (request or AskRequest()).question
+    spoken = wants_wav(accept, format_)
+    if spoken:
+        require_speech_engine(context.settings)  # before the OCR work: a missing engine is known at once
     started = time.perf_counter()
     info = await _session(context, session_id, principal)
     _rate_limit(context, principal)
@@ -272,7 +283,7 @@ async def ask(
         ) from None
     answer = answer.model_copy(update={"question": question, "latency_ms": round((time.perf_counter() - started) * 1000, 1)})
     log.info("session %s: read %s with %s in %.0f ms", session_id, answer.page_id, answer.backend, answer.latency_ms)
-    return answer
+    return await speak(context.settings, answer, session_id) if spoken else answer
 
 
 async def _read(context: AppContext, info: SessionInfo, page: int | None) -> AskResponse:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from darkread.models.synth.gaze import Fixation, Scanpath, saccade_ms, trajectory
-from darkread.models.synth.page import Page
+from darkread.models.synth.page import PrintedPage
 
 SHIPPED = Path(__file__).with_name("data") / "human_scanpath_oz.json"
 
@@ -105,7 +105,7 @@ def _kind(prev_line: int, line: int, prev_char: float, char: float, first: bool)
     return "forward" if char >= prev_char else "regression"
 
 
-def replay_scanpath(page: Page, human: HumanScanpath, duration_s: float, deg_per_texel: float,
+def replay_scanpath(page: PrintedPage, human: HumanScanpath, duration_s: float, deg_per_texel: float,
                     rng: np.random.Generator, dt_s: float = 0.001) -> Scanpath:
     """A scanpath over ``page`` lasting at least ``duration_s``: ``human`` replayed (and looped)."""
     n_lines = len(page.lines)
