@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated
@@ -58,7 +57,7 @@ async def session_page(request: Request, session_id: SessionId) -> HTMLResponse:
 @fragments.get("/sessions", response_class=HTMLResponse)
 async def session_list(request: Request, context: Context, principal: Reader) -> HTMLResponse:
     """The sessions the key may read, most recently active first, as the list the index page shows."""
-    sessions = [info for info in await asyncio.to_thread(context.store.sessions) if principal.owns(info.device_id)]
+    sessions = [info for info in await context.store.sessions() if principal.owns(info.device_id)]
     return _page(request, "fragments/sessions.html", sessions=sessions)
 
 
