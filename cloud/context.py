@@ -11,6 +11,7 @@ from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader, APIKeyQuery
 
 from .auth import ENVIRONMENT_ADMIN, LOOPBACK_DEVELOPER, KeyRing, Principal, Scope, is_loopback
+from .limits import RateLimiter, SingleFlight
 from .prometheus import Metrics
 from .pages import PageAssembler
 from .settings import Settings
@@ -29,6 +30,12 @@ class AppContext:
     pages: PageAssembler
     keys: KeyRing
     live: dict[str, Any] = field(default_factory=dict)  # session id -> its StreamConnection
+    asks: SingleFlight = field(default_factory=SingleFlight)  # one reading per session page
+    limiter: RateLimiter | None = None  # asks and page.png per key (from settings when None)
+
+    def __post_init__(self) -> None:
+        if self.limiter is None:
+            self.limiter = RateLimiter(self.settings.ask_rate_per_min, self.settings.ask_burst)
 
     def auth_configured(self) -> bool:
         return self.settings.api_key is not None or bool(self.keys)

@@ -4,18 +4,22 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from dataclasses import asdict
-from typing import Annotated
+from typing import Annotated, Literal
 
 from darkread.image_codec import encode_png
-from fastapi import APIRouter, Body, Depends, HTTPException, Path, Response, status
+from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
 from .auth import Principal, Scope
 from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
+from .ocr.base import OcrResult
 from .pages import PageImage
+from .speech import WAV_MEDIA_TYPE, wants_wav
+from .speech_http import require_speech_engine, speak
 from .store import SessionInfo
 
 log = logging.getLogger(__name__)
@@ -134,6 +138,7 @@ async def delete_session(session_id: SessionId, context: Context, principal: Adm
     if not await asyncio.to_thread(context.store.delete_session, session_id):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"no session {session_id!r}")
     context.pages.forget(session_id)
+    context.asks.forget(session_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
@@ -148,28 +153,78 @@ async def delete_session(session_id: SessionId, context: Context, principal: Adm
     },
 )
 async def page_png(session_id: SessionId, context: Context, principal: Reader) -> Response:
-    page = await _page(context, await _session(context, session_id, principal))
+    info = await _session(context, session_id, principal)
+    _rate_limit(context, principal)
+    page = await _page(context, info)
     return Response(encode_png(page.image), media_type="image/png", headers={"X-Page-Id": page.page_id})
 
 
 @api.post(
     "/sessions/{session_id}/ask",
-    summary="Read the session's current page and answer",
+    summary="Read the session's current page and answer (JSON, or spoken: Accept: audio/wav or ?format=wav)",
     response_model=AskResponse,
     responses={
+        200: {"content": {WAV_MEDIA_TYPE: {}}, "description": "the answer (JSON), or spoken as a RIFF WAV"},
         404: {"description": "unknown session"},
         409: {"description": "nothing stored yet"},
         502: {"description": "the OCR engine failed"},
-        503: {"description": "the OCR engine or stitcher is unavailable"},
+        503: {"description": "the OCR engine, stitcher or speech engine is unavailable"},
         504: {"description": "the OCR engine timed out"},
     },
 )
 async def ask(
-    session_id: SessionId, context: Context, principal: Reader, request: Annotated[AskRequest | None, Body()] = None
-) -> AskResponse:
+    session_id: SessionId,
+    context: Context,
+    principal: Reader,
+    request: Annotated[AskRequest | None, Body()] = None,
+    format_: Annotated[Literal["json", "wav"] | None, Query(alias="format", description="wav: the answer spoken")] = None,
+    accept: Annotated[str | None, Header()] = None,
+) -> AskResponse | Response:
     question = (request or AskRequest()).question
+    spoken = wants_wav(accept, format_)
+    if spoken:
+        require_speech_engine(context.settings)  # before the OCR work: a missing engine is known at once
     started = time.perf_counter()
-    page = await _page(context, await _session(context, session_id, principal))
+    info = await _session(context, session_id, principal)
+    _rate_limit(context, principal)
+    reading = context.asks.run(session_id, (info.mode, info.last_seq), lambda: _read(context, info))
+    limit = context.settings.ask_timeout_s
+    try:
+        page, result = await asyncio.wait_for(asyncio.shield(reading), limit)
+    except TimeoutError:  # the reading goes on for the next ask of this page
+        context.metrics.ask_errors.labels(reason="ask_timeout").inc()
+        raise HTTPException(
+            status.HTTP_503_SERVICE_UNAVAILABLE, headers={"Retry-After": str(max(1, round(limit)))},
+            detail=f"reading the page takes longer than the {limit:g} s limit; it goes on: ask again shortly",
+        ) from None
+    latency_ms = (time.perf_counter() - started) * 1000
+    log.info("session %s: read %s with %s in %.0f ms", session_id, page.page_id, context.ocr.name, latency_ms)
+    answer = AskResponse(
+        text=result.text,
+        backend=context.ocr.name,
+        page_id=page.page_id,
+        latency_ms=round(latency_ms, 1),
+        lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines],
+        question=question,
+        truncated=result.truncated,
+    )
+    return await speak(context.settings, answer, session_id) if spoken else answer
+
+
+def _rate_limit(context: AppContext, principal: Principal) -> None:
+    assert context.limiter is not None  # noqa: S101 - set in AppContext.__post_init__
+    wait_s = context.limiter.take(principal.key_id)
+    if wait_s > 0:
+        context.metrics.ask_errors.labels(reason="rate_limited").inc()
+        raise HTTPException(
+            status.HTTP_429_TOO_MANY_REQUESTS, headers={"Retry-After": str(max(1, math.ceil(wait_s)))},
+            detail=f"too many requests for this key ({context.settings.ask_rate_per_min:g} per minute)",
+        )
+
+
+async def _read(context: AppContext, info: SessionInfo) -> tuple[PageImage, OcrResult]:
+    """The session's page and what the OCR engine reads on it (shared by concurrent asks)."""
+    page = await _page(context, info)
     backend = context.ocr
     try:
         with context.metrics.ocr_seconds.labels(backend=backend.name).time():
@@ -186,14 +241,4 @@ async def ask(
         context.metrics.ask_errors.labels(reason="retryable" if exc.retryable else "failed").inc()
         code = status.HTTP_503_SERVICE_UNAVAILABLE if exc.retryable else status.HTTP_502_BAD_GATEWAY
         raise HTTPException(code, detail=str(exc)) from None
-    latency_ms = (time.perf_counter() - started) * 1000
-    log.info("session %s: read %s with %s in %.0f ms", session_id, page.page_id, backend.name, latency_ms)
-    return AskResponse(
-        text=result.text,
-        backend=backend.name,
-        page_id=page.page_id,
-        latency_ms=round(latency_ms, 1),
-        lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines],
-        question=question,
-        truncated=result.truncated,
-    )
+    return page, result

@@ -42,7 +42,7 @@ from darkread.proto.errors import (
     SessionMismatchError,
     UnexpectedMessageError,
 )
-from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, Message, Page, Welcome, decode, encode
+from darkread.proto.messages import Ack, Error, Frame, Gaze, Heartbeat, Hello, Message, Page, View, Welcome, decode, encode
 
 from .auth import Principal, Scope
 from .context import AppContext
@@ -160,6 +160,7 @@ class StreamConnection:
             session_id=message.session_id,
             last_acked_seq=last_seq,
             max_message_bytes=self.context.settings.max_message_bytes,
+            v=message.v,  # a version 1 client gets a version 1 answer
         )
 
     def _contiguous(self, seq: int) -> None:
@@ -173,6 +174,10 @@ class StreamConnection:
     def _on_streaming(self, message: Message) -> _Pending | None:
         assert self.hello is not None  # noqa: S101 - state invariant, not input validation
         store, session_id = self.context.store, self.hello.session_id
+        if self.hello.v < 2 and (isinstance(message, View) or getattr(message, "enc", "bits") != "bits"):
+            raise UnexpectedMessageError(f"{message.TYPE} with version 2 content in a version 1 session")
+        if isinstance(message, View):  # a fixation's fused view: stored and stitched as its thresholded frame
+            message = message.as_frame()
         if isinstance(message, Frame | Page | Gaze):
             self._contiguous(message.seq)
         if isinstance(message, Frame):

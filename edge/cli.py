@@ -49,6 +49,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--session", metavar="ID", help="session id (default: resume the spool's, else a new one)")
     run.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
     run.add_argument("--lossless", action="store_true", help="never skip windows: the reader waits for inference")
+    run.add_argument(
+        "--infer", choices=["on-change", "every-window"],
+        help="on-change (default): infer during fixations when the view changed and send one fused view per "
+             "fixation; every-window: infer every n_events foveated events and send every frame (research, evaluation)",
+    )
     run.add_argument("--metrics-port", type=int, metavar="PORT", help="serve Prometheus metrics on 127.0.0.1:PORT")
     run.add_argument("--drain-timeout", type=float, metavar="S", help="seconds to wait for acks at exit (default 30)")
     run.set_defaults(func=_run)
@@ -84,6 +89,8 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
         out["pipeline"]["model"] = args.model
     if args.lossless:
         out["pipeline"]["lossless"] = True
+    if args.infer:
+        out["pipeline"]["infer"] = args.infer
     if args.metrics_port is not None:
         out["metrics"]["port"] = args.metrics_port
     return {section: values for section, values in out.items() if values}

@@ -51,6 +51,15 @@ class PipelineConfig:
     lossless: bool = False  # True: the reader waits for inference instead of skipping windows
     stall_s: float = 5.0  # no events for this long: the watchdog is no longer fed (systemd restarts us)
     sensor_roi: bool = False  # move the sensor's ROI with the foveal window (EVK4: less USB traffic)
+    # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
+    # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
+    infer: str = "on-change"
+    min_interval_ms: float = 100.0  # on-change: at most one inference per this much event time
+    renew_fraction: float = 1.0  # on-change: infer again once this share of n_events is new ...
+    move_px: float = 6.0  # ... or the window moved this far since the last inference
+    min_events: int = 400  # on-change: a frame may have fewer than n_events (low light), not fewer than this
+    first_wait_ms: float = 60.0  # on-change: the first frame of a fixation comes this long into it (landing settled)
+    view_every_ms: float = 250.0  # on-change: a long fixation sends its view this often
 
 
 @dataclass(frozen=True)
@@ -188,4 +197,8 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError("config [source] speed must be >= 0 (0 = as fast as possible)")
     if config.pipeline.n_events <= 0 or config.pipeline.period_ms <= 0:
         raise ValueError("config [pipeline] n_events and period_ms must be positive")
+    if config.pipeline.infer not in {"on-change", "every-window"}:
+        raise ValueError(f"config [pipeline] infer must be 'on-change' or 'every-window', not {config.pipeline.infer!r}")
+    if min(config.pipeline.min_interval_ms, config.pipeline.view_every_ms) <= 0 or config.pipeline.min_events <= 0:
+        raise ValueError("config [pipeline] min_interval_ms, view_every_ms and min_events must be positive")
     return config

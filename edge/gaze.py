@@ -39,6 +39,11 @@ class GazeLookup(Protocol):
         """The gaze at ``t_event_us`` (event clock), or None without a usable gaze on the sensor."""
         ...
 
+    def rows(self, t0_event_us: int, t1_event_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The tracker's own rows with event time in (t0, t1]: (t_event_us, yaw, pitch) in radians,
+        NaN for invalid rows; the on-change mode classifies them into fixations, saccades, blinks."""
+        ...
+
 
 def gaze_point_cpf(yaw_rad: np.ndarray, pitch_rad: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
     """(N, 3) CPF points ``depth`` along normalise(tan yaw, tan pitch, 1); negative depth -> origin."""
@@ -63,6 +68,13 @@ def gaze_sample(calibration: Calibration, yaw: float, pitch: float, depth: float
     if np.isnan(uv).any():
         return None
     return GazeSample(pixel=(float(uv[0]), float(uv[1])), angles=(float(yaw), float(pitch)))
+
+
+def rows_between(t_us: np.ndarray, yaw: np.ndarray, pitch: np.ndarray, t0: int, t1: int) -> tuple[np.ndarray, ...]:
+    """The rows with ``t0 < t <= t1`` of time-sorted arrays (views, no copies)."""
+    i0 = int(np.searchsorted(t_us, t0, side="right"))
+    i1 = int(np.searchsorted(t_us, t1, side="right"))
+    return t_us[i0:i1], yaw[i0:i1], pitch[i0:i1]
 
 
 class GazeMapper:
@@ -92,6 +104,16 @@ class GazeMapper:
         self._pitch = track.pitch_rad[keep]
         depth = track.depth_m[keep]
         self._depth = np.where(np.isfinite(depth) & (depth > 0), depth, self.depth_prior_m)
+        # every row on the event clock, invalid ones (blinks) as NaN: what the gaze-event classifier reads
+        self._rows_t = track.t_us.astype(np.int64) + self.clock_offset_us
+        self._rows_yaw = np.where(track.valid, track.yaw_rad, np.nan)
+        self._rows_pitch = np.where(track.valid, track.pitch_rad, np.nan)
+        period = float(np.median(np.diff(self._rows_t))) if self._rows_t.shape[0] > 1 else 0.0
+        self.rate_hz = 1e6 / period if period > 0 else 60.0
+
+    def rows(self, t0_event_us: int, t1_event_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The tracker's rows with event time in (t0, t1]: (t_event_us, yaw, pitch), NaN when invalid."""
+        return rows_between(self._rows_t, self._rows_yaw, self._rows_pitch, t0_event_us, t1_event_us)
 
     def angles_and_depth_at(self, t_event_us: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Interpolated (yaw, pitch, depth) per event time; NaN where no usable gaze."""

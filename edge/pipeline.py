@@ -10,6 +10,15 @@ jumps to the newest window and counts the windows it skipped; the ring is fixed-
 never grows with load. In ``lossless`` mode (offline replays) the reader thread reconstructs each
 window itself, so it waits for inference instead of skipping.
 
+That is the ``every-window`` mode. The default, ``on-change`` (``[pipeline] infer``), lets the gaze
+decide (:mod:`darkread.edge.view_trigger`): every chunk the reader hands over is one processing
+step that feeds the gaze-event classifier; no inference during saccades and blinks; during a
+fixation one when enough new events arrived or the window moved, at most every
+``min_interval_ms``; the fixation's frames are fused into one view
+(:mod:`darkread.edge.view_fusion`) that goes to ``on_frame`` when the fixation ends and every
+``view_every_ms`` during a long one. The same step runs on the reconstruction thread live and on
+the reader thread in lossless replays.
+
 The window's size and the bin count come from the model (``voxel``, see ``Reconstructor.voxel``);
 the loop's settings are the config's :class:`~darkread.edge.config.PipelineConfig`.
 """
@@ -32,6 +41,8 @@ from darkread.edge.gaze import GazeLookup, GazeSample
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
 from darkread.edge.telemetry import EdgeMetrics
+from darkread.edge.view_fusion import ViewFuser, ViewRecord
+from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 from darkread.frame_record import FrameRecord
 
@@ -110,8 +121,9 @@ def make_frame(
 
 # -- the threads ---------------------------------------------------------------------------------
 
-FrameHandler = Callable[[FrameResult, float], None]
-"""Receives each frame and the ``time.monotonic()`` at which its newest event arrived."""
+FrameHandler = Callable[[FrameResult | ViewRecord, float], None]
+"""Receives each frame (every-window) or view (on-change) and the ``time.monotonic()`` at which the
+data that completed it arrived (its newest event, or the chunk that ended the fixation)."""
 
 
 class Pipeline:
@@ -153,6 +165,17 @@ class Pipeline:
         self._step_lock = threading.Lock()
         self._source_done = threading.Event()
         self._thread: threading.Thread | None = None
+        self._last_t: int | None = None
+        self.on_change = settings.infer == "on-change"
+        if self.on_change:
+            self.gate = GazeGate(gaze)
+            self.trigger = ViewTrigger(settings)
+            self.fuser = ViewFuser()
+            self.views_made = 0
+            self._chunks = 0  # chunks not yet looked at by a processing step
+            self._fixation: int | None = None  # the current fixation's key (its first row, event clock)
+            self._fixation_events = 0  # window events since it started
+            self._since_infer = 0  # window events since the last inference
 
     # -- reader thread ----------------------------------------------------------------------
     def sink(self, events: Events) -> None:
@@ -162,6 +185,10 @@ class Pipeline:
         n_foveated = count_in_window(events, self._origin, self.fovea)
         self.metrics.add("events_in", int(events.shape[0]))
         self.metrics.add("events_foveated", n_foveated)
+        t_newest = int(events["t"][-1])
+        if self._last_t is not None and t_newest > self._last_t:
+            self.metrics.add("event_us", t_newest - self._last_t)  # reading time covered: the CPU-per-second figure
+        self._last_t = t_newest
         if self.ring.dropped != self._ring_dropped:
             self.metrics.add("events_dropped", self.ring.dropped - self._ring_dropped)
             self._ring_dropped = self.ring.dropped
@@ -170,6 +197,15 @@ class Pipeline:
             self._new_foveated += n_foveated if self._origin is not None else int(events.shape[0])
             self._new_events += int(events.shape[0])
             self._last_arrival = time.monotonic()
+            if self.on_change:
+                self._chunks += 1
+                if not self.settings.lossless:
+                    self._cond.notify()
+        if self.on_change:
+            if self.settings.lossless:
+                self._change_step()
+            return
+        with self._cond:
             due = self._new_foveated >= self.settings.n_events
             if self.settings.lossless:
                 due = due or self._event_period_due(int(events["t"][-1]))
@@ -225,14 +261,19 @@ class Pipeline:
         while True:
             with self._cond:
                 self._cond.wait_for(
-                    lambda: (self._new_foveated >= k and not lossless) or self._source_done.is_set(), timeout=period_s
+                    lambda: (not lossless and (self._chunks if self.on_change else self._new_foveated >= k))
+                    or self._source_done.is_set(),
+                    timeout=period_s,
                 )
                 final = self._source_done.is_set()
             if self.watchdog is not None and self._alive():
                 self.watchdog()
             if lossless and not final:
                 continue  # the reader makes every frame (on the event clock); the timer only feeds the watchdog
-            self._process(self._take())
+            if self.on_change:
+                self._change_step(final=final)
+            else:
+                self._process(self._take())
             if final:
                 return
 
@@ -282,9 +323,80 @@ class Pipeline:
         self.metrics.observe_inference(frame.inference_ms)
         self.on_frame(frame, arrival)
 
-    def _recent_events(self, origin: tuple[int, int], t_until: int) -> Events:
+    # -- on-change: one processing step per chunk ----------------------------------------------
+    def _change_step(self, final: bool = False) -> None:
+        """Feed the gaze classifier up to the newest event; end, extend or start the fixation's view."""
+        with self._step_lock:
+            with self._cond:
+                new, arrival = self._new_foveated, self._last_arrival
+                self._new_foveated = self._chunks = 0
+            t = self.ring.newest_t
+            if t is None:
+                return
+            status = self.gate.update(t)
+            key = None if final else fixation_key(status)
+            # a later key is a new fixation; an earlier one is the classifier merging two halves of this one
+            if self._fixation is not None and (key is None or key > self._fixation):
+                self._end_view(arrival, t if final else min(t, status.since_us))
+                self._fixation = None
+            if key is None:
+                return  # saccade, blink, no gaze: nothing to infer
+            if self._fixation is None:
+                self._fixation, self._fixation_events, self._since_infer = key, 0, 0
+                self.trigger.reset()
+            self._fixation_events += new
+            self._since_infer += new
+            if len(self.fuser) and t - self.fuser.t0_us >= self.settings.view_every_ms * 1e3:
+                self._send_view(arrival)  # a long fixation: its view so far, the next one starts afresh
+            if not self.trigger.ready(t, self._fixation):
+                return  # the bounded rate (and the landing's wait), checked before anything costs
+            gaze = self.gaze.at(t)
+            if gaze is None:
+                return
+            origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
+            if origin != self._origin and self.settings.sensor_roi:
+                self.source.set_roi(origin[0], origin[1], self.fovea.width, self.fovea.height)
+            self._origin = origin
+            if self.trigger.due(t, self._fixation, self._since_infer, self._fixation_events, origin):
+                self._infer_into_view(origin, gaze, t, self._fixation)
+
+    def _infer_into_view(self, origin: tuple[int, int], gaze: GazeSample, t: int, t_from: int) -> bool:
+        """One frame of the current fixation (its events only, up to ``n_events``), fused into the view."""
+        window = self._recent_events(origin, t, t_from=t_from)
+        if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
+            return False
+        frame = make_frame(window, origin, gaze, t, self.voxel, self.infer, self.frames_made)
+        if frame is None:
+            return False
+        self.frames_made += 1
+        self.metrics.add("frames")
+        self.metrics.observe_inference(frame.inference_ms)
+        self.fuser.add(frame, frame.events_used, frame.gaze_rad)
+        self.trigger.inferred(t, origin)
+        self._since_infer = 0
+        return True
+
+    def _end_view(self, arrival: float, t_end: int) -> None:
+        """The fixation ended at ``t_end``: a fixation too short for a frame gets one now; send its view."""
+        lasted = self._fixation is not None and t_end - self._fixation >= self.gate.cfg.min_fixation_ms * 1e3
+        if not len(self.fuser) and lasted and self._origin is not None:  # (not a landing the classifier revised)
+            gaze = self.gaze.at(t_end)
+            if gaze is not None:
+                origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
+                self._infer_into_view(origin, gaze, t_end, self._fixation)
+        if len(self.fuser):
+            self._send_view(arrival)
+
+    def _send_view(self, arrival: float) -> None:
+        view = self.fuser.view(self.views_made)
+        self.fuser = ViewFuser(self.fuser.n_levels, self.fuser.radius)
+        self.views_made += 1
+        self.metrics.add("views")
+        self.on_frame(view, arrival)
+
+    def _recent_events(self, origin: tuple[int, int], t_until: int, t_from: int | None = None) -> Events:
         """Exactly the window's events for one frame: the newest ``n_events`` inside the window at
-        ``origin`` with ``t <= t_until``, searching back through the ring as needed.
+        ``origin`` with ``t <= t_until`` (and ``t >= t_from``), searching back through the ring as needed.
 
         The search starts from twice the depth the previous window needed, so a frame copies a
         few thousand ring events, not the whole history.
@@ -296,9 +408,12 @@ class Pipeline:
             if recent.shape[0] and recent["t"][-1] > t_until:  # the reader pushed newer events meanwhile
                 recent = recent[: int(np.searchsorted(recent["t"], t_until, side="right"))]
             inside = np.flatnonzero(in_window(recent, origin[0], origin[1], cfg.width, cfg.height))
-            if inside.shape[0] >= k or n >= len(self.ring):
+            reached_start = t_from is not None and recent.shape[0] and int(recent["t"][0]) <= t_from
+            if inside.shape[0] >= k or n >= len(self.ring) or reached_start:
                 break
             n *= 2
+        if t_from is not None and inside.shape[0]:
+            inside = inside[recent["t"][inside] >= t_from]
         used = inside[-k:]
         if used.shape[0]:
             depth = recent.shape[0] - int(used[0])

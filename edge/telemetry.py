@@ -26,7 +26,9 @@ RGB_FRAME_BYTES_ESTIMATE = 2880 * 2880 * 3 // 2  # a 2880x2880 RGB capture as PN
 COUNTERS = (
     "events_in",
     "events_foveated",
-    "frames",
+    "frames",  # inferences: frames made
+    "views",  # on-change mode: fused views of fixations
+    "event_us",  # event-clock time covered by the events read (reading time)
     "frames_skipped",
     "frames_no_gaze",
     "events_dropped",
@@ -53,12 +55,28 @@ class Snapshot:
     latency_ms_p99: float
     spool_depth: int
     raw_bytes_per_event: float = RAW_EVT3_BYTES_PER_EVENT
+    cpu_s: float = 0.0  # process CPU time over the interval
+
+    @property
+    def cpu_per_reading_s(self) -> float:
+        """CPU seconds the process spent per second of reading (event time): 1/20 is 20x real time."""
+        reading_s = (self.rates["event_us"] * self.interval_s) / 1e6
+        return self.cpu_s / reading_s if reading_s > 0 else 0.0
+
+    def status_line(self) -> str:
+        """The daemon's ``STATUS=``: what the glasses do for the wearer and what it costs."""
+        r = self.rates
+        return (
+            f"{r['views']:.1f} views/s, {r['frames']:.1f} inferences/s, "
+            f"CPU {self.cpu_per_reading_s:.3f} s per reading s, {r['bytes_sent'] / 1e3:.1f} kB/s"
+        )
 
     def log_line(self) -> str:
         r = self.rates
         return (
             f"events {r['events_in']/1e3:.1f}k/s fovea {r['events_foveated']/1e3:.1f}k/s "
-            f"frames {r['frames']:.1f}/s infer p50 {self.inference_ms_p50:.1f} p99 {self.inference_ms_p99:.1f} ms "
+            f"views {r['views']:.1f}/s inferences {r['frames']:.1f}/s "
+            f"CPU {self.cpu_per_reading_s:.3f} s per reading s infer p50 {self.inference_ms_p50:.1f} p99 {self.inference_ms_p99:.1f} ms "
             f"wire p50 {self.latency_ms_p50:.1f} p99 {self.latency_ms_p99:.1f} ms "
             f"skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
             f"drops {self.totals['events_dropped']} spool {self.spool_depth} "
@@ -91,6 +109,7 @@ class EdgeMetrics:
         self.raw_bytes_per_event = RAW_EVT3_BYTES_PER_EVENT  # the raw stream's size, for the bandwidth ratio
         self._started = clock()
         self._last_time = self._started
+        self._last_cpu = time.process_time()
         self._last_totals = dict(self.totals)
 
     def add(self, name: str, n: int = 1) -> None:
@@ -110,6 +129,8 @@ class EdgeMetrics:
             interval = max(now - self._last_time, 1e-9)
             rates = {k: (totals[k] - self._last_totals[k]) / interval for k in COUNTERS}
             self._last_time, self._last_totals = now, totals
+            cpu = time.process_time()
+            cpu_s, self._last_cpu = cpu - self._last_cpu, cpu
         inference, latency = list(self.inference_ms), list(self.latency_ms)
         return Snapshot(
             interval_s=interval,
@@ -121,6 +142,7 @@ class EdgeMetrics:
             latency_ms_p99=percentile(latency, 99),
             spool_depth=self.spool_depth(),
             raw_bytes_per_event=self.raw_bytes_per_event,
+            cpu_s=cpu_s,
         )
 
     def prometheus_text(self) -> str:
@@ -142,6 +164,9 @@ class EdgeMetrics:
             quantiles = [(f'{{quantile="{q}"}}', percentile(values, q * 100)) for q in (0.5, 0.99)]
             metric(name, "gauge", f"{name.replace('_', ' ')} over the last {RESERVOIR} frames", quantiles)
         metric("spool_depth", "gauge", "messages waiting for an ack", [("", self.spool_depth())])
+        reading_s = totals["event_us"] / 1e6
+        metric("cpu_seconds_per_reading_second", "gauge", "process CPU time per second of event time since start",
+               [("", time.process_time() / reading_s if reading_s > 0 else 0.0)])
         metric("uptime_seconds", "gauge", "seconds since start", [("", uptime)])
         return "\n".join(lines) + "\n"
 

@@ -5,6 +5,8 @@ Every message is one msgpack map with a ``type`` string; each type is a frozen d
 ``decode`` checks everything a hostile peer could get wrong and raises only ``ProtocolError``
 subclasses (see ``errors.py``). Unknown extra keys are ignored so a peer may add optional
 fields without a version bump; anything that changes meaning bumps ``PROTOCOL_VERSION``.
+Version 2 adds compressed masks (``enc``, see ``codecs.py``) and the fused ``view``; a server
+still accepts version 1 clients (``SUPPORTED_VERSIONS``).
 The field list with units and limits is in ``README.md`` next to this file.
 """
 
@@ -22,6 +24,7 @@ import numpy as np
 from darkread.frame_record import FrameRecord
 from darkread.mask_bits import pack_bits, packed_length, unpack_bits
 
+from .codecs import LEVEL_ENCODINGS, MASK_ENCODINGS, compress_bits, compress_levels, decompress_bits, decompress_levels
 from .errors import (
     BadMaskError,
     InvalidFieldError,
@@ -32,7 +35,9 @@ from .errors import (
     VersionMismatchError,
 )
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
+SUPPORTED_VERSIONS = (1, 2)  # what a server accepts in hello.v (and answers in welcome.v)
+MAX_LEVELS = 16  # grey levels of a view
 DEFAULT_MAX_MESSAGE_BYTES = 4 * 1024 * 1024
 MAX_MASK_PIXELS = 16 * 1024 * 1024  # 16 Mpx: a stitched page of 4096 x 4096 fits
 MAX_SIDE = 65_535
@@ -100,6 +105,15 @@ def _mode(value: Any, name: str) -> str:
     if value not in ("frames", "pages") or type(value) is not str:
         raise InvalidFieldError(f"{name}: expected 'frames' or 'pages', got {value!r}")
     return value
+
+
+def _choice(options: tuple[str, ...]) -> Callable[[Any, str], str]:
+    def convert(value: Any, name: str) -> str:
+        if type(value) is not str or value not in options:
+            raise InvalidFieldError(f"{name}: expected one of {', '.join(options)}, got {str(value)[:32]!r}")
+        return value
+
+    return convert
 
 
 def _bytes(value: Any, name: str) -> bytes:
@@ -217,6 +231,13 @@ class _Checked:
 
     TYPE: ClassVar[str]
 
+    def _to_wire(self, payload: dict[str, Any]) -> None:
+        """Turn the in-memory form of a field into its wire form (compression), in place."""
+
+    @classmethod
+    def _from_wire(cls, values: dict[str, Any]) -> None:
+        """The inverse of ``_to_wire`` on decoded values, in place; raises ``ProtocolError``."""
+
     def __post_init__(self) -> None:
         values = {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
         for name, value in _check_fields(type(self), values).items():  # type: ignore[arg-type]
@@ -264,18 +285,27 @@ class Frame(_Checked):
     gaze_rad: tuple[float, float] = _spec(_pair_float)  # (yaw, pitch), radians
     events_used: int = _spec(_count)
     shape: tuple[int, int] = _spec(_mask_shape)  # (rows, cols)
-    bits: bytes = _spec(_bytes, repr=False)  # the ink mask, darkread.mask_bits.pack_bits
+    bits: bytes = _spec(_bytes, repr=False)  # the ink mask, darkread.mask_bits.pack_bits (decoded form)
+    enc: str = _spec(_choice(MASK_ENCODINGS[:2]), "bits")  # v2: how ``bits`` go on the wire
 
     @classmethod
     def of(
-        cls, record: FrameRecord, *, seq: int = 0, gaze_rad: tuple[float, float] = (0.0, 0.0), events_used: int = 0
+        cls, record: FrameRecord, *, seq: int = 0, gaze_rad: tuple[float, float] = (0.0, 0.0), events_used: int = 0,
+        enc: str = "zlib",
     ) -> Frame:
         """The wire message carrying ``record`` (``seq`` is assigned by the uplink)."""
         shape, bits = pack_mask(record.mask)
         return cls(
             seq=seq, frame_id=record.frame_id, t_us=record.t_us, origin=record.origin, gaze_px=record.gaze_px,
-            gaze_rad=gaze_rad, events_used=events_used, shape=shape, bits=bits,
+            gaze_rad=gaze_rad, events_used=events_used, shape=shape, bits=bits, enc=enc,
         )
+
+    def _to_wire(self, payload: dict[str, Any]) -> None:
+        _bits_to_wire(self, payload)
+
+    @classmethod
+    def _from_wire(cls, values: dict[str, Any]) -> None:
+        _bits_from_wire(cls, values)
 
     def mask(self) -> np.ndarray:
         return unpack_mask(self.shape, self.bits)
@@ -296,9 +326,78 @@ class Page(_Checked):
     shape: tuple[int, int] = _spec(_mask_shape)
     bits: bytes = _spec(_bytes, repr=False)
     lines: tuple[tuple[int, int, int, int], ...] = _spec(_list_of(_box), ())  # (x0, y0, x1, y1)
+    enc: str = _spec(_choice(MASK_ENCODINGS), "bits")  # v2: "png" sends a 1-bit PNG
 
     def mask(self) -> np.ndarray:
         return unpack_mask(self.shape, self.bits)
+
+    def _to_wire(self, payload: dict[str, Any]) -> None:
+        _bits_to_wire(self, payload)
+
+    @classmethod
+    def _from_wire(cls, values: dict[str, Any]) -> None:
+        _bits_from_wire(cls, values)
+
+
+@dataclass(frozen=True)
+class View(_Checked):
+    """client -> server (v2, mode "frames"): the frames of one fixation registered and fused into
+    one view of ink probability in ``n_levels`` grey levels (level / (n_levels - 1))."""
+
+    TYPE: ClassVar[str] = "view"
+    seq: int = _spec(_seq)
+    view_id: int = _spec(_seq)
+    t0_us: int = _spec(_int)  # event clock: the first fused frame
+    t_us: int = _spec(_int)  # event clock: the last fused frame (no event in the view is newer)
+    origin: tuple[int, int] = _spec(_pair_int)  # the view's top-left (x0, y0), sensor pixels
+    gaze_px: tuple[float, float] = _spec(_pair_float)
+    gaze_rad: tuple[float, float] = _spec(_pair_float)
+    frames: int = _spec(lambda v, n: _int(v, n, 1, 2**32 - 1))  # frames fused
+    events_used: int = _spec(_count)
+    shape: tuple[int, int] = _spec(_mask_shape)
+    n_levels: int = _spec(lambda v, n: _int(v, n, 2, MAX_LEVELS))
+    levels: bytes = _spec(_bytes, repr=False)  # one level index per pixel, row-major (decoded form)
+    enc: str = _spec(_choice(LEVEL_ENCODINGS), "png")
+
+    def ink(self) -> np.ndarray:
+        """uint8 [rows, cols] level indices, 0 (paper) .. n_levels - 1 (surely ink)."""
+        return np.frombuffer(self.levels, np.uint8).reshape(self.shape)
+
+    def record(self) -> FrameRecord:
+        """The view as a binary frame record (ink where the probability is at least one half): what
+        a stitcher of binary frames takes."""
+        mask = (2 * self.ink().astype(np.int32) >= self.n_levels - 1).astype(np.uint8)
+        return FrameRecord(self.view_id, self.t_us, mask, self.origin, self.gaze_px)
+
+    def as_frame(self) -> Frame:
+        """The thresholded view as a ``frame`` of the same seq (the cloud stores views as frames)."""
+        shape, bits = pack_mask(self.record().mask)
+        return Frame(
+            seq=self.seq, frame_id=self.view_id, t_us=self.t_us, origin=self.origin, gaze_px=self.gaze_px,
+            gaze_rad=self.gaze_rad, events_used=self.events_used, shape=shape, bits=bits,
+        )
+
+    def _to_wire(self, payload: dict[str, Any]) -> None:
+        payload["levels"] = compress_levels(self.shape, self.levels, self.enc)
+
+    @classmethod
+    def _from_wire(cls, values: dict[str, Any]) -> None:
+        shape = _mask_shape(values.get("shape"), "view.shape")
+        enc = _choice(LEVEL_ENCODINGS)(values.get("enc", "png"), "view.enc")
+        values["levels"] = decompress_levels(shape, _bytes(values.get("levels"), "view.levels"), enc)
+
+
+def _bits_to_wire(message: Frame | Page, payload: dict[str, Any]) -> None:
+    payload["bits"] = compress_bits(message.shape, message.bits, message.enc)
+
+
+def _bits_from_wire(cls: type[Frame] | type[Page], values: dict[str, Any]) -> None:
+    enc = values.get("enc", "bits")
+    if enc == "bits":
+        return  # v1 layout: checked by the message itself
+    enc = _choice(MASK_ENCODINGS)(enc, f"{cls.TYPE}.enc")
+    shape = _mask_shape(values.get("shape"), f"{cls.TYPE}.shape")
+    values["bits"] = decompress_bits(shape, _bytes(values.get("bits"), f"{cls.TYPE}.bits"), enc)
 
 
 @dataclass(frozen=True)
@@ -338,9 +437,9 @@ class Error(_Checked):
     fatal: bool = _spec(_bool)
 
 
-Message: TypeAlias = Hello | Welcome | Frame | Page | Gaze | Heartbeat | Ack | Error
+Message: TypeAlias = Hello | Welcome | Frame | Page | View | Gaze | Heartbeat | Ack | Error
 MESSAGE_TYPES: dict[str, type[Message]] = {
-    cls.TYPE: cls for cls in (Hello, Welcome, Frame, Page, Gaze, Heartbeat, Ack, Error)
+    cls.TYPE: cls for cls in (Hello, Welcome, Frame, Page, View, Gaze, Heartbeat, Ack, Error)
 }
 
 
@@ -353,6 +452,11 @@ def _check_fields(cls: type[Message], values: Mapping[str, Any]) -> dict[str, An
         checked[spec.name] = spec.metadata["check"](values[spec.name], name)
     if "shape" in checked and "bits" in checked:
         check_mask(checked["shape"], checked["bits"])
+    if cls is View:
+        if len(checked["levels"]) != checked["shape"][0] * checked["shape"][1]:
+            raise BadMaskError(f"view.levels: {len(checked['levels'])} bytes for a {checked['shape']} view")
+        if np.frombuffer(checked["levels"], np.uint8).max(initial=0) >= checked["n_levels"]:
+            raise BadMaskError(f"view.levels: a level of {checked['n_levels']} or more")
     if cls is Gaze and len(checked["t_us"]) != len(checked["px"]):
         raise InvalidFieldError("gaze.t_us and gaze.px must have the same length")
     return checked
@@ -365,6 +469,9 @@ def encode(message: Message) -> bytes:
         value = getattr(message, spec.name)
         if value is not None:  # optional fields are omitted rather than sent as nil
             payload[spec.name] = value
+    if payload.get("enc") == "bits":
+        del payload["enc"]  # the v1 layout: the bytes of a v1 message exactly
+    message._to_wire(payload)
     return msgpack.packb(payload, use_bin_type=True)
 
 
@@ -388,12 +495,14 @@ def decode(data: bytes, *, max_bytes: int) -> Message:
         raise UnknownMessageTypeError(f"unknown message type {str(shown)[:64]!r}")
     if cls in (Hello, Welcome) and "v" not in payload:
         raise InvalidFieldError(f"{cls.TYPE}.v: missing (the protocol version, {PROTOCOL_VERSION})")
-    if cls in (Hello, Welcome) and payload["v"] != PROTOCOL_VERSION:
+    if cls in (Hello, Welcome) and (type(payload["v"]) is not int or payload["v"] not in SUPPORTED_VERSIONS):
         version = payload["v"]
         raise VersionMismatchError(
-            f"protocol version {str(version)[:16]} is not supported; this end speaks {PROTOCOL_VERSION}"
+            f"protocol version {str(version)[:16]} is not supported; this end speaks "
+            f"{', '.join(map(str, SUPPORTED_VERSIONS))}"
         )
     values = {spec.name: payload[spec.name] for spec in fields(cls) if spec.name in payload}
+    cls._from_wire(values)
     for spec in fields(cls):  # absent optional fields take their defaults
         if spec.name not in values and spec.default is not MISSING:
             values[spec.name] = spec.default
@@ -412,6 +521,7 @@ __all__ = [
     "MAX_MASK_PIXELS",
     "MESSAGE_TYPES",
     "PROTOCOL_VERSION",
+    "SUPPORTED_VERSIONS",
     "Ack",
     "Error",
     "Frame",
@@ -421,6 +531,7 @@ __all__ = [
     "Message",
     "Mode",
     "Page",
+    "View",
     "Welcome",
     "check_mask",
     "decode",

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import msgpack
+import numpy as np
 
 from darkread.edge.errors import DeviceError
 from darkread.edge.gaze import READING_DEPTH_PRIOR_M, GazeMapper, GazeSample, gaze_sample
@@ -104,6 +105,27 @@ class LiveGaze:
             v0, v1 = values[right - 1], values[right]
         w = (t - t0) / (t1 - t0)
         return v0[0] + w * (v1[0] - v0[0]), v0[1] + w * (v1[1] - v0[1]), v0[2] + w * (v1[2] - v0[2])
+
+    @property
+    def rate_hz(self) -> float:
+        """The feed's row rate, from the rows held (Aria: 10 to 90 Hz); 60 until two arrived."""
+        with self._lock:
+            times = self._times[-64:]
+        if len(times) < 2:
+            return 60.0
+        period = float(np.median(np.diff(times)))
+        return 1e6 / period if period > 0 else 60.0
+
+    def rows(self, t0_event_us: int, t1_event_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The held rows with event time in (t0, t1]: (t_event_us, yaw, pitch)."""
+        lo, hi = int(t0_event_us) - self.clock_offset_us, int(t1_event_us) - self.clock_offset_us
+        with self._lock:
+            i0 = bisect.bisect_right(self._times, lo)
+            i1 = bisect.bisect_right(self._times, hi)
+            times, values = self._times[i0:i1], self._values[i0:i1]
+        t = np.asarray(times, dtype=np.int64) + self.clock_offset_us
+        angles = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+        return t, angles[:, 0], angles[:, 1]
 
     def at(self, t_event_us: int) -> GazeSample | None:
         value = self._interpolate(t_event_us)

@@ -14,7 +14,7 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from darkread.cloud.errors import StoreError
 from darkread.cloud.stream import close_reason
 from darkread.proto.errors import CloseCode
-from darkread.proto.messages import Ack, Error, Frame, Hello, Page, Welcome, decode, encode, pack_mask
+from darkread.proto.messages import Ack, Error, Frame, Hello, Page, View, Welcome, decode, encode, pack_mask
 
 LIMIT = 1 << 22
 API_KEY = "test-key-7f3a"  # the key the conftest server requires
@@ -85,6 +85,43 @@ def test_frames_are_acked_after_they_are_stored(server: LiveServer) -> None:
     assert stored[3].origin == (500, 300) and stored[3].gaze_px == (600.0, 350.0)
 
 
+def test_version_2_views_and_compressed_frames_are_stored_as_frames(server: LiveServer) -> None:
+    levels = np.zeros((100, 200), np.uint8)
+    levels[40:50, 20:80] = 3  # surely ink
+    levels[40:50, 80:90] = 1  # unlikely ink: paper once thresholded
+    view = View(seq=1, view_id=0, t0_us=0, t_us=5000, origin=(500, 300), gaze_px=(600.0, 350.0), gaze_rad=(0.0, 0.0),
+                frames=3, events_used=4800, shape=(100, 200), n_levels=4, levels=levels.tobytes())
+
+    async def scenario() -> None:
+        ws, welcome = await open_stream(server, "sess-v2")
+        assert welcome.v == 2
+        async with ws:
+            await ws.send(encode(Frame.of(frame(0).record(), seq=0, enc="zlib")))
+            assert decode(await ws.recv(), max_bytes=LIMIT) == Ack(seq=0)
+            await ws.send(encode(view))
+            assert decode(await ws.recv(), max_bytes=LIMIT) == Ack(seq=1)
+
+    asyncio.run(scenario())
+    stored = server.context.store.frames("sess-v2", 100)
+    np.testing.assert_array_equal(stored[0].mask, frame(0).mask())
+    np.testing.assert_array_equal(stored[1].mask, (levels >= 2).astype(np.uint8))
+
+
+def test_a_version_1_client_is_still_served_and_kept_to_version_1(server: LiveServer) -> None:
+    async def scenario() -> None:
+        ws, welcome = await open_stream(server, "sess-v1", v=1)
+        assert welcome.v == 1
+        async with ws:
+            await ws.send(encode(frame(0)))
+            assert decode(await ws.recv(), max_bytes=LIMIT) == Ack(seq=0)
+            await ws.send(encode(Frame.of(frame(1).record(), seq=1, enc="zlib")))  # version 2 content
+            error, code, _ = await expect_error_close(ws)
+            assert code == CloseCode.UNEXPECTED
+
+    asyncio.run(scenario())
+    assert [f.seq for f in server.context.store.frames("sess-v1", 100)] == [0]
+
+
 def test_pipelined_frames_are_acked_in_order(server: LiveServer) -> None:
     async def scenario() -> list[int]:
         ws, _ = await open_stream(server, "sess-pipe")
@@ -136,7 +173,7 @@ def _raw_frame(**changes: Any) -> bytes:
 BAD_INPUTS = {
     "malformed msgpack": ([b"\xc1\x00\x00"], CloseCode.MALFORMED),
     "not a map": ([msgpack.packb([1, 2, 3])], CloseCode.MALFORMED),
-    "wrong protocol version": ([msgpack.packb({**msgpack.unpackb(encode(hello("x"))), "v": 2})], CloseCode.VERSION_MISMATCH),
+    "wrong protocol version": ([msgpack.packb({**msgpack.unpackb(encode(hello("x"))), "v": 3})], CloseCode.VERSION_MISMATCH),
     "frame before hello": ([encode(frame(0))], CloseCode.UNEXPECTED),
     "oversized message": (["hello", b"\x00" * 70_000], CloseCode.MESSAGE_TOO_BIG),
     "frame of the wrong shape": (["hello", encode(frame(0, shape=(50, 200)))], CloseCode.BAD_MASK),

@@ -18,10 +18,10 @@ from darkread.edge.notify import Notifier
 from darkread.edge.spool import Spool
 
 
-def replay_config(recording: Path, model: Path, url: str, spool: Path, **uplink: object):  # noqa: ANN201
+def replay_config(recording: Path, model: Path, url: str, spool: Path, infer: str = "every-window", **uplink: object):  # noqa: ANN201
     return load_config(None, environ={}, overrides={
         "source": {"kind": "replay", "path": str(recording), "speed": 0.0},
-        "pipeline": {"model": str(model)},
+        "pipeline": {"model": str(model), "infer": infer},
         "uplink": {"url": url, "spool_dir": str(spool), "session_id": "synthetic-1", **uplink},
         "metrics": {"log_every_s": 0.0},
     })
@@ -47,6 +47,24 @@ def test_the_daemon_replays_a_recording_into_the_cloud(tmp_path: Path, notify_so
     assert edge.metrics.totals["frames_skipped"] == 0
     assert notify_socket.received()[0].startswith("READY=1\nSTATUS=replay 1280x720 open, model m.onnx warm")
     assert cloud.hellos[0].fovea == (100, 200)
+
+
+@pytest.mark.slow
+def test_on_change_sends_one_view_per_fixation_stretch(tmp_path: Path) -> None:
+    """The default mode: the synthetic gaze rests on the text, so the views come every view_every_ms,
+    each fusing the frames inferred at most every min_interval_ms."""
+    cloud = AckServer()
+    try:
+        config = replay_config(synthetic_recording(tmp_path / "rec"), sum_bins_model(tmp_path / "m.onnx"),
+                               cloud.url, tmp_path / "spool", infer="on-change")
+        edge = build_edge(config)
+        assert Daemon(edge, Notifier(environ={}), tick_s=0.005).run() == 0
+    finally:
+        cloud.close()
+    views, frames = edge.metrics.totals["views"], edge.metrics.totals["frames"]
+    assert 1 <= views <= frames
+    assert cloud.stored["synthetic-1"] == list(range(views))  # one message per view, every one stored
+    assert cloud.hellos[0].v == 2
 
 
 @pytest.mark.slow

@@ -28,6 +28,11 @@ def ink_where_events(voxel: np.ndarray) -> np.ndarray:
     return (np.abs(voxel).sum(axis=0) > 0).astype(np.uint8)
 
 
+def every_window(**settings: object) -> PipelineConfig:
+    """This module tests the every-window loop (a frame per n_events); on-change: test_view_trigger.py."""
+    return PipelineConfig(infer="every-window", **settings)  # type: ignore[arg-type]
+
+
 class FixedGaze:
     def __init__(self, px: tuple[float, float] | None = (640.0, 360.0)) -> None:
         self.px = px
@@ -162,7 +167,7 @@ def test_a_model_with_another_window_size_just_works(tmp_path: Path) -> None:
     frames: list[FrameResult] = []
     source = ListSource(chunked(ev, 200))
     pipeline = Pipeline(source, FixedGaze(), reconstructor, lambda f, t: frames.append(f),
-                        PipelineConfig(lossless=True), reconstructor.voxel)
+                        every_window(lossless=True), reconstructor.voxel)
     pipeline.start()
     assert source.done.wait(5)
     pipeline.stop()
@@ -198,7 +203,7 @@ def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, 
 def test_lossless_pipeline_makes_one_frame_per_window() -> None:
     ev = events_in_box(16_000, 540, 310, 200, 100)  # all inside the window at the gaze
     source = ListSource(chunked(ev, 200))
-    settings = PipelineConfig(n_events=1600, period_ms=1000.0, lossless=True)
+    settings = every_window(n_events=1600, period_ms=1000.0, lossless=True)
     gaze = FixedGaze()
     frames, metrics, pings = run_pipeline(source, gaze, settings)
     # every 1600 new foveated events make a frame (the first places the window), plus the remainder
@@ -221,7 +226,7 @@ def test_slow_inference_skips_to_the_newest_window_and_counts() -> None:
         return ink_where_events(voxel)
 
     source = ListSource(chunked(ev, 1000), pause_s=0.002)
-    frames, metrics, _ = run_pipeline(source, FixedGaze(), PipelineConfig(period_ms=5.0), infer=slow)
+    frames, metrics, _ = run_pipeline(source, FixedGaze(), every_window(period_ms=5.0), infer=slow)
     windows = 40_000 // 1600
     assert len(frames) < windows
     assert metrics.totals["frames_skipped"] > 0
@@ -232,7 +237,7 @@ def test_slow_inference_skips_to_the_newest_window_and_counts() -> None:
 def test_no_gaze_means_no_frames_counted() -> None:
     ev = events_in_box(5000, 540, 310, 200, 100)
     source = ListSource(chunked(ev, 500), pause_s=0.002)
-    frames, metrics, _ = run_pipeline(source, FixedGaze(None), PipelineConfig(period_ms=2.0))
+    frames, metrics, _ = run_pipeline(source, FixedGaze(None), every_window(period_ms=2.0))
     assert frames == []
     assert metrics.totals["frames_no_gaze"] > 0
 
@@ -240,7 +245,7 @@ def test_no_gaze_means_no_frames_counted() -> None:
 def test_ring_bounds_memory_and_counts_drops() -> None:
     ev = random_events(100_000, seed=5)
     source = ListSource(chunked(ev, 50_000))
-    settings = PipelineConfig(period_ms=1.0, ring_capacity=1 << 15)
+    settings = every_window(period_ms=1.0, ring_capacity=1 << 15)
     frames: list = []
     metrics = EdgeMetrics()
     pipeline = Pipeline(source, FixedGaze(), ink_where_events, lambda f, t: frames.append(f), settings, metrics=metrics)
@@ -268,9 +273,22 @@ def test_metrics_snapshot_rates_and_percentiles() -> None:
     assert snap.inference_ms_p50 == pytest.approx(50.5)
     assert snap.latency_ms_p99 == pytest.approx(9.901)
     assert snap.bandwidth_vs_raw() == pytest.approx(50 / (500 * 2.0))
-    assert "frames" in snap.log_line()
+    assert "inferences" in snap.log_line() and "views" in snap.log_line()
     now[0] = 3.0
     assert metrics.snapshot().rates["events_in"] == 0.0  # rates cover the last interval only
+
+
+def test_status_line_reports_views_inferences_cpu_and_bytes() -> None:
+    now = [0.0]
+    metrics = EdgeMetrics(clock=lambda: now[0])
+    metrics.add("views", 8)
+    metrics.add("frames", 20)
+    metrics.add("event_us", 2_000_000)  # two seconds of reading
+    metrics.add("bytes_sent", 12_000)
+    now[0] = 2.0
+    snap = dataclasses.replace(metrics.snapshot(), cpu_s=0.1)
+    assert snap.cpu_per_reading_s == pytest.approx(0.05)
+    assert snap.status_line() == "4.0 views/s, 10.0 inferences/s, CPU 0.050 s per reading s, 6.0 kB/s"
 
 
 def test_metrics_http_endpoint_serves_prometheus_text() -> None:
@@ -300,7 +318,7 @@ def test_watchdog_is_no_longer_fed_when_the_source_stalls() -> None:
     ev = events_in_box(2000, 540, 310, 200, 100)
     source = ListSource(chunked(ev, 500))
     pings: list[float] = []
-    settings = PipelineConfig(period_ms=5.0, stall_s=0.1)
+    settings = every_window(period_ms=5.0, stall_s=0.1)
     pipeline = Pipeline(source, FixedGaze(), ink_where_events, lambda f, t: None, settings,
                         watchdog=lambda: pings.append(time.monotonic()))
     pipeline.start()
@@ -316,10 +334,10 @@ def test_sensor_roi_follows_the_window() -> None:
     ev = events_in_box(8000, 540, 310, 200, 100)
     source = ListSource(chunked(ev, 200))
     gaze = FixedGaze((640.0, 360.0))
-    frames, _, _ = run_pipeline(source, gaze, PipelineConfig(lossless=True, sensor_roi=True))
+    frames, _, _ = run_pipeline(source, gaze, every_window(lossless=True, sensor_roi=True))
     assert frames and source.rois == [(540, 310, 200, 100)]  # programmed once: the gaze did not move
     plain = ListSource(chunked(ev, 200))
-    run_pipeline(plain, FixedGaze(), PipelineConfig(lossless=True))
+    run_pipeline(plain, FixedGaze(), every_window(lossless=True))
     assert plain.rois == []
 
 
@@ -329,7 +347,7 @@ def test_lossless_replay_is_reproducible() -> None:
     ev = events_in_box(12_000, 540, 310, 200, 100)  # 12 ms of events at 1 Mev/s
     runs = []
     for pause_s in (0.0, 0.004):
-        settings = PipelineConfig(n_events=1600, period_ms=2.0, lossless=True)
+        settings = every_window(n_events=1600, period_ms=2.0, lossless=True)
         frames, _, _ = run_pipeline(ListSource(chunked(ev, 300), pause_s=pause_s), FixedGaze(), settings)
         runs.append([(f.t_us, f.events_used) for f, _ in frames])
     assert len(runs[0]) > 12 // 2 and runs[0][-1][0] == int(ev["t"][-1])  # the event-clock period adds frames

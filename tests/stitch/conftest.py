@@ -1,4 +1,4 @@
-"""Fixtures of the stitcher tests: the synthetic page and reading passes over it (``scan.py``)."""
+"""Fixtures of the stitcher tests: the synthetic page and reading passes over it (``reading_factory.py``)."""
 
 from __future__ import annotations
 
