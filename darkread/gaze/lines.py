@@ -38,7 +38,8 @@ def segment_config(line_pitch_px: float, cfg: StitchConfig = StitchConfig()) -> 
 
 def read_lines(x: np.ndarray, y: np.ndarray, cfg: StitchConfig = StitchConfig()) -> np.ndarray:
     """Read-line number of every fixation (0, 1, ... in reading order), split at return sweeps."""
-    frames = [FrameRecord(i, i, _BLANK, (0, 0), (float(xi), float(yi))) for i, (xi, yi) in enumerate(zip(x, y))]
+    # one fixation, one sample of the track (a second apart: the segmenter thins only denser frames)
+    frames = [FrameRecord(i, i * 1_000_000, _BLANK, (0, 0), (float(xi), float(yi))) for i, (xi, yi) in enumerate(zip(x, y))]
     out = np.empty(len(frames), dtype=np.int64)
     for k, line in enumerate(segment_lines(frames, cfg)):
         for f in line:
