@@ -15,6 +15,7 @@ Each component keeps its own errors in its own ``errors.py``::
      ├── DeviceError                   edge/errors.py: the event camera cannot be opened or answers wrongly
      │    └── TreuzellError            edge/sources/evk4/treuzell.py: the EVK4's control protocol failed
      │         └── CommandFailedError  the camera answered a command with an error status
+     ├── CloudRefusedError             edge/errors.py: the cloud refused the uplink (also a ConnectionError)
      ├── ModelError                    edge/errors.py: the ONNX model is missing or has the wrong shape
      ├── RunError                      edge/errors.py: the edge ran but failed (cloud refused the stream,
      │                                 the replay crashed, a replay made no frames)

@@ -100,9 +100,9 @@ def read_recording(
     from darkread.edge.errors import RunError
 
     if out_dir is None:  # a scratch directory that does not outlive the read
-        with tempfile.TemporaryDirectory(prefix="darkread-read-") as scratch:
+        with tempfile.TemporaryDirectory(prefix="darkread-read-", ignore_cleanup_errors=True) as scratch:
             result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
-                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon)
+                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer)
         result.page_png = ""
         return result
     started = time.perf_counter()

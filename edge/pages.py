@@ -1,4 +1,4 @@
-"""Pages mode: frames are stitched on the glasses and only the page goes up (``[uplink] mode = "pages"``).
+"""Pages mode: frames (or, in the on-change mode, the fixations' views) are stitched on the glasses and only the page goes up (``[uplink] mode = "pages"``).
 
 The reconstruction thread adds each frame; the daemon's tick asks for the page every
 ``page_every_s`` and at shutdown. Stitching itself is the shared, pure stitcher; this module only
@@ -11,7 +11,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from darkread.edge.pipeline import FrameResult
+from darkread.frame_record import FrameRecord
 from darkread.stitch import PageStitcher
 from darkread.proto.messages import Page, pack_mask
 
@@ -26,9 +26,10 @@ class PageBuilder:
         self._lock = threading.Lock()
         self._last = clock()
 
-    def add(self, frame: FrameResult) -> None:
+    def add(self, frame: FrameRecord) -> None:
+        """A frame (every-window) or a fixation's view (on-change: its thresholded mask is what is stitched)."""
         with self._lock:
-            self._stitcher.add(frame)  # a FrameResult is the frame record the stitcher reads
+            self._stitcher.add(frame)  # a FrameResult or ViewRecord is the frame record the stitcher reads
 
     def due(self) -> bool:
         return self._clock() - self._last >= self.every_s
@@ -47,4 +48,4 @@ class PageBuilder:
             return None
         shape, bits = pack_mask(page.image)
         lines = tuple(tuple(map(int, box)) for box in page.lines)
-        return Page(seq=0, page_id=0, t_us=int(t_us), shape=shape, bits=bits, lines=lines)
+        return Page(seq=0, page_id=0, t_us=int(t_us), shape=shape, bits=bits, lines=lines, enc="png")  # v2: a 1-bit PNG

@@ -348,9 +348,8 @@ class Pipeline:
             self._since_infer += new
             if len(self.fuser) and t - self.fuser.t0_us >= self.settings.view_every_ms * 1e3:
                 self._send_view(arrival)  # a long fixation: its view so far, the next one starts afresh
-            last = self.trigger.last_infer_us
-            if last is not None and t - last < self.settings.min_interval_ms * 1e3:
-                return  # the bounded rate, checked before anything costs
+            if not self.trigger.ready(t, self._fixation):
+                return  # the bounded rate (and the landing's wait), checked before anything costs
             gaze = self.gaze.at(t)
             if gaze is None:
                 return

@@ -21,7 +21,6 @@ from darkread.stitch.strip import placed
 N_LEVELS = 4  # paper, unlikely, likely, surely ink: two bits a pixel before compression
 SEARCH_RADIUS_PX = 6  # head drift within one fixation, beyond the sensor's offset
 MIN_SCORE = 0.3  # a weaker correlation keeps the sensor's offset
-MIN_GAIN = 0.05  # ... and so does a peak hardly better than the offset itself
 
 
 @dataclass(frozen=True)
@@ -118,9 +117,6 @@ class ViewFuser:
         found = register_frame(reference, known.astype(np.float32), mask, r)
         if found is None or found.score < MIN_SCORE or found.on_rim:
             return px, py
-        here = register_frame(reference[r : r + h, r : r + w], known[r : r + h, r : r + w].astype(np.float32), mask, 0)
-        if here is not None and found.score - here.score < MIN_GAIN:
-            return px, py  # the sensor's offset matches about as well: moving the frame would only add jitter
         return px + found.shift_xy[0] + found.subpixel_xy[0], py + found.shift_xy[1] + found.subpixel_xy[1]
 
     def _accumulate(self, mask: np.ndarray, x: float, y: float) -> None:

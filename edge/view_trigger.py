@@ -43,15 +43,16 @@ class GazeGate:
             return self._status
         t, yaw, pitch = self._rows(t_from, t_event_us)
         self._until = int(t_event_us)
+        pushed = False
         if t.shape[0]:
             x, y = angles_from_cpf(yaw, pitch)
             self.classifier.push(t, x, y)
-            self._last_row = int(t[-1])
-        elif self._last_row is not None and t_event_us - self._last_row > self.cfg.blink_gap_us:
-            # no rows at all (a live feed drops invalid ones): the clock runs on, so a blink shows
+            self._last_row, pushed = int(t[-1]), True
+        if self._last_row is not None and t_event_us - self._last_row > self.cfg.blink_gap_us:
+            # no rows for longer than a blink gap (a live feed drops invalid ones): the clock runs on
             self.classifier.push(int(t_event_us), math.nan, math.nan)
-            self._last_row = int(t_event_us)
-        else:
+            self._last_row, pushed = int(t_event_us), True
+        if not pushed:
             return self._status
         self._status = self.classifier.status()
         return self._status
@@ -86,6 +87,13 @@ class ViewTrigger:
             return False
         moved = self.last_origin is not None and math.dist(origin, self.last_origin) >= s.move_px
         return (moved and new_events > 0) or new_events >= s.renew_fraction * s.n_events
+
+    def ready(self, t_us: int, fixation_start_us: int) -> bool:
+        """The time conditions of ``due`` alone (cheap: checked before the gaze is looked up)."""
+        s = self.settings
+        if self.last_infer_us is None:
+            return t_us - fixation_start_us >= s.first_wait_ms * 1e3
+        return t_us - self.last_infer_us >= s.min_interval_ms * 1e3
 
     def inferred(self, t_us: int, origin: tuple[int, int]) -> None:
         self.last_infer_us = int(t_us)

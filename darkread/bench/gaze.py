@@ -21,7 +21,7 @@ def run(ctx: BenchContext) -> list[Figure]:
     from darkread.gaze.scores import ARIA_RATES_HZ, oz_onset_scores
 
     raw = human.load_eyelink_asc(ctx.shared_data / "reading_gaze" / "oz" / "OZ_1trial.txt")
-    seeds = range(3 if ctx.quick else 10)
+    seeds = range(ctx.runs(10, 3))
     clean = human.NoiseModel(bias_deg=0.0, slow_deg=0.0, fast_deg=0.0)
     figures = []
     for rate in ARIA_RATES_HZ:

@@ -1,10 +1,12 @@
 """What each way of getting the page off the glasses costs in bytes.
 
 Per recording (one page): one RGB snapshot (raw, PNG, JPEG at several qualities), the whole event
-stream as EVT3, the foveated event stream as EVT3, the binary frame stream as sent (encoded wire
-messages), and the stitched page as one encoded ``Page`` message. Streams are also given per second.
-The ratios sit next to the paper's figures: ~98 % of events removed by foveation, the frame stream
-~20x below one RGB image, the stitched page ~2400x below it.
+stream as EVT3, the foveated event stream as EVT3, the stream the glasses sent (encoded wire
+messages as counted by the uplink: one fused view per fixation in the default on-change mode,
+zlib frames in every-window mode), and the stitched page as one encoded ``Page`` message (a 1-bit
+PNG, protocol version 2). Streams are also given per second. The ratios sit next to the paper's
+figures: ~98 % of events removed by foveation, the frame stream ~20x below one RGB image, the
+stitched page ~2400x below it.
 """
 
 from __future__ import annotations
@@ -59,12 +61,13 @@ def frame_message_bytes(shape: tuple[int, int] | None = None) -> int:
     return len(encode(message))
 
 
-def page_message_bytes(ink: np.ndarray, lines: list[tuple[int, int, int, int]] | None = None) -> int:
-    """Bytes of one encoded ``Page`` wire message holding the binary page ``ink`` (1 = ink)."""
+def page_message_bytes(ink: np.ndarray, lines: list[tuple[int, int, int, int]] | None = None, enc: str = "png") -> int:
+    """Bytes of one encoded ``Page`` wire message holding the binary page ``ink`` (1 = ink), as the
+    glasses send it (``enc="png"``: a 1-bit PNG; ``"bits"``: protocol version 1)."""
     from darkread.proto.messages import Page, encode, pack_mask
 
     shape, bits = pack_mask(np.asarray(ink, dtype=np.uint8))
-    return len(encode(Page(seq=0, page_id=0, t_us=0, shape=shape, bits=bits, lines=tuple(lines or ()))))
+    return len(encode(Page(seq=0, page_id=0, t_us=0, shape=shape, bits=bits, lines=tuple(lines or ()), enc=enc)))
 
 
 def page_ink_from_png(path: str | Path) -> np.ndarray:

@@ -60,6 +60,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--match", metavar="PATTERN",
                         help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
                              "'*lux30_*_human' for the real-scanpath recordings at 30 lux")
+    parser.add_argument("--infer", default="on-change", choices=["on-change", "every-window"],
+                        help="the edge's mode (default on-change: one fused view per fixation; every-window: every frame); "
+                             "evaluate both into two --work folders to compare them")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="worker processes (make-suite and evaluation; default 1)")
     parser.set_defaults(func=_run)
@@ -97,7 +100,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             raise FileNotFoundError(f"{work}: no stored results; run `darkread eval {suite}` first")
     else:
         results = evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model,
-                                 force=args.force, jobs=args.jobs)
+                                 force=args.force, jobs=args.jobs, infer=args.infer)
     info = ReportInfo(
         commit=git_commit(),
         backend=args.backend,

@@ -102,6 +102,7 @@ def evaluate_recording(
     compare: Sequence[str] = (),
     model: str | None = None,
     ocr_cache: dict[str, Any] | None = None,
+    infer: str = "on-change",
 ) -> dict[str, Any]:
     """Everything the report needs about one recording (errors are recorded per stage)."""
     from darkread.eval.bandwidth import measure_bandwidth, page_ink_from_png
@@ -123,12 +124,12 @@ def evaluate_recording(
     from darkread.eval.provenance import git_commit
 
     result: dict[str, Any] = {**conditions(recording_dir), "backend": backend, "commit": git_commit(),
-                              "evaluated": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+                              "evaluated": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "infer": infer}
     read: dict[str, Any] = {}
 
     def run_darkread() -> dict[str, Any]:
         started = time.perf_counter()
-        r = read_recording(recording_dir, backend=backend, model=model, out_dir=run_dir / "read")
+        r = read_recording(recording_dir, backend=backend, model=model, out_dir=run_dir / "read", infer=infer)
         read["result"] = r
         return {
             "text": r.text, "cer": r.cer, "wer": r.wer, "frames": r.frames, "messages_sent": r.messages_sent,
@@ -195,6 +196,7 @@ def evaluate_suite(
     force: bool = False,
     progress: bool = True,
     jobs: int = 1,
+    infer: str = "on-change",
 ) -> list[RecordingResult]:
     """Evaluate every recording of a suite with ``jobs`` worker processes; stored results are reused
     unless ``force``.
@@ -223,13 +225,14 @@ def evaluate_suite(
         cache: dict[str, Any] = {}
         for folder in todo:
             by_name[folder.name] = evaluate_recording(folder, runs / folder.name, backend=backend, compare=engines,
-                                                      model=model, ocr_cache=cache)
+                                                      model=model, ocr_cache=cache, infer=infer)
             bar.update()
     else:
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(evaluate_recording, f, runs / f.name, backend=backend, compare=engines, model=model): f
+            futures = {pool.submit(evaluate_recording, f, runs / f.name, backend=backend, compare=engines, model=model,
+                                   infer=infer): f
                        for f in todo}  # each worker makes its own OCR engines
             for future in as_completed(futures):
                 by_name[futures[future].name] = future.result()

@@ -27,7 +27,7 @@ FOVEA = {
 SYNTH = {"synth_samples_per_s", "synth_sim_s_per_wall_s"}
 EDGE = {
     "edge_realtime_factor", "edge_decode_realtime_factor", "edge_latency_p50_ms", "edge_latency_p99_ms",
-    "edge_uplink_kbyte_per_s",
+    "edge_uplink_kbyte_per_s", "edge_inferences_per_s", "edge_view_latency_p99_ms", "edge_realtime_factor_every_window",
 }
 CLOUD = {"cloud_ingest_frames_per_s_1", "cloud_ingest_frames_per_s_10", "cloud_ingest_frames_per_s_50"}
 STITCH = {"stitch_ms_per_frame", "stitch_ink_f1", "stitch_ink_f1_tol1px", "stitch_ocr_cer"}
@@ -84,8 +84,16 @@ def test_ocr_benchmark_writes_its_keys(tmp_path: Path) -> None:
     assert set(run_smoke("ocr", tmp_path)) == ocr_keys()
 
 
+def test_gaze_benchmark_writes_its_keys(tmp_path: Path, shared_data: Path) -> None:
+    from darkread.gaze.scores import ARIA_RATES_HZ
+
+    if not (shared_data / "reading_gaze" / "oz").is_dir():
+        pytest.skip("../shared/data/reading_gaze/oz is not present")
+    assert set(run_smoke("gaze", tmp_path)) == {f"gaze_fixation_onset_f1_{rate:g}hz" for rate in ARIA_RATES_HZ}
+
+
 def test_every_benchmark_module_is_tested() -> None:
-    tested = {"decode", "fovea", "synth", "cloud", "inference", "edge", "stitch", "ocr"}
+    tested = {"decode", "fovea", "synth", "gaze", "cloud", "inference", "edge", "stitch", "ocr"}
     assert {name.rsplit(".", 1)[-1] for name in BENCH_MODULES} == tested
 
 

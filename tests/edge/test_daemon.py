@@ -74,10 +74,18 @@ def test_daemon_should_exit_from_another_thread_drains() -> None:
     assert service.calls[-1] == "shutdown 10.0"
 
 
+class SignalledAtStartup(FakeService):
+    """Sends SIGTERM to this process once the daemon runs (its handler is installed by then: a timer
+    started before ``run()`` could fire first on a busy host and end the test process)."""
+
+    def startup(self) -> str:
+        threading.Timer(0.05, os.kill, args=(os.getpid(), 15)).start()
+        return super().startup()
+
+
 def test_sigterm_stops_the_daemon_gracefully() -> None:
-    service = FakeService()
+    service = SignalledAtStartup()
     daemon = Daemon(service, Notifier({}), tick_s=0.001)
-    threading.Timer(0.05, os.kill, args=(os.getpid(), 15)).start()
     assert daemon.run() == 0
     assert service.calls == ["startup", "shutdown 10.0"]
 

@@ -46,8 +46,15 @@ def test_frame_message_size_does_not_depend_on_the_mask() -> None:
 
 
 def test_page_message_carries_one_bit_per_pixel() -> None:
-    size = page_message_bytes(np.ones((300, 800), dtype=np.uint8))
+    size = page_message_bytes(np.ones((300, 800), dtype=np.uint8), enc="bits")  # protocol version 1
     assert 300 * 800 // 8 < size < 300 * 800 // 8 + 100
+
+
+def test_the_page_goes_as_a_one_bit_png_far_below_its_bits() -> None:
+    page = np.zeros((300, 800), np.uint8)
+    page[50:60, 20:780:7] = 1  # strokes of a line of text
+    page[100:110, 20:600:5] = 1
+    assert page_message_bytes(page) < page_message_bytes(page, enc="bits") / 10
 
 
 def test_foveation_keeps_the_events_in_each_events_own_window(tiny_events: np.ndarray) -> None:

@@ -179,3 +179,17 @@ def test_report_names_the_commits_the_recordings_were_evaluated_at(tmp_path: Pat
     assert "- commit: `2222222222` (recordings evaluated at `1111111111`, 2026-01-01 00:00 UTC to 2026-01-01 00:01 UTC)" in md
     md = write_report(typed(results), tmp_path, ReportInfo(commit="1111111111")).read_text()
     assert "- commit: `1111111111`\n" in md
+
+
+def test_real_scanpath_recordings_get_their_own_table_beside_the_model() -> None:
+    from darkread.eval.tables import scanpath_table
+
+    docs = fake_results()
+    for doc in docs:
+        doc.update(kind="paragraph", lux=30.0, motion="still")
+    human = {**docs[1], "name": "002_dark_human", "scanpath": "human", "darkread": {"cer": 0.03, "wer": 0.1}}
+    results = typed([*docs, human])
+    model = [r for r in results if r.scanpath == "model"]
+    lines = scanpath_table(model, [r for r in results if r.scanpath == "human"])
+    assert "| 30 | still | 1 | 3.0% | 3.0% | 2 | 4.0% |" in lines
+    assert "No recordings" in scanpath_table(model, [])[0]

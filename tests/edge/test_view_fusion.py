@@ -1,0 +1,75 @@
+"""One view per fixation: frames registered to each other with the stitcher's registration, fused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from darkread.edge.view_fusion import N_LEVELS, ViewFuser, quantise, threshold
+from darkread.frame_record import FrameRecord
+from darkread.proto.messages import View, decode, encode
+
+
+def page_of_text(seed: int = 3) -> np.ndarray:
+    """A wide strip of glyph-like blobs (ink = 1) that frames are cut from."""
+    rng = np.random.default_rng(seed)
+    page = np.zeros((140, 320), np.uint8)
+    for row in (30, 60, 90):
+        x = 5
+        while x < 300:
+            w = int(rng.integers(3, 8))
+            page[row : row + int(rng.integers(6, 14)), x : x + w] = 1
+            x += w + int(rng.integers(2, 6))
+    return page
+
+
+def frame(page: np.ndarray, x: int, y: int, i: int, origin: tuple[int, int]) -> FrameRecord:
+    return FrameRecord(i, 1000 * i, page[y : y + 100, x : x + 200], origin, (origin[0] + 100.0, origin[1] + 50.0))
+
+
+def test_frames_moved_on_the_sensor_are_registered_back_onto_the_first() -> None:
+    page = page_of_text()
+    fuser = ViewFuser()
+    fuser.add(frame(page, 20, 10, 0, (500, 300)))
+    # the head drifted: the text sits 3 px left and 2 px up in the window, which the sensor's
+    # offset (the same origin) does not know; the registration finds it
+    placed = fuser.add(frame(page, 23, 12, 1, (500, 300)))
+    assert placed == pytest.approx((3.0, 2.0), abs=0.5)
+    view = fuser.view(7)
+    assert view.frames == 2 and view.frame_id == 7 and view.origin == (500, 300) and view.t0_us == 0 and view.t_us == 1000
+    inside = view.levels[5:-5, 5:-5]  # where both frames overlap the fused view is the page itself
+    np.testing.assert_array_equal(threshold(inside), page[15:105, 25:215])
+
+
+def test_a_pixel_seen_as_ink_in_one_of_three_frames_is_unlikely_ink() -> None:
+    page = page_of_text()
+    noisy = page.copy()
+    noisy[0:4, 150:154] = 1  # a speck in one frame only
+    fuser = ViewFuser()
+    for i, source in enumerate((page, page, noisy)):
+        fuser.add(frame(source, 40, 0, i, (400, 200)), events_used=1600)
+    view = fuser.view(0)
+    assert view.levels[1, 111] == 1  # 1/3 -> level 1 of 0..3
+    assert view.mask[1, 111] == 0  # below one half: paper for a binary stitcher
+    assert view.levels.max() == N_LEVELS - 1 and view.events_used == 4800
+
+
+def test_the_view_goes_on_the_wire_as_grey_levels() -> None:
+    fuser = ViewFuser()
+    fuser.add(frame(page_of_text(), 0, 0, 0, (10, 20)))
+    view = fuser.view(3)
+    message = decode(encode(view.to_message()), max_bytes=1 << 20)
+    assert isinstance(message, View) and message.frames == 1
+    np.testing.assert_array_equal(message.ink(), view.levels)
+    np.testing.assert_array_equal(message.record().mask, view.mask)  # one threshold on both ends
+
+
+def test_quantise_and_threshold() -> None:
+    p = np.array([[0.0, 0.2, 0.34, 0.5, 0.67, 1.0]])
+    np.testing.assert_array_equal(quantise(p), [[0, 1, 1, 2, 2, 3]])
+    np.testing.assert_array_equal(threshold(quantise(p)), [[0, 0, 0, 1, 1, 1]])
+
+
+def test_an_empty_fuser_has_no_view() -> None:
+    with pytest.raises(ValueError):
+        ViewFuser().view(0)

@@ -1,0 +1,137 @@
+"""The on-change mode: the gaze gates inference, one view per fixation (pipeline and pure parts)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from darkread.edge.config import PipelineConfig
+from darkread.edge.events import Events, make_events
+from darkread.edge.gaze import GazeSample
+from darkread.edge.gaze_events import EventKind
+from darkread.edge.pipeline import Pipeline
+from darkread.edge.telemetry import EdgeMetrics
+from darkread.edge.view_fusion import ViewRecord
+from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
+
+SENSOR = (1280, 720)
+RATE_HZ = 60
+PX_PER_DEG = 30.0
+
+
+class ScanGaze:
+    """A reader's gaze in rows at 60 Hz: fixations of 250 ms stepping 2 deg right with two rows
+    in flight between them (a 50 ms saccade); ``at`` holds the last row like a live feed."""
+
+    def __init__(self, n_fixations: int = 6) -> None:
+        t, x = [], []
+        now = 0
+        for i in range(n_fixations):
+            for k in range(15 + 3):  # 250 ms at rest, then the saccade's rows on the way to the next place
+                t.append(now), x.append(2.0 * i + (0.0 if k < 15 else 2.0 * (k - 14) / 4))
+                now += 16_667
+        self.t = np.asarray(t, np.int64)
+        self.yaw = -np.radians(np.asarray(x))  # CPF yaw: x left
+        self.pitch = np.zeros_like(self.yaw)
+        self.fixation_starts = self.t[::18]
+        self.rate_hz = RATE_HZ
+
+    def rows(self, t0: int, t1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        i0, i1 = np.searchsorted(self.t, [t0, t1], side="right")
+        return self.t[i0:i1], self.yaw[i0:i1], self.pitch[i0:i1]
+
+    def at(self, t_event_us: int) -> GazeSample | None:
+        i = int(np.searchsorted(self.t, t_event_us, side="right")) - 1
+        if i < 0:
+            return None
+        x_deg = -np.degrees(self.yaw[i])
+        return GazeSample((400.0 + PX_PER_DEG * x_deg, 360.0), (float(self.yaw[i]), 0.0))
+
+
+class Chunks:
+    width, height = SENSOR
+
+    def __init__(self, events: Events) -> None:
+        self.events = events
+
+    def start(self, sink) -> None:  # noqa: ANN001
+        self.sink = sink
+
+    def stop(self) -> None:
+        pass
+
+    def set_roi(self, *roi: int) -> None:
+        pass
+
+
+def busy_events(duration_us: int, rate_hz: float = 200_000.0, seed: int = 1) -> Events:
+    """Events everywhere around the gaze path (text under a moving head)."""
+    rng = np.random.default_rng(seed)
+    n = int(duration_us * rate_hz / 1e6)
+    t = np.sort(rng.integers(0, duration_us, n))
+    return make_events(rng.integers(300, 900, n), rng.integers(280, 440, n), rng.integers(0, 2, n), t)
+
+
+def ink_where_events(grid: np.ndarray) -> np.ndarray:
+    return (np.abs(grid).sum(axis=0) > 0).astype(np.uint8)
+
+
+def run_on_change(gaze: ScanGaze, events: Events, **settings: object):  # noqa: ANN201
+    views: list[tuple[ViewRecord, float]] = []
+    source = Chunks(events)
+    config = PipelineConfig(lossless=True, infer="on-change", **settings)  # type: ignore[arg-type]
+    metrics = EdgeMetrics()
+    pipeline = Pipeline(source, gaze, ink_where_events, lambda v, t: views.append((v, t)), config, metrics=metrics)
+    pipeline.start()
+    step = 5_000
+    for t0 in range(0, int(events["t"][-1]) + 1, step):
+        i0, i1 = np.searchsorted(events["t"], [t0, t0 + step])
+        if i1 > i0:
+            source.sink(events[i0:i1])
+    pipeline.stop()
+    assert pipeline.error is None
+    return [v for v, _ in views], metrics
+
+
+def test_one_view_per_fixation_and_no_inference_in_saccades() -> None:
+    gaze = ScanGaze()
+    views, metrics = run_on_change(gaze, busy_events(int(gaze.t[-1]) + 20_000))
+    assert len(views) == len(gaze.fixation_starts)
+    for view, start in zip(views, gaze.fixation_starts):
+        assert start <= view.t0_us <= view.t_us <= start + 15 * 16_667  # inside its fixation
+        assert view.frames >= 2  # 250 ms at most every 100 ms: two or three frames fused
+    assert metrics.totals["views"] == len(views)
+    assert metrics.totals["frames"] == sum(v.frames for v in views)
+    # the bounded rate: far fewer inferences than the every-window mode's one per 1600 events
+    assert metrics.totals["frames"] <= 3 * len(views) < metrics.totals["events_foveated"] / 1600
+
+
+def test_a_long_fixation_sends_its_view_every_view_every_ms() -> None:
+    gaze = ScanGaze(n_fixations=1)
+    gaze.t = np.arange(0, 1_000_000, 16_667)  # one fixation of a second
+    gaze.yaw = np.zeros(gaze.t.shape)
+    gaze.pitch = np.zeros(gaze.t.shape)
+    views, _ = run_on_change(gaze, busy_events(1_000_000))
+    assert 3 <= len(views) <= 5
+    assert all(v.t_us - v.t0_us < 250_000 for v in views)
+
+
+def test_the_trigger_waits_for_the_landing_then_bounds_the_rate() -> None:
+    trigger = ViewTrigger(PipelineConfig())
+    start = 1_000_000
+    assert not trigger.due(start + 10_000, start, 5000, 5000, (0, 0))  # the classifier may still revise the landing
+    assert trigger.due(start + 60_000, start, 500, 500, (0, 0))  # then even a thin window (low light) will do
+    trigger.inferred(start + 60_000, (0, 0))
+    assert not trigger.due(start + 100_000, start, 9000, 9000, (50, 0))  # moved, but within min_interval_ms
+    assert not trigger.due(start + 170_000, start, 1000, 9000, (0, 0))  # not enough new, not moved
+    assert trigger.due(start + 170_000, start, 1600, 9000, (0, 0))  # a window's worth of new events
+    assert trigger.due(start + 170_000, start, 10, 9000, (8, 0))  # or the window moved
+
+
+def test_the_gate_says_saccade_after_a_jump_and_blink_without_rows() -> None:
+    gaze = ScanGaze(n_fixations=3)
+    gate = GazeGate(gaze)
+    second = gate.update(int(gaze.t[18 + 10]))
+    assert second.kind == EventKind.FIXATION and fixation_key(second) is not None
+    assert gate.update(int(gaze.t[18 + 15])).kind == EventKind.SACCADE  # the first row on the way (noise learnt by now)
+    late = gate.update(int(gaze.t[-1]) + 500_000)  # no rows for half a second
+    assert late.kind == EventKind.BLINK and fixation_key(late) is None
