@@ -7,8 +7,9 @@
 # in /data, `darkread cloud keys add`) the service refuses to start and says so.
 #   docker run -e DARKREAD_API_KEY=$(openssl rand -hex 16) -p 127.0.0.1:8000:8000 darkread
 #
-# CPU only; no PyTorch (training is not part of the image). Tesseract is optional: build with
-# --build-arg WITH_TESSERACT=1 to add it (DARKREAD_OCR_BACKEND=tesseract).
+# CPU only; no PyTorch (training is not part of the image). espeak-ng speaks the answers (ask with
+# Accept: audio/wav). Tesseract is optional: build with --build-arg WITH_TESSERACT=1 to add it
+# (DARKREAD_OCR_BACKEND=tesseract).
 FROM python:3.11-slim-bookworm
 
 ARG WITH_TESSERACT=0
@@ -18,10 +19,11 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     OMP_THREAD_LIMIT=1
 
-RUN if [ "$WITH_TESSERACT" = "1" ]; then \
-        apt-get update && apt-get install -y --no-install-recommends tesseract-ocr tesseract-ocr-eng \
-        && rm -rf /var/lib/apt/lists/*; \
-    fi
+RUN apt-get update && apt-get install -y --no-install-recommends espeak-ng \
+    && if [ "$WITH_TESSERACT" = "1" ]; then \
+        apt-get install -y --no-install-recommends tesseract-ocr tesseract-ocr-eng; \
+    fi \
+    && rm -rf /var/lib/apt/lists/*
 
 WORKDIR /app
 # The source tree (see .dockerignore) stays in /app: the edge replays

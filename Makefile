@@ -8,7 +8,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 EXTRAS ?= edge,cloud,dev,train,gaze
 
-.PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps
+.PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps speech-deps browser-deps ocr-deps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
@@ -23,13 +23,29 @@ $(STAMP): pyproject.toml setup.py
 
 venv: $(STAMP)  ## create .venv and install darkread with all extras
 
-system-deps:  ## optional Debian packages (Tesseract OCR, libcairo2 for eyekit) when run as root
-	@if [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
-		command -v tesseract >/dev/null || (apt-get update -qq && apt-get install -y -qq tesseract-ocr tesseract-ocr-eng >/dev/null) || true; \
-		ldconfig -p | grep -q libcairo.so.2 || (apt-get update -qq && apt-get install -y -qq libcairo2 >/dev/null) || true; \
-	else echo "system-deps: not root or no apt-get; Tesseract stays optional"; fi
+# Debian packages, installed only when run as root with apt-get (a fresh machine, CI, the image);
+# elsewhere the tests that need them skip with the reason. Each target installs only what is missing.
+APT_INSTALL = apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends
 
-test: system-deps $(STAMP)  ## run the whole test suite
+system-deps: speech-deps browser-deps ocr-deps  ## every Debian package the tests use (when root)
+
+speech-deps:  ## espeak-ng, the offline speech engine of spoken answers (when root)
+	@if command -v espeak-ng >/dev/null; then :; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then $(APT_INSTALL) espeak-ng >/dev/null; \
+	else echo "speech-deps: not root or no apt-get; install espeak-ng for spoken answers"; fi
+
+browser-deps:  ## Chromium and its WebDriver for the live-page browser test (when root)
+	@if command -v chromium >/dev/null && command -v chromedriver >/dev/null; then :; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then $(APT_INSTALL) chromium chromium-driver >/dev/null; \
+	else echo "browser-deps: not root or no apt-get; the browser test will skip"; fi
+
+ocr-deps:  ## Tesseract (an optional second local OCR engine) and libcairo2 for eyekit (when root)
+	@if [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
+		command -v tesseract >/dev/null || ($(APT_INSTALL) tesseract-ocr tesseract-ocr-eng >/dev/null) || true; \
+		ldconfig -p | grep -q libcairo.so.2 || ($(APT_INSTALL) libcairo2 >/dev/null) || true; \
+	else echo "ocr-deps: not root or no apt-get; Tesseract stays optional"; fi
+
+test: system-deps $(STAMP)  ## run the whole test suite (installs espeak-ng, Chromium, Tesseract, libcairo2 when root)
 	$(PY) -m pytest -q
 
 test-fast: $(STAMP)  ## unit tests only (no integration tests)
@@ -38,8 +54,8 @@ test-fast: $(STAMP)  ## unit tests only (no integration tests)
 bench: $(STAMP)  ## benchmarks; prints a table and writes bench.json
 	$(PY) -m darkread.bench
 
-demo: $(STAMP)  ## read the shipped sample recording and compare with its printed text
-	$(VENV)/bin/darkread read --demo
+demo: $(STAMP) speech-deps  ## read the shipped sample recording aloud and compare with its printed text
+	$(VENV)/bin/darkread read --demo --say
 
 eval: $(STAMP)  ## the full evaluation suite (87 recordings, ~30 min on 2 cores) and its report in docs/eval
 	$(VENV)/bin/darkread eval make-suite runs/eval_suite --jobs 2

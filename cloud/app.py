@@ -24,6 +24,7 @@ from .routes import api, public
 from .settings import Settings, get_settings
 from .store import Store
 from .stream import stream_endpoint
+from .ui import mount_ui
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +35,8 @@ Ingest of reconstructed text frames from darkread glasses, page stitching and OC
   then `frame`s (or `page`s); the service answers `welcome` and cumulative `ack`s sent only after
   each message is committed to disk. Authenticate with `X-API-Key` (or `?key=`, or `hello.token`).
 * `POST /v1/sessions/{id}/ask` — read the session's current page.
+* `POST /v1/sessions/{id}/ask` with `Accept: audio/wav` (or `?format=wav`) — the answer spoken (RIFF WAV).
+* `/` — the live session page (the key is typed in, or given as `/#key=...`).
 * `/metrics` — Prometheus metrics (an admin key, unless `DARKREAD_METRICS_PUBLIC`).
 
 Keys are per device with scopes `stream`, `read`, `admin` (`darkread cloud keys add`).
@@ -83,6 +86,7 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
     app.include_router(public)
     app.include_router(api)
     app.add_api_websocket_route("/v1/stream", stream_endpoint, name="stream")
+    mount_ui(app)
     metrics_app = make_asgi_app(registry=metrics.registry)
     app.mount("/metrics", metrics_app if settings.metrics_public else _admin_only(metrics_app))
     return app

@@ -48,3 +48,11 @@ class OcrError(CloudError):
 
 class OcrUnavailableError(OcrError):
     """The engine is not installed or not configured (missing binary, package or API key)."""
+
+
+class SpeechError(CloudError):
+    """The speech engine ran but failed, timed out or wrote no valid WAV."""
+
+
+class SpeechUnavailableError(SpeechError):
+    """The speech engine (espeak-ng) is not installed or cannot run."""

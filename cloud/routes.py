@@ -7,10 +7,10 @@ import logging
 import math
 import time
 from dataclasses import asdict
-from typing import Annotated
+from typing import Annotated, Literal
 
 from darkread.image_codec import encode_png
-from fastapi import APIRouter, Body, Depends, HTTPException, Path, Response, status
+from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
 from pydantic import BaseModel, Field
 
 from .auth import Principal, Scope
@@ -18,6 +18,8 @@ from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
 from .ocr.base import OcrResult
 from .pages import PageImage
+from .speech import WAV_MEDIA_TYPE, wants_wav
+from .speech_http import require_speech_engine, speak
 from .store import SessionInfo
 
 log = logging.getLogger(__name__)
@@ -159,20 +161,29 @@ async def page_png(session_id: SessionId, context: Context, principal: Reader) -
 
 @api.post(
     "/sessions/{session_id}/ask",
-    summary="Read the session's current page and answer",
+    summary="Read the session's current page and answer (JSON, or spoken: Accept: audio/wav or ?format=wav)",
     response_model=AskResponse,
     responses={
+        200: {"content": {WAV_MEDIA_TYPE: {}}, "description": "the answer (JSON), or spoken as a RIFF WAV"},
         404: {"description": "unknown session"},
         409: {"description": "nothing stored yet"},
         502: {"description": "the OCR engine failed"},
-        503: {"description": "the OCR engine or stitcher is unavailable"},
+        503: {"description": "the OCR engine, stitcher or speech engine is unavailable"},
         504: {"description": "the OCR engine timed out"},
     },
 )
 async def ask(
-    session_id: SessionId, context: Context, principal: Reader, request: Annotated[AskRequest | None, Body()] = None
-) -> AskResponse:
+    session_id: SessionId,
+    context: Context,
+    principal: Reader,
+    request: Annotated[AskRequest | None, Body()] = None,
+    format_: Annotated[Literal["json", "wav"] | None, Query(alias="format", description="wav: the answer spoken")] = None,
+    accept: Annotated[str | None, Header()] = None,
+) -> AskResponse | Response:
     question = (request or AskRequest()).question
+    spoken = wants_wav(accept, format_)
+    if spoken:
+        require_speech_engine(context.settings)  # before the OCR work: a missing engine is known at once
     started = time.perf_counter()
     info = await _session(context, session_id, principal)
     _rate_limit(context, principal)
@@ -188,7 +199,7 @@ async def ask(
         ) from None
     latency_ms = (time.perf_counter() - started) * 1000
     log.info("session %s: read %s with %s in %.0f ms", session_id, page.page_id, context.ocr.name, latency_ms)
-    return AskResponse(
+    answer = AskResponse(
         text=result.text,
         backend=context.ocr.name,
         page_id=page.page_id,
@@ -197,6 +208,7 @@ async def ask(
         question=question,
         truncated=result.truncated,
     )
+    return await speak(context.settings, answer, session_id) if spoken else answer
 
 
 def _rate_limit(context: AppContext, principal: Principal) -> None:

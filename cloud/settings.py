@@ -11,6 +11,8 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from darkread.proto.messages import DEFAULT_MAX_MESSAGE_BYTES
 
+from .speech import VOICE_NAME_PATTERN, Voice
+
 OcrBackendName = Literal["local", "rapidocr", "tesseract", "google", "openai"]
 
 OCR_PROMPT = (
@@ -65,6 +67,18 @@ class Settings(BaseSettings):
     openai_token_param: Literal["max_tokens", "max_completion_tokens"] = "max_completion_tokens"
     openai_max_output_tokens: int = Field(1024, ge=1)
     openai_max_retries: int = Field(2, ge=0, description="retries after HTTP 429, honouring retry-after")
+
+    # Spoken answers (ask with Accept: audio/wav): the offline espeak-ng engine.
+    speech_engine: str = Field("espeak-ng", description="the espeak-ng executable (a name on PATH or a path)")
+    speech_language: str = Field("en-us", pattern=VOICE_NAME_PATTERN, description="espeak-ng language, e.g. en-us, en-gb")
+    speech_voice: str = Field(
+        "f2", pattern=f"{VOICE_NAME_PATTERN}|^$", description="espeak-ng voice variant (f2: the most intelligible here); empty = the plain voice"
+    )
+    speech_rate_wpm: int = Field(140, ge=80, le=450, description="speaking rate in words per minute")
+    speech_timeout_s: float = Field(20.0, gt=0, description="longest a single answer may take to synthesise")
+
+    def voice(self) -> Voice:
+        return Voice(self.speech_language, self.speech_voice, self.speech_rate_wpm)
 
     @field_validator("api_key", mode="before")
     @classmethod

@@ -15,6 +15,7 @@ Each component keeps its own errors in its own ``errors.py``::
      ├── DeviceError                   edge/errors.py: the event camera cannot be opened or answers wrongly
      │    └── TreuzellError            edge/sources/evk4/treuzell.py: the EVK4's control protocol failed
      │         └── CommandFailedError  the camera answered a command with an error status
+     ├── CloudRefusedError             edge/errors.py: the cloud refused the uplink (also a ConnectionError)
      ├── ModelError                    edge/errors.py: the ONNX model is missing or has the wrong shape
      ├── RunError                      edge/errors.py: the edge ran but failed (cloud refused the stream,
      │                                 the replay crashed, a replay made no frames)
@@ -39,8 +40,10 @@ Each component keeps its own errors in its own ``errors.py``::
           ├── NoPageError              the session has nothing to read yet
           ├── DataDirError             the data directory is unusable or held by another process
           ├── ServiceStartError        the service did not come up
-          └── OcrError                 an OCR engine failed (``retryable`` says whether to try again)
-               └── OcrUnavailableError the engine is not installed or not configured
+          ├── OcrError                 an OCR engine failed (``retryable`` says whether to try again)
+          │    └── OcrUnavailableError the engine is not installed or not configured
+          └── SpeechError              the speech engine failed or timed out (spoken answers)
+               └── SpeechUnavailableError  espeak-ng is not installed
 
 Built-in exceptions are used where their meaning fits: ``FileNotFoundError``/``OSError`` for files
 and sockets, ``ValueError`` for bad arguments. The ``darkread`` command turns all of these into one

@@ -12,6 +12,7 @@ import argparse
 import json
 import logging
 import secrets
+import shutil
 import sys
 import tempfile
 import time
@@ -33,6 +34,8 @@ Examples:
   darkread read --demo                         the shipped sample recording
   darkread read path/to/recording --json
   darkread read path/to/recording --backend tesseract --out /tmp/read
+  darkread read --demo --say                   ... and speak the answer (espeak-ng in the cloud)
+  darkread read --demo --say-out answer.wav    ... and write the spoken answer to a WAV file
 """
 
 
@@ -58,6 +61,7 @@ class ReadResult:
     reference: str | None = None
     cer: float | None = None
     wer: float | None = None
+    speech_wav: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -73,8 +77,13 @@ def read_recording(
     drain_timeout_s: float = 60.0,
     lexicon: bool = True,
     infer: str = "on-change",
+    speech: bool = False,
 ) -> ReadResult:
-    """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says."""
+    """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says.
+
+    With ``speech`` the answer is also asked for as speech (``Accept: audio/wav``) and written
+    to ``answer.wav`` in the output directory.
+    """
     import httpx
     from pydantic import SecretStr
 
@@ -91,7 +100,7 @@ def read_recording(
     from darkread.edge.errors import RunError
 
     if out_dir is None:  # a scratch directory that does not outlive the read
-        with tempfile.TemporaryDirectory(prefix="darkread-read-") as scratch:
+        with tempfile.TemporaryDirectory(prefix="darkread-read-", ignore_cleanup_errors=True) as scratch:
             result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
                                     drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer)
         result.page_png = ""
@@ -129,6 +138,7 @@ def read_recording(
             try:
                 answer = client.post(f"/v1/sessions/{session_id}/ask", json={}).raise_for_status().json()
                 page = client.get(f"/v1/sessions/{session_id}/page.png").raise_for_status().content
+                spoken = _ask_spoken(client, session_id) if speech else None
             except httpx.HTTPStatusError as exc:
                 detail = exc.response.json().get("detail", "") if exc.response.headers.get("content-type", "").startswith(
                     "application/json") else exc.response.text[:200]
@@ -137,6 +147,8 @@ def read_recording(
         stages["stitch_and_ocr"] = time.perf_counter() - t0
     page_png = out / "page.png"
     page_png.write_bytes(page)
+    if spoken is not None:
+        (out / "answer.wav").write_bytes(spoken)
     result = ReadResult(
         text=answer["text"],
         backend=answer["backend"],
@@ -153,6 +165,7 @@ def read_recording(
         lines=[line["text"] for line in answer.get("lines", [])],
         seconds=time.perf_counter() - started,
         stage_seconds=stages,
+        speech_wav=str(out / "answer.wav") if spoken is not None else None,
     )
     if recording.text is not None:
         from darkread.eval.error_rates import error_rates
@@ -160,6 +173,14 @@ def read_recording(
         rates = error_rates(recording.text, result.text)
         result.reference, result.cer, result.wer = recording.text, rates.cer, rates.wer
     return result
+
+
+def _ask_spoken(client: Any, session_id: str) -> bytes:
+    """The answer as a WAV; the cloud's one-line reason when it cannot speak."""
+    response = client.post(f"/v1/sessions/{session_id}/ask", json={}, headers={"Accept": "audio/wav"})
+    if response.status_code != 200:
+        raise RuntimeError(f"the cloud could not speak the answer: {response.json().get('detail', response.text)}")
+    return bytes(response.content)
 
 
 # -- command line --------------------------------------------------------------------------------
@@ -182,6 +203,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
     parser.add_argument("--out", metavar="DIR", help="keep the page image, spool and cloud data here (default: a temp dir)")
     parser.add_argument("--json", action="store_true", help="print one JSON object with the text and per-stage figures")
+    parser.add_argument("--say", action="store_true",
+                        help="speak the answer (espeak-ng in the cloud; played with paplay/aplay, else the WAV's path is printed)")
+    parser.add_argument("--say-out", metavar="FILE.wav", type=Path,
+                        help="write the spoken answer to this WAV file (played too with --say)")
     parser.set_defaults(func=_run)
 
 
@@ -194,15 +219,39 @@ def _run(args: argparse.Namespace) -> int:
         path = Path(args.recording)
     else:
         raise ValueError("give a RECORDING directory, or --demo for the shipped sample")
+    if args.say_out is not None and args.say_out.suffix.lower() != ".wav":
+        raise ValueError(f"--say-out {args.say_out}: give a .wav file name")
+    speech = args.say or args.say_out is not None
     result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out,
-                           lexicon=args.lexicon, infer=args.infer)
+                           lexicon=args.lexicon, infer=args.infer, speech=speech)
+    if result.speech_wav is not None and args.say_out is not None:
+        args.say_out.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(result.speech_wav, args.say_out)
+        result.speech_wav = str(args.say_out)
     if args.json:
         print(json.dumps(result.to_json(), indent=1))
-        return 0
-    print(result.text)
-    if args.demo or args.verbose or result.reference is not None:
-        _print_summary(result, sys.stderr)
+    else:
+        print(result.text)
+        if args.demo or args.verbose or result.reference is not None:
+            _print_summary(result, sys.stderr)
+    if result.speech_wav is not None:
+        _say(Path(result.speech_wav), play=args.say)
     return 0
+
+
+def _say(wav: Path, *, play: bool) -> None:
+    """Play the spoken answer, or say where it is."""
+    from darkread.say import play_wav
+
+    if not play:
+        print(f"spoken answer written to {wav}", file=sys.stderr)
+        return
+    try:
+        player = play_wav(wav)
+    except OSError as exc:
+        print(f"spoken answer written to {wav} (not played: {exc})", file=sys.stderr)
+        return
+    print(f"spoke the answer with {player} ({wav})", file=sys.stderr)
 
 
 def _print_summary(result: ReadResult, stream: Any) -> None:

@@ -38,6 +38,16 @@ class DeviceError(DarkreadError):
     """The event camera cannot be opened or misbehaves."""
 
 
+class CloudRefusedError(DarkreadError, ConnectionError):
+    """The cloud answered with a fatal error (``code``, ``message``); a ConnectionError too, so
+    code that handles a lost connection sees it."""
+
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(f"cloud error {code}: {message}")
+        self.code = code
+        self.message = message
+
+
 class ModelError(DarkreadError):
     """The reconstruction model cannot be loaded or run."""
 

@@ -25,6 +25,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
 from darkread.edge.config import UplinkConfig
+from darkread.edge.errors import CloudRefusedError
 from darkread.edge.spool import Spool
 from darkread.edge.telemetry import EdgeMetrics
 from darkread.proto.errors import CloseCode, ProtocolError
@@ -54,15 +55,6 @@ FATAL_CODES = frozenset({
     CloseCode.POLICY_VIOLATION, CloseCode.FORBIDDEN, CloseCode.TAKEN_OVER, CloseCode.SESSION_MISMATCH,
     CloseCode.SEQ_GAP, CloseCode.SESSION_BUSY, CloseCode.VERSION_MISMATCH,
 })
-
-
-class CloudRefusedError(ConnectionError):
-    """The cloud answered with a fatal error (``code``, ``message``)."""
-
-    def __init__(self, code: int, message: str) -> None:
-        super().__init__(f"cloud error {code}: {message}")
-        self.code = code
-        self.message = message
 
 
 def placeholder(seq: int) -> bytes:

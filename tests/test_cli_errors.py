@@ -111,7 +111,7 @@ def test_the_drawn_tree_is_the_real_tree() -> None:
         while parents and parents[-1][0] >= depth:
             parents.pop()
         if parents:
-            assert cls.__bases__ == (parents[-1][1],), f"{cls.__name__} is drawn under {parents[-1][1].__name__}"
+            assert cls.__bases__[0] is parents[-1][1], f"{cls.__name__} is drawn under {parents[-1][1].__name__}"
         parents.append((depth, cls))
         drawn += 1
     assert drawn >= 20

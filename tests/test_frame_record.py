@@ -41,16 +41,3 @@ def test_the_edge_result_and_the_stored_frame_are_frame_records() -> None:
     assert (message.gaze_rad, message.events_used, message.seq) == ((0.5, 0.25), 1600, 0)
     np.testing.assert_array_equal(message.mask(), stored.mask)
 
-
-def test_the_wire_and_its_records_stay_pure() -> None:
-    """proto/ and the shared base import with numpy and msgpack only: no edge, cloud, OpenCV or web stack."""
-    import subprocess
-    import sys
-
-    code = (
-        "import sys, darkread.proto.messages, darkread.errors, darkread.frame_record, darkread.mask_bits\n"
-        "heavy = {'darkread.edge', 'darkread.cloud', 'darkread.stitch', 'cv2', 'fastapi', 'onnxruntime', 'torch'}\n"
-        "print(sorted(m for m in heavy if m in sys.modules))\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60)
-    assert out.stdout.strip() == "[]"

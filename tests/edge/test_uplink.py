@@ -30,8 +30,12 @@ class ProtoServer:
     acknowledging the last one (its ack is lost, as on a network drop).
     """
 
-    def __init__(self, drop_after: int | None = None, reject_frame_id: int | None = None) -> None:
+    def __init__(
+        self, drop_after: int | None = None, reject_frame_id: int | None = None, stall_after: int | None = None
+    ) -> None:
         self.stored: dict[str, list[int]] = {}
+        self.stall_after = stall_after  # the first connection stops acking after this many (commits hang)
+        self.connections = 0
         self.reject_frame_id = reject_frame_id
         self.received = 0
         self.hellos: list[Hello] = []
@@ -76,6 +80,8 @@ class ProtoServer:
         hello = decode(await ws.recv(), max_bytes=1 << 22)
         assert isinstance(hello, Hello)
         self.hellos.append(hello)
+        self.connections += 1
+        stalls = self.stall_after is not None and self.connections == 1
         seqs = self.stored.setdefault(hello.session_id, [])
         last = seqs[-1] if seqs else -1
         await ws.send(encode(Welcome(session_id=hello.session_id, last_acked_seq=last, max_message_bytes=1 << 22)))
@@ -94,6 +100,8 @@ class ProtoServer:
             if self.drop_after is not None and count >= self.drop_after:
                 ws.transport.abort()  # network drop: the last ack never leaves
                 return
+            if stalls and count > self.stall_after:  # type: ignore[operator]
+                continue  # the connection stays open, the acks stop
             await ws.send(encode(Ack(seq=seqs[-1])))
 
 
@@ -275,3 +283,22 @@ def test_a_message_the_cloud_rejects_is_dropped_not_resent_forever() -> None:
         assert uplink.metrics.totals["messages_rejected"] == 1
     finally:
         server.close()
+
+
+def test_acks_that_stop_advancing_make_the_uplink_reconnect() -> None:
+    server = ProtoServer(stall_after=3)
+    server.start()
+    uplink = make_uplink(settings(server.url, ack_timeout_s=0.5, heartbeat_s=0.2), Spool(None))
+    try:
+        uplink.start()
+        started = time.monotonic()
+        for i in range(10):
+            uplink.submit(frame(i))
+        assert uplink.wait_drained(5.0), "stuck behind a connection whose acks stopped"
+        elapsed = time.monotonic() - started
+    finally:
+        uplink.stop(1.0)
+        server.close()
+    assert server.stored[uplink.session_id] == list(range(10))
+    assert uplink.metrics.totals["ack_timeouts"] == 1 and server.connections == 2
+    assert 0.5 <= elapsed < 3.0

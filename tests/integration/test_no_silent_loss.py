@@ -117,3 +117,48 @@ def test_a_poison_seq_is_refused_and_the_session_goes_on(tmp_path: Path, recordi
     assert stored == list(range(made_total))  # both replays stored, the wild seq never
     print(f"poison seq: close {code} ({message}); first replay {made_first} frames, second "
           f"{made_total - made_first}, cloud stored {len(stored)} of {made_total}")
+
+
+def test_a_store_failure_closes_the_connection_and_the_edge_resumes(tmp_path: Path, recording: Path) -> None:
+    import time
+    import urllib.request
+
+    port = free_port()
+    cloud = Cloud(tmp_path / "cloud", port)
+    cloud.start()
+    database = tmp_path / "cloud" / "darkread.sqlite3"
+    with sqlite3.connect(database) as db:  # a row the store does not expect: its INSERT of seq 100 fails
+        db.execute("INSERT INTO frames VALUES ('clash', 100, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, x'00')")
+    spool = tmp_path / "spool"
+    edge = subprocess.Popen(edge_command(recording, port, spool, "clash", tiny_model(tmp_path / "tiny.onnx")),
+                            env=edge_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+    def failures() -> float:
+        request = urllib.request.Request(f"http://127.0.0.1:{port}/metrics/", headers={"X-API-Key": API_KEY})
+        with urllib.request.urlopen(request, timeout=5) as response:
+            for line in response.read().decode().splitlines():
+                if line.startswith('darkread_ws_store_failures_total{error="IntegrityError"}'):
+                    return float(line.split()[-1])
+        return 0.0
+
+    try:
+        deadline = time.monotonic() + 60
+        while failures() < 2 and time.monotonic() < deadline:  # the edge came back and hit it again
+            time.sleep(0.1)
+        seen = failures()
+        with sqlite3.connect(database) as db:
+            db.execute("DELETE FROM frames WHERE session_id = 'clash' AND seq = 100")
+        _, stderr = edge.communicate(timeout=120)
+        stored = cloud.stored_seqs("clash")
+    finally:
+        if edge.poll() is None:
+            edge.kill()
+            edge.communicate()
+        cloud.stop()
+    made, pending = spool_counts(spool)
+    assert seen >= 2, "the store failure was not counted"
+    assert edge.returncode == 0, stderr[-2000:]
+    assert stored == list(range(made)) and pending == 0  # every frame once, none lost behind the failure
+    closes = stderr.count("1011")
+    print(f"store failure: {int(seen)} failed stores (IntegrityError, close 1011 each; {closes} seen by the edge), "
+          f"the edge resumed: made {made}, stored {len(stored)}, 0 lost")

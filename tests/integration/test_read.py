@@ -7,8 +7,10 @@ frames and reads the page with the embedded OCR engine.
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
+import wave
 from pathlib import Path
 
 import pytest
@@ -41,14 +43,29 @@ def test_read_recovers_the_printed_text(tmp_path: Path) -> None:
 
 
 def test_read_json_has_the_per_stage_figures(tmp_path: Path) -> None:
-    out = subprocess.run(
-        [sys.executable, "-m", "darkread", "-q", "read", "--demo", "--json", "--out", str(tmp_path)],
+    spoken = shutil.which("espeak-ng") is not None  # make speech-deps installs it when root
+    say = ["--say-out", str(tmp_path / "said" / "answer.wav")] if spoken else []
+    run = subprocess.run(
+        [sys.executable, "-m", "darkread", "-q", "read", "--demo", "--json", "--out", str(tmp_path), *say],
         capture_output=True, text=True, timeout=300, check=True,
-    ).stdout
-    figures = json.loads(out)
+    )
+    figures = json.loads(run.stdout)
     for key in ("text", "events_in", "events_foveated", "frames", "bytes_sent", "page_png", "backend", "seconds"):
         assert key in figures, key
     assert figures["text"].strip()
+    if spoken:  # the answer spoken: a WAV as long as its words at 140 words per minute
+        assert figures["speech_wav"] == say[1] and f"spoken answer written to {say[1]}" in run.stderr
+        with wave.open(say[1]) as wav:
+            seconds_per_word = wav.getnframes() / wav.getframerate() / len(figures["text"].split())
+        assert 0.6 * 60 / 140 <= seconds_per_word <= 1.4 * 60 / 140
+
+
+def test_say_out_must_name_a_wav_file(tmp_path: Path) -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "darkread", "read", "--demo", "--say-out", str(tmp_path / "answer.mp3")],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert result.returncode == 1 and "give a .wav file name" in result.stderr
 
 
 def test_read_of_a_missing_recording_is_a_clear_error(tmp_path: Path) -> None:
