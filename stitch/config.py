@@ -25,6 +25,10 @@ class StitchConfig:
                             incremental stitcher.
       min_line_frames       no second break within this many frames of the last one (an undershooting
                             sweep followed by its corrective saccade is one break).
+      sweep_sample_ms       the rule sees at most one frame per this many ms (the others ride along
+                            with the frame before): at 300 frames/s four frames span 13 ms, less than
+                            a saccade between two tracker rows, so launch and landing never appeared
+                            in one look (1 of 4 lines found); the frame counts above count these samples.
     Registration:
       search_radius_px      correlation search around the predicted position (head tremor and the
                             drift change between two frames stay well inside; half a line pitch
@@ -111,6 +115,7 @@ class StitchConfig:
     sweep_context_frames: int = 4
     sweep_confirm_frames: int = 2
     min_line_frames: int = 4
+    sweep_sample_ms: float = 20.0
     search_radius_px: int = 16
     drift_window_frames: int = 6
     wide_search_px: int = 40

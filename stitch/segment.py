@@ -3,8 +3,10 @@
 The rule compares the launch point (the right edge of the last few samples) with the first sample
 after the jump and the median of a few more, so tracker noise of 25-50 px neither starts nor hides
 a line; an undershooting sweep and its corrective saccade left
-count as one break (``min_line_frames``). The same streaming decision serves the batch
-``segment_lines`` and the incremental ``PageStitcher``.
+count as one break (``min_line_frames``). The rule looks at the gaze track thinned to one frame per
+``sweep_sample_ms``: frames come up to 300 a second while the tracker's rows come 60 a second, so
+a frame-count context of consecutive frames would see only a slice of the (interpolated) saccade.
+The same streaming decision serves the batch ``segment_lines`` and the incremental ``PageStitcher``.
 """
 
 from __future__ import annotations
@@ -30,16 +32,24 @@ class LineSegmenter:
 
     def __init__(self, cfg: StitchConfig = StitchConfig()) -> None:
         self.cfg = cfg
-        self._pending: deque[FrameRecord] = deque()
+        self._pending: deque[tuple[FrameRecord, bool]] = deque()  # (frame, is a sample of the track)
+        self._sampled_ahead = 0  # samples among the pending frames after the first
+        self._last_sample_us: int | None = None
         self._recent: deque[tuple[float, float]] = deque(maxlen=cfg.sweep_context_frames)
         self._line_x: list[float] = []
         self._since_break = 0
         self._started = False
 
     def push(self, frame: FrameRecord) -> list[tuple[FrameRecord, bool]]:
-        self._pending.append(frame)
+        last = self._last_sample_us
+        sample = last is None or frame.t_us - last >= self.cfg.sweep_sample_ms * 1000.0 or frame.t_us < last
+        if sample:
+            self._last_sample_us = frame.t_us
+        if self._pending and sample:
+            self._sampled_ahead += 1
+        self._pending.append((frame, sample))
         decided = []
-        while len(self._pending) > self.cfg.sweep_confirm_frames:
+        while self._pending and (not self._pending[0][1] or self._sampled_ahead >= self.cfg.sweep_confirm_frames):
             decided.append(self._decide())
         return decided
 
@@ -64,7 +74,7 @@ class LineSegmenter:
         # line's end; a median would lag behind the last forward saccades)
         launch_x = float(np.percentile(recent[:, 0], LAUNCH_PCT))
         launch_y = float(np.median(recent[:, 1]))
-        after = np.asarray([f.gaze_px for f in list(self._pending)[: cfg.sweep_confirm_frames + 1]])
+        after = np.asarray([f.gaze_px for f, sample in self._pending if sample][: cfg.sweep_confirm_frames + 1])
         needed = max(cfg.sweep_min_px, cfg.sweep_line_fraction * self._line_extent())
         jumped_left = launch_x - after[0, 0] > needed
         # confirmed unless the eye came straight back (one wild sample); reading on to the right
@@ -74,8 +84,14 @@ class LineSegmenter:
         return bool(jumped_left and stayed_left and not went_up)
 
     def _decide(self) -> tuple[FrameRecord, bool]:
-        new_line = (not self._started) or self._is_sweep()
-        frame = self._pending.popleft()
+        frame, sample = self._pending[0]
+        rider = not sample and self._started  # rides along with the line of the sample before it
+        new_line = False if rider else (not self._started) or self._is_sweep()
+        self._pending.popleft()
+        if self._pending and self._pending[0][1]:
+            self._sampled_ahead -= 1
+        if rider:
+            return frame, False
         self._started = True
         if new_line:
             self._recent.clear()
