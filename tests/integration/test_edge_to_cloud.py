@@ -53,7 +53,7 @@ def test_cloud_killed_mid_stream_every_frame_delivered_once(tmp_path: Path, reco
             overrides={
                 "source": {"kind": "replay", "path": str(recording), "speed": 1.0},
                 "gaze": {"kind": "recording"},
-                "pipeline": {"model": str(sum_bins_model(tmp_path / "tiny.onnx"))},
+                "pipeline": {"model": str(sum_bins_model(tmp_path / "tiny.onnx")), "infer": "every-window"},  # a frame per window
                 "uplink": {
                     "url": f"ws://127.0.0.1:{port}/v1/stream", "api_key": API_KEY,
                     "spool_dir": str(tmp_path / "spool"), "backoff_initial_s": 0.05, "backoff_max_s": 0.3,
