@@ -53,7 +53,7 @@ class PipelineConfig:
     sensor_roi: bool = False  # move the sensor's ROI with the foveal window (EVK4: less USB traffic)
     # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
     # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
-    infer: str = "on-change"
+    infer: str = "every-window"
     min_interval_ms: float = 100.0  # on-change: at most one inference per this much event time
     renew_fraction: float = 1.0  # on-change: infer again once this share of n_events is new ...
     move_px: float = 6.0  # ... or the window moved this far since the last inference

@@ -15,7 +15,9 @@ import numpy as np
 
 from darkread.edge.io.word_stream import DecodeStats
 
-MAX_UNDECODABLE_SHARE = 0.001  # of the words: reserved words, backward TIME_HIGH, dropped events
+MAX_UNDECODABLE_SHARE = 0.001  # of the words: backward TIME_HIGH and the events dropped after one
+MAX_BACKWARD_TIME_STEPS = 100  # a sensor's clock never runs back; a few are tolerated (a USB glitch)
+MAX_OTHER_SHARE = 0.25  # of the words: OTHERS/CONTINUED/reserved (real IMX636 streams carry ERC counters: 7 %)
 MAX_OUT_OF_GEOMETRY_SHARE = 0.001  # of the events: pixels beyond the declared width/height
 MAX_TIME_JUMP_US = 60_000_000  # an event camera never goes a minute without an event or TIME_HIGH
 
@@ -42,7 +44,12 @@ def problems(stats: DecodeStats, fmt: str, width: int, height: int, time: TimeCh
     """What makes this stream implausible, one sentence each (empty: it looks like its header)."""
     found = []
     undecodable = stats.skipped_other + stats.non_monotonic_time_high + stats.dropped_non_monotonic
-    if stats.words and undecodable / stats.words > MAX_UNDECODABLE_SHARE:
+    backward = stats.non_monotonic_time_high + stats.dropped_non_monotonic
+    if stats.words and (
+        backward / stats.words > MAX_UNDECODABLE_SHARE
+        or stats.non_monotonic_time_high > MAX_BACKWARD_TIME_STEPS
+        or stats.skipped_other / stats.words > MAX_OTHER_SHARE
+    ):
         found.append(
             f"{undecodable / stats.words:.1%} of the data does not decode as {fmt} ({stats.non_monotonic_time_high:,} "
             f"backward time steps, {stats.dropped_non_monotonic + stats.skipped_other:,} unusable words): a wrong "

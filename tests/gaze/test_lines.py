@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import os
 from pathlib import Path
 
 import numpy as np
@@ -74,6 +75,7 @@ def test_gaze_lines_command_rejects_bad_input(tmp_path: Path) -> None:
 
 @pytest.mark.shared
 @pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("DARKREAD_LONG_TESTS"), reason="minutes of eyekit warp: set DARKREAD_LONG_TESTS=1 (figures in docs/gaze.md)")
 @needs_eyekit
 def test_line_assignment_on_the_24_adult_readers(shared_data: Path) -> None:
     """Share of fixations on their gold line: the stitcher's logic, eyekit's best methods and the
