@@ -60,8 +60,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--match", metavar="PATTERN",
                         help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
                              "'*lux30_*_human' for the real-scanpath recordings at 30 lux")
-    parser.add_argument("--infer", default="on-change", choices=["on-change", "every-window"],
-                        help="the edge's mode (default on-change: one fused view per fixation; every-window: every frame); "
+    parser.add_argument("--infer", default="every-window", choices=["on-change", "every-window"],
+                        help="the edge's mode (default every-window: every frame; on-change: one fused view per fixation); "
                              "evaluate both into two --work folders to compare them")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="worker processes (make-suite and evaluation; default 1)")

@@ -102,7 +102,7 @@ def evaluate_recording(
     compare: Sequence[str] = (),
     model: str | None = None,
     ocr_cache: dict[str, Any] | None = None,
-    infer: str = "on-change",
+    infer: str = "every-window",
 ) -> dict[str, Any]:
     """Everything the report needs about one recording (errors are recorded per stage)."""
     from darkread.eval.bandwidth import measure_bandwidth, page_ink_from_png
@@ -196,7 +196,7 @@ def evaluate_suite(
     force: bool = False,
     progress: bool = True,
     jobs: int = 1,
-    infer: str = "on-change",
+    infer: str = "every-window",
 ) -> list[RecordingResult]:
     """Evaluate every recording of a suite with ``jobs`` worker processes; stored results are reused
     unless ``force``.
