@@ -221,7 +221,7 @@ def run(ctx: BenchContext) -> list[Figure]:
     reading_s = (frames[-1].t_us - frames[0].t_us) / 1e6
     figures = [Figure("read_demo_answer_ms", demo_answer_ms, "darkread read --demo: question to answer [ms]",
                       goal="<= 1000")]  # fmt: skip
-    sizes = (300, 3000) if ctx.quick else (300, 3000, 30000)
+    sizes = (300,) if ctx.smoke else (300, 3000) if ctx.quick else (300, 3000, 30000)
     for size in sizes:
         name = f"ask-{size}"
         stored = repeated(frames, size)

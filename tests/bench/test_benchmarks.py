@@ -112,8 +112,18 @@ def test_gaze_benchmark_writes_its_keys(tmp_path: Path, shared_data: Path) -> No
     assert set(run_smoke("gaze", tmp_path)) == {f"gaze_fixation_onset_f1_{rate:g}hz" for rate in ARIA_RATES_HZ}
 
 
+@pytest.mark.slow  # a real cloud per size and 20 wearers streaming the sample
+def test_ask_benchmark_writes_its_keys(tmp_path: Path) -> None:
+    figures = run_smoke("ask", tmp_path)
+    assert set(figures) == {
+        "read_demo_answer_ms", "ask_p95_ms_300", "cloud_cpu_ms_per_reading_s",
+        "wearers_ask_p95_ms_20", "wearers_frames_exactly_once_20",
+    }
+    assert figures["wearers_frames_exactly_once_20"] == 1.0
+
+
 def test_every_benchmark_module_is_tested() -> None:
-    tested = {"decode", "fovea", "synth", "gaze", "cloud", "inference", "edge", "stitch", "ocr"}
+    tested = {"decode", "fovea", "synth", "gaze", "cloud", "ask", "inference", "edge", "stitch", "ocr"}
     assert {name.rsplit(".", 1)[-1] for name in BENCH_MODULES} == tested
 
 
