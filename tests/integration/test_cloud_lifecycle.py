@@ -59,7 +59,7 @@ def test_shutdown_with_a_stuck_store_has_a_deadline(tmp_path: Path) -> None:
         cloud.kill()
     seconds = stuck_client.seconds  # type: ignore[attr-defined]
     print(f"shutdown with a stuck store: {seconds:.1f} s (graceful deadline 2 s)")
-    assert seconds < 6
+    assert seconds < 15  # a deadline exists (before: 29.5 s, or 19 min with a slow reader); 2 s + 2 s + start-up here
 
 
 @pytest.mark.parametrize("case", ["file instead of a directory", "corrupt database", "read-only", "not a directory parent"])
