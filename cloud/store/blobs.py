@@ -12,6 +12,10 @@ import shutil
 from pathlib import Path
 from typing import Protocol
 
+import numpy as np
+
+from darkread.image_codec import ImageCodecError, decode_image
+
 from ..errors import StoreError
 
 _KEY = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*(/[A-Za-z0-9][A-Za-z0-9._-]*)*")
@@ -60,3 +64,17 @@ class FileBlobs:
 
     def delete_prefix(self, prefix: str) -> None:
         shutil.rmtree(self._path(prefix), ignore_errors=True)
+
+
+def decode_mask_png(data: bytes, key: str) -> np.ndarray:
+    """PNG bytes (black text on white) -> uint8 ink mask, ink = 1."""
+    try:
+        image = decode_image(data)
+    except ImageCodecError as exc:
+        raise StoreError(f"page image {key!r} is not a readable PNG: {exc}") from exc
+    return (image < 128).astype(np.uint8)
+
+
+def page_key(session_id: str, seq: int) -> str:
+    """Where a session's page sent at ``seq`` lives: the same key on every backend."""
+    return f"pages/{session_id}/{seq}.png"

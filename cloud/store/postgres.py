@@ -40,7 +40,7 @@ from darkread.image_codec import encode_png
 from darkread.mask_bits import pack_bits, unpack_bits
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
-from .blobs import BlobStore
+from .blobs import BlobStore, decode_mask_png, page_key
 from .changes import ChangeFeed, Listener
 from .migrations import Step, migrate, statements
 from .records import (
@@ -55,7 +55,6 @@ from .records import (
     WriteResult,
     check_owner,
 )
-from .sqlite import _page_key, decode_mask_png
 
 log = logging.getLogger(__name__)
 
@@ -481,7 +480,7 @@ class PostgresStore:
 
     async def add_page(self, session_id: str, page: PageRecord) -> WriteResult:
         self._check_open()
-        key = _page_key(session_id, page.seq)
+        key = page_key(session_id, page.seq)
         known = await self._fetch(
             "SELECT s.last_seq FROM pages p JOIN sessions s USING (session_id) WHERE p.session_id = %s AND p.seq = %s",
             (session_id, page.seq),

@@ -25,13 +25,12 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import msgpack
-import numpy as np
 
-from darkread.image_codec import ImageCodecError, decode_image, encode_png
+from darkread.image_codec import encode_png
 from darkread.mask_bits import pack_bits, unpack_bits
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
-from .blobs import BlobStore, FileBlobs
+from .blobs import BlobStore, FileBlobs, decode_mask_png, page_key
 from .changes import ChangeFeed, Listener
 from .migrations import Step, statements
 from .migrations import migrate as run_migrations
@@ -129,19 +128,6 @@ class _SqliteSchema:
 def migrate(conn: sqlite3.Connection) -> int:
     """Apply every pending migration; returns the version the database was at before."""
     return run_migrations(_SqliteSchema(conn), MIGRATIONS, backend="SQLite")
-
-
-def decode_mask_png(data: bytes, key: str) -> np.ndarray:
-    """PNG bytes (black text on white) -> uint8 ink mask, ink = 1."""
-    try:
-        image = decode_image(data)
-    except ImageCodecError as exc:
-        raise StoreError(f"page image {key!r} is not a readable PNG: {exc}") from exc
-    return (image < 128).astype(np.uint8)
-
-
-def _page_key(session_id: str, seq: int) -> str:
-    return f"pages/{session_id}/{seq}.png"
 
 
 class SqliteStore:
@@ -247,7 +233,7 @@ class SqliteStore:
         return await self._sequenced(session_id, frame.seq, insert)
 
     async def add_page(self, session_id: str, page: PageRecord) -> WriteResult:
-        key = _page_key(session_id, page.seq)
+        key = page_key(session_id, page.seq)
         rows, cols = page.mask.shape
         png = encode_png(ink_mask_to_paper(page.mask))
 
