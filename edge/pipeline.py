@@ -176,6 +176,7 @@ class Pipeline:
             self._fixation: int | None = None  # the current fixation's key (its first row, event clock)
             self._fixation_events = 0  # window events since it started
             self._since_infer = 0  # window events since the last inference
+            self._view_origin: tuple[int, int] | None = None  # the current view's window (placed once per view)
 
     # -- reader thread ----------------------------------------------------------------------
     def sink(self, events: Events) -> None:
@@ -350,18 +351,43 @@ class Pipeline:
                 self._send_view(arrival)  # a long fixation: its view so far, the next one starts afresh
             if not self.trigger.ready(t, self._fixation):
                 return  # the bounded rate (and the landing's wait), checked before anything costs
-            gaze = self.gaze.at(t)
-            if gaze is None:
+            window = self._view_window(t)
+            if window is None:
                 return
-            origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
-            if origin != self._origin and self.settings.sensor_roi:
-                self.source.set_roi(origin[0], origin[1], self.fovea.width, self.fovea.height)
-            self._origin = origin
+            origin, gaze = window
             if self.trigger.due(t, self._fixation, self._since_infer, self._fixation_events, origin):
-                self._infer_into_view(origin, gaze, t, self._fixation)
+                self._infer_into_view(origin, gaze, t, self._fixation, arrival)
 
-    def _infer_into_view(self, origin: tuple[int, int], gaze: GazeSample, t: int, t_from: int) -> bool:
-        """One frame of the current fixation (its events only, up to ``n_events``), fused into the view."""
+    def _view_window(self, t: int) -> tuple[tuple[int, int], GazeSample] | None:
+        """Where the current view's window is, and the gaze at ``t``. A view's window stays put: it
+        is placed once, at the mean gaze of the fixation's rows so far (one row's tracker noise
+        would put it tens of pixels off), so its frames all see the same stretch of text."""
+        gaze = self.gaze.at(t)
+        if gaze is None:
+            return None
+        if len(self.fuser) and self._view_origin is not None:
+            return self._view_origin, gaze
+        centre = self._fixation_centre(t) or gaze.pixel
+        origin = window_origin(centre, self.sensor_wh, self.fovea)
+        if origin != self._origin and self.settings.sensor_roi:
+            self.source.set_roi(origin[0], origin[1], self.fovea.width, self.fovea.height)
+        self._origin = self._view_origin = origin
+        return origin, gaze
+
+    def _fixation_centre(self, t: int) -> tuple[float, float] | None:
+        """Mean gaze pixel over the current fixation's valid tracker rows up to ``t`` (None without any)."""
+        if self._fixation is None:
+            return None
+        times, yaw, _ = self.gaze.rows(self._fixation - 1, t)
+        pixels = [g.pixel for g in map(self.gaze.at, times[np.isfinite(yaw)].tolist()) if g is not None]
+        if not pixels:
+            return None
+        u, v = np.mean(np.asarray(pixels, np.float64), axis=0)
+        return float(u), float(v)
+
+    def _infer_into_view(self, origin: tuple[int, int], gaze: GazeSample, t: int, t_from: int, arrival: float) -> bool:
+        """One frame of the current fixation (its events only, up to ``n_events``), fused into the
+        view; a frame that does not register onto the view sends it and starts the next one."""
         window = self._recent_events(origin, t, t_from=t_from)
         if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
             return False
@@ -371,7 +397,10 @@ class Pipeline:
         self.frames_made += 1
         self.metrics.add("frames")
         self.metrics.observe_inference(frame.inference_ms)
-        self.fuser.add(frame, frame.events_used, frame.gaze_rad)
+        if self.fuser.add(frame, frame.events_used, frame.gaze_rad) is None:
+            self.metrics.add("views_split")
+            self._send_view(arrival)
+            self.fuser.add(frame, frame.events_used, frame.gaze_rad)
         self.trigger.inferred(t, origin)
         self._since_infer = 0
         return True
@@ -380,16 +409,16 @@ class Pipeline:
         """The fixation ended at ``t_end``: a fixation too short for a frame gets one now; send its view."""
         lasted = self._fixation is not None and t_end - self._fixation >= self.gate.cfg.min_fixation_ms * 1e3
         if not len(self.fuser) and lasted and self._origin is not None:  # (not a landing the classifier revised)
-            gaze = self.gaze.at(t_end)
-            if gaze is not None:
-                origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
-                self._infer_into_view(origin, gaze, t_end, self._fixation)
+            window = self._view_window(t_end)
+            if window is not None:
+                self._infer_into_view(window[0], window[1], t_end, self._fixation, arrival)
         if len(self.fuser):
             self._send_view(arrival)
 
     def _send_view(self, arrival: float) -> None:
         view = self.fuser.view(self.views_made)
         self.fuser = ViewFuser(self.fuser.n_levels, self.fuser.radius)
+        self._view_origin = None
         self.views_made += 1
         self.metrics.add("views")
         self.on_frame(view, arrival)
