@@ -241,7 +241,9 @@ class Uplink:
                 if code in MESSAGE_REJECTED_CODES:
                     self._rejected = (code, exc.rcvd.reason)  # type: ignore[union-attr]  # dropped after the next welcome
             except (OSError, InvalidHandshake, TimeoutError, ProtocolError) as exc:
-                self.last_error = f"{type(exc).__name__}: {exc}"
+                why = str(exc) or (f"no welcome within {self.settings.open_timeout_s:g} s (the cloud is busy or unreachable)"
+                                   if isinstance(exc, TimeoutError) else "")  # fmt: skip
+                self.last_error = f"{type(exc).__name__}: {why}"
                 logger.warning("uplink to %s lost: %s", url, self.last_error)
             except InvalidURI as exc:
                 self.last_error = str(exc)
