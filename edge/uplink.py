@@ -292,7 +292,8 @@ class Uplink:
         s = self.settings
         headers = {"X-API-Key": s.api_key} if s.api_key else None
         async with connect(
-            url, additional_headers=headers, open_timeout=s.open_timeout_s, max_size=DEFAULT_MAX_MESSAGE_BYTES
+            url, additional_headers=headers, open_timeout=s.open_timeout_s, max_size=DEFAULT_MAX_MESSAGE_BYTES,
+            compression=None,  # messages are compressed already (proto/codecs.py): deflate again costs CPU, saves ~nothing
         ) as ws:
             hello = Hello(
                 device_id=self.device_id,
