@@ -17,7 +17,6 @@ the resume point is the same whichever instance answers.
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import logging
 import random
 import socket
@@ -156,7 +155,7 @@ class Uplink:
         """
         with self._submit_lock:
             seq = self.spool.allocate_seq()
-            payload = encode(dataclasses.replace(message, seq=seq))
+            payload = encode(message.numbered(seq))
             if submitted_at is not None:
                 with self._latency_lock:
                     if len(self._submitted_at) >= LATENCY_TRACKED:
