@@ -10,11 +10,11 @@ jumps to the newest window and counts the windows it skipped; the ring is fixed-
 never grows with load. In ``lossless`` mode (offline replays) the reader thread reconstructs each
 window itself, so it waits for inference instead of skipping.
 
-That is the ``every-window`` mode. The default, ``on-change`` (``[pipeline] infer``), lets the gaze
+That is the ``every-window`` mode (the default). ``on-change`` (``[pipeline] infer``) lets the gaze
 decide (:mod:`darkread.edge.view_trigger`): every chunk the reader hands over is one processing
 step that feeds the gaze-event classifier; no inference during saccades and blinks; during a
-fixation one when enough new events arrived or the window moved, at most every
-``min_interval_ms``; the fixation's frames are fused into one view
+fixation one when enough new events arrived, at most every ``min_interval_ms``, all in one window
+placed at the fixation's mean gaze; the fixation's frames are fused into one view
 (:mod:`darkread.edge.view_fusion`) that goes to ``on_frame`` when the fixation ends and every
 ``view_every_ms`` during a long one. The same step runs on the reconstruction thread live and on
 the reader thread in lossless replays.
