@@ -25,7 +25,7 @@ from darkread.stitch.register import register_frame
 
 N_LEVELS = 8  # the mean of up to ~7 frames to within half a step; few levels compress well in a PNG
 SEARCH_RADIUS_PX = 12  # head drift between two frames of a fixation (50-100 ms apart), beyond the sensor's offset
-MIN_SCORE = 0.3  # a weaker correlation: the frame starts a new view rather than blur this one
+MIN_SCORE = 0.6  # a weaker match: the frame starts a new view (the stitcher places it on its own) rather than blur this one
 MARGIN_PX = 32  # the fused canvas reaches this far beyond the first frame's window (head drift in a fixation)
 MIN_INK_FRACTION = 0.003  # frames (or views) with less ink hold nothing to register: the sensor's offset places them
 
