@@ -13,6 +13,7 @@ gaze point that projects off the sensor or behind the camera.
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -70,10 +71,17 @@ def gaze_sample(calibration: Calibration, yaw: float, pitch: float, depth: float
     return GazeSample(pixel=(float(uv[0]), float(uv[1])), angles=(float(yaw), float(pitch)))
 
 
-def rows_between(t_us: np.ndarray, yaw: np.ndarray, pitch: np.ndarray, t0: int, t1: int) -> tuple[np.ndarray, ...]:
-    """The rows with ``t0 < t <= t1`` of time-sorted arrays (views, no copies)."""
-    i0 = int(np.searchsorted(t_us, t0, side="right"))
-    i1 = int(np.searchsorted(t_us, t1, side="right"))
+def rows_between(
+    t_us: np.ndarray, yaw: np.ndarray, pitch: np.ndarray, t0: int, t1: int, times: list[int] | None = None
+) -> tuple[np.ndarray, ...]:
+    """The rows with ``t0 < t <= t1`` of time-sorted arrays (views, no copies).
+
+    ``times`` (``t_us`` as a list) finds them by ``bisect``: the on-change mode asks every 5 ms of
+    events, mostly for no row at all, and two ``np.searchsorted`` calls cost ten times as much."""
+    if times is not None:
+        i0, i1 = bisect.bisect_right(times, t0), bisect.bisect_right(times, t1)
+    else:
+        i0, i1 = int(np.searchsorted(t_us, t0, side="right")), int(np.searchsorted(t_us, t1, side="right"))
     return t_us[i0:i1], yaw[i0:i1], pitch[i0:i1]
 
 
@@ -106,6 +114,7 @@ class GazeMapper:
         self._depth = np.where(np.isfinite(depth) & (depth > 0), depth, self.depth_prior_m)
         # every row on the event clock, invalid ones (blinks) as NaN: what the gaze-event classifier reads
         self._rows_t = track.t_us.astype(np.int64) + self.clock_offset_us
+        self._rows_t_list: list[int] = self._rows_t.tolist()
         self._rows_yaw = np.where(track.valid, track.yaw_rad, np.nan)
         self._rows_pitch = np.where(track.valid, track.pitch_rad, np.nan)
         period = float(np.median(np.diff(self._rows_t))) if self._rows_t.shape[0] > 1 else 0.0
@@ -113,7 +122,7 @@ class GazeMapper:
 
     def rows(self, t0_event_us: int, t1_event_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The tracker's rows with event time in (t0, t1]: (t_event_us, yaw, pitch), NaN when invalid."""
-        return rows_between(self._rows_t, self._rows_yaw, self._rows_pitch, t0_event_us, t1_event_us)
+        return rows_between(self._rows_t, self._rows_yaw, self._rows_pitch, t0_event_us, t1_event_us, self._rows_t_list)
 
     def angles_and_depth_at(self, t_event_us: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Interpolated (yaw, pitch, depth) per event time; NaN where no usable gaze."""

@@ -16,7 +16,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from darkread.edge.events import Events
+from darkread.edge.events import Events, select_events
 from darkread.edge.fovea import in_window
 from darkread.edge.io.iterator import EventsIterator, PacedReplay
 from darkread.edge.io.plausibility import TimeCheck
@@ -129,7 +129,7 @@ class ReplaySource:
     def _apply_roi(self, events: Events) -> Events:
         if self._roi is None:
             return events
-        return events[in_window(events, *self._roi)]
+        return select_events(events, in_window(events, *self._roi))
 
     def _run(self, sink: EventSink) -> None:
         started = time.perf_counter()
