@@ -194,6 +194,7 @@ class Pipeline:
             self._fixation: int | None = None  # the current fixation's key (its first row, event clock)
             self._fixation_events = 0  # window events since it started
             self._since_infer = 0  # window events since the last inference
+            self._open_piece: tuple[int, int, int] | None = None  # lossless: (grid index, newest t, new events) not yet stepped
 
     # -- reader thread ----------------------------------------------------------------------
     def sink(self, events: Events) -> None:
@@ -239,13 +240,14 @@ class Pipeline:
 
     def _sink_steps(self, events: Events) -> None:
         """Lossless on-change: the chunk into the ring at once, then one processing step per piece
-        of it on the ``LOSSLESS_STEP_US`` grid, each seeing its own newest event as "now".
+        of it on the ``LOSSLESS_STEP_US`` grid, each seeing its piece's newest event as "now".
 
         A step cuts its window at its own time (``_recent_events``), so the events after it in the
-        ring change nothing; a piece's count inside the window is a difference of one cumulative
-        sum, recomputed only when a step moved the window. Per piece that leaves a few integer
-        operations and the decision itself, instead of a ring push, a window test and the
-        metrics for every 5 ms of events.
+        ring change nothing; a piece's count inside the window comes from one window test per
+        chunk (again only after a step moved the window). The piece a chunk ends in may go on in
+        the next chunk, so its step waits for that chunk (or the end of the stream): any chunking
+        makes the steps 5 ms slices would have made. Per piece that leaves a few integer
+        operations and the decision itself.
         """
         if events.shape[0] > self.ring.capacity // 8:  # keep the ring's history far longer than a chunk
             half = events.shape[0] // 2
@@ -255,7 +257,7 @@ class Pipeline:
         self.ring.push(events)
         t = events["t"]
         ends = step_ends(t, LOSSLESS_STEP_US)
-        t_ends = t[ends - 1].tolist()
+        last = ends.shape[0] - 1
         fov = self.fovea
         counted_origin: tuple[int, int] | None = None
         inside_before: list[int] = []  # window events of the chunk before each piece's end, from `counted_at`
@@ -264,7 +266,16 @@ class Pipeline:
         start = 0
         with self._step_lock:
             self._last_arrival = arrival = time.monotonic()
-            for i, (end, t_now) in enumerate(zip(ends.tolist(), t_ends)):
+            for i, (end, t_now) in enumerate(zip(ends.tolist(), t[ends - 1].tolist())):
+                piece = t_now // LOSSLESS_STEP_US
+                carried = 0
+                if self._open_piece is not None:
+                    open_piece, open_t, open_new = self._open_piece
+                    self._open_piece = None
+                    if open_piece == piece:
+                        carried = open_new  # the last chunk's last piece goes on here
+                    else:
+                        self._decide(open_t, open_new, arrival)
                 origin = self._origin
                 if origin is None:
                     new = end - start  # before the first window is placed every event counts
@@ -276,7 +287,10 @@ class Pipeline:
                     j = i - counted_at
                     new = inside_before[j] - (inside_before[j - 1] if j else 0)
                     n_foveated += new
-                self._decide(t_now, new, arrival)
+                if i == last:
+                    self._open_piece = (piece, t_now, new + carried)  # stepped by the next chunk or at the end
+                else:
+                    self._decide(t_now, new + carried, arrival)
                 start = end
         self._count_arrival(events, n_foveated)
 
@@ -392,6 +406,10 @@ class Pipeline:
     def _change_step(self, final: bool = False) -> None:
         """Feed the gaze classifier up to the newest event; end, extend or start the fixation's view."""
         with self._step_lock:
+            if self._open_piece is not None:  # lossless: the stream's last piece, complete now
+                _, open_t, open_new = self._open_piece
+                self._open_piece = None
+                self._decide(open_t, open_new, self._last_arrival)
             with self._cond:
                 new, arrival = self._new_foveated, self._last_arrival
                 self._new_foveated = self._chunks = 0
