@@ -121,7 +121,9 @@ def make_frame(
     """
     if window.shape[0] == 0:
         return None
-    grid = voxel_grid(window, origin[0], origin[1], voxel)
+    # a Reconstructor reads its input in place: bin straight into it (no grid allocated, no copies)
+    bound = getattr(infer, "input_window", None)
+    grid = voxel_grid(window, origin[0], origin[1], voxel, out=bound if bound is not None and bound.shape == voxel.shape else None)
     started = time.perf_counter()
     mask = np.asarray(infer(grid), dtype=np.uint8)
     inference_ms = (time.perf_counter() - started) * 1e3

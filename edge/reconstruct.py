@@ -93,10 +93,32 @@ class Reconstructor:
         self._single = (
             _load_session(path, threads, batch_1=batch_dim) if self._batch_fixed is None and isinstance(batch_dim, str) else None
         )
+        self.input_window: np.ndarray | None = None
+        if self._single is not None:
+            self._bind_window(outputs[0].name)
         zeros = np.zeros((1, *self.input_shape), np.float32)
         for _ in range(max(0, warmup)):
             self._run(zeros)
         log.debug("loaded %s (threads=%d)", path, threads)
+
+    def _bind_window(self, output_name: str) -> None:
+        """``input_window``: one voxel grid the single-window session reads in place, its logits
+        written into a buffer of ours (onnxruntime's I/O binding). A caller that bins straight into
+        it (``voxel_grid(..., out=rec.input_window)``) spares the grid's allocation and the
+        session's input and output copies per window."""
+        assert self._single is not None  # noqa: S101
+        self.input_window = np.zeros(self.input_shape, np.float32)
+        self._output_window = np.zeros((1, 1, *self.input_shape[1:]), np.float32)
+        binding = self._single.io_binding()
+        binding.bind_input(self._input_name, "cpu", 0, np.float32, [1, *self.input_shape], self.input_window.ctypes.data)
+        binding.bind_output(output_name, "cpu", 0, np.float32, list(self._output_window.shape), self._output_window.ctypes.data)
+        self._binding = binding
+
+    def _run_window(self) -> np.ndarray:
+        """Logits [H, W] of ``input_window`` (a view of the output buffer: the next window overwrites it)."""
+        assert self._single is not None  # noqa: S101
+        self._single.run_with_iobinding(self._binding)
+        return self._output_window[0, 0]
 
     def _run(self, batch: np.ndarray) -> np.ndarray:
         if self._batch_fixed is not None and batch.shape[0] != self._batch_fixed:
@@ -107,6 +129,8 @@ class Reconstructor:
 
     def logits(self, voxel: np.ndarray) -> np.ndarray:
         """[bins,H,W] -> float32 [H,W]; [B,bins,H,W] -> [B,H,W] (the model's input shape)."""
+        if voxel is self.input_window and voxel is not None:
+            return self._run_window().copy()
         array = np.asarray(voxel)
         single = array.ndim == 3
         if array.shape[-3:] != self.input_shape or array.ndim not in (3, 4):
@@ -120,4 +144,5 @@ class Reconstructor:
 
     def __call__(self, voxel: np.ndarray) -> np.ndarray:
         """Binary ink mask (uint8, 1 = ink) of the same leading shape as ``logits``."""
-        return (self.logits(voxel) > 0).astype(np.uint8)
+        logits = self._run_window() if voxel is self.input_window and voxel is not None else self.logits(voxel)
+        return (logits > 0).astype(np.uint8)
