@@ -51,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                           "models/synth/data/human_scanpath_oz.json; see models/synth/human_scanpath.py)")
     rec.add_argument("--regime", choices=("standard", "shifted"), default="standard",
                      help="sensor regime: standard (what training saw) or shifted (higher, more spread thresholds, a "
-                          "slower photoreceptor, more shot noise, leak and hot pixels, and a font never used in training: "
+                          "faster photoreceptor in the dark, more shot noise, leak and hot pixels, and a font never used in training: "
                           "the stand-in for a real camera when adapting the model)")
     rec.add_argument("--markers", action="store_true",
                      help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "

@@ -152,7 +152,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser("target", help="a printable page: the text with ArUco markers around it, and its layout",
                        description="Lay out a text file with ArUco markers around it (the synthesiser's page renderer, the "
                                    "calibration's marker dictionary) as a PDF or PNG, and write page.layout.json beside it: "
-                                   "marker ids and corners and every glyph's box in page millimetres. Print it at 100 %% "
+                                   "marker ids and corners and every glyph's box in page millimetres. Print it at 100 % "
                                    "(\"actual size\"), record it with the glasses, then `darkread train annotate`.")
     p.add_argument("--text", required=True, metavar="FILE", help="the text to print (UTF-8; long lines are wrapped)")
     p.add_argument("--out", required=True, type=Path, metavar="PAGE.pdf|PAGE.png", help="what to write (layout: PAGE.layout.json)")
