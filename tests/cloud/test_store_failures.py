@@ -22,7 +22,8 @@ def test_an_integrity_error_closes_within_a_second_and_the_stream_resumes(server
         assert await send_acked(ws, range(3)) == [0, 1, 2]
         with sqlite3.connect(server.settings.data_dir / "darkread.sqlite3") as db:  # e.g. a second writer
             db.execute("INSERT INTO frames SELECT session_id, 3, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch,"
-                       " events_used, rows, cols, bits FROM frames WHERE session_id = 'clash' AND seq = 0")
+                       " events_used, rows, cols, bits, levels, n_levels, fused_frames FROM frames"
+                       " WHERE session_id = 'clash' AND seq = 0")
         sent = time.monotonic()
         await ws.send(encode(frame(3)))
         code, message = await closed_with(ws)
