@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = {"proto": "proto", "stitch": "stitch", "edge": "edge", "cloud": "cloud", "models": "models", "darkread": "app"}
 # the small pure modules of the darkread package every component shares: the version, the error
 # tree's base, the frame record, the mask bit layout, the image codec
-CORE = {"darkread", "darkread.errors", "darkread.frame_record", "darkread.mask_bits", "darkread.image_codec"}
+CORE = {"darkread", "darkread.errors", "darkread.frame_record", "darkread.mask_bits", "darkread.image_codec", "darkread.json_file"}
 
 # component -> the darkread components it may import
 ALLOWED: dict[str, set[str]] = {

@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from darkread.edge.errors import CalibrationError
+from darkread.json_file import read_json_file
 
 BOARD_NAME = "board.json"
 KINDS = ("charuco", "grid")
@@ -98,12 +99,7 @@ def save_board(path: str | Path, spec: BoardSpec) -> None:
 
 def load_board(path: str | Path) -> BoardSpec:
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise CalibrationError(f"{path}: board description not found (pass --board BOARD.json)") from None
-    except (OSError, json.JSONDecodeError) as exc:
-        raise CalibrationError(f"{path}: not a readable board description: {exc}") from exc
+    doc = read_json_file(path, "board description", error=CalibrationError, missing="pass --board BOARD.json")
     return BoardSpec.from_dict(doc)
 
 

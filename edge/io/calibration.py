@@ -15,6 +15,7 @@ import numpy as np
 
 from darkread.edge.errors import CalibrationError
 from darkread.edge.io.intrinsics import Intrinsics, intrinsics_from_dict, intrinsics_to_dict
+from darkread.json_file import read_json_file
 
 _RIGID_TOLERANCE = 1e-3
 
@@ -70,12 +71,7 @@ def _matrix4(value: Any, where: str, path: Path) -> np.ndarray:
 def load_calibration(path: str | Path) -> Calibration:
     """Read ``calibration.json``; ``CalibrationError`` says which key is missing or impossible."""
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise CalibrationError(f"{path}: calibration file not found") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CalibrationError(f"{path}: not a readable JSON file: {exc}") from exc
+    doc = read_json_file(path, "calibration file", error=CalibrationError)
 
     camera = intrinsics_from_dict(_get(doc, "event_camera", "", path), "event_camera", str(path))
 

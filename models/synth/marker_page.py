@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from darkread.edge.calibrate.markers import BoardSpec
+from darkread.json_file import read_json_file
 from darkread.models.synth.fonts import face_by_name
 from darkread.models.synth.page import render_page
 
@@ -219,12 +220,7 @@ def spec_from_layout(doc: dict) -> MarkerPageSpec:
 def load_layout(path: str | Path) -> MarkerPage:
     """Re-create a page from its ``page.layout.json`` (checks that the file's markers match)."""
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: page layout not found (make one with `darkread train target`)") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not a page layout: {exc}") from exc
+    doc = read_json_file(path, "page layout", missing="make one with `darkread train target`", not_found=FileNotFoundError)
     if not isinstance(doc, dict) or doc.get("version") != LAYOUT_VERSION:
         raise ValueError(f"{path}: not a version-{LAYOUT_VERSION} page layout")
     page = lay_out(spec_from_layout(doc))
