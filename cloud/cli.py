@@ -124,6 +124,7 @@ def _serve(args: argparse.Namespace) -> int:
     from darkread.cloud import datadir
     from darkread.cloud.app import create_app
     from darkread.cloud.errors import DataDirError
+    from darkread.cloud.server import WEBSOCKET_OPTIONS
 
     try:  # before uvicorn: a bad data dir is one line, not a start-up traceback
         datadir.check_data_dir(settings.data_dir)  # type: ignore[attr-defined]
@@ -152,6 +153,7 @@ def _serve(args: argparse.Namespace) -> int:
         log_level=logging.getLevelName(logging.getLogger().getEffectiveLevel()).lower(),  # follows -v / -q
         access_log=False,
         timeout_graceful_shutdown=settings.shutdown_timeout_s,  # type: ignore[attr-defined]
+        **WEBSOCKET_OPTIONS,
     )
     datadir.release(held)
     return 0

@@ -268,22 +268,61 @@ async def ask(
     started = time.perf_counter()
     info = await _session(context, session_id, principal)
     _rate_limit(context, principal)
-    # one reading per session page however many ask at once; it goes on past the time limit
+    answer = await _answer(context, info, page)
+    answer = answer.model_copy(update={"question": question, "latency_ms": round((time.perf_counter() - started) * 1000, 1)})
+    log.info("session %s: read %s with %s in %.0f ms", session_id, answer.page_id, answer.backend, answer.latency_ms)
+    return await speak(context.settings, answer, session_id) if spoken else answer
+
+
+@api.get(
+    "/sessions/{session_id}/lines/{line}/speech",
+    summary="One line of a page spoken (RIFF WAV): an app speaks each line as it is read, following the live push",
+    response_class=Response,
+    responses={
+        200: {"content": {WAV_MEDIA_TYPE: {}}, "description": "the line spoken; X-Line-Count says how many the page has"},
+        404: {"description": "unknown session, or the page has no such line (yet)"},
+        409: {"description": "nothing stored yet, or no such page"},
+        503: {"description": "the OCR engine or the speech engine is unavailable"},
+    },
+)
+async def speak_line(
+    session_id: SessionId,
+    line: Annotated[int, Path(ge=0, le=10_000, description="the line, 0 = the top one (as in the answer's lines)")],
+    context: Context,
+    principal: Reader,
+    page: PageQuery = None,
+) -> Response:
+    require_speech_engine(context.settings)
+    info = await _session(context, session_id, principal)
+    # a budget of its own: a reader following the push asks for every line, beside the page polls
+    _rate_limit(context, principal, bucket="lines")
+    answer = await _answer(context, info, page)
+    if line >= len(answer.lines):
+        raise HTTPException(status.HTTP_404_NOT_FOUND,
+                            detail=f"{answer.page_id} has {len(answer.lines)} lines read so far, no line {line}")  # fmt: skip
+    one = answer.model_copy(update={"text": answer.lines[line].text, "lines": [answer.lines[line]]})
+    response = await speak(context.settings, one, session_id)
+    response.headers["X-Line"] = str(line)
+    response.headers["X-Line-Count"] = str(len(answer.lines))
+    return response
+
+
+async def _answer(context: AppContext, info: SessionInfo, page: int | None) -> AskResponse:
+    """The page read, once per page version however many ask at once; past the time limit the
+    reading goes on and the caller gets a 503 to retry."""
+    session_id = info.session_id
     progress = context.pages.get(session_id).stitched_seq if info.mode == "frames" else None  # a newer page: a new reading
     version = (info.mode, info.last_seq, page, progress)
     reading = context.asks.run(session_id, version, lambda: _read(context, info, page))
     limit = context.settings.ask_timeout_s
     try:
-        answer = await asyncio.wait_for(asyncio.shield(reading), limit)
+        return await asyncio.wait_for(asyncio.shield(reading), limit)
     except TimeoutError:
         context.metrics.ask_errors.labels(reason="ask_timeout").inc()
         raise HTTPException(
             status.HTTP_503_SERVICE_UNAVAILABLE, headers={"Retry-After": str(max(1, round(limit)))},
             detail=f"reading the page takes longer than the {limit:g} s limit; it goes on: ask again shortly",
         ) from None
-    answer = answer.model_copy(update={"question": question, "latency_ms": round((time.perf_counter() - started) * 1000, 1)})
-    log.info("session %s: read %s with %s in %.0f ms", session_id, answer.page_id, answer.backend, answer.latency_ms)
-    return await speak(context.settings, answer, session_id) if spoken else answer
 
 
 async def _read(context: AppContext, info: SessionInfo, page: int | None) -> AskResponse:
@@ -307,9 +346,9 @@ async def _read(context: AppContext, info: SessionInfo, page: int | None) -> Ask
     )  # fmt: skip
 
 
-def _rate_limit(context: AppContext, principal: Principal) -> None:
+def _rate_limit(context: AppContext, principal: Principal, bucket: str = "") -> None:
     assert context.limiter is not None  # noqa: S101 - set in AppContext.__post_init__
-    wait_s = context.limiter.take(principal.key_id)
+    wait_s = context.limiter.take(f"{principal.key_id}/{bucket}" if bucket else principal.key_id)
     if wait_s > 0:
         context.metrics.ask_errors.labels(reason="rate_limited").inc()
         raise HTTPException(

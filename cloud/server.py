@@ -13,6 +13,10 @@ from fastapi import FastAPI
 
 from .errors import ServiceStartError
 
+# Masks and views arrive compressed (zlib, PNG: proto/codecs.py); permessage-deflate on top of them
+# costs CPU on both ends for a few bytes, so the service never negotiates it.
+WEBSOCKET_OPTIONS = {"ws_per_message_deflate": False}
+
 
 @dataclass(frozen=True)
 class RunningServer:
@@ -34,7 +38,8 @@ def serve_in_thread(
     app: FastAPI, *, host: str = "127.0.0.1", port: int = 0, ws_max_size: int = 16 * 1024 * 1024, timeout_s: float = 15
 ) -> Iterator[RunningServer]:
     """Start uvicorn with ``app`` (port 0 = a free one), yield once it listens, stop on exit."""
-    config = uvicorn.Config(app, host=host, port=port, log_level="warning", ws_max_size=ws_max_size, lifespan="on")
+    config = uvicorn.Config(app, host=host, port=port, log_level="warning", ws_max_size=ws_max_size, lifespan="on",
+                            **WEBSOCKET_OPTIONS)  # fmt: skip
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="darkread-cloud", daemon=True)
     thread.start()

@@ -17,7 +17,6 @@ the resume point is the same whichever instance answers.
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import logging
 import random
 import socket
@@ -156,7 +155,7 @@ class Uplink:
         """
         with self._submit_lock:
             seq = self.spool.allocate_seq()
-            payload = encode(dataclasses.replace(message, seq=seq))
+            payload = encode(message.numbered(seq))
             if submitted_at is not None:
                 with self._latency_lock:
                     if len(self._submitted_at) >= LATENCY_TRACKED:
@@ -241,7 +240,9 @@ class Uplink:
                 if code in MESSAGE_REJECTED_CODES:
                     self._rejected = (code, exc.rcvd.reason)  # type: ignore[union-attr]  # dropped after the next welcome
             except (OSError, InvalidHandshake, TimeoutError, ProtocolError) as exc:
-                self.last_error = f"{type(exc).__name__}: {exc}"
+                why = str(exc) or (f"no welcome within {self.settings.open_timeout_s:g} s (the cloud is busy or unreachable)"
+                                   if isinstance(exc, TimeoutError) else "")  # fmt: skip
+                self.last_error = f"{type(exc).__name__}: {why}"
                 logger.warning("uplink to %s lost: %s", url, self.last_error)
             except InvalidURI as exc:
                 self.last_error = str(exc)
@@ -290,7 +291,8 @@ class Uplink:
         s = self.settings
         headers = {"X-API-Key": s.api_key} if s.api_key else None
         async with connect(
-            url, additional_headers=headers, open_timeout=s.open_timeout_s, max_size=DEFAULT_MAX_MESSAGE_BYTES
+            url, additional_headers=headers, open_timeout=s.open_timeout_s, max_size=DEFAULT_MAX_MESSAGE_BYTES,
+            compression=None,  # messages are compressed already (proto/codecs.py): deflate again costs CPU, saves ~nothing
         ) as ws:
             hello = Hello(
                 device_id=self.device_id,

@@ -243,6 +243,14 @@ class _Checked:
         for name, value in _check_fields(type(self), values).items():  # type: ignore[arg-type]
             object.__setattr__(self, name, value)
 
+    def numbered(self, seq: int) -> Any:
+        """A copy under ``seq``: only the seq is checked, the rest was at construction (the uplink
+        numbers every message, and checking a mask again costs more than sending it)."""
+        copy = object.__new__(type(self))
+        copy.__dict__.update(self.__dict__)
+        object.__setattr__(copy, "seq", _seq(seq, f"{self.TYPE}.seq"))
+        return copy
+
 
 @dataclass(frozen=True)
 class Hello(_Checked):

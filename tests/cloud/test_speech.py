@@ -159,6 +159,29 @@ def test_ask_answers_in_speech_that_says_the_page(make_settings: Any, run_server
     assert said <= 0.7 and said < unrelated - 0.3
 
 
+@pytest.mark.slow  # the recogniser takes ~10 s
+def test_each_line_is_spoken_on_its_own(make_settings: Any, run_server: Any, ocr: RapidOcrBackend) -> None:
+    """What an app following the live push fetches, line by line: the line's words, and a 404 past the last."""
+    require_espeak()
+    with run_server(make_settings(), ocr=ocr) as server:
+        send_page(server.ws_url, "by-line", page_message(LINES))
+        with httpx.Client(base_url=server.url, headers={"X-API-Key": API_KEY}, timeout=60) as http:
+            answer = http.post("/v1/sessions/by-line/ask").raise_for_status().json()
+            spoken = [http.get(f"/v1/sessions/by-line/lines/{i}/speech") for i in range(len(answer["lines"]))]
+            beyond = http.get(f"/v1/sessions/by-line/lines/{len(answer['lines'])}/speech")
+            unknown = http.get("/v1/sessions/nobody/lines/0/speech")
+        voice = server.context.settings.voice()
+    assert [line["text"] for line in answer["lines"]] == LINES
+    for line, response in zip(answer["lines"], spoken, strict=True):
+        assert response.status_code == 200 and response.headers["content-type"] == "audio/wav"
+        assert response.headers["x-line-count"] == str(len(LINES)) and response.headers["x-page-id"] == "page-0"
+        assert response.content == synthesize(spoken_text(line["text"]), voice)  # this line's words, nothing else
+        rate, pcm = samples(response.content)
+        assert 0.6 * 60 / 140 <= pcm.size / rate / len(line["text"].split()) <= 1.4 * 60 / 140
+    assert beyond.status_code == 404 and "3 lines read so far, no line 3" in beyond.json()["detail"]
+    assert unknown.status_code == 404
+
+
 def test_speech_without_an_engine_is_a_one_line_503(make_settings: Any, run_server: Any) -> None:
     with run_server(make_settings(speech_engine="espeak-ng-missing")) as server:
         send_page(server.ws_url, "mute", page_message(LINES[:1]))

@@ -86,6 +86,21 @@ def test_frames_are_acked_after_they_are_stored(server: LiveServer) -> None:
     assert stored[3].origin == (500, 300) and stored[3].gaze_px == (600.0, 350.0)
 
 
+def test_the_service_never_deflates_what_is_compressed_already(server: LiveServer) -> None:
+    """A client offering permessage-deflate (websockets does by default) gets none: masks and views
+    are zlib/PNG already, deflating them again would cost both ends CPU for a few bytes."""
+
+    async def scenario() -> tuple[str | None, str | None]:
+        ws, _ = await open_stream(server, "no-deflate")
+        async with ws:
+            assert ws.response is not None and ws.request is not None
+            return ws.request.headers.get("Sec-WebSocket-Extensions"), ws.response.headers.get("Sec-WebSocket-Extensions")
+
+    offered, accepted = asyncio.run(scenario())
+    assert offered is not None and "permessage-deflate" in offered
+    assert accepted is None
+
+
 def test_version_2_views_and_compressed_frames_are_stored_as_frames(server: LiveServer) -> None:
     levels = np.zeros((100, 200), np.uint8)
     levels[40:50, 20:80] = 3  # surely ink

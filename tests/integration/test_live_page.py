@@ -130,6 +130,11 @@ def test_live_page_follows_a_session_reads_and_speaks(browser: Any, cloud: Any, 
     assert "key=" not in browser.current_url  # the key left the address bar (and the history)
     assert serious_violations(browser) == []
 
+    # Line by line, switched on from the keyboard before the glasses connect.
+    speak_lines = browser.find_element(By.ID, "speak-lines")
+    press_tab_until(browser, speak_lines).send_keys(Keys.SPACE)
+    assert speak_lines.is_selected()
+
     captions: list[str] = []  # the page image as it grows: "N frames, W x H pixels"
 
     def text_shown() -> str:
@@ -149,6 +154,14 @@ def test_live_page_follows_a_session_reads_and_speaks(browser: Any, cloud: Any, 
     frames = httpx.get(f"{cloud.url}/v1/sessions/{SESSION}", headers={"X-API-Key": API_KEY}).json()["frames"]
     wait_for(lambda: text_shown() and captions[-1].startswith(f"{frames} frames,"), 60, "the page of the whole replay")
     assert len(captions) >= 2, f"the page image did not grow while frames arrived: {captions}"
+
+    shown = [line for line in browser.find_element(By.ID, "text").text.split("\n") if line.strip()]
+    spoken_lines = wait_for(lambda: (n := int(browser.execute_script(
+        "return document.getElementById('line-voice').dataset.spoken"))) >= len(shown) and n, 90, "each line spoken")
+    assert spoken_lines == len(shown), f"{spoken_lines} lines spoken for {len(shown)} read"  # each once
+    early_requests = sent_requests(browser)  # the log is read once: kept for the key checks at the end
+    line_calls = [url for url, _ in early_requests if "/lines/" in url and "/speech" in url]
+    assert sorted({url.split("/lines/")[1].split("/")[0] for url in line_calls}) == [str(i) for i in range(len(shown))]
 
     ask = browser.find_element(By.ID, "ask")
     ask.send_keys(Keys.ENTER)  # a native button: Enter presses it
@@ -192,7 +205,7 @@ def test_live_page_follows_a_session_reads_and_speaks(browser: Any, cloud: Any, 
     wait_for(lambda: browser.find_elements(By.CSS_SELECTOR, f'[data-session="{SESSION}"]'), 20, "the list after login")
     assert serious_violations(browser) == []
 
-    requests = sent_requests(browser)
+    requests = early_requests + sent_requests(browser)
     assert requests and not [url for url, _ in requests if API_KEY in url], "the key went into a URL"
     api_calls = [(url, headers) for url, headers in requests if "/v1/" in url or "/ui/sessions" in url]
     assert {headers.get("x-api-key") for _, headers in api_calls} == {API_KEY, "not-the-key", None}

@@ -345,3 +345,23 @@ def test_invalid_messages_cannot_be_built() -> None:
 def test_protocol_version_is_two_and_one_is_still_accepted() -> None:
     assert PROTOCOL_VERSION == 2
     assert decode(bytes.fromhex(GOLDEN["hello"]), max_bytes=LIMIT).v == 1
+
+
+@pytest.mark.parametrize("kind", ["frame", "page", "gaze", "new_page"])
+@given(seq=st.integers(min_value=0, max_value=2**63 - 1))
+@settings(max_examples=25, deadline=None)
+def test_numbered_is_replace_of_the_seq_alone(kind: str, seq: int) -> None:
+    """What the uplink sends: the message under its spool seq, the same bytes as a rebuilt one."""
+    import dataclasses
+
+    message = EXAMPLES[kind]
+    before = message.seq
+    numbered = message.numbered(seq)
+    assert numbered == dataclasses.replace(message, seq=seq) and encode(numbered) == encode(dataclasses.replace(message, seq=seq))
+    assert message.seq == before and numbered is not message  # the original is untouched
+
+
+@pytest.mark.parametrize("seq", [-1, 2**63, "3", 1.5, True])
+def test_numbered_refuses_a_wild_seq(seq: object) -> None:
+    with pytest.raises(InvalidFieldError):
+        EXAMPLES["frame"].numbered(seq)  # type: ignore[arg-type]

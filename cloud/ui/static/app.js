@@ -9,6 +9,7 @@ const LIST_POLL_MS = 2000;   // the session list
 // spends at most 15 + 7.5 a minute, leaving the rest for the Ask and Speak buttons.
 const MIN_IMAGE_GAP_MS = 4000;
 const MIN_READ_GAP_MS = 8000;
+const PAUSE_S = 3;           // no new frames for this long: the wearer stopped reading (the last line is spoken)
 
 // -- the key -------------------------------------------------------------------------------------
 
@@ -151,6 +152,7 @@ function watchSession(sessionId) {
   let reading = false;       // a read is in flight (it runs beside the image refreshes)
   let pageUrl = null;
   let voiceUrl = null;
+  let pausedNow = false;     // no new frames for PAUSE_S
 
   const say = (message) => { status.textContent = message; };
 
@@ -258,7 +260,71 @@ function watchSession(sessionId) {
   async function onPage(event) {
     const lines = (event.lines || []).map((line) => line.text).filter((line) => line.trim());
     if (lines.length) showText(lines);
+    latest = { page: event.page, count: (event.lines || []).length };
+    queueReadyLines(false);
   }
+
+  // Line by line (the "speak each line" switch): a line is ready once a later one is on the page
+  // (the wearer moved on), the last one when the glasses pause. Each is spoken once, in order.
+  const speakLines = document.getElementById("speak-lines");
+  const lineVoice = document.getElementById("line-voice");
+  let latest = null;         // the newest pushed page: { page, count } (count: its lines so far)
+  const spokenUpTo = new Map();  // page -> lines already queued
+  const lineQueue = [];
+  let speakingLines = false;
+
+  function queueReadyLines(paused) {
+    if (!speakLines.checked || latest === null) return;
+    const done = spokenUpTo.get(latest.page) || 0;
+    const ready = paused ? latest.count : latest.count - 1;
+    for (let line = done; line < ready; line++) lineQueue.push({ page: latest.page, line });
+    spokenUpTo.set(latest.page, Math.max(done, ready));
+    speakQueuedLines();
+  }
+
+  function playLine(url) {
+    return new Promise((resolve) => {
+      lineVoice.onended = resolve;
+      lineVoice.onerror = resolve;
+      lineVoice.src = url;
+      lineVoice.play().catch(() => { say("Speaking is blocked by the browser: press Speak instead."); resolve(); });
+    });
+  }
+
+  async function speakQueuedLines() {
+    if (speakingLines) return;
+    speakingLines = true;
+    try {
+      while (lineQueue.length && speakLines.checked) {
+        const { page, line } = lineQueue.shift();
+        const response = await api(`${base}/lines/${line}/speech?page=${page}`, { headers: { Accept: "audio/wav" } });
+        if (!response.ok) {
+          say(`Line ${line + 1} could not be spoken: ${await failure(response)}`);
+          continue;
+        }
+        const url = URL.createObjectURL(await response.blob());
+        await playLine(url);
+        URL.revokeObjectURL(url);
+        lineVoice.dataset.spoken = String(Number(lineVoice.dataset.spoken) + 1);
+      }
+    } catch (error) {
+      if (error instanceof Unauthorized) showLogin("The key is no longer accepted.");
+      else say(`Speaking lines stopped: ${error.message}`);
+    } finally {
+      speakingLines = false;
+    }
+  }
+
+  speakLines.addEventListener("change", () => {
+    if (!speakLines.checked) {
+      lineQueue.length = 0;
+      lineVoice.pause();
+      return;
+    }
+    if (latest !== null) spokenUpTo.set(latest.page, 0);  // from the top of the page being read
+    say("Each line will be spoken as it is read.");
+    queueReadyLines(pausedNow);
+  });
 
   async function follow() {
     try {
@@ -271,8 +337,12 @@ function watchSession(sessionId) {
         const info = await response.json();
         const state = `${info.last_seq}/${info.frames}/${info.pages}`;
         const age = Math.max(0, Date.now() / 1000 - info.updated_s);
-        say(slowedDown() ? `${info.frames} frames; the service asked to slow down, updating again shortly.`
-          : age < 5 ? `Live: ${info.frames} frames received.` : `${info.frames} frames; nothing new for ${Math.round(age)} s.`);
+        if (!speakingLines) {
+          say(slowedDown() ? `${info.frames} frames; the service asked to slow down, updating again shortly.`
+            : age < 5 ? `Live: ${info.frames} frames received.` : `${info.frames} frames; nothing new for ${Math.round(age)} s.`);
+        }
+        pausedNow = age >= PAUSE_S;
+        if (pausedNow) queueReadyLines(true);  // the glasses paused: the last line is ready too
         if (pushed === null && info.mode === "frames" && info.frames > 0) listen();
         if (state !== imageOf && (await refreshImage(info))) imageOf = state;
         // Without the live push, read beside the image (not awaited: the image keeps growing meanwhile).
