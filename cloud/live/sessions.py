@@ -8,7 +8,10 @@ OCR run in their own small pool so a question does not queue behind other sessio
 and a question waiting for the page ends the batch being stitched after its current frame: it
 waits for at most one frame, then for the frames stored before it only as long as
 ``catch_up_s``, and otherwise answers from the page as stitched so far (its version says how
-far). Sessions idle for ``live_idle_s`` are dropped from memory (rebuilt when asked again).
+far). While a question is being rendered and read, stitching of every session pauses (at most
+``questions_first_s`` per batch, so it never starves): on a busy host the OCR of an answer
+otherwise shared the cores with a stitching backlog that no answer waits for. Sessions idle for
+``live_idle_s`` are dropped from memory (rebuilt when asked again).
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ class LiveConfig:
     stitch_threads: int = 2
     ocr_threads: int = 1
     catch_up_s: float = 0.3  # a question first waits this long at most for frames stored before it
+    questions_first_s: float = 0.5  # stitching pauses this long at most while a question is read (OCR gets the CPU)
     push_interval_s: float = 1.0  # live push: at most one page update per session this often
     live_idle_s: float = 300.0  # a session untouched this long leaves memory
 
@@ -107,6 +111,7 @@ class SessionPages:
                         # read after the frames: the glasses send in seq order and commits keep
                         # it, so every break before these frames is visible now
                         breaks = await store.page_breaks(self.session_id)
+                    await self.owner.questions_first()
                     async with self.lock:
                         done = await loop.run_in_executor(self.owner.stitch_pool, self._stitch, frames, breaks)
                     self.stitched_seq = frames[done - 1].seq
@@ -135,7 +140,7 @@ class SessionPages:
                 self.paginator.add(frame)
             except ValueError as exc:  # a frame the stitcher cannot use (too small): left out, once
                 log.warning("session %s: frame seq %d not stitched: %s", self.session_id, frame.seq, exc)
-            if self._renders_waiting:
+            if self._renders_waiting or self.owner.reading:
                 return done
         return len(frames)
 
@@ -274,6 +279,9 @@ class LivePages:
         self.stitch_pool = ThreadPoolExecutor(cfg.stitch_threads, thread_name_prefix="darkread-stitch")
         self.ocr_pool = ThreadPoolExecutor(cfg.ocr_threads, thread_name_prefix="darkread-ocr")
         self._sessions: dict[str, SessionPages] = {}
+        self.reading = 0  # questions being rendered and read now (stitching gives way to them)
+        self._no_reading = asyncio.Event()
+        self._no_reading.set()
 
     def get(self, session_id: str) -> SessionPages:
         """The session's pages, started (and rebuilt from the store) on first use."""
@@ -302,13 +310,26 @@ class LivePages:
         started = time.perf_counter()
         done = await pages.caught_up(self.cfg.catch_up_s, upto_seq)
         waited = time.perf_counter()
-        reading, rendered = await pages.read(index)
+        self.reading += 1
+        self._no_reading.clear()
+        try:
+            reading, rendered = await pages.read(index)
+        finally:
+            self.reading -= 1
+            if not self.reading:
+                self._no_reading.set()
         log.info(
             "session %s: page %d v%d, waited %.0f ms for stitching, rendered and read %d of %d lines in %.0f ms",
             session_id, reading.index, reading.version, (waited - started) * 1000, reading.lines_read,
             len(rendered.bands), (time.perf_counter() - waited) * 1000,
         )  # fmt: skip
         return Answer(reading, rendered, frames_pending=not done)
+
+    async def questions_first(self) -> None:
+        """Before a stitch batch: wait while questions are being read (``questions_first_s`` at most)."""
+        if self.reading:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._no_reading.wait(), self.cfg.questions_first_s)
 
     async def events(self, session_id: str) -> AsyncIterator[dict[str, Any]]:
         pages = self.get(session_id)
