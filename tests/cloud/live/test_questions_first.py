@@ -67,3 +67,21 @@ async def test_a_question_during_a_backlog_answers_from_the_page_so_far(tmp_path
     finally:
         await pages.close()
         await store.close()
+
+
+async def test_stitching_gives_way_while_a_question_is_read_but_never_starves(tmp_path: Path) -> None:
+    store, records = await stored(tmp_path, 1)
+    pages = LivePages(store, CountingOcr(), LiveConfig(questions_first_s=0.2))
+    try:
+        other = pages.get("s")
+        await other.close()  # fed by hand below
+        pages.reading = 1  # another session's question is being read
+        assert await asyncio.to_thread(other._stitch, records[:10], []) == 1
+        started = asyncio.get_running_loop().time()
+        await pages.questions_first()  # the question goes on: stitching waits its bounded turn
+        assert asyncio.get_running_loop().time() - started >= 0.15
+        pages.reading = 0
+        assert await asyncio.to_thread(other._stitch, records[1:10], []) == 9
+    finally:
+        await pages.close()
+        await store.close()
