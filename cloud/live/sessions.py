@@ -20,7 +20,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -310,20 +310,26 @@ class LivePages:
         started = time.perf_counter()
         done = await pages.caught_up(self.cfg.catch_up_s, upto_seq)
         waited = time.perf_counter()
-        self.reading += 1
-        self._no_reading.clear()
-        try:
+        with self.answering():
             reading, rendered = await pages.read(index)
-        finally:
-            self.reading -= 1
-            if not self.reading:
-                self._no_reading.set()
         log.info(
             "session %s: page %d v%d, waited %.0f ms for stitching, rendered and read %d of %d lines in %.0f ms",
             session_id, reading.index, reading.version, (waited - started) * 1000, reading.lines_read,
             len(rendered.bands), (time.perf_counter() - waited) * 1000,
         )  # fmt: skip
         return Answer(reading, rendered, frames_pending=not done)
+
+    @contextlib.contextmanager
+    def answering(self) -> Iterator[None]:
+        """A question is being rendered and read: stitching gives way meanwhile."""
+        self.reading += 1
+        self._no_reading.clear()
+        try:
+            yield
+        finally:
+            self.reading -= 1
+            if not self.reading:
+                self._no_reading.set()
 
     async def questions_first(self) -> None:
         """Before a stitch batch: wait while questions are being read (``questions_first_s`` at most)."""

@@ -75,12 +75,14 @@ async def test_stitching_gives_way_while_a_question_is_read_but_never_starves(tm
     try:
         other = pages.get("s")
         await other.close()  # fed by hand below
-        pages.reading = 1  # another session's question is being read
-        assert await asyncio.to_thread(other._stitch, records[:10], []) == 1
+        with pages.answering():  # another session's question is being read
+            assert await asyncio.to_thread(other._stitch, records[:10], []) == 1
+            started = asyncio.get_running_loop().time()
+            await pages.questions_first()  # the question goes on: stitching waits its bounded turn
+            assert asyncio.get_running_loop().time() - started >= 0.15
         started = asyncio.get_running_loop().time()
-        await pages.questions_first()  # the question goes on: stitching waits its bounded turn
-        assert asyncio.get_running_loop().time() - started >= 0.15
-        pages.reading = 0
+        await pages.questions_first()  # answered: no wait
+        assert asyncio.get_running_loop().time() - started < 0.1
         assert await asyncio.to_thread(other._stitch, records[1:10], []) == 9
     finally:
         await pages.close()
