@@ -192,13 +192,11 @@ class StreamConnection:
         store, session_id = self.context.store, self.hello.session_id
         if self.hello.v < 2 and (isinstance(message, View) or getattr(message, "enc", "bits") != "bits"):
             raise UnexpectedMessageError(f"{message.TYPE} with version 2 content in a version 1 session")
-        if isinstance(message, View):  # a fixation's fused view: stored and stitched as its thresholded frame
-            message = message.as_frame()
-        if isinstance(message, Frame | Page | Gaze | NewPage):
+        if isinstance(message, Frame | View | Page | Gaze | NewPage):
             self._contiguous(message.seq)
-        if isinstance(message, Frame):
+        if isinstance(message, Frame | View):  # a fixation's fused view: stored with its levels and frame count
             if self.hello.mode != "frames":
-                raise UnexpectedMessageError("frame received but hello.mode is 'pages'")
+                raise UnexpectedMessageError(f"{message.TYPE} received but hello.mode is 'pages'")
             if message.shape != self.hello.fovea:
                 raise BadMaskError(f"frame shape {message.shape} differs from hello.fovea {self.hello.fovea}")
             return _Pending(asyncio.ensure_future(store.add_frame(session_id, stored_frame(message))), "frame", session_id)
@@ -227,12 +225,14 @@ def session_spec(hello: Hello) -> SessionSpec:
                        stream_id=hello.stream_id or "")  # fmt: skip
 
 
-def stored_frame(frame: Frame) -> StoredFrame:
-    """The wire frame as the store keeps it: its frame record, seq, gaze angles and event count."""
+def stored_frame(frame: Frame | View) -> StoredFrame:
+    """The wire frame (or fused view) as the store keeps it: its frame record (a view's with its
+    grey levels and frame count), seq, gaze angles and event count."""
     record = frame.record()
     return StoredFrame(
         record.frame_id, record.t_us, record.mask, record.origin, record.gaze_px,
         seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used,
+        levels=record.levels, n_levels=record.n_levels, frames=record.frames,
     )  # fmt: skip
 
 

@@ -195,14 +195,13 @@ def _to_pages(pages: Any) -> FrameHandler:
     return add
 
 
-LOSSLESS_ON_CHANGE_SLICE_US = 5_000  # finer than any gaze row (11-100 ms), a fifth of the per-chunk cost
-
-
 def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) -> tuple[EventSource, Calibration, Any]:
     """The event source, its calibration and (for a replayed recording) its gaze track loader.
 
-    ``coarse``: an as-fast-as-possible replay in the on-change mode, whose step runs once per chunk,
-    is cut into 5 ms chunks instead of 1 ms (paced replays keep 1 ms, the latency's resolution)."""
+    ``coarse``: an as-fast-as-possible replay in the on-change mode hands over the decoder's chunks
+    whole instead of 1 ms slices: its pipeline takes one processing step per 5 ms of event time
+    whatever the chunking, so whole chunks only save the per-chunk cost (slicing and re-joining,
+    ring push, window count, metrics); paced replays keep 1 ms, the latency's resolution."""
     from darkread.edge.io.calibration import load_calibration
 
     if cfg.kind == "replay":
@@ -215,7 +214,7 @@ def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) 
                 "recording (path) or the camera (kind = \"evk4\")"
             )
         recording = open_recording(cfg.path, gaze=cfg.gaze_csv or None, calibration=cfg.calibration or None)
-        slice_us = LOSSLESS_ON_CHANGE_SLICE_US if coarse and not cfg.speed else DEFAULT_SLICE_US
+        slice_us = None if coarse and not cfg.speed else DEFAULT_SLICE_US
         source = ReplaySource(recording.raw_path, speed=cfg.speed or None, slice_us=slice_us)
         calibrated = (recording.calibration.width, recording.calibration.height)
         if calibrated != (source.width, source.height):

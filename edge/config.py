@@ -54,9 +54,9 @@ class PipelineConfig:
     # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
     # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
     infer: str = "every-window"
-    min_interval_ms: float = 100.0  # on-change: at most one inference per this much event time
+    min_interval_ms: float = 50.0  # on-change: at most one inference per this much event time (<= 20/s; ~4 per fixation)
     renew_fraction: float = 1.0  # on-change: infer again once this share of n_events is new ...
-    move_px: float = 6.0  # ... or the window moved this far since the last inference
+    move_px: float = 6.0  # ... or the window moved this far since the last inference (a view's window is placed once)
     min_events: int = 400  # on-change: a frame may have fewer than n_events (low light), not fewer than this
     first_wait_ms: float = 60.0  # on-change: the first frame of a fixation comes this long into it (landing settled)
     view_every_ms: float = 250.0  # on-change: a long fixation sends its view this often

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from darkread.edge.events import Events
+from darkread.edge.events import Events, select_events
 
 WINDOW_HEIGHT = 100  # rows of the shipped model's window
 WINDOW_WIDTH = 200  # columns
@@ -66,7 +66,7 @@ def crop(events: Events, x0: int, y0: int, cfg: FoveaConfig = FoveaConfig()) -> 
     """Events inside the window at (x0, y0), sensor coordinates kept (a copy)."""
     if x0 < 0 or y0 < 0:
         raise ValueError(f"window origin must be non-negative, got ({x0}, {y0})")
-    return events[in_window(events, x0, y0, cfg.width, cfg.height)]
+    return select_events(events, in_window(events, x0, y0, cfg.width, cfg.height))
 
 
 def window_events(events: Events, origin: tuple[int, int], cfg: FoveaConfig, n_events: int) -> Events:
@@ -85,7 +85,7 @@ def crop_along_track(events: Events, origins_xy: np.ndarray, cfg: FoveaConfig = 
     dx = events["x"] - origins[:, 0]
     dy = events["y"] - origins[:, 1]
     inside = (dx >= 0) & (dx < cfg.width) & (dy >= 0) & (dy < cfg.height)  # NaN compares False
-    return events[inside]
+    return select_events(events, inside)
 
 
 def origins_along_gaze(

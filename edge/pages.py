@@ -27,7 +27,7 @@ class PageBuilder:
         self._last = clock()
 
     def add(self, frame: FrameRecord) -> None:
-        """A frame (every-window) or a fixation's view (on-change: its thresholded mask is what is stitched)."""
+        """A frame (every-window) or a fixation's view (on-change: stitched as its frames, by its grey levels)."""
         with self._lock:
             self._stitcher.add(frame)  # a FrameResult or ViewRecord is the frame record the stitcher reads
 

@@ -10,11 +10,11 @@ jumps to the newest window and counts the windows it skipped; the ring is fixed-
 never grows with load. In ``lossless`` mode (offline replays) the reader thread reconstructs each
 window itself, so it waits for inference instead of skipping.
 
-That is the ``every-window`` mode. The default, ``on-change`` (``[pipeline] infer``), lets the gaze
+That is the ``every-window`` mode (the default). ``on-change`` (``[pipeline] infer``) lets the gaze
 decide (:mod:`darkread.edge.view_trigger`): every chunk the reader hands over is one processing
 step that feeds the gaze-event classifier; no inference during saccades and blinks; during a
-fixation one when enough new events arrived or the window moved, at most every
-``min_interval_ms``; the fixation's frames are fused into one view
+fixation one when enough new events arrived, at most every ``min_interval_ms``, all in one window
+placed at the fixation's mean gaze; the fixation's frames are fused into one view
 (:mod:`darkread.edge.view_fusion`) that goes to ``on_frame`` when the fixation ends and every
 ``view_every_ms`` during a long one. The same step runs on the reconstruction thread live and on
 the reader thread in lossless replays.
@@ -52,6 +52,10 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 MIN_HISTORY_EVENTS = 4096
+LOSSLESS_STEP_US = 5_000
+"""Lossless on-change replays take one processing step per this much event time (a grid on the
+event clock, finer than any gaze row at 11-100 ms), however large the chunks the source hands over:
+the same steps, and so the same views, whatever the replay's chunking."""
 MAX_HISTORY_EVENTS = 1 << 16  # usual cap of the ring events searched for a window's events
 
 Infer = Callable[[np.ndarray], np.ndarray]
@@ -87,6 +91,20 @@ def count_in_window(events: Events, origin: tuple[int, int] | None, cfg: FoveaCo
     return int(np.count_nonzero(in_window(events, origin[0], origin[1], cfg.width, cfg.height)))
 
 
+def step_ends(t_us: np.ndarray, step_us: int) -> np.ndarray:
+    """End indices (exclusive) of the non-empty pieces of time-sorted ``t_us`` cut at multiples of
+    ``step_us``: the slices an ``EventsIterator`` with ``delta_t=step_us`` would have made of them."""
+    n = t_us.shape[0]
+    first, last = int(t_us[0]) // step_us, int(t_us[-1]) // step_us
+    if first == last:
+        return np.array([n], dtype=np.intp)
+    bounds = np.arange(first + 1, last + 1, dtype=np.int64) * step_us
+    # a running maximum keeps the cuts ordered when times jitter back by a few µs (real sensors)
+    cuts = np.maximum.accumulate(np.searchsorted(t_us, bounds, side="left"))
+    ends = np.unique(np.append(cuts, n))
+    return ends[ends > 0]
+
+
 def make_frame(
     window: Events,
     origin: tuple[int, int],
@@ -103,7 +121,9 @@ def make_frame(
     """
     if window.shape[0] == 0:
         return None
-    grid = voxel_grid(window, origin[0], origin[1], voxel)
+    # a Reconstructor reads its input in place: bin straight into it (no grid allocated, no copies)
+    bound = getattr(infer, "input_window", None)
+    grid = voxel_grid(window, origin[0], origin[1], voxel, out=bound if bound is not None and bound.shape == voxel.shape else None)
     started = time.perf_counter()
     mask = np.asarray(infer(grid), dtype=np.uint8)
     inference_ms = (time.perf_counter() - started) * 1e3
@@ -176,22 +196,19 @@ class Pipeline:
             self._fixation: int | None = None  # the current fixation's key (its first row, event clock)
             self._fixation_events = 0  # window events since it started
             self._since_infer = 0  # window events since the last inference
+            self._view_origin: tuple[int, int] | None = None  # the current view's window (placed once per view)
+            self._open_piece: tuple[int, int, int] | None = None  # lossless: (grid index, newest t, new events) not yet stepped
 
     # -- reader thread ----------------------------------------------------------------------
     def sink(self, events: Events) -> None:
         if events.shape[0] == 0:
             return
+        if self.on_change and self.settings.lossless:
+            self._sink_steps(events)
+            return
         self.ring.push(events)
         n_foveated = count_in_window(events, self._origin, self.fovea)
-        self.metrics.add("events_in", int(events.shape[0]))
-        self.metrics.add("events_foveated", n_foveated)
-        t_newest = int(events["t"][-1])
-        if self._last_t is not None and t_newest > self._last_t:
-            self.metrics.add("event_us", t_newest - self._last_t)  # reading time covered: the CPU-per-second figure
-        self._last_t = t_newest
-        if self.ring.dropped != self._ring_dropped:
-            self.metrics.add("events_dropped", self.ring.dropped - self._ring_dropped)
-            self._ring_dropped = self.ring.dropped
+        self._count_arrival(events, n_foveated)
         with self._cond:
             # before the first window is placed every event counts, so the loop wakes to place it
             self._new_foveated += n_foveated if self._origin is not None else int(events.shape[0])
@@ -199,11 +216,8 @@ class Pipeline:
             self._last_arrival = time.monotonic()
             if self.on_change:
                 self._chunks += 1
-                if not self.settings.lossless:
-                    self._cond.notify()
+                self._cond.notify()
         if self.on_change:
-            if self.settings.lossless:
-                self._change_step()
             return
         with self._cond:
             due = self._new_foveated >= self.settings.n_events
@@ -214,6 +228,74 @@ class Pipeline:
         if due and self.settings.lossless:
             # no clock to keep up with: reconstruct right here, so the reader waits for inference
             self._process(self._take())
+
+    def _count_arrival(self, events: Events, n_foveated: int) -> None:
+        """The reader's metrics of one chunk: events in, inside the window, reading time, drops."""
+        self.metrics.add("events_in", int(events.shape[0]))
+        self.metrics.add("events_foveated", n_foveated)
+        t_newest = int(events["t"][-1])
+        if self._last_t is not None and t_newest > self._last_t:
+            self.metrics.add("event_us", t_newest - self._last_t)  # reading time covered: the CPU-per-second figure
+        self._last_t = t_newest
+        if self.ring.dropped != self._ring_dropped:
+            self.metrics.add("events_dropped", self.ring.dropped - self._ring_dropped)
+            self._ring_dropped = self.ring.dropped
+
+    def _sink_steps(self, events: Events) -> None:
+        """Lossless on-change: the chunk into the ring at once, then one processing step per piece
+        of it on the ``LOSSLESS_STEP_US`` grid, each seeing its piece's newest event as "now".
+
+        A step cuts its window at its own time (``_recent_events``), so the events after it in the
+        ring change nothing; a piece's count inside the window comes from one window test per
+        chunk (again only after a step moved the window). The piece a chunk ends in may go on in
+        the next chunk, so its step waits for that chunk (or the end of the stream): any chunking
+        makes the steps 5 ms slices would have made. Per piece that leaves a few integer
+        operations and the decision itself.
+        """
+        if events.shape[0] > self.ring.capacity // 8:  # keep the ring's history far longer than a chunk
+            half = events.shape[0] // 2
+            self._sink_steps(events[:half])
+            self._sink_steps(events[half:])
+            return
+        self.ring.push(events)
+        t = events["t"]
+        ends = step_ends(t, LOSSLESS_STEP_US)
+        last = ends.shape[0] - 1
+        fov = self.fovea
+        counted_origin: tuple[int, int] | None = None
+        inside_before: list[int] = []  # window events of the chunk before each piece's end, from `counted_at`
+        counted_at = 0
+        n_foveated = 0
+        start = 0
+        with self._step_lock:
+            self._last_arrival = arrival = time.monotonic()
+            for i, (end, t_now) in enumerate(zip(ends.tolist(), t[ends - 1].tolist())):
+                piece = t_now // LOSSLESS_STEP_US
+                carried = 0
+                if self._open_piece is not None:
+                    open_piece, open_t, open_new = self._open_piece
+                    self._open_piece = None
+                    if open_piece == piece:
+                        carried = open_new  # the last chunk's last piece goes on here
+                    else:
+                        self._decide(open_t, open_new, arrival)
+                origin = self._origin
+                if origin is None:
+                    new = end - start  # before the first window is placed every event counts
+                else:
+                    if origin != counted_origin:  # (the first piece, or a step moved the window)
+                        inside = np.flatnonzero(in_window(events[start:], origin[0], origin[1], fov.width, fov.height))
+                        inside_before = np.searchsorted(inside, ends[i:] - start).tolist()
+                        counted_origin, counted_at = origin, i
+                    j = i - counted_at
+                    new = inside_before[j] - (inside_before[j - 1] if j else 0)
+                    n_foveated += new
+                if i == last:
+                    self._open_piece = (piece, t_now, new + carried)  # stepped by the next chunk or at the end
+                else:
+                    self._decide(t_now, new + carried, arrival)
+                start = end
+        self._count_arrival(events, n_foveated)
 
     def _event_period_due(self, t_newest: int) -> bool:
         """Lossless mode's ``period_ms``, counted on the event clock so a replay is reproducible."""
@@ -327,41 +409,74 @@ class Pipeline:
     def _change_step(self, final: bool = False) -> None:
         """Feed the gaze classifier up to the newest event; end, extend or start the fixation's view."""
         with self._step_lock:
+            if self._open_piece is not None:  # lossless: the stream's last piece, complete now
+                _, open_t, open_new = self._open_piece
+                self._open_piece = None
+                self._decide(open_t, open_new, self._last_arrival)
             with self._cond:
                 new, arrival = self._new_foveated, self._last_arrival
                 self._new_foveated = self._chunks = 0
             t = self.ring.newest_t
             if t is None:
                 return
-            status = self.gate.update(t)
-            key = None if final else fixation_key(status)
-            # a later key is a new fixation; an earlier one is the classifier merging two halves of this one
-            if self._fixation is not None and (key is None or key > self._fixation):
-                self._end_view(arrival, t if final else min(t, status.since_us))
-                self._fixation = None
-            if key is None:
-                return  # saccade, blink, no gaze: nothing to infer
-            if self._fixation is None:
-                self._fixation, self._fixation_events, self._since_infer = key, 0, 0
-                self.trigger.reset()
-            self._fixation_events += new
-            self._since_infer += new
-            if len(self.fuser) and t - self.fuser.t0_us >= self.settings.view_every_ms * 1e3:
-                self._send_view(arrival)  # a long fixation: its view so far, the next one starts afresh
-            if not self.trigger.ready(t, self._fixation):
-                return  # the bounded rate (and the landing's wait), checked before anything costs
-            gaze = self.gaze.at(t)
-            if gaze is None:
-                return
-            origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
-            if origin != self._origin and self.settings.sensor_roi:
-                self.source.set_roi(origin[0], origin[1], self.fovea.width, self.fovea.height)
-            self._origin = origin
-            if self.trigger.due(t, self._fixation, self._since_infer, self._fixation_events, origin):
-                self._infer_into_view(origin, gaze, t, self._fixation)
+            self._decide(t, new, arrival, final)
 
-    def _infer_into_view(self, origin: tuple[int, int], gaze: GazeSample, t: int, t_from: int) -> bool:
-        """One frame of the current fixation (its events only, up to ``n_events``), fused into the view."""
+    def _decide(self, t: int, new: int, arrival: float, final: bool = False) -> None:
+        """One step at event time ``t`` with ``new`` window events since the last (step lock held)."""
+        status = self.gate.update(t)
+        key = None if final else fixation_key(status)
+        # a later key is a new fixation; an earlier one is the classifier merging two halves of this one
+        if self._fixation is not None and (key is None or key > self._fixation):
+            self._end_view(arrival, t if final else min(t, status.since_us))
+            self._fixation = None
+        if key is None:
+            return  # saccade, blink, no gaze: nothing to infer
+        if self._fixation is None:
+            self._fixation, self._fixation_events, self._since_infer = key, 0, 0
+            self.trigger.reset()
+        self._fixation_events += new
+        self._since_infer += new
+        if len(self.fuser) and t - self.fuser.t0_us >= self.settings.view_every_ms * 1e3:
+            self._send_view(arrival)  # a long fixation: its view so far, the next one starts afresh
+        if not self.trigger.ready(t, self._fixation):
+            return  # the bounded rate (and the landing's wait), checked before anything costs
+        window = self._view_window(t)
+        if window is None:
+            return
+        origin, gaze = window
+        if self.trigger.due(t, self._fixation, self._since_infer, self._fixation_events, origin):
+            self._infer_into_view(origin, gaze, t, self._fixation, arrival)
+
+    def _view_window(self, t: int) -> tuple[tuple[int, int], GazeSample] | None:
+        """Where the current view's window is, and the gaze at ``t``. A view's window stays put: it
+        is placed once, at the mean gaze of the fixation's rows so far (one row's tracker noise
+        would put it tens of pixels off), so its frames all see the same stretch of text."""
+        gaze = self.gaze.at(t)
+        if gaze is None:
+            return None
+        if len(self.fuser) and self._view_origin is not None:
+            return self._view_origin, gaze
+        centre = self._fixation_centre(t) or gaze.pixel
+        origin = window_origin(centre, self.sensor_wh, self.fovea)
+        if origin != self._origin and self.settings.sensor_roi:
+            self.source.set_roi(origin[0], origin[1], self.fovea.width, self.fovea.height)
+        self._origin = self._view_origin = origin
+        return origin, gaze
+
+    def _fixation_centre(self, t: int) -> tuple[float, float] | None:
+        """Mean gaze pixel over the current fixation's valid tracker rows up to ``t`` (None without any)."""
+        if self._fixation is None:
+            return None
+        times, yaw, _ = self.gaze.rows(self._fixation - 1, t)
+        pixels = [g.pixel for g in map(self.gaze.at, times[np.isfinite(yaw)].tolist()) if g is not None]
+        if not pixels:
+            return None
+        u, v = np.mean(np.asarray(pixels, np.float64), axis=0)
+        return float(u), float(v)
+
+    def _infer_into_view(self, origin: tuple[int, int], gaze: GazeSample, t: int, t_from: int, arrival: float) -> bool:
+        """One frame of the current fixation (its events only, up to ``n_events``), fused into the
+        view; a frame that does not register onto the view sends it and starts the next one."""
         window = self._recent_events(origin, t, t_from=t_from)
         if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
             return False
@@ -371,7 +486,10 @@ class Pipeline:
         self.frames_made += 1
         self.metrics.add("frames")
         self.metrics.observe_inference(frame.inference_ms)
-        self.fuser.add(frame, frame.events_used, frame.gaze_rad)
+        if self.fuser.add(frame, frame.events_used, frame.gaze_rad) is None:
+            self.metrics.add("views_split")
+            self._send_view(arrival)
+            self.fuser.add(frame, frame.events_used, frame.gaze_rad)
         self.trigger.inferred(t, origin)
         self._since_infer = 0
         return True
@@ -380,16 +498,16 @@ class Pipeline:
         """The fixation ended at ``t_end``: a fixation too short for a frame gets one now; send its view."""
         lasted = self._fixation is not None and t_end - self._fixation >= self.gate.cfg.min_fixation_ms * 1e3
         if not len(self.fuser) and lasted and self._origin is not None:  # (not a landing the classifier revised)
-            gaze = self.gaze.at(t_end)
-            if gaze is not None:
-                origin = window_origin(gaze.pixel, self.sensor_wh, self.fovea)
-                self._infer_into_view(origin, gaze, t_end, self._fixation)
+            window = self._view_window(t_end)
+            if window is not None:
+                self._infer_into_view(window[0], window[1], t_end, self._fixation, arrival)
         if len(self.fuser):
             self._send_view(arrival)
 
     def _send_view(self, arrival: float) -> None:
         view = self.fuser.view(self.views_made)
         self.fuser = ViewFuser(self.fuser.n_levels, self.fuser.radius)
+        self._view_origin = None
         self.views_made += 1
         self.metrics.add("views")
         self.on_frame(view, arrival)
@@ -404,9 +522,7 @@ class Pipeline:
         k, cfg = self.settings.n_events, self.fovea
         n = self._history
         while True:
-            recent = self.ring.last(n)
-            if recent.shape[0] and recent["t"][-1] > t_until:  # the reader pushed newer events meanwhile
-                recent = recent[: int(np.searchsorted(recent["t"], t_until, side="right"))]
+            recent = self.ring.last(n, until_t=t_until)  # (the reader may have pushed newer events)
             inside = np.flatnonzero(in_window(recent, origin[0], origin[1], cfg.width, cfg.height))
             reached_start = t_from is not None and recent.shape[0] and int(recent["t"][0]) <= t_from
             if inside.shape[0] >= k or n >= len(self.ring) or reached_start:

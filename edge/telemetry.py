@@ -28,6 +28,7 @@ COUNTERS = (
     "events_foveated",
     "frames",  # inferences: frames made
     "views",  # on-change mode: fused views of fixations
+    "views_split",  # on-change mode: views ended early by a frame that did not register onto them
     "event_us",  # event-clock time covered by the events read (reading time)
     "frames_skipped",
     "frames_no_gaze",

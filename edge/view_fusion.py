@@ -1,37 +1,41 @@
 """One view per fixation: its frames registered to each other and fused into ink probability.
 
-During a fixation the eye rests, but the head drifts and the window follows the gaze's jitter, so
-the frames of one fixation show the same few words a few pixels apart. Each frame is placed at
-its sensor offset from the view's first frame, refined by the stitcher's own registration
-(:func:`darkread.stitch.register.register_frame`, correlation against what the view already
-holds), and averaged in. The mean of binary frames is an ink probability; it goes on the wire in
-``n_levels`` grey levels. Pure: numpy and the stitcher.
+During a fixation the eye rests and the window stays where the fixation's gaze centre put it
+(the pipeline locks it), but the head drifts, so the frames of one fixation show the same few
+words a few pixels apart. Each frame is placed at its sensor offset from the frame before,
+refined by the stitcher's own registration (:func:`darkread.stitch.register.register_frame`,
+correlation against what the view already holds); the view so far moves with it, so the view is
+always in the newest frame's window and at its time (where and when the stitcher predicts it). A
+frame that does not register onto the view (the head jumped, or the classifier joined two
+fixations) is not blended in blind: ``add`` says so and the caller starts a new view with it.
+The mean of binary frames is an ink probability; it goes on the wire in ``n_levels`` grey levels
+with the number of frames behind it, and the stitcher averages it in as that many frames. Pure:
+numpy, OpenCV and the stitcher.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
-from darkread.frame_record import FrameRecord
+from darkread.frame_record import FrameRecord, threshold_levels
 from darkread.stitch.register import register_frame
-from darkread.stitch.strip import placed
 
-N_LEVELS = 4  # paper, unlikely, likely, surely ink: two bits a pixel before compression
-SEARCH_RADIUS_PX = 6  # head drift within one fixation, beyond the sensor's offset
-MIN_SCORE = 0.3  # a weaker correlation keeps the sensor's offset
+N_LEVELS = 8  # the mean of up to ~7 frames to within half a step; few levels compress well in a PNG
+SEARCH_RADIUS_PX = 12  # head drift between two frames of a fixation (50-100 ms apart), beyond the sensor's offset
+MIN_SCORE = 0.6  # a weaker match: the frame starts a new view (the stitcher places it on its own) rather than blur this one
+MARGIN_PX = 32  # the fused canvas reaches this far beyond the first frame's window (head drift in a fixation)
+MIN_INK_FRACTION = 0.003  # frames (or views) with less ink hold nothing to register: the sensor's offset places them
 
 
 @dataclass(frozen=True)
 class ViewRecord(FrameRecord):
-    """A fused view: ``mask`` is its thresholded ink (probability >= 1/2, what a binary stitcher
-    takes); ``levels`` the probability in ``n_levels`` steps (level / (n_levels - 1))."""
+    """A fused view: ``mask`` is its thresholded ink (probability >= 1/2); ``levels`` the
+    probability in ``n_levels`` steps and ``frames`` the frames fused (the stitcher weighs it so)."""
 
-    levels: np.ndarray = None  # type: ignore[assignment]  # uint8 [h, w], 0 .. n_levels - 1
-    n_levels: int = N_LEVELS
     t0_us: int = 0  # the first fused frame; ``t_us`` is the last
-    frames: int = 1
     events_used: int = 0
     gaze_rad: tuple[float, float] = (0.0, 0.0)
 
@@ -53,7 +57,7 @@ def quantise(probability: np.ndarray, n_levels: int = N_LEVELS) -> np.ndarray:
 
 def threshold(levels: np.ndarray, n_levels: int = N_LEVELS) -> np.ndarray:
     """Level indices -> binary ink where the probability is at least one half."""
-    return (2 * levels.astype(np.int32) >= n_levels - 1).astype(np.uint8)
+    return threshold_levels(levels, n_levels)
 
 
 def _crop(layer: np.ndarray, x0: int, y0: int, w: int, h: int) -> np.ndarray:
@@ -67,17 +71,25 @@ def _crop(layer: np.ndarray, x0: int, y0: int, w: int, h: int) -> np.ndarray:
 
 
 class ViewFuser:
-    """Accumulates the frames of one fixation; ``view()`` returns them fused (not thread-safe)."""
+    """Accumulates the frames of one fixation; ``view()`` returns them fused (not thread-safe).
 
-    def __init__(self, n_levels: int = N_LEVELS, radius_px: int = SEARCH_RADIUS_PX) -> None:
+    The sum and count live on a canvas in the first frame's coordinates with a ``margin_px`` rim,
+    each frame resampled onto it once (at its sub-pixel place); ``view()`` cuts out the newest
+    frame's window (at the nearest pixel; the stitcher registers the view to a fraction again).
+    """
+
+    def __init__(self, n_levels: int = N_LEVELS, radius_px: int = SEARCH_RADIUS_PX, margin_px: int = MARGIN_PX) -> None:
         self.n_levels = int(n_levels)
         self.radius = int(radius_px)
+        self.margin = int(margin_px)
         self._first: FrameRecord | None = None
         self._last: FrameRecord | None = None
+        self._last_xy = (0.0, 0.0)  # the newest frame's top-left, in the first frame's coordinates
         self._sum: np.ndarray | None = None
         self._count: np.ndarray | None = None
         self._frames = 0
         self._events = 0
+        self._gaze_sum = np.zeros(2)
         self._gaze_rad = (0.0, 0.0)
 
     def __len__(self) -> int:
@@ -88,61 +100,75 @@ class ViewFuser:
         """Event time of the first fused frame (0 while empty)."""
         return self._first.t_us if self._first is not None else 0
 
-    def add(self, frame: FrameRecord, events_used: int = 0, gaze_rad: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float]:
-        """Fuse ``frame`` in; returns where it landed relative to the view's top-left."""
+    def add(
+        self, frame: FrameRecord, events_used: int = 0, gaze_rad: tuple[float, float] = (0.0, 0.0)
+    ) -> tuple[float, float] | None:
+        """Fuse ``frame`` in; returns where it landed relative to the first frame's top-left, or
+        None, leaving the view as it was, when it does not register onto the view."""
         mask = frame.mask.astype(np.float32)
-        h, w = mask.shape
-        if self._first is None:
+        if self._first is None or self._sum is None or self._count is None:
+            h, w = mask.shape
+            m = self.margin
             self._first = frame
-            self._sum, self._count = mask.copy(), np.ones((h, w), np.float32)
-            dx = dy = 0.0
+            self._sum = np.zeros((h + 2 * m, w + 2 * m), np.float32)
+            self._count = np.zeros_like(self._sum)
+            xy = (0.0, 0.0)
         else:
-            dx, dy = self._place(frame, mask)
-            self._accumulate(mask, dx, dy)
-        self._last = frame
+            found = self._place(frame, mask)
+            if found is None:
+                return None
+            xy = found
+        self._accumulate(mask, xy)
+        self._last, self._last_xy = frame, xy
         self._frames += 1
         self._events += int(events_used)
+        self._gaze_sum += frame.gaze_px
         self._gaze_rad = gaze_rad
-        return dx, dy
+        return xy
 
-    def _place(self, frame: FrameRecord, mask: np.ndarray) -> tuple[float, float]:
-        """The sensor offset from the first frame, corrected by correlation against the view so far."""
-        assert self._first is not None and self._sum is not None and self._count is not None  # noqa: S101
+    def _place(self, frame: FrameRecord, mask: np.ndarray) -> tuple[float, float] | None:
+        """The frame's top-left in the first frame's coordinates: where the newest frame was plus
+        the sensor offset between them, corrected by correlation against the view; None when no
+        trustworthy match is found."""
+        assert self._first is not None and self._last is not None and self._sum is not None  # noqa: S101
+        assert self._count is not None  # noqa: S101
         h, w = mask.shape
-        px = frame.origin[0] - self._first.origin[0]
-        py = frame.origin[1] - self._first.origin[1]
-        r = self.radius
-        known = _crop(self._count, px - r, py - r, w + 2 * r, h + 2 * r) > 0
-        reference = _crop(self._sum / np.maximum(self._count, 1.0), px - r, py - r, w + 2 * r, h + 2 * r)
-        found = register_frame(reference, known.astype(np.float32), mask, r)
+        px = int(round(self._last_xy[0])) + frame.origin[0] - self._last.origin[0]
+        py = int(round(self._last_xy[1])) + frame.origin[1] - self._last.origin[1]
+        probability = self._sum / np.maximum(self._count, 1e-6)
+        if frame.mask.mean() < MIN_INK_FRACTION or float((probability >= 0.5).mean()) < MIN_INK_FRACTION:
+            return float(px), float(py)  # blank paper: nothing to correlate, nothing to blur
+        r, m = self.radius, self.margin
+        box = (px + m - r, py + m - r, w + 2 * r, h + 2 * r)
+        known = _crop(self._count, *box) > 0.5
+        found = register_frame(_crop(probability, *box), known.astype(np.float32), mask, r)
         if found is None or found.score < MIN_SCORE or found.on_rim:
-            return px, py
+            return None
         return px + found.shift_xy[0] + found.subpixel_xy[0], py + found.shift_xy[1] + found.subpixel_xy[1]
 
-    def _accumulate(self, mask: np.ndarray, x: float, y: float) -> None:
-        """Add ``mask`` with its top-left at (x, y) of the view (bilinear below a pixel, as the stitcher does)."""
+    def _accumulate(self, mask: np.ndarray, xy: tuple[float, float]) -> None:
+        """Add ``mask`` with its top-left at ``xy`` (first frame's coordinates; bilinear below a
+        pixel, as the stitcher does); what falls beyond the margin is left out."""
         assert self._sum is not None and self._count is not None  # noqa: S101
-        dx, dy = int(np.floor(x)), int(np.floor(y))
-        fx, fy = x - dx, y - dy
-        cover = None
-        if fx > 0.05 or fy > 0.05:
-            mask, cover, _ = placed(mask, fx, fy, 0.0)
-            cover = cover.astype(np.float32)
-        H, W = self._sum.shape
         h, w = mask.shape
-        x0, y0, x1, y1 = max(dx, 0), max(dy, 0), min(dx + w, W), min(dy + h, H)
-        if x0 >= x1 or y0 >= y1:
-            return
-        self._sum[y0:y1, x0:x1] += mask[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
-        self._count[y0:y1, x0:x1] += 1.0 if cover is None else cover[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
+        move = np.array([[1.0, 0.0, xy[0] + self.margin], [0.0, 1.0, xy[1] + self.margin]], np.float32)
+        size = (self._sum.shape[1], self._sum.shape[0])
+        flags, border = cv2.INTER_LINEAR, cv2.BORDER_CONSTANT
+        self._sum += cv2.warpAffine(mask, move, size, flags=flags, borderMode=border, borderValue=0.0)
+        self._count += cv2.warpAffine(np.ones((h, w), np.float32), move, size, flags=flags, borderMode=border, borderValue=0.0)
 
     def view(self, view_id: int) -> ViewRecord:
-        """The fused view so far (at the first frame's place); the fuser must hold a frame."""
+        """The fused view so far, in the newest frame's window; the fuser must hold a frame."""
         if self._first is None or self._last is None or self._sum is None or self._count is None:
             raise ValueError("no frame to fuse")
-        levels = quantise(self._sum / self._count, self.n_levels)
+        h, w = self._last.mask.shape
+        x, y = int(round(self._last_xy[0])) + self.margin, int(round(self._last_xy[1])) + self.margin
+        count = _crop(self._count, x, y, w, h)
+        probability = np.where(count > 0.5, _crop(self._sum, x, y, w, h) / np.maximum(count, 1e-6), 0.0)
+        levels = quantise(probability, self.n_levels)
+        gaze = self._gaze_sum / self._frames
         return ViewRecord(
             frame_id=int(view_id), t_us=self._last.t_us, mask=threshold(levels, self.n_levels),
-            origin=self._first.origin, gaze_px=self._first.gaze_px, levels=levels, n_levels=self.n_levels,
+            origin=self._last.origin, gaze_px=(float(gaze[0]), float(gaze[1])), levels=levels, n_levels=self.n_levels,
             t0_us=self._first.t_us, frames=self._frames, events_used=self._events, gaze_rad=self._gaze_rad,
         )

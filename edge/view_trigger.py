@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from darkread.edge.config import PipelineConfig
 from darkread.edge.gaze import GazeLookup
-from darkread.edge.gaze_events import EventKind, GazeEventClassifier, GazeEventConfig, GazeStatus, angles_from_cpf
+from darkread.edge.gaze_events import EventKind, GazeEventClassifier, GazeEventConfig, GazeStatus
 
 class GazeGate:
     """The classifier fed from a gaze lookup's rows as the event clock advances."""
@@ -45,12 +45,13 @@ class GazeGate:
         self._until = int(t_event_us)
         pushed = False
         if t.shape[0]:
-            x, y = angles_from_cpf(yaw, pitch)
-            self.classifier.push(t, x, y)
-            self._last_row, pushed = int(t[-1]), True
+            # CPF (x left, y up) -> degrees right and down, as ``angles_from_cpf`` (same arithmetic)
+            rows = [(ti, -math.degrees(a), -math.degrees(b)) for ti, a, b in zip(t.tolist(), yaw.tolist(), pitch.tolist())]
+            self.classifier.push_rows(rows)
+            self._last_row, pushed = rows[-1][0], True
         if self._last_row is not None and t_event_us - self._last_row > self.cfg.blink_gap_us:
             # no rows for longer than a blink gap (a live feed drops invalid ones): the clock runs on
-            self.classifier.push(int(t_event_us), math.nan, math.nan)
+            self.classifier.push_rows([(int(t_event_us), math.nan, math.nan)])
             self._last_row, pushed = int(t_event_us), True
         if not pushed:
             return self._status

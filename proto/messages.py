@@ -21,7 +21,7 @@ from typing import Any, ClassVar, Literal, TypeAlias
 import msgpack
 import numpy as np
 
-from darkread.frame_record import FrameRecord
+from darkread.frame_record import FrameRecord, threshold_levels
 from darkread.mask_bits import pack_bits, packed_length, unpack_bits
 
 from .codecs import LEVEL_ENCODINGS, MASK_ENCODINGS, compress_bits, compress_levels, decompress_bits, decompress_levels
@@ -375,13 +375,14 @@ class View(_Checked):
         return np.frombuffer(self.levels, np.uint8).reshape(self.shape)
 
     def record(self) -> FrameRecord:
-        """The view as a binary frame record (ink where the probability is at least one half): what
-        a stitcher of binary frames takes."""
-        mask = (2 * self.ink().astype(np.int32) >= self.n_levels - 1).astype(np.uint8)
-        return FrameRecord(self.view_id, self.t_us, mask, self.origin, self.gaze_px)
+        """The view as a frame record: its grey levels and frame count (the stitcher averages it in
+        as that many frames), with ``mask`` the ink where the probability is at least one half."""
+        levels = self.ink()
+        return FrameRecord(self.view_id, self.t_us, threshold_levels(levels, self.n_levels), self.origin, self.gaze_px,
+                           levels=levels, n_levels=self.n_levels, frames=self.frames)  # fmt: skip
 
     def as_frame(self) -> Frame:
-        """The thresholded view as a ``frame`` of the same seq (the cloud stores views as frames)."""
+        """The thresholded view as a binary ``frame`` of the same seq (for a reader of binary frames)."""
         shape, bits = pack_mask(self.record().mask)
         return Frame(
             seq=self.seq, frame_id=self.view_id, t_us=self.t_us, origin=self.origin, gaze_px=self.gaze_px,

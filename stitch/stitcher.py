@@ -211,8 +211,8 @@ class PageStitcher:
 
     def _integrate(self, frame: FrameRecord, new_line: bool) -> Outcome:
         cfg = self.cfg
-        mask = frame.mask
-        if mask.mean() < cfg.min_ink_fraction:
+        mask = frame.ink_probability()  # a fused view: its grey levels, registered and averaged as such
+        if frame.mask.mean() < cfg.min_ink_fraction:
             self._dropped += 1
             return "blank"
         if new_line:
@@ -258,7 +258,7 @@ class PageStitcher:
                 self._rolls.append(float(np.clip(reg.angle_deg, -cfg.max_roll_deg, cfg.max_roll_deg)))
                 roll = _median(self._rolls)
         gaze_xy = (frame.gaze_px[0] + float(correction[0]), frame.gaze_px[1] + float(correction[1]))
-        self._strip.add(mask, x, y, score, gaze_xy, frame.frame_id, cfg, roll)
+        self._strip.add(mask, x, y, score, gaze_xy, frame.frame_id, cfg, roll, frame.frames)
         self._positions[frame.frame_id] = (x, y)
         self._used += 1
         return "placed" if reg is None else "registered"
@@ -287,7 +287,7 @@ class PageStitcher:
         a = cfg.anchor_search_px
         reference, seen = self._page.reference(self._strip, (px - a, py - a, px + w + a, py + h + a))
         found = locate_frame(
-            reference, seen, frame.mask, a, cfg.blur_sigma_px, cfg.anchor_known_fraction, roll, cfg.ambiguity_rows
+            reference, seen, frame.ink_probability(), a, cfg.blur_sigma_px, cfg.anchor_known_fraction, roll, cfg.ambiguity_rows
         )
         if found is None or found.score < cfg.anchor_min_score or found.vertical_margin < cfg.ambiguity_margin:
             return None
@@ -320,7 +320,7 @@ class PageStitcher:
         wide = cfg.wide_search_px
         reference, seen = self._page.reference(self._strip, (px - wide, py - wide, px + w + wide, py + h + wide))
         reg = register_frame(
-            reference, seen, frame.mask, wide, cfg.blur_sigma_px, cfg.min_overlap_fraction, (roll,), cfg.ambiguity_rows
+            reference, seen, frame.ink_probability(), wide, cfg.blur_sigma_px, cfg.min_overlap_fraction, (roll,), cfg.ambiguity_rows
         )
         if reg is None or reg.on_rim or reg.vertical_margin < cfg.ambiguity_margin:
             log.debug("frame %d dropped: no unambiguous match within %d px", frame.frame_id, wide)

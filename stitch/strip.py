@@ -32,10 +32,18 @@ def placed(mask: np.ndarray, fx: float, fy: float, angle_deg: float) -> tuple[np
 
 
 def accumulate(
-    canvas: Canvas, mask: np.ndarray, x: float, y: float, score: float, cfg: StitchConfig, angle_deg: float = 0.0
+    canvas: Canvas,
+    mask: np.ndarray,
+    x: float,
+    y: float,
+    score: float,
+    cfg: StitchConfig,
+    angle_deg: float = 0.0,
+    weight: int = 1,
 ) -> int:
-    """Blend ``mask`` into the strip with its top-left at (x, y) (sub-pixel: bilinear), rotated by
-    ``angle_deg`` about its centre; returns how many pixels took it."""
+    """Blend ``mask`` (binary ink, or an ink probability) into the strip with its top-left at
+    (x, y) (sub-pixel: bilinear), rotated by ``angle_deg`` about its centre, as ``weight`` frames
+    (a fused view of that many frames counts as they would have); returns how many pixels took it."""
     ix, iy = int(np.floor(x)), int(np.floor(y))
     fx, fy = x - ix, y - iy
     if fx > 0.05 or fy > 0.05 or abs(angle_deg) > 0.02:
@@ -51,9 +59,10 @@ def accumulate(
     if defined is not None:
         improves &= defined
         replaces &= defined
-    taper = row_taper(h, cfg.taper_sigma_rows)
-    n = np.where(replaces, 1.0, count + 1.0).astype(np.float32)
-    alpha = np.maximum(1.0 / n, np.float32(cfg.alpha))
+    k = np.float32(weight)
+    taper = row_taper(h, cfg.taper_sigma_rows) * k
+    n = np.where(replaces, k, count + k).astype(np.float32)
+    alpha = np.maximum(k / n, np.float32(cfg.alpha))
     blended = avg + alpha * (values - avg)
     np.copyto(avg, blended, where=improves)
     np.copyto(count, n, where=improves)
@@ -80,8 +89,9 @@ class LineStrip:
         frame_id: int,
         cfg: StitchConfig,
         angle_deg: float = 0.0,
+        weight: int = 1,
     ) -> None:
-        accumulate(self.canvas, mask, x, y, score, cfg, angle_deg)
+        accumulate(self.canvas, mask, x, y, score, cfg, angle_deg, weight)
         self.gaze_points.append(gaze_xy)
         self.frame_ids.append(frame_id)
 

@@ -41,3 +41,19 @@ def test_the_edge_result_and_the_stored_frame_are_frame_records() -> None:
     assert (message.gaze_rad, message.events_used, message.seq) == ((0.5, 0.25), 1600, 0)
     np.testing.assert_array_equal(message.mask(), stored.mask)
 
+
+
+def test_a_fused_view_carries_its_probability_and_frame_count() -> None:
+    levels = np.array([[0, 1, 2, 3]], np.uint8)
+    view = FrameRecord(1, 2, (levels >= 2).astype(np.uint8), (0, 0), (0.0, 0.0), levels=levels, n_levels=4, frames=5)
+    np.testing.assert_allclose(view.ink_probability(), [[0.0, 1 / 3, 2 / 3, 1.0]], rtol=1e-6)
+    assert view.frames == 5
+    binary = FrameRecord(1, 2, (levels >= 2).astype(np.uint8), (0, 0), (0.0, 0.0))
+    np.testing.assert_array_equal(binary.ink_probability(), [[0.0, 0.0, 1.0, 1.0]])
+    assert binary.frames == 1 and binary.levels is None
+    with pytest.raises(ValueError, match="levels must be integers 0 .. 3"):
+        FrameRecord(1, 2, binary.mask, (0, 0), (0.0, 0.0), levels=levels + 1, n_levels=4)
+    with pytest.raises(ValueError, match="shape"):
+        FrameRecord(1, 2, binary.mask, (0, 0), (0.0, 0.0), levels=levels[:, :2], n_levels=4)
+    with pytest.raises(ValueError, match="frames"):
+        FrameRecord(1, 2, binary.mask, (0, 0), (0.0, 0.0), frames=0)

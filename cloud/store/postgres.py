@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import msgpack
+import numpy as np
 import psycopg
 from psycopg import conninfo
 from psycopg_pool import AsyncConnectionPool, ConnectionPool, PoolTimeout
@@ -110,6 +111,13 @@ MIGRATIONS: tuple[str, ...] = (
     """
     ALTER TABLE sessions ADD COLUMN stream_id text NOT NULL DEFAULT ''
     """,
+    # 2 -> 3: a fixation's fused view keeps its grey levels and the frames behind it (the stitcher
+    # weighs it by them); binary frames have no levels and stand for one frame
+    """
+    ALTER TABLE frames ADD COLUMN levels bytea;
+    ALTER TABLE frames ADD COLUMN n_levels integer NOT NULL DEFAULT 2;
+    ALTER TABLE frames ADD COLUMN fused_frames integer NOT NULL DEFAULT 1
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -120,6 +128,7 @@ _COLUMNS: dict[str, tuple[tuple[str, str], ...]] = {
         ("x0", "integer"), ("y0", "integer"), ("gaze_u", "float8"), ("gaze_v", "float8"),
         ("yaw", "float8"), ("pitch", "float8"), ("events_used", "integer"),
         ("rows", "integer"), ("cols", "integer"), ("bits", "bytea"),
+        ("levels", "bytea"), ("n_levels", "integer"), ("fused_frames", "integer"),
     ),
     "pages": (
         ("session_id", "text"), ("seq", "bigint"), ("page_id", "bigint"), ("t_us", "bigint"),
@@ -475,7 +484,9 @@ class PostgresStore:
     async def add_frame(self, session_id: str, frame: StoredFrame) -> WriteResult:
         rows, cols = frame.mask.shape
         bits = pack_bits(frame.mask)
-        row = (frame.frame_id, frame.t_us, *frame.origin, *frame.gaze_px, *frame.gaze_rad, frame.events_used, rows, cols, bits)
+        levels = None if frame.levels is None else frame.levels.tobytes()
+        row = (frame.frame_id, frame.t_us, *frame.origin, *frame.gaze_px, *frame.gaze_rad, frame.events_used, rows, cols, bits,
+               levels, frame.n_levels, frame.frames)  # fmt: skip
         return await self._sequenced("frames", session_id, frame.seq, row)
 
     async def add_page(self, session_id: str, page: PageRecord) -> WriteResult:
@@ -538,15 +549,17 @@ class PostgresStore:
 
     async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[StoredFrame]:
         rows = await self._fetch(
-            "SELECT seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used, rows, cols, bits"
-            " FROM frames WHERE session_id = %s AND seq > %s ORDER BY seq LIMIT %s",
+            "SELECT seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used, rows, cols, bits,"
+            " levels, n_levels, fused_frames FROM frames WHERE session_id = %s AND seq > %s ORDER BY seq LIMIT %s",
             (session_id, after_seq, limit),
         )
         frames = []
-        for seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, n_rows, cols, bits in rows:
+        for seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, n_rows, cols, bits, levels, n_levels, fused in rows:
             mask = unpack_bits((n_rows, cols), bits)
+            grey = None if levels is None else np.frombuffer(bytes(levels), np.uint8).reshape(n_rows, cols)
             frames.append(StoredFrame(int(frame_id), int(t_us), mask, (x0, y0), (u, v), seq=int(seq), gaze_rad=(yaw, pitch),
-                                      events_used=int(used)))  # fmt: skip
+                                      events_used=int(used), levels=grey, n_levels=int(n_levels),
+                                      frames=int(fused)))  # fmt: skip
         return frames
 
     async def page_breaks(self, session_id: str) -> list[PageBreak]:

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import msgpack
+import numpy as np
 
 from darkread.image_codec import encode_png
 from darkread.mask_bits import pack_bits, unpack_bits
@@ -97,6 +98,13 @@ MIGRATIONS: tuple[str | Callable[[sqlite3.Connection], object], ...] = (
     lambda conn: None
     if "stream_id" in {row[1] for row in conn.execute("PRAGMA table_info(sessions)")}
     else conn.execute("ALTER TABLE sessions ADD COLUMN stream_id TEXT NOT NULL DEFAULT ''"),
+    # 3 -> 4: a fixation's fused view keeps its grey levels and the frames behind it (the stitcher
+    # weighs it by them); binary frames have no levels and stand for one frame
+    """
+    ALTER TABLE frames ADD COLUMN levels BLOB;
+    ALTER TABLE frames ADD COLUMN n_levels INTEGER NOT NULL DEFAULT 2;
+    ALTER TABLE frames ADD COLUMN fused_frames INTEGER NOT NULL DEFAULT 1;
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 _SEQUENCED = ("frames", "pages", "gaze", "page_breaks")
@@ -247,10 +255,13 @@ class SqliteStore:
         row = (
             session_id, frame.seq, frame.frame_id, frame.t_us, *frame.origin, *frame.gaze_px, *frame.gaze_rad,
             frame.events_used, rows, cols, pack_bits(frame.mask),
+            None if frame.levels is None else frame.levels.tobytes(), frame.n_levels, frame.frames,
         )  # fmt: skip
 
         def insert(conn: sqlite3.Connection) -> int:
-            sql = "INSERT INTO frames VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT DO NOTHING"
+            sql = ("INSERT INTO frames (session_id, seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used,"
+                   " rows, cols, bits, levels, n_levels, fused_frames)"
+                   " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT DO NOTHING")  # fmt: skip
             return conn.execute(sql, row).rowcount
 
         return await self._sequenced(session_id, frame.seq, insert)
@@ -317,15 +328,17 @@ class SqliteStore:
     async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[StoredFrame]:
         def query(conn: sqlite3.Connection) -> list[tuple[Any, ...]]:
             return conn.execute(
-                "SELECT seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used, rows, cols, bits"
-                " FROM frames WHERE session_id = ? AND seq > ? ORDER BY seq LIMIT ?",
+                "SELECT seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used, rows, cols, bits,"
+                " levels, n_levels, fused_frames FROM frames WHERE session_id = ? AND seq > ? ORDER BY seq LIMIT ?",
                 (session_id, after_seq, limit),
             ).fetchall()
 
         frames = []
-        for seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, rows, cols, bits in await self._read(query):
+        for seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, rows, cols, bits, levels, n_levels, fused in await self._read(query):
             mask = unpack_bits((rows, cols), bits)
-            frames.append(StoredFrame(frame_id, t_us, mask, (x0, y0), (u, v), seq=seq, gaze_rad=(yaw, pitch), events_used=used))
+            grey = None if levels is None else np.frombuffer(levels, np.uint8).reshape(rows, cols)
+            frames.append(StoredFrame(frame_id, t_us, mask, (x0, y0), (u, v), seq=seq, gaze_rad=(yaw, pitch), events_used=used,
+                                      levels=grey, n_levels=n_levels, frames=fused))  # fmt: skip
         return frames
 
     async def page_breaks(self, session_id: str) -> list[PageBreak]:

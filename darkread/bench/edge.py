@@ -1,6 +1,10 @@
-"""The edge loop end to end on the sample recording, in the default ``on-change`` mode (inference
-gated by the gaze, one fused view per fixation) with the ``every-window`` mode (a frame per 1600
-foveated events, today's research mode) measured beside it in the same run.
+"""The edge loop end to end on the sample recording, in the default inference mode
+(``PipelineConfig().infer``, named in every label) with the other one measured beside it in the
+same run: ``on-change`` (inference gated by the gaze, one fused view per fixation) and
+``every-window`` (a frame per 1600 foveated events, the research mode). Keys:
+``edge_realtime_factor``, ``edge_inferences_per_s`` and ``edge_uplink_kbyte_per_s`` are the default
+mode's; ``edge_realtime_factor_on_change`` and ``edge_realtime_factor_every_window`` name theirs;
+the view latency is on-change's (only it makes views), the event-to-wire latency every-window's.
 
 * Real-time factor (recording seconds per CPU second of the process): the whole edge (replay as fast as possible -> ring -> fovea at the gaze ->
   voxel -> U-Net -> frame message encoded) on one core (CPU affinity pinned when the OS allows),
@@ -31,7 +35,14 @@ from darkread.paths import SAMPLE_RECORDING
 
 
 SMOKE_SECONDS = 0.3
-MODES = ("on-change", "every-window")  # the default first
+MODES = ("on-change", "every-window")
+
+
+def default_mode() -> str:
+    """The mode ``darkread read``, the daemon and ``eval`` run without being told."""
+    from darkread.edge.config import PipelineConfig
+
+    return PipelineConfig().infer
 
 
 def _recording(ctx: BenchContext) -> Path | None:
@@ -189,11 +200,13 @@ def run(ctx: BenchContext) -> list[Figure]:
         }
     if not pinned:
         ctx.notes.append("edge: could not pin to one core; the real-time factor used all cores")
-    span_s = lossless[MODES[0]][2].stats["recording_s"]
+    default = default_mode()
+    other = next(mode for mode in MODES if mode != default)
+    span_s = lossless[default][2].stats["recording_s"]
     rtf = {mode: span_s / run[1] for mode, run in lossless.items()}  # CPU seconds: the host is shared
     inferences = {mode: run[3].totals["frames"] for mode, run in lossless.items()}
-    views = lossless[MODES[0]][3].totals["views"]
-    wall = lossless[MODES[0]][0]
+    views = lossless["on-change"][3].totals["views"]
+    wall = {mode: span_s / run[0] for mode, run in lossless.items()}
 
     paced = {}
     for mode in MODES:
@@ -208,34 +221,37 @@ def run(ctx: BenchContext) -> list[Figure]:
     view_latency = np.fromiter(paced["on-change"].latency_ms, float)
     latency = np.fromiter(paced["every-window"].latency_ms, float)
     inference = np.fromiter(paced["every-window"].inference_ms, float)
-    source = lossless[MODES[0]][2]
+    source = lossless[default][2]
     rate = meta.get("event_rate_hz", source.stats["events_out"] / max(span_s, 1e-9))
     decode_ref = f"decode only {span_s / decode_s:.0f}x"
     infer_ref = f"inference alone p50 {np.percentile(inference, 50):.2f} ms, p99 {np.percentile(inference, 99):.2f} ms"
-    every = "every-window"
+    made = {"on-change": f"{views} views of {inferences['on-change']} frames", "every-window": f"{inferences['every-window']} frames"}
+    sent = {"on-change": "views", "every-window": "frames"}
     return [
         Figure(
-            "edge_realtime_factor", rtf["on-change"],
-            f"edge real-time factor, 1 core CPU time, lossless, on-change ({views} views of {inferences['on-change']} "
-            f"frames, {rate / 1e3:.0f} kev/s)",
-            reference=f"every-window {rtf[every]:.2f}x ({inferences[every]} frames); {decode_ref}; wall clock {span_s / wall:.1f}x",
+            "edge_realtime_factor", rtf[default],
+            f"edge real-time factor, 1 core CPU time, lossless, default mode {default} ({made[default]}, {rate / 1e3:.0f} kev/s)",
+            reference=f"{other} {rtf[other]:.2f}x ({made[other]}); {decode_ref}; wall clock {wall[default]:.1f}x",
             goal=">= 20x",
         ),
-        Figure("edge_realtime_factor_every_window", rtf[every], "edge real-time factor, every-window mode", reference="(reference)"),
+        Figure("edge_realtime_factor_on_change", rtf["on-change"], "edge real-time factor, on-change mode",
+               reference=f"wall clock {wall['on-change']:.1f}x" + (" (the default)" if default == "on-change" else "")),
+        Figure("edge_realtime_factor_every_window", rtf["every-window"], "edge real-time factor, every-window mode",
+               reference=f"wall clock {wall['every-window']:.1f}x" + (" (the default)" if default == "every-window" else "")),
         Figure("edge_decode_realtime_factor", span_s / decode_s, "RAW decode alone, real-time factor", reference="(reference)"),
         Figure(
-            "edge_inferences_per_s", inferences["on-change"] / span_s, "inferences per second of reading, on-change",
-            reference=f"every-window {inferences[every] / span_s:.0f}/s; views {views / span_s:.1f}/s",
+            "edge_inferences_per_s", inferences[default] / span_s, f"inferences per second of reading, default mode {default}",
+            reference=f"{other} {inferences[other] / span_s:.1f}/s; views {views / span_s:.1f}/s",
         ),
         Figure(
-            "edge_uplink_kbyte_per_s", sent_kb_s["on-change"], "uplink bandwidth, views (on-change), paced at 1x",
-            reference=f"every-window frames {sent_kb_s[every]:.1f} kB/s; raw EVT3 stream {raw_kb_s:.0f} kB/s; "
+            "edge_uplink_kbyte_per_s", sent_kb_s[default], f"uplink bandwidth, default mode {default} ({sent[default]}), paced at 1x",
+            reference=f"{other} {sent[other]} {sent_kb_s[other]:.1f} kB/s; raw EVT3 stream {raw_kb_s:.0f} kB/s; "
                       f"one 2880x2880 RGB PNG {rgb_bytes / 1e3:.0f} kB ({rgb_how})",
             goal="<= 15",
         ),
         Figure(
             "edge_view_latency_p99_ms", float(np.percentile(view_latency, 99)) if view_latency.size else float("nan"),
-            f"fixation end to its view on the wire p99, paced at 1x ({view_latency.size} views)",
+            f"fixation end to its view on the wire p99, on-change, paced at 1x ({view_latency.size} views)",
             reference=f"p50 {np.percentile(view_latency, 50) if view_latency.size else float('nan'):.1f} ms; {infer_ref}",
             goal="<= 50 ms",
         ),

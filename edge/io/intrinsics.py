@@ -48,15 +48,26 @@ class Intrinsics:
         z = points[:, 2]
         in_front = z > 0
         safe_z = np.where(in_front, z, 1.0)
-        x, y = points[:, 0] / safe_z, points[:, 1] / safe_z
+        u, v = self._distorted_pixel(points[:, 0] / safe_z, points[:, 1] / safe_z)
+        uv = np.stack([u, v], axis=1)
+        uv[~in_front] = np.nan
+        return uv
+
+    def project_point(self, x: float, y: float, z: float) -> tuple[float, float] | None:
+        """One camera-frame point -> its pixel (None behind the camera): ``project`` in plain floats,
+        the same arithmetic, for the per-frame lookups where numpy's per-call cost is 50x the work."""
+        if not z > 0:
+            return None
+        return self._distorted_pixel(x / z, y / z)
+
+    def _distorted_pixel(self, x, y):  # noqa: ANN001, ANN202 - floats or arrays alike
+        """Normalised image coordinates -> pixel through the radtan model (one formula for both paths)."""
         k1, k2, p1, p2 = self.distortion
         r2 = x * x + y * y
         radial = 1 + k1 * r2 + k2 * r2 * r2
         xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
         yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-        uv = np.stack([self.fx * xd + self.cx, self.fy * yd + self.cy], axis=1)
-        uv[~in_front] = np.nan
-        return uv
+        return self.fx * xd + self.cx, self.fy * yd + self.cy
 
     def unproject(self, uv: np.ndarray, *, iterations: int = 30, eps: float = 1e-10) -> np.ndarray:
         """(N, 2) pixels -> (N, 2) undistorted normalised rays (x/z, y/z) (``cv2.undistortPoints``)."""
@@ -67,6 +78,10 @@ class Intrinsics:
         return cv2.undistortPoints(
             pts, self.camera_matrix(), self.distortion_coefficients(), R=None, P=None, criteria=criteria
         ).reshape(-1, 2)
+
+    def point_on_sensor(self, u: float, v: float) -> bool:
+        """``on_sensor`` of one pixel."""
+        return -0.5 <= u < self.width - 0.5 and -0.5 <= v < self.height - 0.5
 
     def on_sensor(self, uv: np.ndarray) -> np.ndarray:
         """Pixel centres sit at integers, so the sensor spans -0.5 <= u < width - 0.5 (likewise v)."""

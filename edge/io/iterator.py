@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterable, Iterator
 
 import numpy as np
 
-from darkread.edge.events import EVENT_CD_DTYPE, Events, empty_events
+from darkread.edge.events import Events, concat_events, empty_events
 from darkread.edge.io.raw import RawReader
 
 __all__ = ["EventsIterator", "PacedReplay"]
@@ -85,7 +85,7 @@ class EventsIterator:
             if self.current_time is None:
                 start, stop = self._bounds(int(chunk["t"][0]))
                 self.current_time = start
-            buf = np.concatenate((pending, chunk), dtype=EVENT_CD_DTYPE) if len(pending) else chunk
+            buf = concat_events((pending, chunk)) if len(pending) else chunk
             buf = buf[np.searchsorted(buf["t"], start) :] if buf["t"][0] < start else buf
             if not len(buf):
                 continue
@@ -119,7 +119,7 @@ class EventsIterator:
         for chunk in chunks:
             if start is None:
                 start, stop = self._bounds(int(chunk["t"][0]))
-            buf = np.concatenate((pending, chunk), dtype=EVENT_CD_DTYPE) if len(pending) else chunk
+            buf = concat_events((pending, chunk)) if len(pending) else chunk
             t = buf["t"]
             if t[0] < start:
                 buf = buf[np.searchsorted(t, start) :]

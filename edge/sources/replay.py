@@ -16,10 +16,11 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from darkread.edge.events import Events
+from darkread.edge.events import Events, select_events
 from darkread.edge.fovea import in_window
 from darkread.edge.io.iterator import EventsIterator, PacedReplay
 from darkread.edge.io.plausibility import TimeCheck
+from darkread.edge.io.raw import RawReader
 from darkread.edge.io.raw_header import read_raw_header
 from darkread.edge.sources.base import EventSink
 
@@ -46,18 +47,23 @@ class ReplaySource:
         raw_path: str | Path,
         *,
         speed: float | None = 1.0,
-        slice_us: int = DEFAULT_SLICE_US,
+        slice_us: int | None = DEFAULT_SLICE_US,
         chunk_bytes: int = 1 << 18,
     ) -> None:
+        """``slice_us=None`` hands over the decoder's chunks as they are (``chunk_bytes`` of the file
+        each): for an as-fast-as-possible replay into a sink that cuts them itself, which saves
+        re-slicing and re-joining every chunk."""
         self.raw_path = Path(raw_path)
         header = read_raw_header(self.raw_path)  # fails early on a missing or unknown file
         self.width, self.height = int(header.width), int(header.height)
         if speed is not None and speed <= 0:
             raise ValueError(f"replay speed must be positive (or None for as fast as possible), got {speed}")
-        if slice_us <= 0:
+        if slice_us is not None and slice_us <= 0:
             raise ValueError(f"slice_us must be positive, got {slice_us}")
+        if slice_us is None and speed is not None:
+            raise ValueError("a paced replay needs time slices (slice_us); whole chunks replay as fast as possible")
         self.speed = speed
-        self.slice_us = int(slice_us)
+        self.slice_us = None if slice_us is None else int(slice_us)
         self.chunk_bytes = int(chunk_bytes)
         self.finished = threading.Event()
         self.error: BaseException | None = None
@@ -111,6 +117,9 @@ class ReplaySource:
         The clock is anchored at the first slice, so opening and decoding the file does not make
         the first slices late.
         """
+        if self.slice_us is None:
+            self._reader = RawReader(self.raw_path, chunk_bytes=self.chunk_bytes)
+            return self._reader
         slices = EventsIterator(self.raw_path, delta_t=self.slice_us, chunk_bytes=self.chunk_bytes)
         self._reader = slices.reader
         return PacedReplay(slices, self.speed, clock=time.perf_counter, sleep=self._stop.wait)
@@ -129,7 +138,7 @@ class ReplaySource:
     def _apply_roi(self, events: Events) -> Events:
         if self._roi is None:
             return events
-        return events[in_window(events, *self._roi)]
+        return select_events(events, in_window(events, *self._roi))
 
     def _run(self, sink: EventSink) -> None:
         started = time.perf_counter()

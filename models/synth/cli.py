@@ -49,6 +49,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     rec.add_argument("--scanpath-file", default=None, metavar="FILE.json",
                      help="with --scanpath human: another human scanpath (the form of "
                           "models/synth/data/human_scanpath_oz.json; see models/synth/human_scanpath.py)")
+    rec.add_argument("--regime", choices=("standard", "shifted"), default="standard",
+                     help="sensor regime: standard (what training saw) or shifted (higher, more spread thresholds, a "
+                          "faster photoreceptor in the dark, more shot noise, leak and hot pixels, and a font never used in training: "
+                          "the stand-in for a real camera when adapting the model)")
+    rec.add_argument("--markers", action="store_true",
+                     help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "
+                          "page.layout.json and the simulator's true page pose per millisecond (pose_truth.npz, for scoring)")
     rec.set_defaults(func=_recording)
 
     ds = sub.add_parser(
@@ -102,6 +109,8 @@ def _recording(args: argparse.Namespace) -> int:
         read_once=args.read_once,
         scanpath="human" if args.scanpath_file else args.scanpath,
         scanpath_file=args.scanpath_file,
+        regime=args.regime,
+        markers=args.markers,
     )
     if args.scanpath_file and not Path(args.scanpath_file).is_file():
         raise FileNotFoundError(f"--scanpath-file {args.scanpath_file}: no such file")

@@ -29,6 +29,7 @@ class PrintedPage:
     line_y: np.ndarray  # [n_lines] texel row of each line's x-height centre
     char_x: list[np.ndarray] = field(default_factory=list)  # per line: texel column of each character centre
     text_box: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # x0, y0, x1, y1 of the text, texels
+    glyph_boxes: list[list[tuple[str, float, float, float, float]]] = field(default_factory=list)  # per line: (char, x0, y0, x1, y1) texels, ink extent
 
     @property
     def text(self) -> str:
@@ -84,11 +85,12 @@ def render_page(
     image = Image.new("L", (width_ss, height_ss), 0)
     draw = ImageDraw.Draw(image)
     baselines = margin_ss + size_px * 0.8 + pitch_ss * np.arange(len(lines))
-    char_x = []
+    char_x, glyph_boxes = [], []
     for line, baseline in zip(lines, baselines):
         draw.text((margin_ss, float(baseline)), line, fill=255, font=font, anchor="ls")
         edges = np.array([font.getlength(line[:k]) for k in range(len(line) + 1)])
         char_x.append(((edges[:-1] + edges[1:]) / 2 + margin_ss) / SUPERSAMPLE)
+        glyph_boxes.append(_glyph_boxes(line, font, edges, margin_ss, float(baseline)))
     small = image.reduce(SUPERSAMPLE)  # box filter = area downsampling
     coverage = np.asarray(small, dtype=np.float32) / 255.0
     xh = xh_ss / SUPERSAMPLE
@@ -108,7 +110,23 @@ def render_page(
         line_y=line_y.astype(np.float64),
         char_x=char_x,
         text_box=box,
+        glyph_boxes=glyph_boxes,
     )
+
+
+def _glyph_boxes(
+    line: str, font: ImageFont.FreeTypeFont, edges: np.ndarray, x0_ss: float, baseline_ss: float
+) -> list[tuple[str, float, float, float, float]]:
+    """Ink extent of every visible character of a line, in texels (spaces have none)."""
+    boxes = []
+    for k, ch in enumerate(line):
+        left, top, right, bottom = font.getbbox(ch, anchor="ls")
+        if right <= left or bottom <= top:
+            continue
+        x = x0_ss + float(edges[k])
+        boxes.append((ch, (x + left) / SUPERSAMPLE, (baseline_ss + top) / SUPERSAMPLE,
+                      (x + right) / SUPERSAMPLE, (baseline_ss + bottom) / SUPERSAMPLE))
+    return boxes
 
 
 def reflectance(

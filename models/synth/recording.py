@@ -52,6 +52,13 @@ class RecordingSpec:
     read_once: bool = False  # stop once the page was read (``seconds`` is then the upper bound)
     scanpath: str = "model"  # "human": a real reader's fixations replayed (models/synth/human_scanpath.py)
     scanpath_file: str | None = None
+    regime: str = "standard"  # "shifted": a sensor and a font training never saw
+    markers: bool = False  # the text printed with ArUco markers around it (page.layout.json, pose_truth.npz)
+
+
+LAYOUT_NAME = "page.layout.json"
+POSE_TRUTH_NAME = "pose_truth.npz"
+POSE_TRUTH_STEP_US = 1000
 
 
 def session_spec(spec: RecordingSpec) -> SessionSpec:
@@ -59,7 +66,7 @@ def session_spec(spec: RecordingSpec) -> SessionSpec:
     return SessionSpec(
         split=spec.split, lux=spec.lux, motion=spec.motion, kind=spec.kind, font=spec.font,
         xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
-        scanpath=spec.scanpath, scanpath_file=spec.scanpath_file,
+        scanpath=spec.scanpath, scanpath_file=spec.scanpath_file, regime=spec.regime, markers=spec.markers,
     )
 
 
@@ -115,6 +122,42 @@ def reachable_region(uv: np.ndarray, fovea: FoveaConfig = FOVEA, margin: int = R
     x0, y0 = np.maximum(np.floor(lo - half), 0).astype(int)
     x1, y1 = np.minimum(np.ceil(hi + half), np.array(SENSOR_WH)).astype(int)
     return int(x0), int(y0), int(max(x1 - x0, 1)), int(max(y1 - y0, 1))
+
+
+def page_region(session: Session, seconds: float, margin: int = REGION_MARGIN_PX) -> tuple[int, int, int, int]:
+    """(x0, y0, w, h): the sensor pixels the marker page covers at any time of the recording."""
+    page = session.marker_page
+    assert page is not None
+    _, corners = page.marker_points()
+    pts = corners.reshape(-1, 2)
+    hom = page_to_camera(session, np.arange(0.0, seconds + 0.025, 0.025))
+    uv = np.concatenate([session.calib.project(np.c_[pts, np.ones(len(pts))] @ h.T) for h in hom])
+    uv = uv[np.all(np.isfinite(uv), axis=1)]
+    x0, y0 = np.maximum(np.floor(uv.min(axis=0)) - margin, 0).astype(int)
+    x1, y1 = np.minimum(np.ceil(uv.max(axis=0)) + margin, np.array(SENSOR_WH)).astype(int)
+    return int(x0), int(y0), int(max(x1 - x0, 1)), int(max(y1 - y0, 1))
+
+
+def union_region(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+    x0, y0 = min(a[0], b[0]), min(a[1], b[1])
+    x1, y1 = max(a[0] + a[2], b[0] + b[2]), max(a[1] + a[3], b[1] + b[3])
+    return x0, y0, x1 - x0, y1 - y0
+
+
+def page_to_camera(session: Session, t_s: np.ndarray) -> np.ndarray:
+    """[n, 3, 3]: page millimetres (x, y, 1) -> camera-frame point (m) at each time (the true pose)."""
+    s = session.texels_per_mm
+    mm_to_texel = np.array([[s, 0.0, -0.5], [0.0, s, -0.5], [0.0, 0.0, 1.0]])
+    return np.stack([session.scene.texel_to_camera(float(t)) @ mm_to_texel for t in np.atleast_1d(t_s)])
+
+
+def write_pose_truth(path: Path, session: Session, seconds: float, event_t0: int) -> None:
+    """The simulator's page-to-camera pose every millisecond on the event clock (for scoring only)."""
+    t_s = np.arange(0, int(seconds * 1e6) + 1, POSE_TRUTH_STEP_US) * 1e-6
+    np.savez_compressed(
+        path, t_us=(event_t0 + np.round(t_s * 1e6)).astype(np.int64), H_mm_to_camera=page_to_camera(session, t_s),
+        note=np.array("page mm (x, y, 1) -> camera-frame point in metres; project with calibration.json's intrinsics"),
+    )
 
 
 def simulate_region(
@@ -180,6 +223,8 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     rows = gaze_rows(session, device_t0, seconds, rng)
     uv = gaze_pixels(session, {k: v[~rows["blink"]] for k, v in rows.items()})
     x0, y0, w, h = reachable_region(uv)
+    if session.marker_page is not None:
+        x0, y0, w, h = union_region((x0, y0, w, h), page_region(session, seconds))
     region = Region.of(session.calib, x0, y0, w, h)
     log.info("simulating region x=%d..%d y=%d..%d (%d px)", x0, x0 + w, y0, y0 + h, w * h)
     signal = simulate_region(session, region, seconds, rng, progress=progress)
@@ -219,6 +264,11 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         session_uid=str(uuid.UUID(bytes=uid_bytes, version=4)),
     )
     save_calibration(out / "calibration.json", calib)
+    if session.marker_page is not None:
+        from darkread.models.synth.marker_page import save_layout
+
+        save_layout(out / LAYOUT_NAME, session.marker_page)
+        write_pose_truth(out / POSE_TRUTH_NAME, session, seconds, event_t0)
     (out / "text.txt").write_text(session.page.text, encoding="ascii")
     duration = round(seconds, 3)
     face_family = session.page.font.removesuffix(" Bold")
@@ -242,7 +292,10 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         "sensor": session.sensor.to_dict(),
         "page": {k: round(float(v), 4) for k, v in session.extras.items()},
         "generator": "darkread.models.synth",
+        "sensor_regime": spec.regime,
     }
+    if session.marker_page is not None:
+        meta["markers"] = {"layout": LAYOUT_NAME, "pose_truth": POSE_TRUTH_NAME, "n_markers": len(session.marker_page.markers)}
     if spec.scanpath != "model" or spec.scanpath_file is not None:
         from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath
 

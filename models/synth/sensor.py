@@ -79,6 +79,47 @@ def random_sensor_params(rng: np.random.Generator, lux: float) -> SensorParams:
     )
 
 
+REGIMES: tuple[str, ...] = ("standard", "shifted")
+
+
+def shifted_sensor_params(rng: np.random.Generator, lux: float) -> SensorParams:
+    """A sensor outside what training saw (the stand-in for a real camera with other biases).
+
+    Training draws thresholds 0.18-0.32 with sd 0.03-0.05, a photoreceptor cut-off of 300-1000 Hz
+    halved at 100-400 lux, shot 0.03-0.1 Hz at 100 lux, leak 0.01-0.1 Hz and hot pixels up to 5e-5.
+    This regime has higher, asymmetric and more spread thresholds, a longer refractory period, a
+    faster photoreceptor in the dark (cut-off 1.5-2.5 kHz halved at 50-80 lux: ~250 Hz at 10 lux,
+    nearer the IMX636's "latency < 1 ms at 5 lux" than training's model), 3-5x the shot noise
+    rising faster as light falls, a leakier reference and 4-10x the hot pixels.
+    """
+    c_mean = rng.uniform(0.36, 0.44)
+    return SensorParams(
+        lux=float(lux),
+        c_on=float(c_mean * rng.uniform(0.85, 0.95)),
+        c_off=float(c_mean * rng.uniform(1.05, 1.15)),
+        c_sigma=float(rng.uniform(0.06, 0.08)),
+        refractory_us=float(rng.uniform(400.0, 600.0)),
+        cutoff_hz=float(rng.uniform(1500.0, 2500.0)),
+        cutoff_half_lux=float(rng.uniform(50.0, 80.0)),
+        dark_lux=float(rng.uniform(3.0, 5.0)),
+        shot_rate_100lux_hz=float(rng.uniform(0.3, 0.5)),
+        shot_lux_exponent=float(rng.uniform(1.15, 1.25)),
+        leak_rate_hz=float(rng.uniform(0.2, 0.4)),
+        leak_decades=float(rng.uniform(0.5, 0.7)),
+        hot_pixel_fraction=float(rng.uniform(2e-4, 5e-4)),
+        hot_rate_hz=float(rng.uniform(500.0, 1000.0)),
+    )
+
+
+def regime_sensor_params(regime: str, rng: np.random.Generator, lux: float) -> SensorParams:
+    """Sensor parameters of a regime: ``standard`` (what training saw) or ``shifted``."""
+    if regime == "standard":
+        return random_sensor_params(rng, lux)
+    if regime == "shifted":
+        return shifted_sensor_params(rng, lux)
+    raise ValueError(f"sensor regime {regime!r}: use one of {', '.join(REGIMES)}")
+
+
 class EventSensor:
     """The pixels of one rectangular sensor region, with their fixed mismatch and running state.
 

@@ -18,7 +18,8 @@ from darkread.models.synth.gaze import Scanpath, TrackerModel, reading_scanpath
 from darkread.models.synth.motion import MOTION_LEVELS, random_motion
 from darkread.models.synth.page import PrintedPage, reflectance, render_page
 from darkread.models.synth.scene import Scene, base_pose
-from darkread.models.synth.sensor import SensorParams, random_sensor_params
+from darkread.models.synth.marker_page import MarkerPage, MarkerPageSpec, lay_out, mm_to_px
+from darkread.models.synth.sensor import SensorParams, regime_sensor_params
 from darkread.models.synth.text import TEXT_KINDS, make_lines
 
 TEXTURE_OVERSAMPLING = 1.25  # texels per event pixel at the nominal pose
@@ -40,6 +41,8 @@ class SessionSpec:
     duration_s: float = 10.0
     scanpath: str = "model"  # "model": the reading model; "human": a real reader's fixations replayed
     scanpath_file: str | None = None  # a human scanpath file (default: the shipped oz reader)
+    regime: str = "standard"  # "shifted": a sensor and a font training never saw (sensor.REGIMES)
+    markers: bool = False  # print the text as a marker page (marker_page.py) instead of a plain page
 
 
 SCANPATHS = ("model", "human")
@@ -58,6 +61,8 @@ class Session:
     xheight_px: float  # nominal x-height (pixels) the page was made for
     deg_per_texel: float
     extras: dict = field(default_factory=dict)
+    marker_page: MarkerPage | None = None  # the laid-out page when the text is printed with markers
+    texels_per_mm: float = 0.0  # texture resolution of ``page`` (marker pages: page mm -> texel via mm_to_px)
 
     @property
     def calib(self) -> Calibration:
@@ -65,7 +70,7 @@ class Session:
 
     def with_lux(self, lux: float, rng: np.random.Generator) -> tuple[Scene, SensorParams]:
         """The same scene under another light level, with freshly drawn sensor parameters."""
-        return replace(self.scene, lux=float(lux)), random_sensor_params(rng, lux)
+        return replace(self.scene, lux=float(lux)), regime_sensor_params(self.spec.regime, rng, lux)
 
 
 def random_lux(rng: np.random.Generator, lo: float = 4.0, hi: float = 1200.0) -> float:
@@ -76,6 +81,7 @@ def _pick_face(spec: SessionSpec, rng: np.random.Generator) -> FontFace:
     if spec.font is not None:
         return face_by_name(spec.font)
     split = "held_out" if spec.held_out else ("all" if spec.split == "val" else "train")
+    split = "shifted" if spec.regime == "shifted" else split
     faces = faces_for(split)
     return faces[int(rng.integers(len(faces)))]
 
@@ -99,14 +105,20 @@ def make_session(spec: SessionSpec, seed: int) -> Session:
     page = render_page(lines, face, xh_tex, xh_m / xh_tex, line_spacing=float(rng.uniform(1.25, 1.7)))
     texel_m = page.texel_m * xh_tex / page.xheight_tex  # keep the physical x-height exact after font rounding
     page.texel_m = texel_m
+    marker_page = None
+    if spec.markers:
+        marker_page = lay_out(MarkerPageSpec(lines=tuple(lines), font=face.name))
+        distance = marker_page.xheight_mm * 1e-3 * calib.fx / xh_px  # the printed size is fixed: the reader's distance gives the x-height
+        page = printed_marker_page(marker_page, xh_tex / marker_page.xheight_mm)
+        texel_m = page.texel_m
     paper = float(rng.uniform(0.7, 0.92))
     contrast = float(rng.uniform(0.7, 0.95))
     blur = float(rng.uniform(0.0, 0.6)) * TEXTURE_OVERSAMPLING
     reflect = reflectance(page, paper=paper, contrast=contrast, blur_tex=blur)
-    rot, centre = base_pose(rng, distance)
+    rot, centre = base_pose(rng, distance, max_tilt_deg=12.0 if spec.markers else 20.0)
     lux = float(spec.lux) if spec.lux is not None else random_lux(rng)
     surround = float(rng.uniform(0.05, 0.4))  # a desk or clothing around the paper
-    if np.random.default_rng([seed, 3]).random() < 0.8:
+    if np.random.default_rng([seed, 3]).random() < 0.8 or spec.markers:
         surround = paper  # usually the sheet extends beyond the field of view (no page edge in view)
     scene = Scene(page, reflect, calib, rot, centre, random_motion(motion_level, rng), lux, surround)
     deg_per_texel = math.degrees(texel_m / distance)
@@ -126,11 +138,29 @@ def make_session(spec: SessionSpec, seed: int) -> Session:
         scene=scene,
         scanpath=scanpath,
         tracker=TrackerModel.random(rng),
-        sensor=random_sensor_params(rng, lux),
+        sensor=regime_sensor_params(spec.regime, rng, lux),
         kind=kind,
         xheight_px=xh_px,
         deg_per_texel=deg_per_texel,
         extras={"paper": paper, "contrast": contrast, "print_blur_tex": blur, "distance_m": distance},
+        marker_page=marker_page,
+        texels_per_mm=1e-3 / texel_m,
+    )
+
+
+def printed_marker_page(page: MarkerPage, texels_per_mm: float) -> PrintedPage:
+    """The marker page as the simulator's texture, ``texels_per_mm`` texels per page millimetre."""
+    s = float(texels_per_mm)
+    x0, y0, x1, y1 = mm_to_px(np.asarray(page.text_box_mm).reshape(2, 2), s).ravel()
+    return PrintedPage(
+        lines=list(page.spec.lines),
+        font=page.spec.font,
+        coverage=page.ink_at(s),
+        texel_m=1e-3 / s,
+        xheight_tex=page.xheight_mm * s,
+        line_y=mm_to_px(np.asarray(page.line_y_mm), s),
+        char_x=[mm_to_px(np.asarray(xs), s) for xs in page.char_x_mm],
+        text_box=(float(x0), float(y0), float(x1), float(y1)),
     )
 
 

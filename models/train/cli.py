@@ -71,6 +71,35 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_target(args: argparse.Namespace) -> int:
+    from darkread.models.synth.marker_page import MarkerPageSpec, lay_out, text_lines, write_target
+
+    try:
+        text = Path(args.text).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FileNotFoundError(f"--text {args.text}: no such file") from None
+    spec = MarkerPageSpec(lines=text_lines(text, args.line_chars), font=args.font, xheight_mm=args.xheight_mm,
+                          marker_mm=args.marker_mm)
+    page = lay_out(spec)
+    out, layout = write_target(args.out, page, dpi=args.dpi)
+    w, h = page.size_mm
+    print(f"{out}: {w:.1f} x {h:.1f} mm (print at 100 %, \"actual size\"), {len(page.markers)} markers, "
+          f"{len(page.glyphs)} glyphs; layout -> {layout}")
+    return 0
+
+
+def _cmd_annotate(args: argparse.Namespace) -> int:
+    from darkread.models.train.annotate import AnnotateConfig, annotate_recording
+
+    if not Path(args.recording).is_dir():
+        raise FileNotFoundError(f"{args.recording}: no such recording directory")
+    cfg = AnnotateConfig(window_every_ms=args.every_ms, max_windows=args.max_windows,
+                         max_offset_ms=args.max_offset_ms, refine_offset=args.max_offset_ms > 0)
+    summary = annotate_recording(args.recording, args.layout, args.out, cfg, progress=not args.quiet)
+    print(json.dumps({k: v for k, v in summary.items() if k != "config"}, indent=1))
+    return 0
+
+
 def _cmd_all(args: argparse.Namespace) -> int:
     from darkread.models.train.pipeline import reproduce
 
@@ -119,6 +148,36 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--export", type=Path, help="also write the fine-tuned network to this .onnx")
     p.set_defaults(func=_cmd_finetune)
+
+    p = sub.add_parser("target", help="a printable page: the text with ArUco markers around it, and its layout",
+                       description="Lay out a text file with ArUco markers around it (the synthesiser's page renderer, the "
+                                   "calibration's marker dictionary) as a PDF or PNG, and write page.layout.json beside it: "
+                                   "marker ids and corners and every glyph's box in page millimetres. Print it at 100 % "
+                                   "(\"actual size\"), record it with the glasses, then `darkread train annotate`.")
+    p.add_argument("--text", required=True, metavar="FILE", help="the text to print (UTF-8; long lines are wrapped)")
+    p.add_argument("--out", required=True, type=Path, metavar="PAGE.pdf|PAGE.png", help="what to write (layout: PAGE.layout.json)")
+    p.add_argument("--font", default="DejaVu Sans", help="font face (default DejaVu Sans; see models/synth/fonts.py)")
+    p.add_argument("--xheight-mm", type=float, default=2.4, help="lower-case x-height in mm (default 2.4, about 12 pt)")
+    p.add_argument("--marker-mm", type=float, default=12.0, help="marker side in mm (default 12)")
+    p.add_argument("--line-chars", type=int, default=48, help="wrap lines longer than this (default 48)")
+    p.add_argument("--dpi", type=float, default=300.0, help="PNG resolution (default 300; the PDF is always at size)")
+    p.set_defaults(func=_cmd_target)
+
+    p = sub.add_parser("annotate", help="targets for every window of a recording of a marker page, from the page's pose",
+                       description="Find the page's ArUco markers in event images, fit the page-to-sensor homography over "
+                                   "time (refined on the events, interpolated between poses), choose the time offset that "
+                                   "best matches the page's edges to the windows' events, and render every 1600-event "
+                                   "window's ink target. Writes OUT/shard-00000.npz (the training shard format) and "
+                                   "OUT/annotation.json (share annotated, detection rate; the residual against the "
+                                   "simulator's pose when the recording has pose_truth.npz).")
+    p.add_argument("recording", type=Path, help="recording directory (events.raw, general_eye_gaze.csv, calibration.json)")
+    p.add_argument("--layout", type=Path, help="the page's layout (default RECORDING/page.layout.json)")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--every-ms", type=float, default=40.0, help="one window per this interval (default 40)")
+    p.add_argument("--max-windows", type=int, default=400)
+    p.add_argument("--max-offset-ms", type=float, default=8.0, help="time offset search range, +- ms (default 8; 0 = off)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_annotate)
 
     p = sub.add_parser("all", help="reproduce the shipped model from scratch: synth -> fit -> export -> int8 -> evaluate -> card")
     p.add_argument("--train-dir", type=Path, default=DEFAULT_TRAIN)

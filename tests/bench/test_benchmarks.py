@@ -28,6 +28,7 @@ SYNTH = {"synth_samples_per_s", "synth_sim_s_per_wall_s"}
 EDGE = {
     "edge_realtime_factor", "edge_decode_realtime_factor", "edge_latency_p50_ms", "edge_latency_p99_ms",
     "edge_uplink_kbyte_per_s", "edge_inferences_per_s", "edge_view_latency_p99_ms", "edge_realtime_factor_every_window",
+    "edge_realtime_factor_on_change",
 }
 CLOUD = {"cloud_ingest_frames_per_s_1", "cloud_ingest_frames_per_s_10", "cloud_ingest_frames_per_s_50"}
 CLOUD_POSTGRES = {
@@ -90,6 +91,9 @@ def test_edge_benchmark_writes_its_keys(tmp_path: Path) -> None:
     figures = run_smoke("edge", tmp_path)
     assert set(figures) == EDGE
     assert figures["edge_realtime_factor"] > 0 and figures["edge_latency_p99_ms"] >= figures["edge_latency_p50_ms"]
+    from darkread.bench.edge import default_mode
+
+    assert figures["edge_realtime_factor"] == figures["edge_realtime_factor_" + default_mode().replace("-", "_")]
 
 
 @pytest.mark.slow  # rapidocr reads the stitched and the naive page

@@ -101,7 +101,7 @@ def test_the_service_never_deflates_what_is_compressed_already(server: LiveServe
     assert accepted is None
 
 
-def test_version_2_views_and_compressed_frames_are_stored_as_frames(server: LiveServer) -> None:
+def test_version_2_views_and_compressed_frames_are_stored_as_frame_records(server: LiveServer) -> None:
     levels = np.zeros((100, 200), np.uint8)
     levels[40:50, 20:80] = 3  # surely ink
     levels[40:50, 80:90] = 1  # unlikely ink: paper once thresholded
@@ -121,6 +121,11 @@ def test_version_2_views_and_compressed_frames_are_stored_as_frames(server: Live
     stored = asyncio.run(server.context.store.frames("sess-v2"))
     np.testing.assert_array_equal(stored[0].mask, frame(0).mask())
     np.testing.assert_array_equal(stored[1].mask, (levels >= 2).astype(np.uint8))
+    # the view keeps its grey levels and the frames behind it: the stitcher weighs it by them
+    assert stored[0].levels is None and stored[0].frames == 1
+    np.testing.assert_array_equal(stored[1].levels, levels)
+    assert stored[1].n_levels == 4 and stored[1].frames == 3
+    np.testing.assert_allclose(stored[1].ink_probability()[45, 85], 1 / 3)
 
 
 def test_a_version_1_client_is_still_served_and_kept_to_version_1(server: LiveServer) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from factories import angles_at, pixel_at
 
-from darkread.edge.gaze import GazeMapper, gaze_point_cpf
+from darkread.edge.gaze import GazeMapper, gaze_point_cpf, project_gaze
 from darkread.edge.io.calibration import Calibration, load_calibration
 from darkread.edge.io.gaze_csv import GazeTrack, read_gaze_csv
 
@@ -116,3 +116,22 @@ def test_sample_recording_worked_example(shared_sample_recording: Path) -> None:
     assert pixel_at(mapper, t_event) == pytest.approx(tuple(expected))
     uv = mapper.pixels_at(gaze.t_us + calib.gaze_to_event_time_offset_us)
     assert np.isfinite(uv).all()  # the wearer looks at the page, inside the sensor, throughout
+
+
+def test_one_gaze_in_floats_is_the_array_path_of_one_gaze() -> None:
+    """``at`` (plain floats, for the pipeline) gives bit for bit what the numpy path gives one time."""
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.integers(10_000, 70_000, 80))  # some gaps beyond max_gap_us
+    valid = rng.random(80) > 0.1
+    calib = simple_calibration()
+    calib = Calibration(1280, 720, 900.0, 910.0, 650.0, 350.0, (-0.2, 0.05, 0.001, -0.002), calib.T_event_cpf, OFFSET)
+    mapper = GazeMapper(calib, track(t, rng.normal(0, 0.3, 80), rng.normal(0, 0.2, 80), rng.uniform(0.3, 0.8, 80), valid))
+    for time in OFFSET + rng.integers(t[0] - 20_000, t[-1] + 20_000, 400):
+        yaw, pitch, depth = mapper.angles_and_depth_at(np.array([time]))
+        uv = project_gaze(calib, yaw, pitch, depth)[0]
+        sample = mapper.at(int(time))
+        if np.isnan(uv).any():
+            assert sample is None
+        else:
+            assert sample is not None
+            assert sample.pixel == (float(uv[0]), float(uv[1])) and sample.angles == (float(yaw[0]), float(pitch[0]))

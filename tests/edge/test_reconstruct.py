@@ -107,3 +107,20 @@ def test_shipped_model_runs_without_torch() -> None:
     result = subprocess.run([sys.executable, "-c", script], check=False, capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "ok"
+
+
+@shipped
+def test_the_bound_input_window_infers_what_a_plain_grid_does() -> None:
+    """``input_window``: the grid binned in place gives the same logits and mask as the grid passed
+    in; batches (the free batch axis) agree with single windows (the batch axis fixed at 1)."""
+    rec = Reconstructor(warmup=0)
+    assert rec.input_window is not None and rec.input_window.shape == rec.input_shape
+    for seed in range(3):
+        voxel = _voxel(10 + seed)
+        rec.input_window[...] = voxel
+        assert np.array_equal(rec.logits(rec.input_window), rec.logits(voxel))
+        assert np.array_equal(rec(rec.input_window), rec(voxel))
+    batch = _voxel(20, batch=2)
+    logits = rec.logits(batch)
+    for i in range(2):
+        np.testing.assert_allclose(rec.logits(batch[i]), logits[i], rtol=1e-5, atol=1e-5)

@@ -27,18 +27,28 @@ def frame(page: np.ndarray, x: int, y: int, i: int, origin: tuple[int, int]) -> 
     return FrameRecord(i, 1000 * i, page[y : y + 100, x : x + 200], origin, (origin[0] + 100.0, origin[1] + 50.0))
 
 
-def test_frames_moved_on_the_sensor_are_registered_back_onto_the_first() -> None:
+def test_frames_moved_on_the_sensor_are_registered_and_the_view_is_in_the_newest_window() -> None:
     page = page_of_text()
     fuser = ViewFuser()
     fuser.add(frame(page, 20, 10, 0, (500, 300)))
     # the head drifted: the text sits 3 px left and 2 px up in the window, which the sensor's
-    # offset (the same origin) does not know; the registration finds it
+    # offset (the same, locked, origin) does not know; the registration finds it
     placed = fuser.add(frame(page, 23, 12, 1, (500, 300)))
     assert placed == pytest.approx((3.0, 2.0), abs=0.5)
     view = fuser.view(7)
     assert view.frames == 2 and view.frame_id == 7 and view.origin == (500, 300) and view.t0_us == 0 and view.t_us == 1000
-    inside = view.levels[5:-5, 5:-5]  # where both frames overlap the fused view is the page itself
-    np.testing.assert_array_equal(threshold(inside), page[15:105, 25:215])
+    # the view is the newest frame's window (where and when the stitcher predicts it): both
+    # frames agree on it, so it is the page itself there
+    np.testing.assert_array_equal(threshold(view.levels), page[12:112, 23:223])
+    assert view.gaze_px == (600.0, 350.0)  # the mean of its frames' gaze
+
+
+def test_a_frame_that_does_not_register_is_left_out_for_the_next_view() -> None:
+    fuser = ViewFuser()
+    fuser.add(frame(page_of_text(seed=3), 0, 0, 0, (500, 300)))
+    speckle = (np.random.default_rng(5).random((100, 200)) < 0.2).astype(np.uint8)  # nothing like the view
+    assert fuser.add(FrameRecord(1, 1000, speckle, (500, 300), (600.0, 350.0))) is None
+    assert len(fuser) == 1 and fuser.view(0).t_us == 0
 
 
 def test_a_pixel_seen_as_ink_in_one_of_three_frames_is_unlikely_ink() -> None:
@@ -49,7 +59,7 @@ def test_a_pixel_seen_as_ink_in_one_of_three_frames_is_unlikely_ink() -> None:
     for i, source in enumerate((page, page, noisy)):
         fuser.add(frame(source, 40, 0, i, (400, 200)), events_used=1600)
     view = fuser.view(0)
-    assert view.levels[1, 111] == 1  # 1/3 -> level 1 of 0..3
+    assert view.levels[1, 111] == 2  # 1/3 -> level 2 of 0..7 (2/7, the nearest)
     assert view.mask[1, 111] == 0  # below one half: paper for a binary stitcher
     assert view.levels.max() == N_LEVELS - 1 and view.events_used == 4800
 
@@ -61,12 +71,17 @@ def test_the_view_goes_on_the_wire_as_grey_levels() -> None:
     message = decode(encode(view.to_message()), max_bytes=1 << 20)
     assert isinstance(message, View) and message.frames == 1
     np.testing.assert_array_equal(message.ink(), view.levels)
-    np.testing.assert_array_equal(message.record().mask, view.mask)  # one threshold on both ends
+    record = message.record()  # what the cloud stores and stitches: the levels and the frame count
+    np.testing.assert_array_equal(record.mask, view.mask)  # one threshold on both ends
+    np.testing.assert_array_equal(record.levels, view.levels)
+    assert record.frames == view.frames and record.n_levels == view.n_levels
 
 
 def test_quantise_and_threshold() -> None:
     p = np.array([[0.0, 0.2, 0.34, 0.5, 0.67, 1.0]])
-    np.testing.assert_array_equal(quantise(p), [[0, 1, 1, 2, 2, 3]])
+    np.testing.assert_array_equal(quantise(p, 4), [[0, 1, 1, 2, 2, 3]])
+    np.testing.assert_array_equal(threshold(quantise(p, 4), 4), [[0, 0, 0, 1, 1, 1]])
+    np.testing.assert_array_equal(quantise(p), [[0, 1, 2, 4, 5, 7]])  # N_LEVELS = 8
     np.testing.assert_array_equal(threshold(quantise(p)), [[0, 0, 0, 1, 1, 1]])
 
 

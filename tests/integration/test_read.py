@@ -42,6 +42,14 @@ def test_read_recovers_the_printed_text(tmp_path: Path) -> None:
     assert result.backend == "rapidocr+lexicon"
 
 
+def test_the_on_change_mode_reads_the_sample_as_well(tmp_path: Path) -> None:
+    """Fused views, stored with their grey levels and frame counts and stitched as that many
+    frames, read the shipped sample without an error, from far fewer inferences and messages."""
+    result = read_recording(SAMPLE_RECORDING, out_dir=tmp_path, infer="on-change")
+    assert result.cer == 0.0, f"read {result.text!r} (CER {result.cer:.1%})"
+    assert 0 < result.messages_sent < result.frames  # several frames behind each view
+
+
 def test_read_json_has_the_per_stage_figures(tmp_path: Path) -> None:
     spoken = shutil.which("espeak-ng") is not None  # make speech-deps installs it when root
     say = ["--say-out", str(tmp_path / "said" / "answer.wav")] if spoken else []

@@ -50,3 +50,16 @@ def test_row_taper_weighs_the_fixated_row_most() -> None:
     taper = row_taper(100, 20.0)[:, 0]
     assert taper.shape == (100,)
     assert taper.argmax() in (49, 50) and taper[0] < 0.05
+
+
+def test_a_fused_view_counts_as_the_frames_behind_it() -> None:
+    """A view of three frames (probability 2/3) blends in as those three frames would have."""
+    cfg = StitchConfig(improvement_tolerance=1.0)
+    one_by_one, fused = Canvas(STRIP_LAYERS), Canvas(STRIP_LAYERS)
+    for c in (one_by_one, fused):
+        accumulate(c, 0 * _ones(), 0, 0, 0.8, cfg)  # a paper frame first
+    for mask in (_ones(), _ones(), 0 * _ones()):
+        accumulate(one_by_one, mask, 0, 0, 0.8, cfg)
+    accumulate(fused, np.full((20, 30), 2 / 3, np.float32), 0, 0, 0.8, cfg, weight=3)
+    for layer in ("avg", "count", "conf"):
+        np.testing.assert_allclose(fused.view(layer, 0, 0, 30, 20), one_by_one.view(layer, 0, 0, 30, 20), rtol=1e-5)

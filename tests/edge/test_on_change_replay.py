@@ -1,0 +1,67 @@
+"""The on-change edge on the shipped sample, replayed losslessly: its output is pinned, and it does
+not depend on how the replay cuts the stream (the pipeline steps on a 5 ms event-clock grid)."""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+
+from darkread.edge.builder import build_edge
+from darkread.edge.config import load_config
+from darkread.edge.reconstruct import default_model_path
+from darkread.edge.sources.replay import ReplaySource
+from darkread.edge.view_fusion import ViewRecord
+from darkread.paths import SAMPLE_RECORDING
+
+pytestmark = pytest.mark.skipif(
+    not (SAMPLE_RECORDING / "events.raw").is_file() or not default_model_path().is_file(),
+    reason="no shipped sample recording or model in this checkout",
+)
+
+# What the sample makes (3 s, 3 lines, 60 Hz gaze): fixed by the gaze and the event counts alone
+# (the classifier, the trigger, the window), not by the model's arithmetic, so exact on any CPU.
+SAMPLE_VIEWS = 13
+SAMPLE_FRAMES = 28
+
+
+def replay(slice_us: int | None) -> tuple[list[ViewRecord], dict[str, int]]:
+    """The sample through ``build_edge`` in the on-change mode as fast as possible; ``slice_us``
+    None hands the decoder's chunks over whole (the builder's choice), else slices of that length."""
+    config = load_config(None, environ={}, overrides={
+        "source": {"kind": "replay", "path": str(SAMPLE_RECORDING), "speed": 0.0},
+        "pipeline": {"infer": "on-change"},
+    })
+    views: list[ViewRecord] = []
+    edge = build_edge(config, on_frame=lambda view, arrival: views.append(view))
+    source = edge.source
+    if slice_us is not None:
+        source = ReplaySource(source.raw_path, speed=None, slice_us=slice_us)
+        edge.source = edge.pipeline.source = source
+    edge.startup()
+    source.wait()
+    edge.shutdown(5.0)
+    assert edge.pipeline.error is None
+    return views, dict(edge.metrics.totals)
+
+
+def fingerprint(views: list[ViewRecord]) -> str:
+    digest = hashlib.sha256()
+    for view in views:
+        digest.update(repr((view.frame_id, view.t0_us, view.t_us, view.origin, view.frames, view.events_used)).encode())
+        digest.update(np.ascontiguousarray(view.levels).tobytes())
+    return digest.hexdigest()
+
+
+@pytest.mark.slow  # three replays of 3 s of events with the shipped model
+def test_the_sample_makes_the_same_views_however_the_replay_is_cut() -> None:
+    whole, totals = replay(None)
+    assert (len(whole), totals["frames"], totals["views"]) == (SAMPLE_VIEWS, SAMPLE_FRAMES, SAMPLE_VIEWS)
+    assert totals["events_in"] == 903_373
+    assert sum(view.frames for view in whole) == SAMPLE_FRAMES
+    assert all(0.005 < float(view.mask.mean()) < 0.5 for view in whole)  # ink on paper, not noise or nothing
+    for slice_us in (5_000, 1_000):  # the grid's own slices, and the paced replays' 1 ms slices
+        cut, cut_totals = replay(slice_us)
+        assert fingerprint(cut) == fingerprint(whole), f"{slice_us} µs slices changed the views"
+        assert cut_totals["events_foveated"] == totals["events_foveated"]
