@@ -334,7 +334,7 @@ async def _read(context: AppContext, info: SessionInfo, page: int | None) -> Ask
         return AskResponse(text=result.text, backend=context.ocr.name, page_id=glasses.page_id, latency_ms=0.0,
                            lines=lines, question="", truncated=result.truncated)  # fmt: skip
     try:
-        live = await _ocr(context, lambda: context.pages.ask(info.session_id, page))
+        live = await _ocr(context, lambda: context.pages.ask(info.session_id, page, upto_seq=info.last_seq))
     except NoPageError as exc:
         raise _no_page(exc) from None
     reading = live.reading

@@ -53,7 +53,9 @@ class Settings(BaseSettings):
     session_expire_s: float = Field(
         0.0, ge=0, description="sessions idle this long are deleted with everything stored; 0 keeps them"
     )
-    ask_catch_up_s: float = Field(2.0, ge=0, description="an ask first waits at most this for frames stored before it")
+    ask_catch_up_s: float = Field(
+        0.3, ge=0, description="an ask waits at most this for frames stored before it, then reads the page as stitched so far"
+    )
     page_lost_after_s: float = Field(0.25, gt=0, description="registration lost this long (event time) starts a page")
     max_page_pixels: int = Field(2_000_000, ge=10_000, description="a page whose canvas outgrows this starts anew")
     min_stitch_gap_ms: float = Field(

@@ -16,6 +16,13 @@ class Canvas:
         self.y0 = 0
         self.empty = True
 
+    def fork(self) -> Canvas:
+        """An independent copy (the layers copied, nothing else to share)."""
+        twin = Canvas(())
+        twin.layers = {name: layer.copy() for name, layer in self.layers.items()}
+        twin.x0, twin.y0, twin.empty = self.x0, self.y0, self.empty
+        return twin
+
     @property
     def shape(self) -> tuple[int, int]:
         return next(iter(self.layers.values())).shape  # type: ignore[return-value]

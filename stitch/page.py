@@ -21,6 +21,11 @@ class PageCanvas:
     def __init__(self) -> None:
         self.canvas = Canvas(("num", "den", "views"))
 
+    def fork(self) -> PageCanvas:
+        twin = PageCanvas()
+        twin.canvas = self.canvas.fork()
+        return twin
+
     def add_strip(self, strip: LineStrip) -> None:
         if strip.canvas.empty:
             return

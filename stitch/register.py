@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -67,17 +68,27 @@ def frame_transform(shape: tuple[int, int], angle_deg: float, dx: float = 0.0, d
     return move
 
 
+@lru_cache(maxsize=64)
 def _prior(shape: tuple[int, int], radius: int) -> np.ndarray:
-    """Score penalty growing with the distance from the predicted place (zero for radius 0)."""
+    """Score penalty growing with the distance from the predicted place (zero for radius 0);
+    the same few shapes come back every frame, so they are kept (read-only)."""
     if radius <= 0:
-        return np.zeros(shape, np.float32)
-    yy, xx = np.mgrid[-radius : radius + 1, -radius : radius + 1]
-    return (_CENTRE_PRIOR * (xx**2 + yy**2) / float(radius**2)).astype(np.float32)
+        prior = np.zeros(shape, np.float32)
+    else:
+        yy, xx = np.mgrid[-radius : radius + 1, -radius : radius + 1]
+        prior = (_CENTRE_PRIOR * (xx**2 + yy**2) / float(radius**2)).astype(np.float32)
+    prior.flags.writeable = False
+    return prior
+
+
+def _finite(scores: np.ndarray) -> np.ndarray:
+    """NaN and infinities (flat windows) as the worst score, in place."""
+    return np.nan_to_num(scores, copy=False, nan=-1.0, posinf=-1.0, neginf=-1.0)
 
 
 def _match(search: np.ndarray, sub: np.ndarray, radius: int) -> np.ndarray:
     """Normalised correlation of ``sub`` at every offset in ``search``, minus the centre prior."""
-    scores = np.nan_to_num(cv2.matchTemplate(search, sub, cv2.TM_CCOEFF_NORMED), nan=-1.0, posinf=-1.0, neginf=-1.0)
+    scores = _finite(cv2.matchTemplate(search, sub, cv2.TM_CCOEFF_NORMED))
     return scores - _prior(scores.shape, radius) if radius > 0 else scores
 
 
@@ -179,12 +190,7 @@ def locate_frame(
     if float(blurred.std()) < 1e-3:
         return None
     search = blur(reference, blur_sigma)
-    scores = np.nan_to_num(
-        cv2.matchTemplate(search, np.ascontiguousarray(blurred), cv2.TM_CCOEFF_NORMED),
-        nan=-1.0,
-        posinf=-1.0,
-        neginf=-1.0,
-    )
+    scores = _finite(cv2.matchTemplate(search, np.ascontiguousarray(blurred), cv2.TM_CCOEFF_NORMED))
     rows, cols = scores.shape
 
     def window_mean(image: np.ndarray) -> np.ndarray:

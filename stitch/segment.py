@@ -11,6 +11,7 @@ The same streaming decision serves the batch ``segment_lines`` and the increment
 
 from __future__ import annotations
 
+import copy
 from collections import deque
 from collections.abc import Sequence
 
@@ -39,6 +40,14 @@ class LineSegmenter:
         self._line_x: list[float] = []
         self._since_break = 0
         self._started = False
+
+    def fork(self) -> LineSegmenter:
+        """An independent copy that shares the (immutable) frames: O(frames of the line), no mask copied."""
+        twin = copy.copy(self)
+        twin._pending = deque(self._pending)
+        twin._recent = deque(self._recent, maxlen=self._recent.maxlen)
+        twin._line_x = list(self._line_x)
+        return twin
 
     def push(self, frame: FrameRecord) -> list[tuple[FrameRecord, bool]]:
         last = self._last_sample_us

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import copy
 import logging
+import statistics
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
@@ -50,13 +51,22 @@ class _FinishedLine:
 
     @classmethod
     def of(cls, strip: LineStrip) -> _FinishedLine:
-        x, y = np.median(np.asarray(strip.gaze_points), axis=0)
+        x, y = np.median(np.asarray(strip.gaze_points, dtype=np.float64), axis=0)
         return cls(strip.canvas.box, (float(x), float(y)))
 
 
 def _apply(affine: np.ndarray, xy: tuple[float, float]) -> tuple[float, float]:
     x, y = affine @ np.array([xy[0], xy[1], 1.0])
     return float(x), float(y)
+
+
+def _apply_all(affine: np.ndarray, points: dict[int, tuple[float, float]]) -> dict[int, tuple[float, float]]:
+    """``_apply`` to every value of ``points`` at once (one matrix product, not one per frame)."""
+    if not points:
+        return {}
+    xy = np.asarray(list(points.values()), dtype=np.float64)
+    moved = xy @ affine[:, :2].T + affine[:, 2]
+    return dict(zip(points.keys(), map(tuple, moved.tolist())))
 
 
 def predict_correction(
@@ -77,11 +87,22 @@ def predict_correction(
         return np.zeros(2)
     times = np.array([t for t, _ in recent], dtype=np.float64)
     values = np.array([c for _, c in recent], dtype=np.float64)
-    if len(recent) < 3 or float(np.ptp(times)) < min_span_us or t_us - times[-1] > 1_000_000:
-        return np.median(values, axis=0)
-    centre = times.mean()
-    slope, intercept = np.polyfit(times - centre, values, 1)
-    return intercept + slope * (min(float(t_us), times[-1] + max_ahead_us) - centre)
+    if len(recent) < 3 or float(times.max() - times.min()) < min_span_us or t_us - times[-1] > 1_000_000:
+        return _median_rows(values)
+    dt = times - times.mean()
+    # least squares, closed form (np.polyfit's SVD cost more than the rest of the prediction)
+    slope = (dt @ (values - values.mean(axis=0))) / float(dt @ dt)
+    return values.mean(axis=0) + slope * (min(float(t_us), times[-1] + max_ahead_us) - times.mean())
+
+
+def _median(values: Iterable[float]) -> float:
+    """np.median of a few values, without its overhead (~30x): called several times per frame."""
+    return float(statistics.median(values))
+
+
+def _median_rows(values: np.ndarray) -> np.ndarray:
+    """Column medians of a small (n, 2) array, as np.median(values, axis=0)."""
+    return np.array([statistics.median(column) for column in values.T.tolist()], dtype=np.float64)
 
 
 Outcome = Literal["blank", "dropped", "placed", "registered"]
@@ -136,13 +157,29 @@ class PageStitcher:
         outcome = self._integrate(frame, new_line)
         return Placement(frame, outcome, self._score)
 
-    def snapshot(self) -> StitchedPage:
-        """The page with the undecided frames integrated too, leaving this stitcher as it was."""
+    def fork(self) -> PageStitcher:
+        """An independent copy for a snapshot or a checkpoint. Frames are immutable and shared, so
+        the cost is the canvases (page area), not the frames stitched so far (a deep copy of a
+        30,000-frame session took longer than the question it served)."""
+        twin = copy.copy(self)
+        twin._segmenter = self._segmenter.fork()
+        twin._page = self._page.fork()
+        twin._lines = list(self._lines)
+        twin._strip = None if self._strip is None else self._strip.fork()
+        twin._corrections = deque(self._corrections, maxlen=self._corrections.maxlen)
+        twin._rolls = deque(self._rolls, maxlen=self._rolls.maxlen)
+        twin._scores = deque(self._scores, maxlen=self._scores.maxlen)
+        twin._positions = dict(self._positions)
+        return twin
+
+    def snapshot(self, positions: bool = True) -> StitchedPage:
+        """The page with the undecided frames integrated too, leaving this stitcher as it was
+        (without ``positions`` the page's ``frame_positions`` stay empty: cheaper)."""
         if not self._segmenter.pending:
-            return self.page()
-        ended = copy.deepcopy(self)
+            return self.page(positions)
+        ended = self.fork()
         ended.flush()
-        return ended.page()
+        return ended.page(positions)
 
     @property
     def canvas_pixels(self) -> int:
@@ -188,7 +225,7 @@ class PageStitcher:
         px, py = np.round(np.asarray(frame.origin) + correction).astype(int).tolist()
         x, y = float(px), float(py)
         reference, seen = self._page.reference(self._strip, (px - r, py - r, px + w + r, py + h + r))
-        roll = float(np.median(self._rolls)) if self._rolls else 0.0
+        roll = _median(self._rolls) if self._rolls else 0.0
         search_roll = cfg.roll_step_deg > 0 and self._registered % cfg.roll_every_frames == 0
         angles = (roll - cfg.roll_step_deg, roll, roll + cfg.roll_step_deg) if search_roll else (roll,)
         reg = register_frame(reference, seen, mask, r, cfg.blur_sigma_px, cfg.min_overlap_fraction, angles)
@@ -219,7 +256,7 @@ class PageStitcher:
             self._registered += 1
             if search_roll:
                 self._rolls.append(float(np.clip(reg.angle_deg, -cfg.max_roll_deg, cfg.max_roll_deg)))
-                roll = float(np.median(self._rolls))
+                roll = _median(self._rolls)
         gaze_xy = (frame.gaze_px[0] + float(correction[0]), frame.gaze_px[1] + float(correction[1]))
         self._strip.add(mask, x, y, score, gaze_xy, frame.frame_id, cfg, roll, frame.frames)
         self._positions[frame.frame_id] = (x, y)
@@ -229,7 +266,7 @@ class PageStitcher:
     def _weak(self, score: float) -> bool:
         """A match well below the recent ones: likely the neighbouring line (one pitch off, a frame's
         lines meet other words), as when the head moved more than predicted."""
-        return len(self._scores) >= 3 and score < float(np.median(self._scores)) - self.cfg.weak_match_drop
+        return len(self._scores) >= 3 and score < _median(self._scores) - self.cfg.weak_match_drop
 
     def _page_empty(self) -> bool:
         return self._page.canvas.empty and (self._strip is None or self._strip.empty)
@@ -290,8 +327,9 @@ class PageStitcher:
             return None
         return reg
 
-    def page(self) -> StitchedPage:
-        """The page so far: finished lines plus the line being read."""
+    def page(self, positions: bool = True) -> StitchedPage:
+        """The page so far: finished lines plus the line being read (``positions``: with every
+        frame's place on it, ``frame_positions``)."""
         cfg = self.cfg
         lines = list(self._lines)
         if self._strip is not None and not self._strip.empty:
@@ -320,14 +358,13 @@ class PageStitcher:
             to_image = turn @ np.vstack([to_image, [0.0, 0.0, 1.0]])
             image = binarize(avg, cfg, views)
         boxes, images = self._line_boxes(lines, image, to_image)
-        positions = {fid: _apply(to_image, xy) for fid, xy in self._positions.items()}
         return StitchedPage(
             image,
             boxes,
             images,
             self._used,
             self._dropped,
-            positions,
+            _apply_all(to_image, self._positions) if positions else {},
             skew_deg=skew if abs(skew) >= cfg.deskew_min_deg else 0.0,
             ink_probability=np.where(views >= cfg.min_views, avg, 0.0).astype(np.float32),
             grey_saturation=cfg.grey_saturation,

@@ -95,6 +95,14 @@ class LineStrip:
         self.gaze_points.append(gaze_xy)
         self.frame_ids.append(frame_id)
 
+    def fork(self) -> LineStrip:
+        """An independent copy: the canvas copied, the per-frame lists copied (their items are immutable)."""
+        twin = LineStrip()
+        twin.canvas = self.canvas.fork()
+        twin.gaze_points = list(self.gaze_points)
+        twin.frame_ids = list(self.frame_ids)
+        return twin
+
     @property
     def empty(self) -> bool:
         return not self.frame_ids

@@ -3,9 +3,12 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from darkread.cloud.ocr.base import OcrLine, OcrResult
 from darkread.proto.messages import Frame, pack_mask
 
 LINES = ["the quick brown fox jumps over", "the lazy dog while reading in", "the dark with an event camera"]
@@ -52,3 +55,19 @@ def reading_frames(seed: int = 0, lines: list[str] = LINES, first_seq: int = 0, 
                 t_us = t0_us + 40_000 * len(frames)
                 frames.append(Frame(seq, seq, t_us, (x0, y0), (float(u), float(v)), (0.0, 0.0), 1600, shape, bits))
     return frames
+
+
+@dataclass
+class CountingOcr:
+    """An OCR engine for tests of what is read when: reads a line image as its ink count, and counts the calls."""
+
+    name: str = "counting"
+    calls: list[tuple[int, int]] = field(default_factory=list)
+
+    def read(self, image: np.ndarray) -> OcrResult:
+        self.calls.append(image.shape)
+        text = f"ink {(image < 128).sum()}"
+        return OcrResult(text, [OcrLine(text, (0, 0, image.shape[1], image.shape[0]), 1.0)])
+
+    def ready(self) -> bool:
+        return True

@@ -16,7 +16,7 @@ give the same pages, which is how pages are rebuilt after a restart. A new page 
 
 from __future__ import annotations
 
-import copy
+import statistics
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -160,14 +160,14 @@ class Paginator:
             decided_seq, _ = self._undecided.popleft()
             if placement.outcome == "blank":
                 continue
-            weak = bool(self._scores) and placement.score < float(np.median(self._scores)) - self.cfg.weak_drop
+            weak = bool(self._scores) and placement.score < statistics.median(self._scores) - self.cfg.weak_drop
             if placement.outcome == "registered" and not weak:
                 page.registered += 1
                 self._scores.append(placement.score)
                 self._lost, self._checkpoint = [], None
             elif page.registered >= self.cfg.settled_frames:
                 if not self._lost:
-                    self._checkpoint = (copy.deepcopy(page.stitcher), page.version, page.registered, page.last_seq)
+                    self._checkpoint = (page.stitcher.fork(), page.version, page.registered, page.last_seq)
                 self._lost.append((decided_seq, placement.frame))
                 if self._is_lost():
                     self._restart_from_lost()
@@ -194,7 +194,7 @@ class Paginator:
         """The page's current version (cached: rendering costs about 100 ms)."""
         if page.stitcher is None or (page.rendered is not None and page.rendered.version == page.version):
             return page.rendered
-        stitched = page.stitcher.snapshot()
+        stitched = page.stitcher.snapshot(positions=False)
         if stitched.image.size == 0:
             return None
         ink = stitched.image

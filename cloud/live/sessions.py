@@ -4,8 +4,14 @@ session's current page; questions read the page that is already there.
 Per session one asyncio task pulls newly stored frames from the store (so a backlog costs no
 memory and a restart rebuilds the pages the same way), and hands them in batches to the stitch
 thread pool; the session's paginator is used by one thread at a time (``lock``). Rendering and
-OCR run in their own small pool so a question does not queue behind other sessions' stitching.
-Sessions idle for ``live_idle_s`` are dropped from memory (rebuilt when asked again).
+OCR run in their own small pool so a question does not queue behind other sessions' stitching,
+and a question waiting for the page ends the batch being stitched after its current frame: it
+waits for at most one frame, then for the frames stored before it only as long as
+``catch_up_s``, and otherwise answers from the page as stitched so far (its version says how
+far). While a question is being rendered and read, stitching of every session pauses (at most
+``questions_first_s`` per batch, so it never starves): on a busy host the OCR of an answer
+otherwise shared the cores with a stitching backlog that no answer waits for. Sessions idle for
+``live_idle_s`` are dropped from memory (rebuilt when asked again).
 """
 
 from __future__ import annotations
@@ -14,7 +20,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -34,7 +40,8 @@ class LiveConfig:
     batch_frames: int = 32  # frames stitched per turn (a question waits at most one batch)
     stitch_threads: int = 2
     ocr_threads: int = 1
-    catch_up_s: float = 2.0  # a question first waits this long at most for frames stored before it
+    catch_up_s: float = 0.3  # a question first waits this long at most for frames stored before it
+    questions_first_s: float = 0.5  # stitching pauses this long at most while a question is read (OCR gets the CPU)
     push_interval_s: float = 1.0  # live push: at most one page update per session this often
     live_idle_s: float = 300.0  # a session untouched this long leaves memory
 
@@ -71,6 +78,7 @@ class SessionPages:
         self.read_locks: dict[int, asyncio.Lock] = {}
         self.subscribers: set[asyncio.Queue[dict[str, Any]]] = set()
         self._breaks_applied = 0
+        self._renders_waiting = 0  # questions waiting for ``lock``: the stitch thread stops its batch early
         self._wake = asyncio.Event()
         self._wake.set()  # catch up with what is stored (after a restart: rebuild)
         self._progress = asyncio.Condition()
@@ -89,20 +97,31 @@ class SessionPages:
     async def _run(self) -> None:
         loop = asyncio.get_running_loop()
         store, batch = self.owner.store, self.owner.cfg.batch_frames
+        frames: list[StoredFrame] = []  # fetched, not yet stitched (a question cut the batch short)
+        breaks: list[PageBreak] = []
         while True:
             await self._wake.wait()
             self._wake.clear()
             try:
-                while frames := await store.frames(self.session_id, after_seq=self.stitched_seq, limit=batch):
-                    # read after the frames: the glasses send in seq order and commits keep it,
-                    # so every break before these frames is visible now
-                    breaks = await store.page_breaks(self.session_id)
+                while True:
+                    if not frames:
+                        frames = await store.frames(self.session_id, after_seq=self.stitched_seq, limit=batch)
+                        if not frames:
+                            break
+                        # read after the frames: the glasses send in seq order and commits keep
+                        # it, so every break before these frames is visible now
+                        breaks = await store.page_breaks(self.session_id)
+                    await self.owner.questions_first()
                     async with self.lock:
-                        await loop.run_in_executor(self.owner.stitch_pool, self._stitch, frames, breaks)
-                    self.stitched_seq = frames[-1].seq
+                        done = await loop.run_in_executor(self.owner.stitch_pool, self._stitch, frames, breaks)
+                    self.stitched_seq = frames[done - 1].seq
+                    frames = frames[done:]
                     self._maybe_push()
+                    async with self._progress:
+                        self._progress.notify_all()
             except StoreError as exc:
                 log.warning("session %s: pages wait for the store: %s", self.session_id, exc)
+                frames = []
                 await asyncio.sleep(1.0)
                 self._wake.set()
                 continue
@@ -110,9 +129,10 @@ class SessionPages:
             async with self._progress:
                 self._progress.notify_all()
 
-    def _stitch(self, frames: list[StoredFrame], breaks: list[PageBreak]) -> None:
-        """Worker thread: every frame once, with the explicit breaks before it applied first."""
-        for frame in frames:
+    def _stitch(self, frames: list[StoredFrame], breaks: list[PageBreak]) -> int:
+        """Worker thread: frames in order, each once, with the explicit breaks before it applied
+        first; stops early (after at least one) when a question waits for the page. How many it took."""
+        for done, frame in enumerate(frames, 1):
             while self._breaks_applied < len(breaks) and breaks[self._breaks_applied].seq < frame.seq:
                 self.paginator.page_break()
                 self._breaks_applied += 1
@@ -120,12 +140,19 @@ class SessionPages:
                 self.paginator.add(frame)
             except ValueError as exc:  # a frame the stitcher cannot use (too small): left out, once
                 log.warning("session %s: frame seq %d not stitched: %s", self.session_id, frame.seq, exc)
+            if self._renders_waiting or self.owner.reading:
+                return done
+        return len(frames)
 
-    async def caught_up(self, timeout_s: float) -> bool:
-        """Wait until every frame stored so far is stitched (at most ``timeout_s``)."""
+    async def caught_up(self, timeout_s: float, upto_seq: int | None = None) -> bool:
+        """Wait until every frame stored so far (or up to ``upto_seq``) is stitched, at most ``timeout_s``."""
+
+        def reached() -> bool:
+            return self.idle or (upto_seq is not None and self.stitched_seq >= upto_seq)
+
         async with self._progress:
             try:
-                await asyncio.wait_for(self._progress.wait_for(lambda: self.idle), timeout_s)
+                await asyncio.wait_for(self._progress.wait_for(reached), timeout_s)
             except TimeoutError:
                 return False
         return True
@@ -149,9 +176,16 @@ class SessionPages:
     async def render(self, index: int | None = None) -> RenderedPage:
         self.last_used = time.monotonic()
         loop = asyncio.get_running_loop()
-        async with self.lock:
+        self._renders_waiting += 1  # the stitch thread ends its batch after the current frame
+        try:
+            await self.lock.acquire()
+        finally:
+            self._renders_waiting -= 1
+        try:
             page = self._page(index)
             rendered = await loop.run_in_executor(self.owner.ocr_pool, self.paginator.render, page)
+        finally:
+            self.lock.release()
         if rendered is None:
             raise NoPageError(f"page {page.index} of session {self.session_id!r} has no ink yet")
         return rendered
@@ -245,6 +279,9 @@ class LivePages:
         self.stitch_pool = ThreadPoolExecutor(cfg.stitch_threads, thread_name_prefix="darkread-stitch")
         self.ocr_pool = ThreadPoolExecutor(cfg.ocr_threads, thread_name_prefix="darkread-ocr")
         self._sessions: dict[str, SessionPages] = {}
+        self.reading = 0  # questions being rendered and read now (stitching gives way to them)
+        self._no_reading = asyncio.Event()
+        self._no_reading.set()
 
     def get(self, session_id: str) -> SessionPages:
         """The session's pages, started (and rebuilt from the store) on first use."""
@@ -266,18 +303,39 @@ class LivePages:
     def live_sessions(self) -> int:
         return len(self._sessions)
 
-    async def ask(self, session_id: str, index: int | None = None) -> Answer:
+    async def ask(self, session_id: str, index: int | None = None, upto_seq: int | None = None) -> Answer:
+        """Read the page; first wait (``catch_up_s`` at most) for the frames up to ``upto_seq``
+        (the last seq stored when the question came; None: everything stored)."""
         pages = self.get(session_id)
         started = time.perf_counter()
-        done = await pages.caught_up(self.cfg.catch_up_s)
+        done = await pages.caught_up(self.cfg.catch_up_s, upto_seq)
         waited = time.perf_counter()
-        reading, rendered = await pages.read(index)
+        with self.answering():
+            reading, rendered = await pages.read(index)
         log.info(
             "session %s: page %d v%d, waited %.0f ms for stitching, rendered and read %d of %d lines in %.0f ms",
             session_id, reading.index, reading.version, (waited - started) * 1000, reading.lines_read,
             len(rendered.bands), (time.perf_counter() - waited) * 1000,
         )  # fmt: skip
         return Answer(reading, rendered, frames_pending=not done)
+
+    @contextlib.contextmanager
+    def answering(self) -> Iterator[None]:
+        """A question is being rendered and read: stitching gives way meanwhile."""
+        self.reading += 1
+        self._no_reading.clear()
+        try:
+            yield
+        finally:
+            self.reading -= 1
+            if not self.reading:
+                self._no_reading.set()
+
+    async def questions_first(self) -> None:
+        """Before a stitch batch: wait while questions are being read (``questions_first_s`` at most)."""
+        if self.reading:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._no_reading.wait(), self.cfg.questions_first_s)
 
     async def events(self, session_id: str) -> AsyncIterator[dict[str, Any]]:
         pages = self.get(session_id)

@@ -44,7 +44,12 @@ class RapidOcrBackend:
                 raise OcrUnavailableError(
                     "rapidocr is not installed (pip install 'rapidocr>=3' onnxruntime)", backend=self.name
                 ) from exc
-            self._engine = RapidOCR(params=self._params)
+            engine = RapidOCR(params=self._params)
+            # rapidocr 3 loads its models on first use: a second and more on the first question
+            # (and its CPU counted against it); ``ready`` loads them now
+            for load in ("_load_det_model", "_load_rec_model"):
+                getattr(engine, load, lambda: None)()
+            self._engine = engine
         return self._engine
 
     def ready(self) -> bool:

@@ -18,6 +18,7 @@ import asyncio
 import json
 import logging
 import sqlite3
+import threading
 import time
 from collections.abc import Callable
 from contextlib import closing
@@ -155,6 +156,11 @@ class SqliteStore:
             raise StoreError(f"cannot open the database {self.db_path}: {exc}") from exc
         self._writer = GroupCommitWriter(self._connect)
         self._changes = ChangeFeed()
+        # one read connection per worker thread, kept: opening one cost more than the query
+        # (the live pages read every few frames)
+        self._local = threading.local()
+        self._readers: list[sqlite3.Connection] = []
+        self._readers_lock = threading.Lock()
 
     def subscribe(self, listener: Listener) -> Callable[[], None]:
         return self._changes.subscribe(listener)
@@ -165,12 +171,29 @@ class SqliteStore:
         conn.execute("PRAGMA synchronous=FULL")  # a commit is on disk before we ack
         return conn
 
+    def _reader(self) -> sqlite3.Connection:
+        conn: sqlite3.Connection | None = getattr(self._local, "conn", None)
+        if conn is None:
+            conn = self._local.conn = self._connect()
+            with self._readers_lock:
+                self._readers.append(conn)
+        return conn
+
+    def _drop_reader(self) -> None:
+        conn = getattr(self._local, "conn", None)
+        self._local.conn = None
+        if conn is not None:
+            with self._readers_lock:
+                if conn in self._readers:
+                    self._readers.remove(conn)
+            conn.close()
+
     async def _read(self, query: Callable[[sqlite3.Connection], T]) -> T:
         def run() -> T:
             try:
-                with closing(self._connect()) as conn:
-                    return query(conn)
+                return query(self._reader())
             except sqlite3.Error as exc:
+                self._drop_reader()  # the next read starts on a fresh connection
                 raise StoreError(f"read failed: {exc}") from exc
 
         return await asyncio.to_thread(run)
@@ -288,6 +311,10 @@ class SqliteStore:
 
     async def close(self, timeout_s: float = 30.0) -> None:
         await asyncio.to_thread(self._writer.close, timeout_s)
+        with self._readers_lock:
+            readers, self._readers = self._readers, []
+        for conn in readers:
+            conn.close()
 
     # --- reads --------------------------------------------------------------------------------
 

@@ -121,6 +121,7 @@ def test_ask_benchmark_writes_its_keys(tmp_path: Path) -> None:
     figures = run_smoke("ask", tmp_path)
     assert set(figures) == {
         "read_demo_answer_ms", "ask_p95_ms_300", "cloud_cpu_ms_per_reading_s",
+        "cloud_cpu_ms_per_reading_s_frames", "cloud_cpu_ms_per_reading_s_views", "cloud_cpu_ms_per_reading_s_asking_2hz",
         "wearers_ask_p95_ms_20", "wearers_frames_exactly_once_20",
     }
     assert figures["wearers_frames_exactly_once_20"] == 1.0

@@ -47,6 +47,14 @@ def test_rapidocr_reads_a_clean_line_at_x_height_10(rapid: RapidOcrBackend) -> N
     assert result.lines[0].confidence is not None and result.lines[0].confidence > 0.8
 
 
+def test_ready_loads_the_models_so_the_first_question_does_not() -> None:
+    """rapidocr 3 loads its detection and recognition models on first use; ``ready`` (the
+    service's warm-up and /readyz) must do it, or the first ask pays a second or more for it."""
+    backend = RapidOcrBackend()
+    assert backend.ready()
+    assert backend._engine.text_det is not None and backend._engine.text_rec is not None
+
+
 def test_rapidocr_reads_two_lines_in_order(rapid: RapidOcrBackend) -> None:
     first, second = render_line("reading in the dark", 10), render_line("with event cameras", 10)
     width = max(first.shape[1], second.shape[1])

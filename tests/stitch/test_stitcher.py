@@ -258,3 +258,64 @@ def test_a_walking_head_jump_registers_to_the_lines_already_read_not_a_second_co
     assert f1 > 0.98  # measured 0.998-1.000
     assert abs(page.image.shape[0] - truth.image.shape[0]) <= 4
     assert page.frames_used >= 0.95 * len(jumped)
+
+
+def test_a_fork_is_independent_and_continues_exactly_like_its_original(reading) -> None:
+    """``fork`` (snapshots, paging checkpoints) shares the immutable frames instead of deep-copying
+    the whole history, and must still behave as a deep copy would."""
+    import copy
+
+    frames = reading.frames
+    half = len(frames) // 2
+    original = PageStitcher()
+    for frame in frames[:half]:
+        original.add(frame)
+    fork, deep = original.fork(), copy.deepcopy(original)
+    before = original.page().ink_probability.copy()
+    for twin in (fork, deep):
+        for frame in frames[half:]:
+            twin.add(frame)
+        twin.flush()
+    np.testing.assert_array_equal(original.page().ink_probability, before)  # the original is untouched
+    forked, copied = fork.page(), deep.page()
+    np.testing.assert_array_equal(forked.ink_probability, copied.ink_probability)
+    assert forked.lines == copied.lines and forked.frame_positions == copied.frame_positions
+    assert forked.frames_used == copied.frames_used and forked.frames_dropped == copied.frames_dropped
+
+
+def test_a_snapshot_leaves_the_stitcher_as_it_was_and_can_skip_the_positions(reading) -> None:
+    stitcher = PageStitcher()
+    for frame in reading.frames[: len(reading.frames) // 2]:
+        stitcher.add(frame)
+    full, bare = stitcher.snapshot(), stitcher.snapshot(positions=False)
+    np.testing.assert_array_equal(full.ink_probability, bare.ink_probability)
+    assert full.lines == bare.lines and bare.frame_positions == {} and len(full.frame_positions) >= stitcher.frames_used > 0
+    for frame in reading.frames[len(reading.frames) // 2 :]:
+        stitcher.add(frame)
+    stitcher.flush()
+    np.testing.assert_array_equal(stitcher.page().ink_probability, stitch_page(reading.frames).ink_probability)
+
+
+def test_frame_positions_are_every_frame_moved_onto_the_page() -> None:
+    from darkread.stitch.stitcher import _apply, _apply_all
+
+    affine = np.array([[0.99, -0.05, 3.5], [0.05, 0.99, -7.25]])
+    points = {i: (float(i) * 1.5, 100.0 - i) for i in range(50)}
+    moved = _apply_all(affine, points)
+    assert list(moved) == list(points) and _apply_all(affine, {}) == {}
+    for i, xy in points.items():
+        assert np.allclose(moved[i], _apply(affine, xy), atol=1e-9)
+
+
+def test_the_closed_form_drift_line_is_the_least_squares_line() -> None:
+    from darkread.stitch.stitcher import predict_correction
+
+    rng = np.random.default_rng(3)
+    times = np.sort(rng.integers(0, 150_000, 6))
+    values = rng.normal(0, 3, (6, 2)) + np.outer(times, [2e-5, -1e-5])
+    recent = [(int(t), v) for t, v in zip(times, values)]
+    centre = times.mean()
+    slope, intercept = np.polyfit(times - centre, values, 1)
+    t_next = int(times[-1]) + 20_000
+    assert np.allclose(predict_correction(recent, t_next), intercept + slope * (t_next - centre), atol=1e-9)
+    assert np.allclose(predict_correction(recent[:2], t_next), np.median(values[:2], axis=0))

@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 import pytest
-from page_readings import LINES, reading_frames
+from page_readings import LINES, CountingOcr, reading_frames
 
 from darkread.cloud.live import LineReader, Paginator, PagingConfig
-from darkread.cloud.ocr.base import OcrLine, OcrResult
 from darkread.cloud.store import StoredFrame
 from darkread.cloud.stream import stored_frame
 
@@ -61,22 +58,6 @@ def test_frames_at_the_same_gaze_within_the_gap_are_skipped() -> None:
     every = paginate(records)
     thinned = paginate(records, PagingConfig(min_stitch_gap_us=100_000, same_place_px=60))
     assert thinned.skipped > 0 and thinned.current.version < every.current.version
-
-
-@dataclass
-class CountingOcr:
-    """Reads a line image as its ink count, and counts the calls."""
-
-    name: str = "counting"
-    calls: list[tuple[int, int]] = field(default_factory=list)
-
-    def read(self, image: np.ndarray) -> OcrResult:
-        self.calls.append(image.shape)
-        text = f"ink {(image < 128).sum()}"
-        return OcrResult(text, [OcrLine(text, (0, 0, image.shape[1], image.shape[0]), 1.0)])
-
-    def ready(self) -> bool:
-        return True
 
 
 def test_a_version_is_read_once_and_unchanged_lines_are_not_read_again() -> None:

@@ -106,3 +106,34 @@ async def test_a_failing_write_fails_alone(tmp_path: Path) -> None:
         assert isinstance(results[1], StoreError)
     finally:
         await store.close()
+
+
+async def test_reads_keep_one_connection_per_thread_and_see_every_commit(tmp_path: Path) -> None:
+    """The live pages read every few frames: a read reuses its worker thread's connection (opening
+    one cost more than the query), still sees each commit at once, and close() closes them all."""
+    store = SqliteStore(tmp_path)
+    try:
+        await store.open_session(SessionSpec("s", "g", "frames", (1280, 720), (100, 200)))
+        for seq in range(40):
+            await store.add_frame("s", frame(seq))
+            assert [f.seq for f in await store.frames("s", after_seq=seq - 1)] == [seq]  # read after write
+        await asyncio.gather(*(store.page_breaks("s") for _ in range(64)))
+        readers = list(store._readers)
+        assert 1 <= len(readers) <= threading.active_count()  # per thread, not per read
+    finally:
+        await store.close()
+    assert store._readers == []
+    with pytest.raises(sqlite3.ProgrammingError):  # closed with the store
+        readers[0].execute("SELECT 1")
+
+
+async def test_a_failed_read_starts_the_next_one_on_a_fresh_connection(tmp_path: Path) -> None:
+    store = SqliteStore(tmp_path)
+    try:
+        await store.open_session(SessionSpec("s", "g", "frames", (1280, 720), (100, 200)))
+        with pytest.raises(StoreError, match="read failed"):
+            await store._read(lambda conn: conn.execute("SELECT * FROM no_such_table").fetchall())
+        await store.add_frame("s", frame(0))
+        assert [f.seq for f in await store.frames("s")] == [0]
+    finally:
+        await store.close()
