@@ -128,7 +128,8 @@ def test_a_store_failure_closes_the_connection_and_the_edge_resumes(tmp_path: Pa
     cloud.start()
     database = tmp_path / "cloud" / "darkread.sqlite3"
     with sqlite3.connect(database) as db:  # a row the store does not expect: its INSERT of seq 5 fails
-        db.execute("INSERT INTO frames VALUES ('clash', 5, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, x'00')")
+        db.execute("INSERT INTO frames (session_id, seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch,"
+                   " events_used, rows, cols, bits) VALUES ('clash', 5, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, x'00')")
     spool = tmp_path / "spool"
     edge = subprocess.Popen(edge_command(recording, port, spool, "clash", tiny_model(tmp_path / "tiny.onnx")),
                             env=edge_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
