@@ -54,6 +54,7 @@ from darkread.proto.messages import (
     Page,
     View,
     Welcome,
+    content_version,
     decode,
     encode,
 )
@@ -190,8 +191,9 @@ class StreamConnection:
     def _on_streaming(self, message: Message) -> _Pending | None:
         assert self.hello is not None  # noqa: S101 - state invariant, not input validation
         store, session_id = self.context.store, self.hello.session_id
-        if self.hello.v < 2 and (isinstance(message, View) or getattr(message, "enc", "bits") != "bits"):
-            raise UnexpectedMessageError(f"{message.TYPE} with version 2 content in a version 1 session")
+        needs = content_version(message)
+        if self.hello.v < needs:
+            raise UnexpectedMessageError(f"{message.TYPE} with version {needs} content in a version {self.hello.v} session")
         if isinstance(message, Frame | View | Page | Gaze | NewPage):
             self._contiguous(message.seq)
         if isinstance(message, Frame | View):  # a fixation's fused view: stored with its levels and frame count

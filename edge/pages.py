@@ -48,4 +48,4 @@ class PageBuilder:
             return None
         shape, bits = pack_mask(page.image)
         lines = tuple(tuple(map(int, box)) for box in page.lines)
-        return Page(seq=0, page_id=0, t_us=int(t_us), shape=shape, bits=bits, lines=lines, enc="png")  # v2: a 1-bit PNG
+        return Page(seq=0, page_id=0, t_us=int(t_us), shape=shape, bits=bits, lines=lines, enc="g4")  # v3: CCITT G4, the smallest

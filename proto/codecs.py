@@ -1,31 +1,40 @@
 """How masks and grey-level views are compressed on the wire (protocol version 2).
 
 A binary mask is always held as ``mask_bits.pack_bits`` output (the v1 layout); on the wire it
-goes as that (``"bits"``), zlib of it (``"zlib"``) or a 1-bit PNG (``"png"``, black = ink). A view's
-grey levels (one byte per pixel, each < ``n_levels``) go as an 8-bit grey PNG of the level
-indices (``"png"``) or zlib of the bytes (``"zlib"``).
+goes as that (``"bits"``), zlib of it (``"zlib"``), a 1-bit PNG (``"png"``, black = ink) or, from
+version 3, a bare CCITT Group 4 stream (``"g4"``, ITU-T T.6, ink = black: the fax code for text, the
+smallest of them on stitched pages). A view's grey levels (one byte per pixel, each < ``n_levels``)
+go as an 8-bit grey PNG of the level indices (``"png"``) or zlib of the bytes (``"zlib"``).
 
 Decoding is hostile-input safe: zlib is inflated with a length bound (a small message cannot
 expand into gigabytes), a PNG's header is read and checked against the declared shape before any
-pixel is decoded, and every failure is a ``BadMaskError``.
+pixel is decoded, a G4 stream carries no size of its own (the decoder wraps it in a TIFF header
+built from the message's ``shape``, already checked against the protocol's limits) and must end
+with T.6's end-of-block code (a cut stream is refused), and every failure is a ``BadMaskError``.
 """
 
 from __future__ import annotations
 
+import io
 import struct
 import zlib
 
 import numpy as np
+from PIL import Image
 
 from darkread.image_codec import ImageCodecError, decode_image, encode_png, encode_png_bilevel
 from darkread.mask_bits import pack_bits, packed_length, unpack_bits
 
 from .errors import BadMaskError
 
-MASK_ENCODINGS = ("bits", "zlib", "png")
+MASK_ENCODINGS = ("bits", "zlib", "png", "g4")
 LEVEL_ENCODINGS = ("png", "zlib")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 ZLIB_LEVEL = 6
+G4_EOFB = 0x001001  # T.6 end of facsimile block: two EOL codes, 000000000001 000000000001
+_TIFF_TAGS = {"width": 256, "height": 257, "bits": 258, "compression": 259, "photometric": 262,
+              "offsets": 273, "samples": 277, "rows_per_strip": 278, "byte_counts": 279}  # fmt: skip
+_PIL_ERRORS = (OSError, ValueError, SyntaxError, EOFError, struct.error, Image.DecompressionBombError)
 
 
 def _inflate(data: bytes, size: int) -> bytes:
@@ -63,6 +72,64 @@ def _decode_png(data: bytes, shape: tuple[int, int], depths: tuple[int, ...]) ->
     return image
 
 
+def encode_g4(shape: tuple[int, int], bits: bytes) -> bytes:
+    """Packed mask bits -> the bare T.6 (Group 4) stream of the mask, ink coded as black.
+
+    libtiff (in Pillow's wheels) writes it as the single strip of a TIFF; the strip is the stream.
+    Pillow codes a mode-"1" pixel of value 1 as a fax *black* run, so the ink goes in as 1.
+    """
+    ink = unpack_bits(shape, bits).astype(bool)
+    out = io.BytesIO()
+    Image.fromarray(ink).save(out, "TIFF", compression="group4", strip_size=max(1, ink.size))  # one strip
+    tiff_bytes = out.getvalue()
+    with Image.open(io.BytesIO(tiff_bytes)) as tiff:
+        offsets, counts = tiff.tag_v2[_TIFF_TAGS["offsets"]], tiff.tag_v2[_TIFF_TAGS["byte_counts"]]
+    if len(offsets) != 1:
+        raise RuntimeError(f"Pillow wrote {len(offsets)} G4 strips, not one (Pillow too old for strip_size?)")
+    return tiff_bytes[offsets[0]:offsets[0] + counts[0]]
+
+
+def g4_tiff(shape: tuple[int, int], stream: bytes) -> bytes:
+    """A bare G4 stream -> a one-strip TIFF of ``shape`` around it (the size comes from us, not the stream)."""
+    height, width = shape
+    short, long = 3, 4
+    tags = [  # ascending tag order, as TIFF requires; photometric 1 (BlackIsZero): Pillow's reading of fax black = 1
+        ("width", long, width), ("height", long, height), ("bits", short, 1), ("compression", short, 4),
+        ("photometric", short, 1), ("offsets", long, 8), ("samples", short, 1), ("rows_per_strip", long, height),
+        ("byte_counts", long, len(stream)),
+    ]
+    entries = b"".join(
+        struct.pack("<HHII", _TIFF_TAGS[name], kind, 1, value) if kind == long
+        else struct.pack("<HHIHH", _TIFF_TAGS[name], kind, 1, value, 0)
+        for name, kind, value in tags
+    )
+    return b"II*\0" + struct.pack("<I", 8 + len(stream)) + stream + struct.pack("<H", len(tags)) + entries + b"\0" * 4
+
+
+def _ends_with_eofb(stream: bytes) -> bool:
+    """Whether the stream ends with T.6's EOFB followed by less than a byte of zero padding."""
+    tail = int.from_bytes(stream[-4:], "big")
+    if len(stream) < 3 or tail == 0:
+        return False
+    padding = (tail & -tail).bit_length() - 1
+    return padding < 8 and (tail >> padding) & 0xFFFFFF == G4_EOFB
+
+
+def decode_g4(shape: tuple[int, int], stream: bytes) -> bytes:
+    """A bare G4 stream of a ``shape`` mask -> packed bits; anything else is a ``BadMaskError``."""
+    if not _ends_with_eofb(stream):
+        raise BadMaskError(f"G4 stream of {len(stream)} bytes does not end with the end-of-block code (cut or not G4)")
+    try:
+        with Image.open(io.BytesIO(g4_tiff(shape, stream))) as image:
+            image.load()
+            pixels = np.asarray(image)
+    except _PIL_ERRORS as exc:
+        raise BadMaskError(f"G4 stream does not decode ({type(exc).__name__}: {exc})"[:300]) from None
+    if pixels.shape != shape:
+        raise BadMaskError(f"G4 stream decoded to {pixels.shape}, not {shape}")
+    return pack_bits(pixels)
+
+
 def compress_bits(shape: tuple[int, int], bits: bytes, enc: str) -> bytes:
     """Packed mask bits -> their wire form under ``enc``."""
     if enc == "bits":
@@ -72,6 +139,8 @@ def compress_bits(shape: tuple[int, int], bits: bytes, enc: str) -> bytes:
     if enc == "png":
         ink = unpack_bits(shape, bits)
         return encode_png_bilevel(np.where(ink > 0, 0, 255).astype(np.uint8))
+    if enc == "g4":
+        return encode_g4(shape, bits)
     raise BadMaskError(f"unknown mask encoding {enc!r} (known: {', '.join(MASK_ENCODINGS)})")
 
 
@@ -83,6 +152,8 @@ def decompress_bits(shape: tuple[int, int], data: bytes, enc: str) -> bytes:
         return _inflate(data, packed_length(shape))
     if enc == "png":
         return pack_bits(_decode_png(data, shape, (1, 8)) < 128)
+    if enc == "g4":
+        return decode_g4(shape, data)
     raise BadMaskError(f"unknown mask encoding {enc!r} (known: {', '.join(MASK_ENCODINGS)})")
 
 

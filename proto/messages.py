@@ -5,8 +5,8 @@ Every message is one msgpack map with a ``type`` string; each type is a frozen d
 ``decode`` checks everything a hostile peer could get wrong and raises only ``ProtocolError``
 subclasses (see ``errors.py``). Unknown extra keys are ignored so a peer may add optional
 fields without a version bump; anything that changes meaning bumps ``PROTOCOL_VERSION``.
-Version 2 adds compressed masks (``enc``, see ``codecs.py``) and the fused ``view``; a server
-still accepts version 1 clients (``SUPPORTED_VERSIONS``).
+Version 2 adds compressed masks (``enc``, see ``codecs.py``) and the fused ``view``; version 3 the
+CCITT G4 page (``enc="g4"``); a server still accepts version 1 and 2 clients (``SUPPORTED_VERSIONS``).
 The field list with units and limits is in ``README.md`` next to this file.
 """
 
@@ -35,8 +35,8 @@ from .errors import (
     VersionMismatchError,
 )
 
-PROTOCOL_VERSION = 2
-SUPPORTED_VERSIONS = (1, 2)  # what a server accepts in hello.v (and answers in welcome.v)
+PROTOCOL_VERSION = 3
+SUPPORTED_VERSIONS = (1, 2, 3)  # what a server accepts in hello.v (and answers in welcome.v)
 MAX_LEVELS = 16  # grey levels of a view
 DEFAULT_MAX_MESSAGE_BYTES = 4 * 1024 * 1024
 MAX_MASK_PIXELS = 16 * 1024 * 1024  # 16 Mpx: a stitched page of 4096 x 4096 fits
@@ -202,13 +202,19 @@ def pack_mask(mask: np.ndarray) -> tuple[tuple[int, int], bytes]:
     return shape, pack_bits(array)
 
 
-def check_mask(shape: tuple[int, int], bits: bytes) -> None:
-    """Raise ``BadMaskError`` unless ``bits`` is exactly the packed form of a ``shape`` mask."""
+def check_mask_shape(shape: tuple[int, int]) -> None:
+    """Raise ``BadMaskError`` unless ``shape`` is within the protocol's limits (checked before decoding)."""
     height, width = shape
     if height < 1 or width < 1 or height > MAX_SIDE or width > MAX_SIDE:
         raise BadMaskError(f"mask shape {shape} must be positive and at most {MAX_SIDE} per side")
     if height * width > MAX_MASK_PIXELS:
         raise BadMaskError(f"mask shape {shape} exceeds {MAX_MASK_PIXELS} pixels")
+
+
+def check_mask(shape: tuple[int, int], bits: bytes) -> None:
+    """Raise ``BadMaskError`` unless ``bits`` is exactly the packed form of a ``shape`` mask."""
+    check_mask_shape(shape)
+    height, width = shape
     expected = packed_length(shape)
     if len(bits) != expected:
         raise BadMaskError(f"mask of shape {shape} needs {expected} bytes of bits, got {len(bits)}")
@@ -337,7 +343,7 @@ class Page(_Checked):
     shape: tuple[int, int] = _spec(_mask_shape)
     bits: bytes = _spec(_bytes, repr=False)
     lines: tuple[tuple[int, int, int, int], ...] = _spec(_list_of(_box), ())  # (x0, y0, x1, y1)
-    enc: str = _spec(_choice(MASK_ENCODINGS), "bits")  # v2: "png" sends a 1-bit PNG
+    enc: str = _spec(_choice(MASK_ENCODINGS), "bits")  # v2: "png" a 1-bit PNG; v3: "g4" a CCITT G4 stream
 
     def mask(self) -> np.ndarray:
         return unpack_mask(self.shape, self.bits)
@@ -399,6 +405,14 @@ class View(_Checked):
         values["levels"] = decompress_levels(shape, _bytes(values.get("levels"), "view.levels"), enc)
 
 
+def content_version(message: Message) -> int:
+    """The lowest protocol version that has everything ``message`` uses (a session may not send newer)."""
+    enc = getattr(message, "enc", "bits")
+    if enc == "g4":
+        return 3
+    return 2 if isinstance(message, View) or enc != "bits" else 1
+
+
 def _bits_to_wire(message: Frame | Page, payload: dict[str, Any]) -> None:
     payload["bits"] = compress_bits(message.shape, message.bits, message.enc)
 
@@ -407,8 +421,9 @@ def _bits_from_wire(cls: type[Frame] | type[Page], values: dict[str, Any]) -> No
     enc = values.get("enc", "bits")
     if enc == "bits":
         return  # v1 layout: checked by the message itself
-    enc = _choice(MASK_ENCODINGS)(enc, f"{cls.TYPE}.enc")
+    enc = _choice(MASK_ENCODINGS if cls is Page else MASK_ENCODINGS[:2])(enc, f"{cls.TYPE}.enc")
     shape = _mask_shape(values.get("shape"), f"{cls.TYPE}.shape")
+    check_mask_shape(shape)  # the protocol's limits before a byte is decompressed
     values["bits"] = decompress_bits(shape, _bytes(values.get("bits"), f"{cls.TYPE}.bits"), enc)
 
 
@@ -557,6 +572,8 @@ __all__ = [
     "View",
     "Welcome",
     "check_mask",
+    "check_mask_shape",
+    "content_version",
     "decode",
     "encode",
     "pack_mask",

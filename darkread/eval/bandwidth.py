@@ -3,8 +3,8 @@
 Per recording (one page): one RGB snapshot (raw, PNG, JPEG at several qualities), the whole event
 stream as EVT3, the foveated event stream as EVT3, the stream the glasses sent (encoded wire
 messages as counted by the uplink: one fused view per fixation in the default on-change mode,
-zlib frames in every-window mode), and the stitched page as one encoded ``Page`` message (a 1-bit
-PNG, protocol version 2). Streams are also given per second. The ratios sit next to the paper's
+zlib frames in every-window mode), and the stitched page as one encoded ``Page`` message (a CCITT
+G4 stream, protocol version 3, as ``edge/pages.py`` sends it). Streams are also given per second. The ratios sit next to the paper's
 figures: ~98 % of events removed by foveation, the frame stream ~20x below one RGB image, the
 stitched page ~2400x below it.
 """
@@ -61,9 +61,12 @@ def frame_message_bytes(shape: tuple[int, int] | None = None) -> int:
     return len(encode(message))
 
 
-def page_message_bytes(ink: np.ndarray, lines: list[tuple[int, int, int, int]] | None = None, enc: str = "png") -> int:
+PAGE_ENC = "g4"  # what edge/pages.py sends
+
+
+def page_message_bytes(ink: np.ndarray, lines: list[tuple[int, int, int, int]] | None = None, enc: str = PAGE_ENC) -> int:
     """Bytes of one encoded ``Page`` wire message holding the binary page ``ink`` (1 = ink), as the
-    glasses send it (``enc="png"``: a 1-bit PNG; ``"bits"``: protocol version 1)."""
+    glasses send it (``enc="g4"``: CCITT G4, v3; ``"png"``: a 1-bit PNG, v2; ``"bits"``: v1)."""
     from darkread.proto.messages import Page, encode, pack_mask
 
     shape, bits = pack_mask(np.asarray(ink, dtype=np.uint8))

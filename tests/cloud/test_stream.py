@@ -109,7 +109,7 @@ def test_version_2_views_and_compressed_frames_are_stored_as_frame_records(serve
                 frames=3, events_used=4800, shape=(100, 200), n_levels=4, levels=levels.tobytes())
 
     async def scenario() -> None:
-        ws, welcome = await open_stream(server, "sess-v2")
+        ws, welcome = await open_stream(server, "sess-v2", v=2)
         assert welcome.v == 2
         async with ws:
             await ws.send(encode(Frame.of(frame(0).record(), seq=0, enc="zlib")))
@@ -194,7 +194,7 @@ def _raw_frame(**changes: Any) -> bytes:
 BAD_INPUTS = {
     "malformed msgpack": ([b"\xc1\x00\x00"], CloseCode.MALFORMED),
     "not a map": ([msgpack.packb([1, 2, 3])], CloseCode.MALFORMED),
-    "wrong protocol version": ([msgpack.packb({**msgpack.unpackb(encode(hello("x"))), "v": 3})], CloseCode.VERSION_MISMATCH),
+    "wrong protocol version": ([msgpack.packb({**msgpack.unpackb(encode(hello("x"))), "v": 4})], CloseCode.VERSION_MISMATCH),
     "frame before hello": ([encode(frame(0))], CloseCode.UNEXPECTED),
     "oversized message": (["hello", b"\x00" * 70_000], CloseCode.MESSAGE_TOO_BIG),
     "frame of the wrong shape": (["hello", encode(frame(0, shape=(50, 200)))], CloseCode.BAD_MASK),
@@ -288,6 +288,32 @@ def test_pages_mode_stores_pages_as_png(server: LiveServer) -> None:
     page = asyncio.run(server.context.store.latest_page("sess-pages"))
     assert page is not None and page.page_id == 7 and page.lines == ((5, 20, 80, 30),)
     np.testing.assert_array_equal(page.mask, mask)
+
+
+def test_a_g4_page_is_stored_in_version_3_and_refused_in_version_2(server: LiveServer) -> None:
+    mask = np.zeros((60, 90), np.uint8)
+    mask[20:30, 5:80:3] = 1
+    shape, bits = pack_mask(mask)
+    page = Page(seq=0, page_id=3, t_us=5, shape=shape, bits=bits, lines=((5, 20, 80, 30),), enc="g4")
+
+    async def scenario() -> None:
+        ws, welcome = await open_stream(server, "sess-g4", mode="pages")
+        assert welcome.v == 3
+        async with ws:
+            await ws.send(encode(page))
+            assert decode(await ws.recv(), max_bytes=LIMIT) == Ack(seq=0)
+        ws, welcome = await open_stream(server, "sess-g4-v2", mode="pages", v=2)
+        assert welcome.v == 2
+        async with ws:
+            await ws.send(encode(page))  # version 3 content
+            error, code, _ = await expect_error_close(ws)
+            assert code == CloseCode.UNEXPECTED and "version 3 content in a version 2 session" in error.message
+
+    asyncio.run(scenario())
+    stored = asyncio.run(server.context.store.latest_page("sess-g4"))
+    assert stored is not None and stored.page_id == 3
+    np.testing.assert_array_equal(stored.mask, mask)
+    assert asyncio.run(server.context.store.latest_page("sess-g4-v2")) is None
 
 
 def test_metrics_count_connections_messages_and_bytes(server: LiveServer) -> None:

@@ -1,5 +1,5 @@
-"""Protocol version 2: compressed masks, the fused view; golden fixtures (valid, truncated,
-hostile) in ``fixtures/`` and property tests of the codecs."""
+"""Protocol versions 2 and 3: compressed masks, the fused view, the G4 page; golden fixtures
+(valid, truncated, hostile) in ``fixtures/`` and property tests of the codecs."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from darkread.mask_bits import pack_bits
+from darkread.mask_bits import pack_bits, packed_length
 from darkread.proto.codecs import (
     LEVEL_ENCODINGS,
     MASK_ENCODINGS,
@@ -20,9 +20,10 @@ from darkread.proto.codecs import (
     compress_levels,
     decompress_bits,
     decompress_levels,
+    g4_tiff,
 )
 from darkread.proto.errors import BadMaskError, CloseCode, InvalidFieldError, ProtocolError
-from darkread.proto.messages import Frame, Hello, Page, View, decode, encode, pack_mask
+from darkread.proto.messages import Frame, Hello, Page, View, content_version, decode, encode, pack_mask
 
 FIXTURES = Path(__file__).parent / "fixtures"
 LIMIT = 1 << 20
@@ -40,10 +41,12 @@ VALID = {
                         n_levels=4, levels=LEVELS, enc="png", **GAZE),
     "v2_view_zlib": View(seq=12, view_id=4, t0_us=1000000, t_us=1200000, frames=3, events_used=4800, shape=(4, 5),
                          n_levels=4, levels=LEVELS, enc="zlib", **GAZE),
+    "v3_page_g4": Page(seq=10, page_id=2, t_us=2000000, shape=(4, 5), bits=SMALL_BITS, lines=((1, 1, 4, 3),), enc="g4"),
 }
 # zlib output is fixed for a given input and level; PNG bytes may differ between libpng builds,
 # so those fixtures are checked by decoding (and re-encoding round trips), not byte for byte
-BYTE_EXACT = {"v2_hello", "v2_frame_zlib", "v2_view_zlib"}
+# T.6 fixes every code of a G4 stream (libtiff ends it with EOFB), so the G4 page is byte exact too
+BYTE_EXACT = {"v2_hello", "v2_frame_zlib", "v2_view_zlib", "v3_page_g4"}
 HOSTILE = {
     "hostile_frame_zlib_bomb": BadMaskError,  # 16 MiB of zeros declared as a 4 x 5 mask
     "hostile_frame_zlib_trailing": BadMaskError,
@@ -51,6 +54,10 @@ HOSTILE = {
     "hostile_view_level_range": BadMaskError,
     "hostile_view_unknown_enc": InvalidFieldError,
     "hostile_view_png_colour": BadMaskError,
+    "hostile_page_g4_cut": BadMaskError,  # the stream's last two bytes (its end-of-block code) cut off
+    "hostile_page_g4_huge_shape": BadMaskError,  # a 44-byte stream declared as 65535 x 65535: refused before decoding
+    "hostile_page_g4_not_g4": BadMaskError,  # zero bytes (no valid code) before a real stream
+    "hostile_frame_g4": InvalidFieldError,  # G4 is for pages only
 }
 
 
@@ -112,6 +119,38 @@ def test_a_text_like_mask_compresses_well() -> None:
     assert len(compress_bits(shape, bits, "png")) < len(bits) / 3
 
 
+def test_a_g4_page_is_version_3_content_and_the_smallest_of_a_text_like_page() -> None:
+    import cv2
+
+    mask = np.zeros((200, 400), np.uint8)
+    for i, line in enumerate(("the quick brown fox jumps", "over the lazy dog, then", "reads a page in the dark")):
+        cv2.putText(mask, line, (20, 60 + 30 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.7, 1, 1)  # text, not a pattern
+    shape, bits = pack_mask(mask)
+    sizes = {enc: len(compress_bits(shape, bits, enc)) for enc in MASK_ENCODINGS}
+    assert sizes["g4"] == min(sizes.values()), sizes
+    page = Page(seq=0, page_id=0, t_us=0, shape=shape, bits=bits, enc="g4")
+    assert content_version(page) == 3 and content_version(Page(seq=0, page_id=0, t_us=0, shape=shape, bits=bits)) == 1
+    assert content_version(Page(seq=0, page_id=0, t_us=0, shape=shape, bits=bits, enc="png")) == 2
+
+
+def test_every_cut_of_a_g4_stream_is_refused() -> None:
+    mask = np.zeros((40, 120), np.uint8)
+    mask[10:30, 5:115:4] = 1
+    shape, bits = pack_mask(mask)
+    stream = compress_bits(shape, bits, "g4")
+    for end in range(len(stream)):
+        with pytest.raises(BadMaskError):
+            decompress_bits(shape, stream[:end], "g4")
+
+
+def test_the_g4_decoder_takes_the_size_from_the_message_not_the_stream() -> None:
+    stream = compress_bits((4, 5), SMALL_BITS, "g4")
+    tiff = g4_tiff((4, 5), stream)
+    assert tiff.startswith(b"II*\0") and stream in tiff
+    wider = decompress_bits((4, 9), stream, "g4")  # the same stream under another shape: that shape, whatever it says
+    assert len(wider) == packed_length((4, 9)) and wider != SMALL_BITS
+
+
 # --- property tests of the codecs -----------------------------------------------------------------
 
 masks = hnp.arrays(np.uint8, hnp.array_shapes(min_dims=2, max_dims=2, min_side=1, max_side=48), elements=st.integers(0, 1))
@@ -136,7 +175,7 @@ def test_levels_round_trip_through_every_encoding(levels: np.ndarray, enc: str) 
 
 
 @settings(deadline=None)
-@given(masks, st.sampled_from(("zlib", "png")))
+@given(masks, st.sampled_from(("zlib", "png", "g4")))
 def test_views_and_frames_round_trip_as_messages(mask: np.ndarray, enc: str) -> None:
     shape, bits = pack_mask(mask)
     frame = Frame(seq=1, frame_id=2, t_us=3, events_used=4, shape=shape, bits=bits, enc="zlib", **GAZE)
