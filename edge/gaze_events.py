@@ -11,9 +11,16 @@ place; its centre is the mean of its recent rows. Each new row waits in a look-a
 than the noise allows (``z`` standard deviations of the difference of the two means, the noise
 estimated online from the fixation rows themselves), the fixation has ended: the rows of the
 look-ahead still near the old centre stay with it, rows near neither are the saccade in flight, the
-rest start the next fixation. A fixation is accepted once it lasted ``min_fixation_ms``; two
-accepted fixations that the test cannot tell apart with all their rows are merged (a split by
-noise), so a fixation is reported when the next one is accepted, or at a blink. A gap in valid
+rest start the next fixation. A small step is often seen a few rows late, when its first rows
+already joined the run: on a change the split is refined over the run's last ``refine_rows`` rows
+and the look-ahead (the best two-segment split), and the rows after it move to the new fixation.
+Reading saccades run along the line, while the tracker's slow error wanders both ways: in the step
+and merge tests a vertical difference counts ``across_weight`` (0.5) of a horizontal one (a return
+sweep still shows by its 10-20 deg along the line; a page tilted by 20 deg loses 5 % of a
+saccade). With a single row of look-ahead (10 Hz) both stay off. A fixation is accepted once it
+lasted ``min_fixation_ms``; two accepted fixations that the test cannot tell apart with all their
+rows are merged (a split by noise), so a fixation is reported when the next one is accepted, or
+at a blink. A gap in valid
 rows longer than ``blink_gap_ms`` (invalid rows, or rows the tracker dropped) is a blink. A
 saccade that goes left by ``sweep_min_deg`` without rising more than ``sweep_max_rise_deg`` is a
 return sweep.
