@@ -70,3 +70,10 @@ def bandwidth_rows(results: Sequence[RecordingResult]) -> list[Bandwidth]:
 
 def held_out_fonts(results: Sequence[RecordingResult]) -> set[str]:
     return {str(r.font) for r in results if r.held_out_font}
+
+
+def paired(primary: Sequence[RecordingResult], beside: Sequence[RecordingResult]) -> list[tuple[RecordingResult, RecordingResult]]:
+    """The recordings both runs evaluated, as (primary, beside) pairs in the primary's order: modes are
+    compared on the same recordings even when one run covers fewer of them."""
+    by_name = {r.name: r for r in beside}
+    return [(r, by_name[r.name]) for r in primary if r.name in by_name]

@@ -2,7 +2,7 @@
 
 Per recording (one page): one RGB snapshot (raw, PNG, JPEG at several qualities), the whole event
 stream as EVT3, the foveated event stream as EVT3, the stream the glasses sent (encoded wire
-messages as counted by the uplink: one fused view per fixation in the default on-change mode,
+messages as counted by the uplink: one fused view per fixation in on-change mode,
 zlib frames in every-window mode), and the stitched page as one encoded ``Page`` message (a CCITT
 G4 stream, protocol version 3, as ``edge/pages.py`` sends it). Streams are also given per second. The ratios sit next to the paper's
 figures: ~98 % of events removed by foveation, the frame stream ~20x below one RGB image, the

@@ -10,7 +10,21 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from darkread.eval.results import RecordingResult
 
+from darkread.eval.results import EDGE_MODES
+
 logger = logging.getLogger(__name__)
+BOTH = "both"
+
+
+def default_mode() -> str:
+    """The edge's default inference mode: the report's primary mode."""
+    from darkread.edge.config import PipelineConfig
+
+    return PipelineConfig().infer
+
+
+def other_mode(mode: str) -> str:
+    return next(m for m in EDGE_MODES if m != mode)
 
 EVAL_HELP = """\
 Two forms:
@@ -24,12 +38,20 @@ Two forms:
       17 short recordings, one axis varied at a time (CI-sized). --match PATTERN: only those
       recordings (e.g. --match '*lux30_*_human').
 
-  darkread eval SUITE_DIR [--out docs/eval] [--backend local] [--jobs N]
+  darkread eval SUITE_DIR [--out docs/eval] [--backend local] [--infer MODE|both] [--beside DIR] [--jobs N]
       read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
       snapshot of the same scene, compare OCR engines on the stitched pages, measure bandwidth, and
       write the Markdown report with PNG plots to --out. Results are kept per recording under
-      SUITE_DIR/eval_runs, so an interrupted evaluation resumes (--force redoes them).
-      --report-only rebuilds the report from the stored results.
+      SUITE_DIR/eval_runs/<mode> (or --work), so an interrupted evaluation resumes (--force redoes
+      them). --report-only rebuilds the report from the stored results.
+
+  Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
+  PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
+  default SUITE_DIR/eval_runs/<mode>), and the report puts the other mode beside the default:
+  CER by lux and motion with the difference, the 30-lux headline, a CER-vs-lux plot of both, and
+  each mode's stream in the bandwidth table. --beside DIR alone puts the stored results of another
+  run (the other mode, same suite) beside this one without evaluating them, e.g.
+      darkread eval SUITE --infer on-change --work W1 --beside SUITE/eval_runs/every-window
 """
 
 
@@ -51,7 +73,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "engine with and without the word-list correction, e.g. rapidocr and rapidocr-raw, plus "
                              "remote ones when configured; --compare alone: no comparison)")
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
-    parser.add_argument("--work", metavar="DIR", help="per-recording outputs (default SUITE_DIR/eval_runs)")
+    parser.add_argument("--work", metavar="DIR", help="per-recording outputs of the (default) mode (default SUITE_DIR/eval_runs/<mode>)")
     parser.add_argument("--force", action="store_true", help="re-evaluate recordings that already have results")
     parser.add_argument("--report-only", action="store_true", help="rebuild the report from stored results")
     parser.add_argument("--note", action="append", default=[], metavar="TEXT", help="a line for the report's header (repeatable)")
@@ -60,9 +82,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--match", metavar="PATTERN",
                         help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
                              "'*lux30_*_human' for the real-scanpath recordings at 30 lux")
-    parser.add_argument("--infer", default="every-window", choices=["on-change", "every-window"],
-                        help="the edge's mode (default every-window: every frame; on-change: one fused view per fixation); "
-                             "evaluate both into two --work folders to compare them")
+    parser.add_argument("--infer", default=None, choices=[*EDGE_MODES, BOTH],
+                        help="the edge's mode (default: the edge's default, PipelineConfig().infer; every-window: every frame; "
+                             "on-change: one fused view per fixation; both: the default and the other beside it)")
+    parser.add_argument("--beside", metavar="DIR",
+                        help="results of the other mode to put beside this run in the report (a --work folder of the same "
+                             "suite); with --infer both, where the other mode is evaluated (default SUITE_DIR/eval_runs/<mode>)")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="worker processes (make-suite and evaluation; default 1)")
     parser.set_defaults(func=_run)
@@ -90,27 +115,41 @@ def _evaluate(args: argparse.Namespace) -> int:
     from darkread.edge.reconstruct import default_model_path
     from darkread.eval.provenance import ReportInfo, describe_model, git_commit
     from darkread.eval.report import write_report
-    from darkread.eval.runner import evaluate_suite, load_results
 
     suite = Path(args.target)
-    work = Path(args.work) if args.work else suite / "eval_runs"
-    if args.report_only:
-        results = load_results(work)
-        if not results:
-            raise FileNotFoundError(f"{work}: no stored results; run `darkread eval {suite}` first")
-    else:
-        results = evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model,
-                                 force=args.force, jobs=args.jobs, infer=args.infer)
+    mode = default_mode() if args.infer in (None, BOTH) else args.infer
+    runs = [(mode, Path(args.work) if args.work else suite / "eval_runs" / mode)]
+    if args.infer == BOTH or args.beside:
+        other = other_mode(mode)
+        runs.append((other, Path(args.beside) if args.beside else suite / "eval_runs" / other))
+    evaluate = [] if args.report_only else runs if args.infer == BOTH else runs[:1]
+    per_mode = [_results(suite, work, expected, args, evaluate=(expected, work) in evaluate) for expected, work in runs]
     info = ReportInfo(
         commit=git_commit(),
         backend=args.backend,
         model=describe_model(args.model or default_model_path()),
-        suite=_describe_suite(suite, results),
+        suite=_describe_suite(suite, per_mode[0]),
         notes=list(args.note),
     )
-    path = write_report(results, args.out, info)
+    path = write_report(per_mode[0], args.out, info, beside=per_mode[1] if len(per_mode) > 1 else None)
     print(f"report: {path}")
     return 0
+
+
+def _results(suite: Path, work: Path, mode: str, args: argparse.Namespace, *, evaluate: bool) -> list[RecordingResult]:
+    """One mode's results: evaluated (resuming from ``work``) or read from ``work``; all of ``mode``."""
+    from darkread.eval.runner import evaluate_suite, load_results
+
+    if evaluate:
+        return evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model,
+                              force=args.force, jobs=args.jobs, infer=mode)
+    results = load_results(work)
+    if not results:
+        raise FileNotFoundError(f"{work}: no stored results; run `darkread eval {suite} --infer {mode} --work {work}` first")
+    others = sorted({r.infer for r in results} - {mode})
+    if others:
+        raise ValueError(f"{work}: expected {mode} results, found {', '.join(others)} ones; give the folder of a {mode} run")
+    return results
 
 
 def _describe_suite(suite: Path, results: list[RecordingResult]) -> str:

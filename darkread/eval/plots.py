@@ -32,14 +32,20 @@ def _lux_axis(ax: Any, levels: list[float]) -> None:
     ax.invert_xaxis()
 
 
+Series = tuple[str, Sequence[RecordingResult], str]  # legend label, recordings, system ("darkread" or "rgb")
+
+
 def plot_cer_vs(results: Sequence[RecordingResult], key: str, path: str | Path, *, xlabel: str, logx: bool = False,
-                title: str = "") -> Path:
-    """Mean CER per value of ``key`` for darkread and the RGB baseline, each recording as a faint dot."""
+                title: str = "", series: Sequence[Series] | None = None) -> Path:
+    """Mean CER per value of ``key`` for darkread and the RGB baseline (or the given ``series``, e.g.
+    darkread in two edge modes), each recording as a faint dot."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=120)
-    for (system, label), colour, marker in zip(SYSTEMS, ("tab:blue", "tab:orange"), ("o", "s")):
+    lines = series if series is not None else [(label, results, system) for system, label in SYSTEMS]
+    colours, markers = ("tab:blue", "tab:orange", "tab:green", "tab:red"), ("o", "s", "^", "D")
+    for (label, members, system), colour, marker in zip(lines, colours, markers):
         xs, ys = [], []
-        for value, group in group_by(results, key).items():
+        for value, group in group_by(members, key).items():
             m = mean(r.rate(system) for r in group)
             if value is not None and m is not None:
                 xs.append(float(value))

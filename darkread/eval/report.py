@@ -14,7 +14,7 @@ import json
 from collections.abc import Sequence
 from pathlib import Path
 
-from darkread.eval.aggregate import held_out_fonts, mean, sweep_subset
+from darkread.eval.aggregate import held_out_fonts, mean, paired, sweep_subset
 from darkread.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
 from darkread.eval.provenance import ReportInfo, run_commits
 from darkread.eval.results import RecordingResult
@@ -25,6 +25,8 @@ from darkread.eval.tables import (
     failure_lines,
     grouped_table,
     headline_table,
+    mode_headline,
+    mode_table,
     pct,
     per_recording_table,
     scanpath_table,
@@ -34,13 +36,21 @@ REPORT_NAME = "README.md"
 RESULTS_NAME = "results.json"
 
 
-def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: ReportInfo) -> Path:
-    """Write ``README.md``, ``results.json`` and the PNG plots into ``out_dir``; returns the Markdown path."""
+def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: ReportInfo,
+                 beside: Sequence[RecordingResult] | None = None) -> Path:
+    """Write ``README.md``, ``results.json`` and the PNG plots into ``out_dir``; returns the Markdown path.
+
+    ``beside``: the same suite evaluated in the other edge mode, compared with ``results`` (the primary
+    mode, which every other table shows) in a section of its own and in the bandwidth table."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     every = sorted(results, key=lambda r: str(r.name))
     results = [r for r in every if r.scanpath == "model"]  # the tables below: the reading model's scanpaths
     human = [r for r in every if r.scanpath != "model"]
+    other = sorted((r for r in beside or () if r.scanpath == "model"), key=lambda r: str(r.name))
+    modes_md = _modes_section(results, other, out) if beside is not None else []
+    if beside is not None:
+        (out / f"results_{_mode(beside)}.json").write_text(json.dumps([r.raw for r in beside], indent=1))
     plot_cer_vs(results, "lux", out / "cer_vs_lux.png", xlabel="illuminance at the page (lux, log scale)", logx=True,
                 title="CER vs light: darkread and one RGB snapshot")
     sizes, sizes_label = sweep_subset(results, "xheight_px")
@@ -60,6 +70,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         f"- OCR backend (darkread and the RGB baseline): `{info.backend}`",
         f"- reconstruction model: {info.model or 'the shipped default'}",
         f"- suite: {info.suite or f'{len(results)} recordings'}",
+        f"- edge mode: `{_mode(every)}`" + (f" (`{_mode(beside)}` beside it: {len(beside)} recordings)" if beside else ""),
         *[f"- {note}" for note in info.notes],
         "",
         (f"Over all {len(results)} recordings: darkread mean CER {pct(dk)} (WER {pct(mean(r.rate('darkread', 'wer') for r in results))}), "
@@ -72,6 +83,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         "",
         *headline_table(results),
         "",
+        *modes_md,
         "## Real readers' scanpaths",
         "",
         *scanpath_table(results, human),
@@ -117,7 +129,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         *(["![OCR engines by text kind](ocr_backends_by_kind.png)", ""] if backends_png else []),
         "## Bandwidth",
         "",
-        *bandwidth_table(results),
+        *bandwidth_table(results, [q for _, q in paired(results, other)]),  # the other mode on the same recordings
         "",
         "## The RGB baseline",
         "",
@@ -163,3 +175,30 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
     path = out / REPORT_NAME
     path.write_text("\n".join(md))
     return path
+
+
+def _mode(results: Sequence[RecordingResult]) -> str:
+    """The edge mode(s) a run was evaluated in."""
+    return ", ".join(sorted({r.infer for r in results})) or "–"
+
+
+def _modes_section(results: Sequence[RecordingResult], beside: Sequence[RecordingResult], out: Path) -> list[str]:
+    """Both edge modes on the recordings both evaluated: CER by light and motion, the 30-lux headline, a plot."""
+    pairs = paired(results, beside)
+    first, second = _mode(results), _mode(beside)
+    md = ["## Edge modes side by side", "",
+          (f"darkread with the edge in `{first}` mode (every other table of this report) and in `{second}` mode, on the "
+           f"{len(pairs)} recordings both runs evaluated (`darkread eval --infer both`, or `--beside` a stored run). "
+           "every-window infers every 1600-event window and sends every frame; on-change infers when the view "
+           "changed during a fixation and sends one fused view per fixation. Difference in percentage points: "
+           "positive when the first mode reads worse."), ""]
+    if not pairs:
+        return [*md, "No recording was evaluated in both modes.", ""]
+    plot_cer_vs(results, "lux", out / "cer_vs_lux_modes.png", xlabel="illuminance at the page (lux, log scale)",
+                logx=True, title=f"CER vs light: darkread in both edge modes ({len(pairs)} recordings)",
+                series=[(f"darkread, {first}", [p for p, _ in pairs], "darkread"),
+                        (f"darkread, {second}", [q for _, q in pairs], "darkread"),
+                        ("RGB snapshot baseline", [p for p, _ in pairs], "rgb")])
+    return [*md, *mode_headline(pairs), "", "![CER vs lux, both modes](cer_vs_lux_modes.png)", "",
+            *mode_table(pairs, ("lux", "motion"), "lux, motion", lambda v: f"{v[0]:g}, {v[1]}"), "",
+            *mode_table(pairs, "lux", "lux", lambda v: f"{v:g}"), ""]

@@ -15,6 +15,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 CONDITIONS = ("lux", "motion", "kind", "font", "xheight_px", "scanpath")  # what the report groups recordings by
+EDGE_MODES = ("every-window", "on-change")  # the edge's inference modes (``PipelineConfig.infer``)
+LEGACY_MODE = "every-window"  # results stored before they named their mode were all every-window
+
+
+def stored_mode(doc: Mapping[str, Any]) -> str:
+    """The edge mode a stored result was evaluated in."""
+    return str(doc.get("infer") or LEGACY_MODE)
 
 
 def _number(value: Any) -> float | None:
@@ -124,6 +131,7 @@ class RecordingResult:
     failures: tuple[str, ...]  # "section: error" of every stage that failed
     raw: dict[str, Any] = field(repr=False, compare=False)
     scanpath: str = "model"  # "human": a real reader's fixations replayed (the reading model otherwise)
+    infer: str = LEGACY_MODE  # the edge mode it was evaluated in (every-window, on-change)
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> RecordingResult:
@@ -137,6 +145,7 @@ class RecordingResult:
             darkread=DarkreadRead.from_dict(doc.get("darkread")), rgb=RgbRead.from_dict(doc.get("rgb")),
             backends=backends, bandwidth=Bandwidth.from_dict(doc.get("bandwidth")),
             failures=_failures(doc), raw=dict(doc), scanpath=str(doc.get("scanpath") or "model"),
+            infer=stored_mode(doc),
         )
 
     def condition(self, key: str) -> Any:

@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from darkread.eval.results import RecordingResult
+from darkread.eval.results import RecordingResult, stored_mode
 
 logger = logging.getLogger(__name__)
 
@@ -216,11 +216,15 @@ def evaluate_suite(
     todo = []
     for folder in folders:
         stored = runs / folder.name / RESULT_NAME
-        if stored.is_file() and not force:
-            by_name[folder.name] = json.loads(stored.read_text())
+        doc = json.loads(stored.read_text()) if stored.is_file() and not force else None
+        if doc is not None and stored_mode(doc) != infer:
+            logger.warning("%s holds a %s result; evaluating it again in %s mode", stored.parent, stored_mode(doc), infer)
+            doc = None
+        if doc is not None:
+            by_name[folder.name] = doc
         else:
             todo.append(folder)
-    bar = tqdm(total=len(folders), initial=len(by_name), desc="evaluating", unit="rec", disable=not progress)
+    bar = tqdm(total=len(folders), initial=len(by_name), desc=f"evaluating ({infer})", unit="rec", disable=not progress)
     if jobs <= 1:
         cache: dict[str, Any] = {}
         for folder in todo:

@@ -124,22 +124,28 @@ def _sizes(rows: Sequence[Bandwidth]) -> str:
     return " or ".join(f"{w} x {h}" for w, h in sizes) if sizes else "unknown size"
 
 
-def bandwidth_table(results: Sequence[RecordingResult]) -> list[str]:
-    """Medians over recordings, per page (one recording) and per second, next to the paper's ratios."""
+STREAMS = {  # what each edge mode sends in mode `frames`: (the stream, its messages)
+    "every-window": ("binary frames", "Frame messages"),
+    "on-change": ("the view stream", "View messages: one fused view per fixation"),
+}
+
+
+def bandwidth_table(results: Sequence[RecordingResult], beside: Sequence[RecordingResult] = ()) -> list[str]:
+    """Medians over recordings, per page (one recording) and per second, next to the paper's ratios;
+    ``beside``: another edge mode's run, whose stream and page get their own rows and figures."""
     rows = bandwidth_rows(results)
     if not rows:
         return ["No bandwidth figures in these results."]
+    by_mode = [(r[0].infer, bw) for r in (results, beside) if r and (bw := bandwidth_rows(r))]
 
-    def med(get: Callable[[Bandwidth], float | None]) -> float | None:
-        return median(get(b) for b in rows)
-
-    def per_s(get: Callable[[Bandwidth], float]) -> float | None:
-        return median(get(b) / b.duration_s for b in rows if b.duration_s)
+    def med(get: Callable[[Bandwidth], float | None], among: Sequence[Bandwidth] = rows) -> float | None:
+        return median(get(b) for b in among)
 
     png = med(lambda b: b.rgb["png"])
+    counts = ", ".join(f"{len(bw)} in `{mode}`" for mode, bw in by_mode)
     lines = [
-        (f"Medians over {len(rows)} recordings. A recording is one page; streams are also given per second. "
-        f"The RGB snapshot is one full image of {_sizes(rows)} pixels."),
+        (f"Medians over the recordings of each run ({counts}). A recording is one page; streams are also given per "
+         f"second. The RGB snapshot is one full image of {_sizes(rows)} pixels."),
         "",
         "| what is sent | per page | per second | RGB PNG / this |",
         "|---|---:|---:|---:|",
@@ -149,38 +155,83 @@ def bandwidth_table(results: Sequence[RecordingResult]) -> list[str]:
     for key, label in rgb_formats:
         size = med(lambda b, k=key: b.rgb.get(k))
         lines.append(f"| {label} | {_bytes(size)} | – | {_ratio(png / size) if png and size else '–'} |")
-    streams: list[tuple[Callable[[Bandwidth], int], str, bool]] = [
-        (lambda b: b.evt3_bytes, "all events, EVT3", True),
-        (lambda b: b.foveated_evt3_bytes, "foveated events (100 x 200 window at the gaze), EVT3", True),
-        (lambda b: b.frame_stream_bytes, "binary frames as sent (Frame messages, mode `frames`)", True),
-        (lambda b: b.page_bytes, "stitched page as sent (one Page message, mode `pages`)", False),
+    streams: list[tuple[Callable[[Bandwidth], int], str, bool, Sequence[Bandwidth]]] = [
+        (lambda b: b.evt3_bytes, "all events, EVT3", True, rows),
+        (lambda b: b.foveated_evt3_bytes, "foveated events (100 x 200 window at the gaze), EVT3", True, rows),
     ]
-    for get, label, is_stream in streams:
-        page = med(get)
-        second = per_s(get) if is_stream else None
+    for mode, bw in by_mode:
+        stream, messages = STREAMS.get(mode, ("the stream", "messages"))
+        streams += [(lambda b: b.frame_stream_bytes, f"`{mode}`: {stream} as sent ({messages}, mode `frames`)", True, bw),
+                    (lambda b: b.page_bytes, f"`{mode}`: stitched page as sent (one Page message, mode `pages`)", False, bw)]
+    for get, label, is_stream, among in streams:
+        page = med(get, among)
+        second = median(get(b) / b.duration_s for b in among if b.duration_s) if is_stream else None
         ref = second if is_stream else page
         lines.append(f"| {label} | {_bytes(page)} | {_bytes(second) if second is not None else '–'} | "
                      f"{_ratio(png / ref) if png and ref else '–'} |")
     removed = med(lambda b: 1 - b.events_foveated / b.events if b.events else None)
-    frames_vs_png = med(lambda b: b.rgb["png"] / (b.frame_stream_bytes / b.duration_s) if b.frame_stream_bytes else None)
-    frames_vs_jpeg = med(lambda b: b.rgb["jpeg80"] / (b.frame_stream_bytes / b.duration_s) if b.frame_stream_bytes else None)
-    page_vs_png = med(lambda b: b.rgb["png"] / b.page_bytes if b.page_bytes else None)
-    page_vs_jpeg = med(lambda b: b.rgb["jpeg80"] / b.page_bytes if b.page_bytes else None)
-    measured = sum(1 for b in rows if b.frames_measured)
     lines += [
         "",
         "| figure | measured here (median) | paper |",
         "|---|---:|---:|",
         f"| events removed by foveation | {pct(removed)} | ~{PAPER_FOVEATION_REMOVED:.0%} (real scenes) |",
-        f"| one RGB image (PNG) / one second of binary frames | {_ratio(frames_vs_png)} | ~{PAPER_FRAMES_VS_RGB:.0f}x |",
-        f"| one RGB image (JPEG q80) / one second of binary frames | {_ratio(frames_vs_jpeg)} | |",
-        f"| one RGB image (PNG) / stitched page | {_ratio(page_vs_png)} | ~{PAPER_PAGE_VS_RGB:.0f}x |",
-        f"| one RGB image (JPEG q80) / stitched page | {_ratio(page_vs_jpeg)} | |",
-        "",
-        (f"Frame figures measured on a real edge run for {measured} of {len(rows)} recordings (the rest: one "
-        "frame per 1600 foveated events). Page bytes: the cloud-stitched page of the run, encoded as the "
-        "`Page` message the glasses send in mode `pages`."),
     ]
+    for mode, bw in by_mode:
+        stream = STREAMS.get(mode, ("the stream",))[0]
+        for fmt, name, paper in (("png", "PNG", f"~{PAPER_FRAMES_VS_RGB:.0f}x"), ("jpeg80", "JPEG q80", "")):
+            ratio = med(lambda b, f=fmt: b.rgb[f] / (b.frame_stream_bytes / b.duration_s) if b.frame_stream_bytes else None, bw)
+            lines.append(f"| one RGB image ({name}) / one second of {stream} (`{mode}`) | {_ratio(ratio)} | {paper} |")
+        for fmt, name, paper in (("png", "PNG", f"~{PAPER_PAGE_VS_RGB:.0f}x"), ("jpeg80", "JPEG q80", "")):
+            ratio = med(lambda b, f=fmt: b.rgb[f] / b.page_bytes if b.page_bytes else None, bw)
+            lines.append(f"| one RGB image ({name}) / stitched page (`{mode}`) | {_ratio(ratio)} | {paper} |")
+    measured = sum(1 for _, bw in by_mode for b in bw if b.frames_measured)
+    lines += [
+        "",
+        (f"Stream figures measured on a real edge run for {measured} of {sum(len(bw) for _, bw in by_mode)} recordings "
+         "(the rest: one frame per 1600 foveated events). Page bytes: the cloud-stitched page of the run, encoded as "
+         "the `Page` message the glasses send in mode `pages`."),
+    ]
+    return lines
+
+
+def _difference(a: float | None, b: float | None) -> str:
+    return "–" if a is None or b is None else f"{(a - b) * 100:+.1f} pp"
+
+
+def _mode_cells(pairs: Sequence[tuple[RecordingResult, RecordingResult]]) -> str:
+    """n, both modes' mean CER and their difference (primary minus beside, percentage points)."""
+    a, b = mean(p.rate("darkread") for p, _ in pairs), mean(q.rate("darkread") for _, q in pairs)
+    return f"{len(pairs)} | {pct(a)} | {pct(b)} | {_difference(a, b)} |"
+
+
+def mode_table(pairs: Sequence[tuple[RecordingResult, RecordingResult]], key: str | tuple[str, ...], label: str,
+               fmt: Callable[[Any], str] = str) -> list[str]:
+    """Mean darkread CER of two edge modes on the same recordings, per value of ``key``, and the difference."""
+    if not pairs:
+        return ["No recording was evaluated in both modes."]
+    first, second = pairs[0][0].infer, pairs[0][1].infer
+    lines = [f"| {label} | n | `{first}` CER | `{second}` CER | `{first}` − `{second}` |", "|---|---:|---:|---:|---:|"]
+    beside = {p.name: q for p, q in pairs}
+    for value, group in group_by([p for p, _ in pairs], key).items():
+        lines.append(f"| {fmt(value)} | " + _mode_cells([(p, beside[p.name]) for p in group]))
+    lines.append("| **all** | " + _mode_cells(pairs))
+    return lines
+
+
+def mode_headline(pairs: Sequence[tuple[RecordingResult, RecordingResult]], *, lux: float = 30.0,
+                  kind: str = "paragraph") -> list[str]:
+    """The paper's headline condition in both modes: reading still or with normal head motion, and walking."""
+    group = [(p, q) for p, q in pairs if p.lux == lux and p.kind == kind]
+    if not group:
+        return [f"No {lux:g}-lux {kind} recordings evaluated in both modes."]
+    first, second = group[0][0].infer, group[0][1].infer
+    lines = [f"| {lux:g}-lux {kind}s | n | `{first}` CER | `{second}` CER | `{first}` − `{second}` |",
+             "|---|---:|---:|---:|---:|"]
+    rows = [("still + normal", [(p, q) for p, q in group if p.motion in ("still", "normal")]),
+            ("walking", [(p, q) for p, q in group if p.motion == "walking"]), ("**all**", group)]
+    for label, members in rows:
+        if members:
+            lines.append(f"| {label} | " + _mode_cells(members))
     return lines
 
 

@@ -63,12 +63,13 @@ def test_bandwidth_table_medians_and_paper_ratios() -> None:
     assert "one full image of 2880 x 2880 pixels" in text
     # medians: PNG 19 MB; frames 1.5 MB per page = 750 kB/s; page 9 kB
     assert "| RGB snapshot, PNG | 19.0 MB | – | 1.0x |" in text
-    assert "| binary frames as sent (Frame messages, mode `frames`) | 1.50 MB | 750 kB | 25x |" in text
+    assert "| `every-window`: binary frames as sent (Frame messages, mode `frames`) | 1.50 MB | 750 kB | 25x |" in text
     assert "| events removed by foveation | 98.0% | ~98% (real scenes) |" in text
     # PNG / frames-per-second: 20 MB / 1 MB/s = 20 and 18 MB / 0.5 MB/s = 36 -> median 28
-    assert "| one RGB image (PNG) / one second of binary frames | 28x | ~20x |" in text
+    assert "| one RGB image (PNG) / one second of binary frames (`every-window`) | 28x | ~20x |" in text
     # PNG / page: 2000 and 2250 -> median 2125
-    assert "| one RGB image (PNG) / stitched page | 2,125x | ~2400x |" in text
+    assert "| one RGB image (PNG) / stitched page (`every-window`) | 2,125x | ~2400x |" in text
+    assert "on-change" not in text  # no second mode: no rows for it
 
 
 def test_report_on_a_two_recording_suite(tmp_path: Path) -> None:
@@ -109,7 +110,7 @@ def test_cli_rebuilds_the_report_from_stored_results(tmp_path: Path) -> None:
 
     suite = tmp_path / "suite"
     for result in fake_results():
-        folder = suite / "eval_runs" / result["name"]
+        folder = suite / "eval_runs" / "every-window" / result["name"]  # results without "infer": every-window
         folder.mkdir(parents=True)
         (folder / "result.json").write_text(json.dumps(result))
     out = tmp_path / "report"
@@ -193,3 +194,81 @@ def test_real_scanpath_recordings_get_their_own_table_beside_the_model() -> None
     lines = scanpath_table(model, [r for r in results if r.scanpath == "human"])
     assert "| 30 | still | 1 | 3.0% | 3.0% | 2 | 4.0% |" in lines
     assert "No recordings" in scanpath_table(model, [])[0]
+
+
+def on_change_results() -> list[dict[str, Any]]:
+    """The same two recordings read by the edge in on-change mode: worse in the dark, a 10x smaller stream."""
+    docs = fake_results()
+    for doc, cer in zip(docs, (0.04, 0.16)):
+        doc.update(infer="on-change")
+        doc["darkread"] = {"text": "the quick fox", "cer": cer, "wer": 0.2}
+        doc["bandwidth"]["frame_stream_bytes"] //= 10
+        doc["bandwidth"]["page_bytes"] //= 2
+    return docs
+
+
+def test_modes_side_by_side_pair_recordings_and_show_the_difference() -> None:
+    from darkread.eval.aggregate import paired
+    from darkread.eval.tables import mode_headline, mode_table
+
+    beside = typed(on_change_results())[:1]  # the other run covers one of the two recordings
+    pairs = paired(typed(fake_results()), beside)
+    assert [(p.name, p.infer, q.infer) for p, q in pairs] == [("000_bright", "every-window", "on-change")]
+    rows = mode_table(pairs, ("lux", "motion"), "lux, motion", lambda v: f"{v[0]:g}, {v[1]}")
+    assert rows[0] == "| lux, motion | n | `every-window` CER | `on-change` CER | `every-window` − `on-change` |"
+    assert rows[2] == "| 1000, still | 1 | 2.0% | 4.0% | -2.0 pp |"
+    assert rows[-1] == "| **all** | 1 | 2.0% | 4.0% | -2.0 pp |"
+
+    runs = [{**fake_results()[0], "name": f"p{k}", "lux": 30.0, "kind": "paragraph", "motion": motion,
+             "darkread": {"cer": cer}} for k, (motion, cer) in enumerate([("still", 0.0), ("normal", 0.02), ("walking", 0.1)])]
+    views = [{**r, "infer": "on-change", "darkread": {"cer": r["darkread"]["cer"] + 0.01}} for r in runs]
+    text = "\n".join(mode_headline(paired(typed(views), typed(runs))))
+    assert "| 30-lux paragraphs | n | `on-change` CER | `every-window` CER | `on-change` − `every-window` |" in text
+    assert "| still + normal | 2 | 2.0% | 1.0% | +1.0 pp |" in text
+    assert "| walking | 1 | 11.0% | 10.0% | +1.0 pp |" in text
+    assert "No 30-lux paragraph recordings evaluated in both modes." in mode_headline(pairs)
+
+
+def test_bandwidth_table_gives_each_modes_stream() -> None:
+    text = "\n".join(bandwidth_table(typed(fake_results()), typed(on_change_results())))
+    assert "(2 in `every-window`, 2 in `on-change`)" in text
+    # views: 150 kB per page (median of 200 and 100 kB), 75 kB/s; PNG 19 MB / 75 kB/s = 253x
+    assert ("| `on-change`: the view stream as sent (View messages: one fused view per fixation, mode `frames`) | "
+            "150 kB | 75.0 kB | 253x |") in text
+    # PNG / view-stream second: 20 MB / 100 kB/s = 200 and 18 MB / 50 kB/s = 360 -> median 280
+    assert "| one RGB image (PNG) / one second of the view stream (`on-change`) | 280x | ~20x |" in text
+    assert "| one RGB image (PNG) / one second of binary frames (`every-window`) | 28x | ~20x |" in text
+    # half the page bytes: 4000 and 4500 -> median 4250
+    assert "| one RGB image (PNG) / stitched page (`on-change`) | 4,250x | ~2400x |" in text
+
+
+def test_cli_puts_the_other_mode_beside_the_default(tmp_path: Path) -> None:
+    """--infer both --report-only: the edge's default mode first, the other one beside it, from stored results."""
+    from darkread.cli import main
+    from darkread.edge.config import PipelineConfig
+
+    suite = tmp_path / "suite"
+    for mode, docs in (("every-window", fake_results()), ("on-change", on_change_results())):
+        for result in docs:
+            folder = suite / "eval_runs" / mode / result["name"]
+            folder.mkdir(parents=True)
+            (folder / "result.json").write_text(json.dumps(result))
+    out = tmp_path / "report"
+    assert main(["eval", str(suite), "--infer", "both", "--report-only", "--out", str(out)]) == 0
+    md = (out / "README.md").read_text()
+    first = PipelineConfig().infer
+    second = "on-change" if first == "every-window" else "every-window"
+    assert f"- edge mode: `{first}` (`{second}` beside it: 2 recordings)" in md
+    assert "## Edge modes side by side" in md and "![CER vs lux, both modes](cer_vs_lux_modes.png)" in md
+    assert f"| lux | n | `{first}` CER | `{second}` CER | `{first}` − `{second}` |" in md
+    sign = "-" if first == "every-window" else "+"
+    assert f"| 5 | 1 | {'6.0%' if first == 'every-window' else '16.0%'} | " in md and f"| {sign}10.0 pp |" in md
+    assert "one second of the view stream (`on-change`)" in md and "one second of binary frames (`every-window`)" in md
+    with Image.open(out / "cer_vs_lux_modes.png") as image:
+        assert image.format == "PNG" and image.size[0] > 300
+    assert json.loads((out / f"results_{second}.json").read_text())[0]["name"] == "000_bright"
+
+    # --beside a folder of the same mode is refused with one line
+    with pytest.raises(ValueError, match="expected on-change results, found every-window"):
+        main(["-vv", "eval", str(suite), "--infer", "every-window", "--report-only", "--out", str(out),
+              "--beside", str(suite / "eval_runs" / "every-window")])
