@@ -54,7 +54,9 @@ class PipelineConfig:
     # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
     # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
     infer: str = "every-window"
-    min_interval_ms: float = 50.0  # on-change: at most one inference per this much event time (<= 20/s; ~4 per fixation)
+    min_interval_ms: float = 10.0  # on-change: at most one inference per this much event time while frames change the view ...
+    settled_interval_ms: float = 400.0  # ... and per this much once a frame agreed with it (the view is sent first: one more frame adds little)
+    settled_score: float = 0.85  # agreed: the frame registered onto its view at least this well (its match score)
     renew_fraction: float = 1.0  # on-change: infer again once this share of n_events is new ...
     move_px: float = 6.0  # ... or the window moved this far since the last inference (a view's window is placed once)
     min_events: int = 400  # on-change: a frame may have fewer than n_events (low light), not fewer than this
@@ -207,6 +209,6 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError("config [pipeline] n_events and period_ms must be positive")
     if config.pipeline.infer not in {"on-change", "every-window"}:
         raise ValueError(f"config [pipeline] infer must be 'on-change' or 'every-window', not {config.pipeline.infer!r}")
-    if min(config.pipeline.min_interval_ms, config.pipeline.view_every_ms) <= 0 or config.pipeline.min_events <= 0:
-        raise ValueError("config [pipeline] min_interval_ms, view_every_ms and min_events must be positive")
+    if min(config.pipeline.min_interval_ms, config.pipeline.settled_interval_ms, config.pipeline.view_every_ms) <= 0 or config.pipeline.min_events <= 0:
+        raise ValueError("config [pipeline] min_interval_ms, settled_interval_ms, view_every_ms and min_events must be positive")
     return config

@@ -13,7 +13,8 @@ window itself, so it waits for inference instead of skipping.
 That is the ``every-window`` mode (the default). ``on-change`` (``[pipeline] infer``) lets the gaze
 decide (:mod:`darkread.edge.view_trigger`): every chunk the reader hands over is one processing
 step that feeds the gaze-event classifier; no inference during saccades and blinks; during a
-fixation one when enough new events arrived, at most every ``min_interval_ms``, all in one window
+fixation one when enough new events arrived, at most every ``min_interval_ms`` until a frame agrees
+with the view (then none until it is sent), all in one window
 placed at the fixation's mean gaze; the fixation's frames are fused into one view
 (:mod:`darkread.edge.view_fusion`) that goes to ``on_frame`` when the fixation ends and every
 ``view_every_ms`` during a long one. The same step runs on the reconstruction thread live and on
@@ -490,7 +491,7 @@ class Pipeline:
             self.metrics.add("views_split")
             self._send_view(arrival)
             self.fuser.add(frame, frame.events_used, frame.gaze_rad)
-        self.trigger.inferred(t, origin)
+        self.trigger.inferred(t, origin, self.fuser.last_score)
         self._since_infer = 0
         return True
 

@@ -23,7 +23,7 @@ pytestmark = pytest.mark.skipif(
 # What the sample makes (3 s, 3 lines, 60 Hz gaze): fixed by the gaze and the event counts alone
 # (the classifier, the trigger, the window), not by the model's arithmetic, so exact on any CPU.
 SAMPLE_VIEWS = 13
-SAMPLE_FRAMES = 48
+SAMPLE_FRAMES = 29
 
 
 def replay(slice_us: int | None) -> tuple[list[ViewRecord], dict[str, int]]:
