@@ -131,7 +131,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         suite=_describe_suite(suite, per_mode[0]),
         notes=list(args.note),
     )
-    path = write_report(per_mode[0], args.out, info, beside=per_mode[1] if len(per_mode) > 1 else None)
+    path = write_report(per_mode[0], args.out, info, beside=per_mode[1] if len(per_mode) > 1 else None,
+                        suite_dir=suite)
     print(f"report: {path}")
     return 0
 

@@ -11,8 +11,10 @@ would let one garbage read dominate).
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from darkread.eval.aggregate import held_out_fonts, mean, paired, sweep_subset
 from darkread.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
@@ -36,12 +38,30 @@ REPORT_NAME = "README.md"
 RESULTS_NAME = "results.json"
 
 
+def relative_paths(value: Any, suite_dir: Path) -> Any:
+    """``value`` (a result's JSON) with every absolute path written relative to the suite: a
+    committed report must not carry the directories of the machine that made it."""
+    if isinstance(value, dict):
+        return {k: relative_paths(v, suite_dir) for k, v in value.items()}
+    if isinstance(value, list):
+        return [relative_paths(v, suite_dir) for v in value]
+    if isinstance(value, str) and value.startswith("/") and len(value) > 1 and "\n" not in value:
+        return os.path.relpath(value, suite_dir)
+    return value
+
+
+def _results_json(results: Sequence[RecordingResult], suite_dir: Path | None) -> str:
+    raws = [r.raw for r in results]
+    return json.dumps(raws if suite_dir is None else relative_paths(raws, Path(suite_dir).resolve()), indent=1)
+
+
 def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: ReportInfo,
-                 beside: Sequence[RecordingResult] | None = None) -> Path:
+                 beside: Sequence[RecordingResult] | None = None, suite_dir: str | Path | None = None) -> Path:
     """Write ``README.md``, ``results.json`` and the PNG plots into ``out_dir``; returns the Markdown path.
 
     ``beside``: the same suite evaluated in the other edge mode, compared with ``results`` (the primary
-    mode, which every other table shows) in a section of its own and in the bandwidth table."""
+    mode, which every other table shows) in a section of its own and in the bandwidth table.
+    ``suite_dir``: the paths in the JSON files are written relative to it."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     every = sorted(results, key=lambda r: str(r.name))
@@ -50,7 +70,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
     other = sorted((r for r in beside or () if r.scanpath == "model"), key=lambda r: str(r.name))
     modes_md = _modes_section(results, other, out) if beside is not None else []
     if beside is not None:
-        (out / f"results_{_mode(beside)}.json").write_text(json.dumps([r.raw for r in beside], indent=1))
+        (out / f"results_{_mode(beside)}.json").write_text(_results_json(beside, suite_dir))
     plot_cer_vs(results, "lux", out / "cer_vs_lux.png", xlabel="illuminance at the page (lux, log scale)", logx=True,
                 title="CER vs light: darkread and one RGB snapshot")
     sizes, sizes_label = sweep_subset(results, "xheight_px")
@@ -59,7 +79,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
     plot_cer_vs_lux_by_motion(results, out / "cer_vs_lux_by_motion.png")
     backends_png = plot_backends(results, out / "ocr_backends_by_kind.png")
     examples_png = plot_examples(results, out / "examples.png")
-    (out / RESULTS_NAME).write_text(json.dumps([r.raw for r in every], indent=1))
+    (out / RESULTS_NAME).write_text(_results_json(every, suite_dir))
 
     dk, rgb = mean(r.rate("darkread") for r in results), mean(r.rate("rgb") for r in results)
     md = [

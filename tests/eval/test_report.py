@@ -272,3 +272,18 @@ def test_cli_puts_the_other_mode_beside_the_default(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="expected on-change results, found every-window"):
         main(["-vv", "eval", str(suite), "--infer", "every-window", "--report-only", "--out", str(out),
               "--beside", str(suite / "eval_runs" / "every-window")])
+
+
+def test_the_stored_results_name_paths_relative_to_the_suite(tmp_path: Path) -> None:
+    from darkread.eval.report import relative_paths
+
+    suite = tmp_path / "suite"
+    raw = {"name": "000", "darkread": {"page_png": str(suite / "eval_runs" / "on-change" / "000" / "read" / "page.png"),
+                                        "text": "a/b"},
+           "bandwidth": {"recording": str(suite / "000")}, "rgb": {"crop_png": str(tmp_path / "elsewhere" / "c.png")},
+           "lines": ["/", 3]}
+    portable = relative_paths(raw, suite)
+    assert portable["darkread"] == {"page_png": "eval_runs/on-change/000/read/page.png", "text": "a/b"}
+    assert portable["bandwidth"]["recording"] == "000"
+    assert portable["rgb"]["crop_png"] == "../elsewhere/c.png"
+    assert portable["lines"] == ["/", 3] and portable["name"] == "000"
