@@ -42,7 +42,7 @@ FORBIDDEN: dict[str, set[str]] = {
 # pure components: the standard library and these only
 PURE_THIRD_PARTY: dict[str, set[str]] = {
     "core": {"numpy", "cv2"},
-    "proto": {"msgpack", "numpy"},
+    "proto": {"msgpack", "numpy", "PIL"},  # PIL: the CCITT G4 codec of stitched pages (libtiff)
     "stitch": {"numpy", "cv2"},
 }
 

@@ -13,6 +13,7 @@ from darkread.bench.ack_server import AckServer
 from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon
+from darkread.proto.messages import PROTOCOL_VERSION
 from darkread.edge.errors import ModelError
 from darkread.edge.notify import Notifier
 from darkread.edge.spool import Spool
@@ -64,7 +65,7 @@ def test_on_change_sends_one_view_per_fixation_stretch(tmp_path: Path) -> None:
     views, frames = edge.metrics.totals["views"], edge.metrics.totals["frames"]
     assert 1 <= views <= frames
     assert cloud.stored["synthetic-1"] == list(range(views))  # one message per view, every one stored
-    assert cloud.hellos[0].v == 2
+    assert cloud.hellos[0].v == PROTOCOL_VERSION
 
 
 @pytest.mark.slow
