@@ -22,6 +22,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from darkread.edge.config import INFER_MODES, default_infer_mode
+
 logger = logging.getLogger(__name__)
 
 READ_HELP = """\
@@ -79,7 +81,7 @@ def read_recording(
     out_dir: str | Path | None = None,
     drain_timeout_s: float = 60.0,
     lexicon: bool = True,
-    infer: str = "every-window",
+    infer: str | None = None,
     speech: bool = False,
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says.
@@ -121,7 +123,7 @@ def read_recording(
         overrides = {
             "source": {"kind": "replay", "path": str(recording.path if recording.path.is_dir() else recording.raw_path), "speed": 0.0},
             "gaze": {"kind": "recording"},
-            "pipeline": {"lossless": True, "infer": infer, **({"model": str(model)} if model else {})},
+            "pipeline": {"lossless": True, "infer": infer or default_infer_mode(), **({"model": str(model)} if model else {})},
             "uplink": {"url": server.ws_url, "api_key": api_key, "mode": mode, "spool_dir": str(out / "spool"),
                        "drain_timeout_s": drain_timeout_s},
             "metrics": {"log_every_s": 3600.0},
@@ -201,7 +203,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
                         help="OCR backend (default: local, the embedded offline engine); remote ones read DARKREAD_* settings")
     parser.add_argument("--mode", default="frames", choices=["frames", "pages"], help="stream frames (default) or stitch on the glasses")
-    parser.add_argument("--infer", default="every-window", choices=["on-change", "every-window"],
+    parser.add_argument("--infer", default=None, choices=INFER_MODES,
                         help="every-window (default): infer every window, send every frame; on-change: one fused view per fixation (10x fewer bytes, reads worse yet)")
     parser.add_argument("--no-lexicon", dest="lexicon", action="store_false",
                         help="report the offline engine's text as read, without the dictionary correction")

@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from darkread.edge.config import INFER_MODES
+
 RUN_HELP = """\
 Run the edge pipeline: read events (the EVK4 camera, or a recording replayed at wall-clock
 speed or faster), foveate around the gaze, reconstruct text frames with the ONNX U-Net and
@@ -54,7 +56,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
     run.add_argument("--lossless", action="store_true", help="never skip windows: the reader waits for inference")
     run.add_argument(
-        "--infer", choices=["on-change", "every-window"],
+        "--infer", choices=INFER_MODES,
         help="every-window (default): infer every n_events foveated events and send every frame; on-change: infer "
              "during fixations when the view changed and send one fused view per fixation (10x fewer bytes)",
     )

@@ -41,6 +41,9 @@ class GazeConfig:
     depth_prior_m: float = 0.45
 
 
+INFER_MODES = ("every-window", "on-change")  # ``[pipeline] infer``: the first is the default
+
+
 @dataclass(frozen=True)
 class PipelineConfig:
     n_events: int = 1600  # foveated events per voxel grid (and new ones that trigger a frame)
@@ -53,7 +56,7 @@ class PipelineConfig:
     sensor_roi: bool = False  # move the sensor's ROI with the foveal window (EVK4: less USB traffic)
     # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
     # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
-    infer: str = "every-window"
+    infer: str = INFER_MODES[0]
     min_interval_ms: float = 10.0  # on-change: at most one inference per this much event time while frames change the view ...
     settled_interval_ms: float = 400.0  # ... and per this much once a frame agreed with it (the view is sent first: one more frame adds little)
     settled_score: float = 0.85  # agreed: the frame registered onto its view at least this well (its match score)
@@ -190,6 +193,16 @@ def load_config(
     return validate(config)
 
 
+def default_infer_mode() -> str:
+    """The inference mode the daemon, ``darkread read``, the bench and the evaluation use unless told."""
+    return PipelineConfig().infer
+
+
+def other_infer_mode(mode: str) -> str:
+    """The mode that is not ``mode`` (the evaluation and the bench put both side by side)."""
+    return next(m for m in INFER_MODES if m != mode)
+
+
 def validate(config: EdgeConfig) -> EdgeConfig:
     urls = [part.strip() for part in config.uplink.url.split(",") if part.strip()]
     if not urls:
@@ -207,7 +220,7 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError("config [source] speed must be >= 0 (0 = as fast as possible)")
     if config.pipeline.n_events <= 0 or config.pipeline.period_ms <= 0:
         raise ValueError("config [pipeline] n_events and period_ms must be positive")
-    if config.pipeline.infer not in {"on-change", "every-window"}:
+    if config.pipeline.infer not in INFER_MODES:
         raise ValueError(f"config [pipeline] infer must be 'on-change' or 'every-window', not {config.pipeline.infer!r}")
     if min(config.pipeline.min_interval_ms, config.pipeline.settled_interval_ms, config.pipeline.view_every_ms) <= 0 or config.pipeline.min_events <= 0:
         raise ValueError("config [pipeline] min_interval_ms, settled_interval_ms, view_every_ms and min_events must be positive")

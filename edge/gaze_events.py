@@ -347,8 +347,8 @@ class GazeEventClassifier:
         n = len(run)
         lo = max(1, n - cfg.refine_rows)
         t_min = run.t[0] + cfg.min_fixation_ms * 1000.0 - cfg.period_us  # the run must last that long
-        xs, ys = run.x[lo - min(lo, cfg.centre_rows):], run.y[lo - min(lo, cfg.centre_rows):]
         base = lo - min(lo, cfg.centre_rows)  # index of xs[0] in the run
+        xs, ys = run.x[base:], run.y[base:]
         xs = xs + [r[1] for r in rows]
         ys = ys + [r[2] for r in rows]
         px, py = [0.0], [0.0]

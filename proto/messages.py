@@ -40,6 +40,8 @@ SUPPORTED_VERSIONS = (1, 2, 3)  # what a server accepts in hello.v (and answers 
 MAX_LEVELS = 16  # grey levels of a view
 DEFAULT_MAX_MESSAGE_BYTES = 4 * 1024 * 1024
 MAX_MASK_PIXELS = 16 * 1024 * 1024  # 16 Mpx: a stitched page of 4096 x 4096 fits
+FRAME_ENCODINGS = MASK_ENCODINGS[:2]  # a frame's mask: bits or zlib
+PAGE_ENCODINGS = MASK_ENCODINGS  # a page's: also a 1-bit PNG (v2) or CCITT G4 (v3)
 MAX_SIDE = 65_535
 MAX_LIST = 100_000  # lines per page, gaze samples per batch
 MAX_STATS = 64
@@ -303,7 +305,7 @@ class Frame(_Checked):
     events_used: int = _spec(_count)
     shape: tuple[int, int] = _spec(_mask_shape)  # (rows, cols)
     bits: bytes = _spec(_bytes, repr=False)  # the ink mask, darkread.mask_bits.pack_bits (decoded form)
-    enc: str = _spec(_choice(MASK_ENCODINGS[:2]), "bits")  # v2: how ``bits`` go on the wire
+    enc: str = _spec(_choice(FRAME_ENCODINGS), "bits")  # v2: how ``bits`` go on the wire
 
     @classmethod
     def of(
@@ -343,7 +345,7 @@ class Page(_Checked):
     shape: tuple[int, int] = _spec(_mask_shape)
     bits: bytes = _spec(_bytes, repr=False)
     lines: tuple[tuple[int, int, int, int], ...] = _spec(_list_of(_box), ())  # (x0, y0, x1, y1)
-    enc: str = _spec(_choice(MASK_ENCODINGS), "bits")  # v2: "png" a 1-bit PNG; v3: "g4" a CCITT G4 stream
+    enc: str = _spec(_choice(PAGE_ENCODINGS), "bits")  # v2: "png" a 1-bit PNG; v3: "g4" a CCITT G4 stream
 
     def mask(self) -> np.ndarray:
         return unpack_mask(self.shape, self.bits)
@@ -421,7 +423,7 @@ def _bits_from_wire(cls: type[Frame] | type[Page], values: dict[str, Any]) -> No
     enc = values.get("enc", "bits")
     if enc == "bits":
         return  # v1 layout: checked by the message itself
-    enc = _choice(MASK_ENCODINGS if cls is Page else MASK_ENCODINGS[:2])(enc, f"{cls.TYPE}.enc")
+    enc = _choice(PAGE_ENCODINGS if cls is Page else FRAME_ENCODINGS)(enc, f"{cls.TYPE}.enc")  # before decoding
     shape = _mask_shape(values.get("shape"), f"{cls.TYPE}.shape")
     check_mask_shape(shape)  # the protocol's limits before a byte is decompressed
     values["bits"] = decompress_bits(shape, _bytes(values.get("bits"), f"{cls.TYPE}.bits"), enc)

@@ -47,11 +47,9 @@ STREAM_KINDS = {"every-window": "frames", "on-change": "views"}  # ``darkread re
 
 def default_infer() -> str:
     """The mode ``darkread read`` uses unless told otherwise (the bench follows it)."""
-    import inspect
+    from darkread.edge.config import default_infer_mode
 
-    from darkread.read import read_recording
-
-    return str(inspect.signature(read_recording).parameters["infer"].default)
+    return default_infer_mode()
 
 
 def recorded_frames(ctx: BenchContext, infer: str | None = None) -> tuple[list[StoredFrame], float]:

@@ -31,18 +31,10 @@ import numpy as np
 
 from darkread.bench import BenchContext, Figure
 from darkread.bench.ack_server import AckServer
+from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
 from darkread.paths import SAMPLE_RECORDING
 
-
 SMOKE_SECONDS = 0.3
-MODES = ("on-change", "every-window")
-
-
-def default_mode() -> str:
-    """The mode ``darkread read``, the daemon and ``eval`` run without being told."""
-    from darkread.edge.config import PipelineConfig
-
-    return PipelineConfig().infer
 
 
 def _recording(ctx: BenchContext) -> Path | None:
@@ -196,12 +188,12 @@ def run(ctx: BenchContext) -> list[Figure]:
         lossless = {
             mode: min((_run_edge(recording, model, 0.0, on_frame=encode_only, infer=mode) for _ in range(repeats)),
                       key=lambda r: r[1])
-            for mode in MODES
+            for mode in INFER_MODES
         }
     if not pinned:
         ctx.notes.append("edge: could not pin to one core; the real-time factor used all cores")
-    default = default_mode()
-    other = next(mode for mode in MODES if mode != default)
+    default = default_infer_mode()
+    other = other_infer_mode(default)
     span_s = lossless[default][2].stats["recording_s"]
     rtf = {mode: span_s / run[1] for mode, run in lossless.items()}  # CPU seconds: the host is shared
     inferences = {mode: run[3].totals["frames"] for mode, run in lossless.items()}
@@ -209,7 +201,7 @@ def run(ctx: BenchContext) -> list[Figure]:
     wall = {mode: span_s / run[0] for mode, run in lossless.items()}
 
     paced = {}
-    for mode in MODES:
+    for mode in INFER_MODES:
         server = AckServer()
         try:
             paced[mode] = _run_edge(recording, model, 1.0, uplink_url=server.url, infer=mode)[3]

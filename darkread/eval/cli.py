@@ -10,21 +10,10 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from darkread.eval.results import RecordingResult
 
-from darkread.eval.results import EDGE_MODES
+from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
 
 logger = logging.getLogger(__name__)
 BOTH = "both"
-
-
-def default_mode() -> str:
-    """The edge's default inference mode: the report's primary mode."""
-    from darkread.edge.config import PipelineConfig
-
-    return PipelineConfig().infer
-
-
-def other_mode(mode: str) -> str:
-    return next(m for m in EDGE_MODES if m != mode)
 
 EVAL_HELP = """\
 Two forms:
@@ -82,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--match", metavar="PATTERN",
                         help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
                              "'*lux30_*_human' for the real-scanpath recordings at 30 lux")
-    parser.add_argument("--infer", default=None, choices=[*EDGE_MODES, BOTH],
+    parser.add_argument("--infer", default=None, choices=[*INFER_MODES, BOTH],
                         help="the edge's mode (default: the edge's default, PipelineConfig().infer; every-window: every frame; "
                              "on-change: one fused view per fixation; both: the default and the other beside it)")
     parser.add_argument("--beside", metavar="DIR",
@@ -117,10 +106,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     from darkread.eval.report import write_report
 
     suite = Path(args.target)
-    mode = default_mode() if args.infer in (None, BOTH) else args.infer
+    mode = default_infer_mode() if args.infer in (None, BOTH) else args.infer
     runs = [(mode, Path(args.work) if args.work else suite / "eval_runs" / mode)]
     if args.infer == BOTH or args.beside:
-        other = other_mode(mode)
+        other = other_infer_mode(mode)
         runs.append((other, Path(args.beside) if args.beside else suite / "eval_runs" / other))
     evaluate = [] if args.report_only else runs if args.infer == BOTH else runs[:1]
     per_mode = [_results(suite, work, expected, args, evaluate=(expected, work) in evaluate) for expected, work in runs]

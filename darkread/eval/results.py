@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 CONDITIONS = ("lux", "motion", "kind", "font", "xheight_px", "scanpath")  # what the report groups recordings by
-EDGE_MODES = ("every-window", "on-change")  # the edge's inference modes (``PipelineConfig.infer``)
 LEGACY_MODE = "every-window"  # results stored before they named their mode were all every-window
 
 

@@ -91,9 +91,9 @@ def test_edge_benchmark_writes_its_keys(tmp_path: Path) -> None:
     figures = run_smoke("edge", tmp_path)
     assert set(figures) == EDGE
     assert figures["edge_realtime_factor"] > 0 and figures["edge_latency_p99_ms"] >= figures["edge_latency_p50_ms"]
-    from darkread.bench.edge import default_mode
+    from darkread.edge.config import default_infer_mode
 
-    assert figures["edge_realtime_factor"] == figures["edge_realtime_factor_" + default_mode().replace("-", "_")]
+    assert figures["edge_realtime_factor"] == figures["edge_realtime_factor_" + default_infer_mode().replace("-", "_")]
 
 
 @pytest.mark.slow  # rapidocr reads the stitched and the naive page
