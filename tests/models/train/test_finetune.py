@@ -76,6 +76,7 @@ def test_learning_rate_warms_up_then_decays() -> None:
     assert lr_at(10, cfg, 1.0) == pytest.approx(5e-5)
 
 
+@pytest.mark.slow  # five CLI processes (torch import, an ONNX export): ~30 s idle, minutes on a loaded machine
 def test_cli_finetune_runs_and_bad_inputs_fail_in_one_line(tmp_path, base_model, shard_writer) -> None:
     ann = annotated_dir(tmp_path, "ann", 4, 3, shard_writer)
     result = darkread("train", "finetune", "--annotated", str(ann), "--base", str(base_model), "--synthetic", "0", "--steps", "2",
@@ -84,7 +85,5 @@ def test_cli_finetune_runs_and_bad_inputs_fail_in_one_line(tmp_path, base_model,
     assert json.loads(result.stdout)["steps"] == 2 and (tmp_path / "t.onnx").is_file()
     assert_one_error_line(darkread("train", "finetune"), "nothing to tune on")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(tmp_path / "nope")), "no such directory")
-    assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--base", str(tmp_path / "none.onnx"),
-                                   "--synthetic", "0"), "no such model file")
-    assert_one_error_line(darkread("train", "finetune", "--annotated", str(tmp_path)), "no shard-")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--synthetic-share", "1.5"), "--synthetic-share")
+    assert_one_error_line(darkread("train", "compare", str(ann), "--model", str(tmp_path / "none.onnx")), "no such model file")
