@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,21 +12,9 @@ from darkread.edge.reconstruct import Reconstructor
 from darkread.models.train.export import export_onnx
 from darkread.models.train.finetune import FinetuneError, TuneConfig, finetune, lr_at
 from darkread.models.train.net import BinaryUNet
+from darkread_cli import assert_one_error_line, darkread
 
 TINY = TuneConfig(steps=3, batch_size=4, warmup_steps=1, crop=(32, 64), monitor_windows=4, threads=1)
-
-
-def darkread(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    command = Path(sys.executable).with_name("darkread")
-    prefix = [str(command)] if command.is_file() else [sys.executable, "-m", "darkread"]
-    return subprocess.run([*prefix, "-q", *argv], capture_output=True, text=True, timeout=timeout, check=False)
-
-
-def assert_one_error_line(result: subprocess.CompletedProcess[str], mentions: str) -> None:
-    assert result.returncode == 1, result.stderr
-    lines = [line for line in result.stderr.strip().splitlines() if line.startswith("darkread:")]
-    assert len(lines) == 1 and mentions in lines[0], result.stderr
-    assert "Traceback" not in result.stderr
 
 
 @pytest.fixture(scope="module")
