@@ -39,7 +39,7 @@ import numpy as np
 
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.marker_page import MarkerPage, mm_to_px
-from darkread.models.train.finetune import Windows, read_events, window_stack
+from darkread.models.train.windows import Windows, read_events, window_stack
 
 log = logging.getLogger(__name__)
 

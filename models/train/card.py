@@ -165,12 +165,11 @@ Samples (events, network, baseline, target at 1000 and 5 lux): `docs/model_sampl
 ## Limitations
 
 * Trained on synthetic data only; the simulator's noise model is an estimate (no public per-lux
-  IMX636 noise rates). Fine-tune on real recordings with `darkread train finetune`.
-* Fine-tuning targets come from locating this network's own output on the rendered page
-  (normalised cross-correlation). With this model the match is driven mostly by the line
-  layout: on the shared sample recording a page with each line's words reversed fits about as
-  well as the true page. So a target can be off by whole words along a line. Check the
-  match scores it logs, and prefer recordings with a known page pose.
+  IMX636 noise rates). To adapt it to a real sensor: record a printed marker page
+  (`darkread train target`), annotate the recordings from the page's pose (`darkread train
+  annotate`), fine-tune from these weights (`darkread train finetune --annotated ... --export
+  tuned.onnx`) and compare on held-out recordings (`darkread train compare`); see
+  docs/finetune.md for the loop and what it measured on a simulated shifted sensor.
 * Latin text, printed fonts, dark ink on light paper; handwriting, colour print and
   inverted (light-on-dark) text are out of scope.
 * One window at a time, no temporal state: a window with almost no signal (long fixation in the

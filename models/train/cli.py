@@ -63,11 +63,42 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_finetune(args: argparse.Namespace) -> int:
-    from darkread.models.train.finetune import finetune_recordings
+    from darkread.models.train.finetune import TuneConfig, annotate_missing, finetune
 
-    summary = finetune_recordings(args.recordings, args.checkpoint, args.run_dir, lr_scale=args.lr_scale,
-                                  steps=args.steps, threads=args.threads, export_to=args.export)
+    if not args.recordings and not args.annotated:
+        raise ValueError("nothing to tune on: give --annotated DIR... (from `darkread train annotate`) or RECORDINGS...")
+    if not 0.0 <= args.synthetic_share < 1.0:
+        raise ValueError(f"--synthetic-share {args.synthetic_share}: must be in [0, 1)")
+    for path in [*args.recordings, *args.annotated]:
+        if not path.is_dir():
+            raise FileNotFoundError(f"{path}: no such directory")
+    dirs = list(args.annotated)
+    if args.recordings:
+        dirs += annotate_missing(args.recordings, args.layout, args.run_dir / "annotated", progress=not args.quiet)
+    cfg = TuneConfig(lr=args.lr, steps=args.steps, minutes=args.minutes, batch_size=args.batch_size,
+                     synthetic_share=args.synthetic_share if args.synthetic > 0 or args.synthetic_dir else 0.0,
+                     threads=args.threads, seed=args.seed)
+    summary = finetune(dirs, args.base, args.run_dir, args.export, cfg=cfg, synthetic=args.synthetic,
+                       synthetic_dir=args.synthetic_dir, progress=not args.quiet)
     print(json.dumps(summary, indent=1, default=float))
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from darkread.models.train.compare import compare
+
+    models = {"shipped" if args.base == MODELS_DIR / "binary_unet.onnx" else "base": args.base, args.name: args.model}
+    if len(set(models)) < 2:
+        raise ValueError(f"--name {args.name}: must differ from the base model's name")
+    for path in models.values():
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such model file")
+    for path in args.inputs:
+        if not path.is_dir():
+            raise FileNotFoundError(f"{path}: no such recording or shard directory")
+    compare(args.inputs, models, args.out, read=not args.no_read, backend=args.backend, group=args.group,
+                     progress=not args.quiet)
+    print((args.out / "compare.md").read_text(encoding="utf-8"))
     return 0
 
 
@@ -139,15 +170,50 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--timing", action="append", default=[], metavar="STEP=SECONDS", help="extra rows for the card's reproduction-time table")
     p.set_defaults(func=_cmd_evaluate)
 
-    p = sub.add_parser("finetune", help="fine-tune on real recordings of known pages (targets made automatically)")
-    p.add_argument("recordings", type=Path, nargs="+", help="recording directories (events.raw, gaze CSV, calibration.json, text.txt)")
-    p.add_argument("--checkpoint", type=Path, default=Path("runs/binary_unet/best.pt"), help="starting weights")
+    p = sub.add_parser("finetune", help="fine-tune the shipped network on annotated recordings (mixed with synthetic windows), export ONNX",
+                       description="Fine-tune from the shipped weights (BINARY_UNET.onnx read back into torch) on the windows "
+                                   "`darkread train annotate` labelled from the page's pose, with synthetic standard-regime "
+                                   "windows in every batch so the network does not forget, at a low learning rate within a "
+                                   "step and time budget. Writes RUN_DIR/finetune.json, RUN_DIR/tuned.pt and the ONNX "
+                                   "(--export; default RUN_DIR/tuned.onnx) for `darkread read --model`. Compare before/after "
+                                   "on recordings it was not tuned on with `darkread train compare`.")
+    p.add_argument("recordings", type=Path, nargs="*", metavar="RECORDING",
+                   help="recordings of a marker page to annotate first (into RUN_DIR/annotated/; --layout)")
+    p.add_argument("--annotated", type=Path, nargs="+", default=[], metavar="DIR",
+                   help="directories written by `darkread train annotate` (shard-00000.npz)")
+    p.add_argument("--layout", type=Path, help="page layout for RECORDINGs (default each RECORDING/page.layout.json)")
+    p.add_argument("--base", type=Path, default=MODELS_DIR / "binary_unet.onnx", help="starting weights (default: the shipped model)")
+    p.add_argument("--export", type=Path, help="the tuned network as ONNX (default RUN_DIR/tuned.onnx)")
     p.add_argument("--run-dir", type=Path, default=Path("runs/finetune"))
-    p.add_argument("--lr-scale", type=float, default=1e-3, help="learning rate as a fraction of the training rate (default 1e-3)")
-    p.add_argument("--steps", type=int, default=200)
-    p.add_argument("--threads", type=int, default=2)
-    p.add_argument("--export", type=Path, help="also write the fine-tuned network to this .onnx")
+    p.add_argument("--synthetic", type=int, default=600, help="synthetic standard-regime windows to mix in (default 600; 0 = none)")
+    p.add_argument("--synthetic-dir", type=Path, help="take them from this `darkread synth dataset` directory instead of simulating")
+    p.add_argument("--synthetic-share", type=float, default=0.5, help="share of every batch that is synthetic (default 0.5)")
+    p.add_argument("--lr", type=float, default=2e-4, help="peak learning rate (default 2e-4; training used 3e-3)")
+    p.add_argument("--steps", type=int, default=1500, help="at most this many steps (default 1500)")
+    p.add_argument("--minutes", type=float, default=20.0, help="wall-time budget (default 20)")
+    p.add_argument("--batch-size", type=int, default=16)
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_finetune)
+
+    p = sub.add_parser("compare", help="before/after: ink F1 and end-to-end CER of the shipped and a tuned model",
+                       description="Score the shipped network and a tuned one (--model) on recordings they were not tuned on: "
+                                   "ink F1 of the windows the glasses cut against the simulator's ground truth (a recording "
+                                   "with pose_truth.npz and page.layout.json, or a shard directory's own targets), and the "
+                                   "CER of reading each recording end to end exactly as `darkread read --model` does. Writes "
+                                   "OUT/compare.json, OUT/compare.md (printed) and OUT/compare.png; reads are cached per model "
+                                   "under OUT/cache, so a rerun resumes.")
+    p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT", help="recording directories, or shard directories (ink F1 only)")
+    p.add_argument("--model", type=Path, required=True, help="the tuned ONNX (from `darkread train finetune --export`)")
+    p.add_argument("--base", type=Path, default=MODELS_DIR / "binary_unet.onnx", help="the model before (default: the shipped one)")
+    p.add_argument("--name", default="tuned", help="the tuned model's name in the tables (default tuned)")
+    p.add_argument("--out", type=Path, default=Path("runs/compare"), help="output directory (default runs/compare)")
+    p.add_argument("--no-read", action="store_true", help="ink F1 only, no end-to-end reads")
+    p.add_argument("--backend", default="local", help="OCR backend of the reads (default local)")
+    p.add_argument("--group", help="one group name for all inputs in the summary (default: by regime and lux)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_compare)
 
     p = sub.add_parser("target", help="a printable page: the text with ArUco markers around it, and its layout",
                        description="Lay out a text file with ArUco markers around it (the synthesiser's page renderer, the "

@@ -1,254 +1,231 @@
-"""Fine-tuning on real recordings of known pages, with targets made automatically.
+"""Fine-tuning the shipped network on annotated recordings of your sensor.
 
-For each recording the windows the glasses would reconstruct are cut exactly as on the edge
-(gaze -> fovea -> newest 1600 events -> voxel grid). Each window's target comes from the page
-whose text is known (``text.txt``):
+The targets come from ``darkread train annotate`` (the page's pose found from its ArUco markers,
+``models/train/annotate.py``): shards of the windows the glasses cut, each with the page's ink
+under that pose. Fine-tuning then
 
-1. the page is rendered as an ink image at the recording's x-height (``meta.json``);
-2. the current model's prediction for the window is located on that page by normalised
-   cross-correlation over a few scales (``match_target``);
-3. a confident match gives the page crop under the window as the target; an unconfident one
-   drops the window (a wrong target teaches the wrong thing, a missing one costs nothing).
-
-The network is then trained on those pairs at a learning rate ~1000x below the training rate,
-so it adapts to the real sensor's noise without forgetting the synthetic prior.
+* starts from the **shipped weights** (``models/binary_unet.onnx``, read back into torch by
+  ``onnx_weights.py`` and checked to give the same logits);
+* keeps the BatchNorms frozen (the annotated windows are few and correlated; their batch
+  statistics would overwrite the synthetic ones);
+* mixes **synthetic standard-regime windows** into every batch (``synthetic_share``), so what the
+  network knew of the simulator, and of light levels the recordings do not cover, is not
+  forgotten;
+* runs at a low learning rate (AdamW, short warm-up, cosine decay) within a step and time budget;
+* exports ONNX that the edge loads as it is (``darkread read --model tuned.onnx``).
 """
 
 from __future__ import annotations
 
+import json
 import logging
+import math
+import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
+
+from darkread.models.train.data import Shard, augment, load_dataset, random_crop
 
 log = logging.getLogger(__name__)
 
-WINDOW_HW: tuple[int, int] = (100, 200)
+ROUND_TRIP_TOLERANCE = 1e-3  # largest logit difference accepted between torch and onnxruntime
+
+
+class FinetuneError(ValueError):
+    """Nothing to tune on, or a model that does not round-trip."""
 
 
 @dataclass(frozen=True)
-class Match:
-    target: np.ndarray  # uint8 [100,200], 1 = ink
-    score: float  # normalised cross-correlation in [-1, 1]
-    x: int  # top-left of the window on the scaled page
-    y: int
-    scale: float  # page scale at which the prediction fitted best
+class TuneConfig:
+    lr: float = 2e-4  # peak; ~15x below the training rate (3e-3)
+    steps: int = 1500
+    minutes: float = 20.0  # wall-time budget; whichever of steps and minutes ends first
+    batch_size: int = 16
+    synthetic_share: float = 0.5  # of every batch
+    warmup_steps: int = 50
+    crop: tuple[int, int] | None = (64, 128)  # as the shipped training (the net is fully convolutional)
+    max_shift: int = 6
+    dice_weight: float = 0.5
+    threads: int = 1
+    seed: int = 0
+    monitor_windows: int = 96  # per kind, scored before and after (logged; the real test is `train compare`)
 
 
-def render_page_ink(text: str, xheight_px: float, font_path: str | Path | None = None, margin_px: int = 120) -> np.ndarray:
-    """The printed page as an ink mask (uint8, 1 = ink) with the given x-height in pixels."""
-    from PIL import Image, ImageDraw, ImageFont
-
-    path = str(font_path) if font_path else _default_font()
-    probe = ImageFont.truetype(path, 100)
-    _, top, _, bottom = probe.getbbox("x", anchor="ls")
-    size = max(4, round(xheight_px * 100 / max(1, bottom - top)))
-    font = ImageFont.truetype(path, size)
-    lines = [line.rstrip() for line in text.splitlines()] or [""]
-    pitch = round(size * 1.4)
-    width = int(max(font.getlength(line) for line in lines)) + 2 * margin_px
-    height = pitch * len(lines) + 2 * margin_px
-    image = Image.new("L", (width, height), 0)
-    draw = ImageDraw.Draw(image)
-    for i, line in enumerate(lines):
-        draw.text((margin_px, margin_px + size * 0.8 + i * pitch), line, fill=255, font=font, anchor="ls")
-    return (np.asarray(image) > 127).astype(np.uint8)
+def lr_at(step: int, cfg: TuneConfig, progress: float) -> float:
+    """Linear warm-up, then cosine decay to 5 % of the peak over the budget."""
+    warm = min(1.0, (step + 1) / max(1, cfg.warmup_steps))
+    return cfg.lr * warm * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * min(1.0, progress))))
 
 
-def _default_font() -> str:
-    import matplotlib
-
-    return str(Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans.ttf")
-
-
-def _font_for(meta: dict[str, Any]) -> str | None:
-    name = meta.get("font")
-    if not name:
-        return None
-    try:
-        from darkread.models.synth.fonts import face_by_name
-
-        return str(face_by_name(str(name)).path)
-    except (ImportError, ValueError, OSError):  # unknown name or synth component absent: the default face still matches roughly
-        return None
+def load_annotated(dirs: Sequence[str | Path]) -> tuple[Shard, dict[str, int]]:
+    """Every window of the annotated shard directories ``train annotate`` wrote, and a count per directory."""
+    parts, counts = [], {}
+    for d in dirs:
+        path = Path(d)
+        if not path.exists():
+            raise FileNotFoundError(f"{path}: no such annotated directory")
+        shard = load_dataset(path)
+        parts.append(shard)
+        counts[str(path)] = len(shard)
+    if not parts or sum(counts.values()) == 0:
+        raise FinetuneError("no annotated windows to tune on")
+    return Shard(np.concatenate([p.voxels for p in parts]), np.concatenate([p.targets for p in parts]), {}), counts
 
 
-def match_target(
-    prediction: np.ndarray,
-    page_ink: np.ndarray,
-    scales: Sequence[float] = (0.8, 0.9, 1.0, 1.1, 1.25),
-    min_score: float = 0.35,
-    min_ink_fraction: float = 0.01,
-) -> Match | None:
-    """Where on the page ``prediction`` fits best; the page crop there is the target.
+def synthetic_windows(n: int, source: str | Path | None = None, seed: int = 0, progress: bool = True) -> Shard:
+    """``n`` standard-regime windows: from a shard directory (``darkread synth dataset``), or simulated now."""
+    if n <= 0:
+        return Shard(np.zeros((0, 4, 100, 200), np.float16), np.zeros((0, 100, 200), np.uint8), {})
+    if source is not None:
+        shard = load_dataset(source, limit=n)
+        return Shard(shard.voxels, shard.targets, {})
+    from tqdm import tqdm
 
-    Returns None when the prediction has too little ink to locate, or no position correlates
-    better than ``min_score``.
-    """
-    pred = np.asarray(prediction, np.float32)
-    h, w = pred.shape
-    if pred.mean() < min_ink_fraction:
-        return None
-    best: Match | None = None
-    for scale in scales:
-        page = cv2.resize(page_ink.astype(np.float32), None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-        if page.shape[0] < h or page.shape[1] < w:
-            continue
-        response = cv2.matchTemplate(page, pred, cv2.TM_CCOEFF_NORMED)
-        # Nearly blank page patches have ~zero variance and normalise to meaningless scores.
-        patch_ink = cv2.matchTemplate(page, np.ones_like(pred), cv2.TM_CCORR)
-        response[~np.isfinite(response) | (patch_ink < 0.3 * pred.sum())] = -1.0
-        _, score, _, (x, y) = cv2.minMaxLoc(response)
-        if np.isfinite(score) and (best is None or score > best.score):
-            target = (page[y : y + h, x : x + w] > 0.5).astype(np.uint8)
-            best = Match(target=target, score=float(score), x=int(x), y=int(y), scale=float(scale))
-    if best is None or best.score < min_score:
-        return None
-    return best
+    from darkread.models.synth.shards import SAMPLES_PER_PAGE, make_samples, shard_seed
+    from darkread.models.synth.session import SessionSpec
+
+    spec = SessionSpec(split="train", duration_s=4.0)
+    vs, ts = [], []
+    with tqdm(total=n, desc="synthetic windows", unit="window", disable=not progress) as bar:
+        page = 0
+        while sum(len(v) for v in vs) < n:
+            k = min(SAMPLES_PER_PAGE, n - sum(len(v) for v in vs))
+            v, t, _ = make_samples(spec, shard_seed(seed, "finetune", False, 0, page), k)
+            vs.append(v)
+            ts.append(t)
+            bar.update(k)
+            page += 1
+    return Shard(np.concatenate(vs), np.concatenate(ts), {})
 
 
-@dataclass
-class Windows:
-    """The windows the glasses would reconstruct: voxel grids, origins, end times, their events."""
-
-    voxels: np.ndarray  # float32 [n, 4, 100, 200]
-    origins: np.ndarray  # int [n, 2] (x0, y0)
-    t_end_us: np.ndarray  # int64 [n]
-    events: list[np.ndarray]
+def _batch(pool: Shard, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    take = rng.choice(len(pool), size=k, replace=len(pool) < k)
+    return pool.voxels[take].astype(np.float32), pool.targets[take]
 
 
-def read_events(path: str | Path, *, need_text: bool = True) -> tuple[Any, np.ndarray, tuple[int, int]]:
-    """(recording, all its events, sensor (width, height)); raises for a recording without events."""
-    from darkread.edge.io.evt3 import decode_evt3
-    from darkread.edge.io.raw_header import read_raw_header
-    from darkread.edge.io.recording import open_recording
-
-    rec = open_recording(path)
-    if need_text and not rec.text:
-        raise ValueError(f"{path}: fine-tuning needs the printed text (text.txt)")
-    header = read_raw_header(rec.raw_path)
-    events, _ = decode_evt3(rec.raw_path.read_bytes()[header.data_offset :], header.width, header.height)
-    if len(events) == 0:
-        raise ValueError(f"{path}: no events")
-    return rec, events, (header.width, header.height)
-
-
-def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every_ms: float = 40.0,
-                 max_windows: int = 400) -> Windows:
-    """Every ``every_ms`` a window cut exactly as on the edge: gaze -> fovea -> newest 1600 events -> voxels."""
-    from darkread.edge.config import PipelineConfig
-    from darkread.edge.fovea import window_events, window_origin
-    from darkread.edge.gaze import GazeMapper
-    from darkread.edge.pipeline import MAX_HISTORY_EVENTS
-    from darkread.edge.voxel import VoxelConfig, voxel_grid
-
-    mapper = GazeMapper(rec.calibration, rec.gaze())
-    n_events, voxel = PipelineConfig().n_events, VoxelConfig()
-    times = np.arange(int(events["t"][0]) + 100_000, int(events["t"][-1]), int(every_ms * 1000))[:max_windows]
-    ends = np.searchsorted(events["t"], times, side="right")
-    voxels, origins, t_end, chosen = [], [], [], []
-    for t, end in zip(times, ends):
-        gaze = mapper.at(int(t))
-        if gaze is None:
-            continue
-        origin = window_origin(gaze.pixel, sensor_wh, voxel.fovea)
-        window = window_events(events[max(0, end - MAX_HISTORY_EVENTS) : end], origin, voxel.fovea, n_events)
-        if len(window) >= n_events // 2:
-            voxels.append(voxel_grid(window, origin[0], origin[1], voxel))
-            origins.append(origin)
-            t_end.append(int(window["t"][-1]))
-            chosen.append(window)
-    stack = np.stack(voxels).astype(np.float32) if voxels else np.zeros((0, 4, *WINDOW_HW), np.float32)
-    return Windows(stack, np.array(origins, dtype=np.int64).reshape(-1, 2), np.array(t_end, dtype=np.int64), chosen)
-
-
-def recording_windows(path: str | Path, every_ms: float = 40.0, max_windows: int = 400) -> tuple[np.ndarray, dict[str, Any], str]:
-    """Voxel grids [n,4,100,200] the edge would reconstruct from ``path``, its meta and its text."""
-    rec, events, sensor_wh = read_events(path)
-    windows = window_stack(rec, events, sensor_wh, every_ms, max_windows)
-    return windows.voxels, rec.meta, rec.text
-
-
-def make_targets(
-    voxels: np.ndarray, predictions: np.ndarray, page_ink: np.ndarray, min_score: float = 0.35
-) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """Keep the windows whose prediction matches the page; returns voxels, targets, scores."""
-    kept_v, kept_t, scores = [], [], []
-    for voxel, pred in zip(voxels, predictions):
-        match = match_target(pred, page_ink, min_score=min_score)
-        if match is not None:
-            kept_v.append(voxel)
-            kept_t.append(match.target)
-            scores.append(match.score)
-    if not kept_v:
-        return np.zeros((0, 4, *WINDOW_HW), np.float32), np.zeros((0, *WINDOW_HW), np.uint8), []
-    return np.stack(kept_v), np.stack(kept_t), scores
-
-
-def finetune_arrays(
-    model: Any, voxels: np.ndarray, targets: np.ndarray, *, lr: float, steps: int, batch_size: int = 16,
-    threads: int = 2, dice_weight: float = 0.5, seed: int = 0,
-) -> list[float]:
-    """Train ``model`` in place on (voxels, targets) for ``steps`` steps; returns the losses."""
+def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, progress: bool = True) -> dict[str, Any]:
+    """Train ``model`` in place on batches mixing both pools; returns the loss history and what ran."""
     import torch
-    from darkread.models.train.data import augment
+    from tqdm import tqdm
+
     from darkread.models.train.fit import bce_dice_loss
 
-    if len(voxels) == 0:
-        raise ValueError("no windows to fine-tune on (no prediction matched the page)")
-    torch.set_num_threads(threads)
-    rng = np.random.default_rng(seed)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=0.0)
+    if len(annotated) == 0:
+        raise FinetuneError("no annotated windows to tune on")
+    torch.manual_seed(cfg.seed)
+    torch.set_num_threads(cfg.threads)
+    rng = np.random.default_rng(cfg.seed)
+    n_syn = int(round(cfg.batch_size * cfg.synthetic_share)) if len(synthetic) else 0
+    n_ann = cfg.batch_size - n_syn
+    optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=0.0)
     model.train()
-    for module in model.modules():  # keep the synthetic BatchNorm statistics: real batches are few
+    for module in model.modules():
         if isinstance(module, torch.nn.BatchNorm2d):
             module.eval()
-    losses = []
-    for _ in range(steps):
-        take = rng.choice(len(voxels), size=min(batch_size, len(voxels)), replace=False)
-        x, y = augment(voxels[take].astype(np.float32), targets[take], rng, max_shift=0)
-        loss = bce_dice_loss(model(torch.from_numpy(x)), torch.from_numpy(y.astype(np.float32))[:, None], dice_weight)
+    budget_s, started = cfg.minutes * 60.0, time.perf_counter()
+    losses: list[float] = []
+    step = 0
+    bar = tqdm(total=cfg.steps, desc="fine-tuning", unit="step", disable=not progress)
+    while step < cfg.steps:
+        elapsed = time.perf_counter() - started
+        if elapsed >= budget_s:
+            log.info("time budget (%.1f min) reached after %d steps", cfg.minutes, step)
+            break
+        for group in optimizer.param_groups:
+            group["lr"] = lr_at(step, cfg, max(step / cfg.steps, elapsed / budget_s))
+        xs, ys = zip(*[_batch(pool, k, rng) for pool, k in ((annotated, n_ann), (synthetic, n_syn)) if k > 0])
+        x, y = augment(np.concatenate(xs), np.concatenate(ys), rng, max_shift=cfg.max_shift)
+        if cfg.crop is not None:
+            x, y = random_crop(x, y, cfg.crop, rng)
+        loss = bce_dice_loss(model(torch.from_numpy(np.ascontiguousarray(x))),
+                             torch.from_numpy(y.astype(np.float32))[:, None], cfg.dice_weight)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
         losses.append(float(loss.detach()))
+        step += 1
+        bar.update(1)
+        if step % 25 == 0:
+            bar.set_postfix(loss=f"{np.mean(losses[-25:]):.3f}")
+    bar.close()
     model.eval()
-    return losses
+    return {"steps": step, "seconds": round(time.perf_counter() - started, 1), "batch": {"annotated": n_ann, "synthetic": n_syn},
+            "loss_first_25": float(np.mean(losses[:25])) if losses else None,
+            "loss_last_25": float(np.mean(losses[-25:])) if losses else None}
 
 
-def finetune_recordings(
-    recordings: Sequence[str | Path], checkpoint: str | Path, run_dir: str | Path, *, lr_scale: float = 1e-3,
-    steps: int = 200, threads: int = 2, export_to: str | Path | None = None, min_score: float = 0.35,
+def _monitor(model: Any, pools: dict[str, Shard], n: int) -> dict[str, float]:
+    from darkread.models.train.fit import evaluate_model
+
+    return {name: round(evaluate_model(model, pool.voxels[:n], pool.targets[:n])["f1"], 4) for name, pool in pools.items() if len(pool)}
+
+
+def annotate_missing(recordings: Sequence[str | Path], layout: str | Path | None, root: Path, progress: bool) -> list[Path]:
+    """Annotate recordings not yet annotated under ``root``; returns their annotated directories."""
+    from darkread.models.train.annotate import SHARD_NAME, annotate_recording
+
+    out = []
+    for rec in recordings:
+        target = root / Path(rec).name
+        if not (target / SHARD_NAME).is_file():
+            log.info("annotating %s -> %s", rec, target)
+            annotate_recording(rec, layout, target, progress=progress)
+        out.append(target)
+    return out
+
+
+def finetune(
+    annotated_dirs: Sequence[str | Path],
+    base_model: str | Path,
+    run_dir: str | Path,
+    export_to: str | Path | None = None,
+    *,
+    cfg: TuneConfig = TuneConfig(),
+    synthetic: int = 600,
+    synthetic_dir: str | Path | None = None,
+    progress: bool = True,
 ) -> dict[str, Any]:
-    """Targets from each recording's known page, then fine-tuning of ``checkpoint`` at ``lr_scale`` x its lr."""
+    """Fine-tune ``base_model`` (ONNX) on the annotated windows plus synthetic ones; export ONNX."""
     import torch
-    from darkread.models.train.fit import load_model
 
-    data = torch.load(checkpoint, map_location="cpu", weights_only=False)
-    base_lr = float(data["fit_config"]["lr"])
-    model = load_model(checkpoint)
-    all_v, all_t, summary = [], [], {}
-    for path in recordings:
-        voxels, meta, text = recording_windows(path)
-        with torch.no_grad():
-            preds = np.concatenate([(model(torch.from_numpy(voxels[i : i + 32])) > 0)[:, 0].numpy() for i in range(0, len(voxels), 32)]) if len(voxels) else np.zeros((0, *WINDOW_HW), bool)
-        page = render_page_ink(text, float(meta.get("xheight_px", 10.0)), _font_for(meta))
-        kept_v, kept_t, scores = make_targets(voxels, preds.astype(np.uint8), page, min_score)
-        summary[str(path)] = {"windows": len(voxels), "matched": len(kept_v), "mean_score": float(np.mean(scores)) if scores else None}
-        log.info("%s: %d windows, %d matched the page", path, len(voxels), len(kept_v))
-        all_v.append(kept_v)
-        all_t.append(kept_t)
-    voxels, targets = np.concatenate(all_v), np.concatenate(all_t)
-    losses = finetune_arrays(model, voxels, targets, lr=base_lr * lr_scale, steps=steps, threads=threads)
+    from darkread.models.train.export import export_onnx
+    from darkread.models.train.onnx_weights import max_output_difference, model_from_onnx
+
+    annotated, counts = load_annotated(annotated_dirs)
+    log.info("%d annotated windows from %d directories", len(annotated), len(counts))
+    model = model_from_onnx(base_model)
+    probe = annotated.voxels[: min(4, len(annotated))].astype(np.float32)
+    round_trip = max_output_difference(model, base_model, probe)
+    if round_trip > ROUND_TRIP_TOLERANCE:
+        raise FinetuneError(f"{base_model}: torch and onnxruntime logits differ by {round_trip:.3g} after loading")
+    syn = synthetic_windows(synthetic + cfg.monitor_windows, synthetic_dir, seed=cfg.seed + 1, progress=progress)
+    syn_monitor, syn_train = syn.select(np.arange(min(cfg.monitor_windows, len(syn)))), syn.select(np.arange(min(cfg.monitor_windows, len(syn)), len(syn)))
+    pools = {"annotated_training_windows": annotated, "synthetic_held_out": syn_monitor}
+    before = _monitor(model, pools, cfg.monitor_windows)
+    run = tune(model, annotated, syn_train, cfg, progress=progress)
+    after = _monitor(model, pools, cfg.monitor_windows)
     out = Path(run_dir)
     out.mkdir(parents=True, exist_ok=True)
-    torch.save({"model": model.state_dict(), "fit_config": {**data["fit_config"], "lr": base_lr * lr_scale}}, out / "best.pt")
-    if export_to is not None:
-        from darkread.models.train.export import export_onnx
-
-        export_onnx(model, export_to)
-    return {"recordings": summary, "pairs": len(voxels), "lr": base_lr * lr_scale, "first_loss": losses[0], "last_loss": losses[-1]}
+    onnx_path = Path(export_to) if export_to is not None else out / "tuned.onnx"
+    export_onnx(model, onnx_path)
+    exported = max_output_difference(model, onnx_path, probe)
+    summary = {
+        "base_model": str(base_model),
+        "exported": str(onnx_path),
+        "annotated": counts,
+        "annotated_windows": len(annotated),
+        "synthetic_windows": len(syn_train),
+        "synthetic_source": str(synthetic_dir) if synthetic_dir else "simulated (standard regime, training texts)",
+        "round_trip_max_logit_difference": {"shipped_onnx_to_torch": round_trip, "torch_to_exported_onnx": exported},
+        "monitor_f1_before": before,
+        "monitor_f1_after": after,
+        **run,
+        "config": asdict(cfg),
+    }
+    torch.save({"model": model.state_dict(), "finetune": summary}, out / "tuned.pt")
+    (out / "finetune.json").write_text(json.dumps(summary, indent=1, default=float) + "\n", encoding="utf-8")
+    return summary

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,19 +14,7 @@ pytestmark = pytest.mark.slow  # a 0.6 s synthetic recording: ~20 s of simulatio
 
 from darkread.models.synth.marker_page import MarkerPageSpec, lay_out, load_layout, save_layout
 from darkread.models.train.data import load_shard
-
-
-def darkread(*argv: str, timeout: float = 240) -> subprocess.CompletedProcess[str]:
-    command = Path(sys.executable).with_name("darkread")
-    prefix = [str(command)] if command.is_file() else [sys.executable, "-m", "darkread"]
-    return subprocess.run([*prefix, "-q", *argv], capture_output=True, text=True, timeout=timeout, check=False)
-
-
-def assert_one_error_line(result: subprocess.CompletedProcess[str], mentions: str) -> None:
-    assert result.returncode == 1, result.stderr
-    lines = [line for line in result.stderr.strip().splitlines() if line.startswith("darkread:")]
-    assert len(lines) == 1 and lines[0].startswith("darkread: error: ") and mentions in lines[0], result.stderr
-    assert "Traceback" not in result.stderr
+from darkread_cli import assert_one_error_line, darkread
 
 
 @pytest.fixture(scope="module")

@@ -1,81 +1,75 @@
+"""Fine-tuning from the shipped ONNX on annotated shards mixed with synthetic ones; the CLI's bad inputs."""
+
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
-from darkread.models.train.finetune import (
-    finetune_arrays,
-    make_targets,
-    match_target,
-    render_page_ink,
-)
-from darkread.models.train.net import BinaryUNet, NetConfig
+
+from darkread.edge.reconstruct import Reconstructor
+from darkread.models.train.export import export_onnx
+from darkread.models.train.finetune import FinetuneError, TuneConfig, finetune, lr_at
+from darkread.models.train.net import BinaryUNet
+from darkread_cli import assert_one_error_line, darkread
+
+TINY = TuneConfig(steps=3, batch_size=4, warmup_steps=1, crop=(32, 64), monitor_windows=4, threads=1)
 
 
 @pytest.fixture(scope="module")
-def page() -> np.ndarray:
-    text = "The quick brown fox jumps over the lazy dog while\nreading in the dark with event vision on glasses.\nPack my box with five dozen liquor jugs, said Mia.\nSphinx of black quartz, judge my vow in the night."
-    return render_page_ink(text, xheight_px=10.0)
+def base_model(tmp_path_factory) -> Path:
+    """A small-valued BinaryUNet as ONNX (the shipped file's architecture; independent of it being installed)."""
+    import torch
 
-
-def test_rendered_page_is_an_ink_mask(page: np.ndarray) -> None:
-    assert page.dtype == np.uint8 and set(np.unique(page)) == {0, 1}
-    assert 0.005 < page.mean() < 0.2
-
-
-def test_a_noisy_prediction_is_located_on_the_page(page: np.ndarray) -> None:
-    y, x = 100, 150
-    truth = page[y : y + 100, x : x + 200]
-    rng = np.random.default_rng(0)
-    noisy = truth.copy()
-    flip = rng.random(noisy.shape) < 0.03
-    noisy[flip] = 1 - noisy[flip]
-    match = match_target(noisy, page)
-    assert match is not None and match.scale == 1.0
-    assert (match.x, match.y) == (x, y)
-    assert np.array_equal(match.target, truth)
-
-
-def test_an_empty_or_random_prediction_gives_no_target(page: np.ndarray) -> None:
-    assert match_target(np.zeros((100, 200), np.uint8), page) is None
-    noise = (np.random.default_rng(1).random((100, 200)) < 0.1).astype(np.uint8)
-    assert match_target(noise, page) is None
-
-
-def test_make_targets_keeps_only_matched_windows(page: np.ndarray) -> None:
-    voxels = np.random.default_rng(2).normal(size=(2, 4, 100, 200)).astype(np.float32)
-    preds = np.stack([page[100:200, 150:350], np.zeros((100, 200), np.uint8)])
-    kept_v, kept_t, scores = make_targets(voxels, preds, page)
-    assert len(kept_v) == 1 and np.array_equal(kept_v[0], voxels[0])
-    assert np.array_equal(kept_t[0], page[100:200, 150:350]) and scores[0] > 0.9
-
-
-def test_finetuning_lowers_the_loss_and_keeps_batchnorm_statistics(page: np.ndarray) -> None:
     torch.manual_seed(0)
-    model = BinaryUNet(NetConfig(widths=(4, 8, 8, 8), blocks=(1, 1, 1))).eval()
-    targets = np.stack([page[100:150, 150:250], page[120:170, 400:500]])  # small crops: the net is fully convolutional
-    voxels = np.repeat(targets[:, None].astype(np.float32) * 2 - 0.2, 4, axis=1)
-    stats = model.stem[1].running_mean.clone()
-    losses = finetune_arrays(model, voxels, targets, lr=1e-2, steps=5, batch_size=2, threads=1)
-    assert losses[-1] < losses[0]
-    assert torch.equal(model.stem[1].running_mean, stats)
-    assert not model.training
-    with pytest.raises(ValueError, match="no windows"):
-        finetune_arrays(model, voxels[:0], targets[:0], lr=1e-5, steps=1)
+    return export_onnx(BinaryUNet().eval(), tmp_path_factory.mktemp("base") / "base.onnx")
 
 
-@pytest.mark.slow
-def test_windows_of_a_recording_match_its_printed_page(shared_sample_recording) -> None:
-    from darkread.edge.reconstruct import Reconstructor, default_model_path
-    from darkread.models.train.finetune import _font_for, recording_windows
+def annotated_dir(root: Path, name: str, n: int, seed: int, shard_writer) -> Path:
+    d = root / name
+    d.mkdir()
+    shard_writer(d / "shard-00000.npz", n, seed)
+    return d
 
-    if not default_model_path().is_file():
-        pytest.skip("no shipped model")
-    voxels, meta, text = recording_windows(shared_sample_recording, max_windows=40)
-    assert voxels.ndim == 4 and voxels.shape[1:] == (4, 100, 200) and len(voxels) > 0
-    preds = Reconstructor(warmup=0)(voxels)
-    xheight = float(meta.get("xheight_px", 10.0))
-    page = render_page_ink(text, xheight, _font_for(meta))
-    kept_v, kept_t, scores = make_targets(voxels, preds, page)
-    assert len(kept_v) >= 1 and min(scores) >= 0.35
-    assert kept_t.shape[1:] == (100, 200)
+
+def test_finetune_on_a_tiny_annotated_shard_exports_a_loadable_onnx(tmp_path, base_model, shard_writer) -> None:
+    ann = annotated_dir(tmp_path, "rec_annotated", 6, 0, shard_writer)
+    syn = annotated_dir(tmp_path, "synthetic", 10, 1, shard_writer)
+    summary = finetune([ann], base_model, tmp_path / "run", tmp_path / "tuned.onnx", cfg=TINY, synthetic=6, synthetic_dir=syn,
+                       progress=False)
+    assert summary["steps"] == 3 and summary["annotated_windows"] == 6 and summary["synthetic_windows"] == 6
+    assert summary["batch"] == {"annotated": 2, "synthetic": 2}
+    trip = summary["round_trip_max_logit_difference"]
+    assert trip["shipped_onnx_to_torch"] < 1e-4 and trip["torch_to_exported_onnx"] < 1e-4
+    voxels = np.random.default_rng(2).normal(size=(2, 4, 100, 200)).astype(np.float32)
+    tuned, before = Reconstructor(tmp_path / "tuned.onnx", warmup=0), Reconstructor(base_model, warmup=0)
+    assert tuned.logits(voxels).shape == (2, 100, 200)
+    assert not np.allclose(tuned.logits(voxels), before.logits(voxels))  # the weights moved
+    saved = json.loads((tmp_path / "run" / "finetune.json").read_text())
+    assert saved["exported"] == str(tmp_path / "tuned.onnx") and (tmp_path / "run" / "tuned.pt").is_file()
+
+
+def test_no_annotated_windows_is_an_error(tmp_path, base_model) -> None:
+    with pytest.raises(FinetuneError, match="no annotated windows"):
+        finetune([], base_model, tmp_path / "run", cfg=TINY, synthetic=0, progress=False)
+
+
+def test_learning_rate_warms_up_then_decays() -> None:
+    cfg = TuneConfig(lr=1e-3, warmup_steps=10)
+    assert lr_at(0, cfg, 0.0) == pytest.approx(1e-4)
+    assert lr_at(10, cfg, 0.0) == pytest.approx(1e-3)
+    assert lr_at(10, cfg, 1.0) == pytest.approx(5e-5)
+
+
+@pytest.mark.slow  # five CLI processes (torch import, an ONNX export): ~30 s idle, minutes on a loaded machine
+def test_cli_finetune_runs_and_bad_inputs_fail_in_one_line(tmp_path, base_model, shard_writer) -> None:
+    ann = annotated_dir(tmp_path, "ann", 4, 3, shard_writer)
+    result = darkread("train", "finetune", "--annotated", str(ann), "--base", str(base_model), "--synthetic", "0", "--steps", "2",
+                      "--batch-size", "2", "--run-dir", str(tmp_path / "run"), "--export", str(tmp_path / "t.onnx"), "--quiet")
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert json.loads(result.stdout)["steps"] == 2 and (tmp_path / "t.onnx").is_file()
+    assert_one_error_line(darkread("train", "finetune"), "nothing to tune on")
+    assert_one_error_line(darkread("train", "finetune", "--annotated", str(tmp_path / "nope")), "no such directory")
+    assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--synthetic-share", "1.5"), "--synthetic-share")
+    assert_one_error_line(darkread("train", "compare", str(ann), "--model", str(tmp_path / "none.onnx")), "no such model file")

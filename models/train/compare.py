@@ -1,0 +1,246 @@
+"""Before/after: the shipped network next to a fine-tuned one on recordings it was not tuned on.
+
+Two figures per input, for each model:
+
+* **ink F1** of the windows the glasses would cut (gaze -> fovea -> 1600 events -> voxel grid),
+  against the simulator's ground truth: the page's ink under its true pose (``pose_truth.npz``
+  with ``page.layout.json``, what ``synth recording --markers`` writes). A shard directory
+  (``darkread synth dataset``, or ``train annotate``'s output) is scored on its own targets.
+* **end-to-end CER**: the recording read exactly as ``darkread read --model`` reads it (a real edge
+  and cloud on loopback, the page stitched and read by OCR) against its ``text.txt``.
+
+Predictions run on onnxruntime (what ships). Every read is cached under ``OUT/cache/<model
+digest>/`` so an interrupted comparison resumes, and the shipped model's reads are shared between
+comparisons of several tuned models.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from darkread.models.train.ink_scores import ink_counts, scores_from_counts
+
+log = logging.getLogger(__name__)
+
+RESULTS_NAME = "compare.json"
+REPORT_NAME = "compare.md"
+PLOT_NAME = "compare.png"
+
+
+@dataclass
+class ScoredWindows:
+    """Voxel grids and their true ink, from a recording or a shard directory."""
+
+    voxels: np.ndarray  # float [n,4,100,200]
+    targets: np.ndarray | None  # uint8 [n,100,200], None when no ground truth exists
+    source: str  # where the targets come from
+
+
+def model_digest(path: str | Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
+
+
+def is_recording(path: Path) -> bool:
+    return (path / "events.raw").is_file() or any(path.glob("*.raw"))
+
+
+def truth_windows(recording: str | Path, every_ms: float = 40.0, max_windows: int = 400) -> ScoredWindows:
+    """The recording's windows with the simulator's ink under the true pose (targets None without it)."""
+    from darkread.models.synth.marker_page import load_layout
+    from darkread.models.train.annotate import load_pose_truth, pixels_per_mm, render_target, window_rays
+    from darkread.models.train.windows import read_events, window_stack
+
+    path = Path(recording)
+    rec, events, wh = read_events(path)
+    windows = window_stack(rec, events, wh, every_ms=every_ms, max_windows=max_windows)
+    truth = load_pose_truth(path)
+    layout = path / "page.layout.json"
+    if truth is None or not layout.is_file() or len(windows.t_end_us) == 0:
+        return ScoredWindows(windows.voxels, None, "none (no pose_truth.npz + page.layout.json)")
+    page = load_layout(layout)
+    centre_mm = np.asarray(page.text_box_mm).reshape(2, 2).mean(axis=0)
+    ink_cache: dict[float, np.ndarray] = {}
+    targets = np.zeros((len(windows.t_end_us), *windows.voxels.shape[-2:]), np.uint8)
+    for i, (t_end, origin) in enumerate(zip(windows.t_end_us, windows.origins)):
+        H = truth.at(float(t_end))  # page mm -> camera point: a page -> normalised-image homography
+        s = max(1.0, round(1.25 * pixels_per_mm(H, rec.calibration, centre_mm) * 4) / 4)
+        if s not in ink_cache:
+            ink_cache[s] = page.ink_at(s)
+        targets[i] = render_target(ink_cache[s], s, H, window_rays(rec.calibration, tuple(origin)))
+    return ScoredWindows(windows.voxels, targets, "simulator's true pose")
+
+
+def shard_windows(directory: str | Path, limit: int | None = None) -> ScoredWindows:
+    from darkread.models.train.data import load_dataset
+
+    data = load_dataset(directory, limit=limit)
+    return ScoredWindows(data.voxels, data.targets, "shard targets")
+
+
+def ink_f1(model: str | Path, scored: ScoredWindows) -> dict[str, Any] | None:
+    """Pooled ink counts and F1 of ``model`` on the windows (None without ground truth)."""
+    from darkread.models.train.evaluate import predict_onnx
+
+    if scored.targets is None or len(scored.voxels) == 0:
+        return None
+    pred = predict_onnx(model, scored.voxels).astype(bool)
+    tp, fp, fn = ink_counts(pred, scored.targets.astype(bool))
+    return {"tp": tp, "fp": fp, "fn": fn, "windows": len(pred), **{k: round(v, 4) for k, v in scores_from_counts(tp, fp, fn).items()}}
+
+
+def read_cer(model: str | Path, recording: str | Path, backend: str, cache_dir: Path) -> dict[str, Any]:
+    """``darkread read --model`` on the recording (cached per model digest and recording name)."""
+    from darkread.read import read_recording
+
+    cache = cache_dir / f"{Path(recording).name}.json"
+    if cache.is_file():
+        return json.loads(cache.read_text())
+    result = read_recording(recording, backend=backend, model=str(model))
+    row = {"cer": result.cer, "wer": result.wer, "text": result.text, "reference": result.reference, "frames": result.frames,
+           "seconds": round(result.seconds, 1)}
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    cache.write_text(json.dumps(row, indent=1) + "\n", encoding="utf-8")
+    return row
+
+
+def recording_meta(path: Path) -> dict[str, Any]:
+    meta_path = path / "meta.json"
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    return {"lux": meta.get("lux"), "font": meta.get("font"), "regime": meta.get("sensor_regime", "standard")}
+
+
+def compare(
+    inputs: Sequence[str | Path],
+    models: dict[str, Path],
+    out: str | Path,
+    *,
+    read: bool = True,
+    backend: str = "local",
+    group: str | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Score every input with every model (name -> ONNX); writes OUT/compare.json, .md and .png."""
+    from tqdm import tqdm
+
+    out = Path(out)
+    digests = {name: model_digest(path) for name, path in models.items()}
+    rows = []
+    for item in tqdm([Path(p) for p in inputs], desc="comparing", unit="input", disable=not progress):
+        recording = is_recording(item)
+        row: dict[str, Any] = {"input": item.name, "path": str(item), "kind": "recording" if recording else "shards",
+                               **(recording_meta(item) if recording else {}), "group": group}
+        scored = truth_windows(item) if recording else shard_windows(item)
+        row["truth"] = scored.source
+        for name, path in models.items():
+            row[name] = {"ink": ink_f1(path, scored)}
+            if recording and read:
+                row[name]["read"] = read_cer(path, item, backend, out / "cache" / digests[name])
+        rows.append(row)
+        log.info("%s: %s", item.name, {n: (row[n]["ink"] or {}).get("f1") for n in models})
+    report = {"models": {n: {"path": str(p), "sha256_12": digests[n]} for n, p in models.items()},
+              "backend": backend, "rows": rows, "summary": summarise(rows, list(models))}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / RESULTS_NAME).write_text(json.dumps(report, indent=1, default=float) + "\n", encoding="utf-8")
+    (out / REPORT_NAME).write_text(markdown(report), encoding="utf-8")
+    plot(report, out / PLOT_NAME)
+    return report
+
+
+def group_key(row: dict[str, Any]) -> str:
+    if row.get("group"):
+        return str(row["group"])
+    if row["kind"] == "shards":
+        return row["input"]
+    lux = row.get("lux")
+    return f"{row.get('regime') or 'recordings'} {lux:g} lux" if lux is not None else str(row.get("regime") or "recordings")
+
+
+def summarise(rows: list[dict[str, Any]], names: list[str]) -> list[dict[str, Any]]:
+    """Per group: pooled ink F1 and mean CER of each model, and how many recordings each improved."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault(group_key(row), []).append(row)
+    summary = []
+    for key, members in groups.items():
+        entry: dict[str, Any] = {"group": key, "n": len(members)}
+        for name in names:
+            inks = [m[name]["ink"] for m in members if m[name].get("ink")]
+            if inks:
+                tp, fp, fn = (sum(i[k] for i in inks) for k in ("tp", "fp", "fn"))
+                entry[f"{name}_ink_f1"] = round(scores_from_counts(tp, fp, fn)["f1"], 4)
+                entry["windows"] = sum(i["windows"] for i in inks)
+            cers = [m[name]["read"]["cer"] for m in members if m[name].get("read") and m[name]["read"].get("cer") is not None]
+            if cers:
+                entry[f"{name}_cer"] = round(float(np.mean(cers)), 4)
+        if len(names) == 2:
+            a, b = names
+            pairs = [(m[a]["read"]["cer"], m[b]["read"]["cer"]) for m in members
+                     if m[a].get("read") and m[b].get("read") and m[a]["read"].get("cer") is not None and m[b]["read"].get("cer") is not None]
+            if pairs:
+                entry["cer_lower"] = sum(y < x for x, y in pairs)
+                entry["cer_higher"] = sum(y > x for x, y in pairs)
+        summary.append(entry)
+    return summary
+
+
+def _fmt(value: Any, pct: bool = False) -> str:
+    if value is None:
+        return "-"
+    return f"{100 * value:.1f} %" if pct else f"{value:.3f}"
+
+
+def markdown(report: dict[str, Any]) -> str:
+    names = list(report["models"])
+    lines = ["# Before/after (`darkread train compare`)", ""]
+    lines += [f"* `{n}`: `{m['path']}` (sha256 {m['sha256_12']})" for n, m in report["models"].items()]
+    lines += [f"* OCR backend: {report['backend']}; ink F1 pooled over the windows of a group, CER averaged over its recordings", ""]
+    head = ["group", "n", "windows", *[f"ink F1 {n}" for n in names], *[f"CER {n}" for n in names]]
+    if len(names) == 2:
+        head.append(f"CER lower / higher with {names[1]}")
+    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for s in report["summary"]:
+        cells = [s["group"], str(s["n"]), str(s.get("windows", "-")), *[_fmt(s.get(f"{n}_ink_f1")) for n in names],
+                 *[_fmt(s.get(f"{n}_cer"), pct=True) for n in names]]
+        if len(names) == 2:
+            cells.append(f"{s['cer_lower']} / {s['cer_higher']}" if "cer_lower" in s else "-")
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "Per input:", "", "| input | " + " | ".join([*[f"ink F1 {n}" for n in names], *[f"CER {n}" for n in names]]) + " |",
+              "|---|" + "---|" * (2 * len(names))]
+    for r in report["rows"]:
+        f1 = [_fmt((r[n]["ink"] or {}).get("f1")) for n in names]
+        cer = [_fmt((r[n].get("read") or {}).get("cer"), pct=True) for n in names]
+        lines.append(f"| {r['input']} | " + " | ".join(f1 + cer) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(report: dict[str, Any], path: Path) -> Path:
+    """Grouped bars: ink F1 and CER per group, one bar per model."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(report["models"])
+    summary = report["summary"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
+    x = np.arange(len(summary))
+    width = 0.8 / max(1, len(names))
+    for ax, key, title in ((axes[0], "ink_f1", "ink F1 (higher is better)"), (axes[1], "cer", "CER (lower is better)")):
+        for k, name in enumerate(names):
+            values = [s.get(f"{name}_{key}") for s in summary]
+            ax.bar(x + (k - (len(names) - 1) / 2) * width, [v if v is not None else 0 for v in values], width, label=name)
+        ax.set_xticks(x, [s["group"] for s in summary], rotation=20, fontsize=8, ha="right")
+        ax.set_title(title, fontsize=9)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path

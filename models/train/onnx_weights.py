@@ -1,0 +1,111 @@
+"""The shipped ONNX network back in torch, so fine-tuning can start from exactly what ships.
+
+No .pt checkpoint ships, only ``binary_unet.onnx``, whose exporter folded every BatchNorm into the
+convolution before it. The torch net keeps its BatchNorms, so each folded convolution goes back as
+(weight, bias) = (conv weight, identity BatchNorm with beta = folded bias): running mean 0, running
+variance 1, gamma sqrt(1 + eps), so the BatchNorm in eval mode is exactly ``x + beta``. The
+convolutions are matched in the order the graph runs them (the exporter traces ``forward``), which
+is the order torch calls its Conv2d modules; every shape is checked, and callers can confirm the
+round trip on a window with ``max_output_difference``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from darkread.models.train.net import INPUT_SHAPE, BinaryUNet, NetConfig
+
+
+class OnnxWeightsError(ValueError):
+    """The ONNX file is not a network of this architecture."""
+
+
+def onnx_convolutions(path: str | Path) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
+    """(node name, weight, bias or None) of every Conv node, in graph order."""
+    import onnx
+    from onnx import numpy_helper
+
+    try:
+        graph = onnx.load(str(path)).graph
+    except (OSError, onnx.onnx_cpp2py_export.checker.ValidationError) as exc:  # type: ignore[attr-defined]
+        raise OnnxWeightsError(f"{path}: not a readable ONNX model ({exc})") from None
+    except Exception as exc:  # protobuf DecodeError and friends: a file that is not ONNX at all
+        raise OnnxWeightsError(f"{path}: not an ONNX model ({type(exc).__name__})") from None
+    inits = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
+    convs = []
+    for node in graph.node:
+        if node.op_type != "Conv":
+            continue
+        if len(node.input) < 2 or node.input[1] not in inits:
+            raise OnnxWeightsError(f"{path}: convolution {node.name} has no constant weight")
+        bias = inits.get(node.input[2]) if len(node.input) > 2 else None
+        convs.append((node.name, inits[node.input[1]], bias))
+    return convs
+
+
+def conv_order(model: nn.Module) -> list[tuple[nn.Conv2d, nn.BatchNorm2d | None]]:
+    """The model's Conv2d modules in call order, each with the BatchNorm that follows it (if any)."""
+    following: dict[int, nn.BatchNorm2d] = {}
+    for module in model.modules():
+        if isinstance(module, nn.Sequential):
+            layers = list(module)
+            for a, b in zip(layers, layers[1:]):
+                if isinstance(a, nn.Conv2d) and isinstance(b, nn.BatchNorm2d):
+                    following[id(a)] = b
+    called: list[nn.Conv2d] = []
+    hooks = [m.register_forward_hook(lambda mod, _i, _o: called.append(mod)) for m in model.modules() if isinstance(m, nn.Conv2d)]
+    try:
+        with torch.no_grad():
+            model.eval()(torch.zeros(1, *INPUT_SHAPE))
+    finally:
+        for h in hooks:
+            h.remove()
+    return [(conv, following.get(id(conv))) for conv in called]
+
+
+def load_onnx_weights(model: BinaryUNet, path: str | Path) -> BinaryUNet:
+    """Copy the folded weights of ``path`` into ``model`` (in place; returned in eval mode)."""
+    convs = onnx_convolutions(path)
+    slots = conv_order(model)
+    if len(convs) != len(slots):
+        raise OnnxWeightsError(f"{path}: {len(convs)} convolutions, the network has {len(slots)}; not this architecture")
+    with torch.no_grad():
+        for (name, weight, bias), (conv, bn) in zip(convs, slots):
+            if tuple(weight.shape) != tuple(conv.weight.shape):
+                raise OnnxWeightsError(f"{path}: {name} has weight {tuple(weight.shape)}, the network expects "
+                                       f"{tuple(conv.weight.shape)}; not this architecture or these widths")
+            conv.weight.copy_(torch.from_numpy(np.array(weight)))
+            b = np.zeros(weight.shape[0], np.float32) if bias is None else bias
+            if bn is not None:
+                bn.running_mean.zero_()
+                bn.running_var.fill_(1.0)
+                bn.weight.fill_(float(np.sqrt(1.0 + bn.eps)))
+                bn.bias.copy_(torch.from_numpy(np.array(b)))
+            elif conv.bias is not None:
+                conv.bias.copy_(torch.from_numpy(np.array(b)))
+            elif np.any(b):
+                raise OnnxWeightsError(f"{path}: {name} has a bias the network has no place for")
+    return model.eval()
+
+
+def model_from_onnx(path: str | Path, config: NetConfig | None = None) -> BinaryUNet:
+    """A torch BinaryUNet computing what ``path`` computes."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: no such model file")
+    return load_onnx_weights(BinaryUNet(config), path)
+
+
+def max_output_difference(model: BinaryUNet, path: str | Path, voxels: np.ndarray) -> float:
+    """Largest |torch logit - onnxruntime logit| on ``voxels`` [n,4,100,200]: the round-trip check."""
+    import onnxruntime as ort
+
+    x = np.ascontiguousarray(voxels, np.float32)
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    ref = session.run(None, {session.get_inputs()[0].name: x})[0]
+    with torch.no_grad():
+        got = model.eval()(torch.from_numpy(x)).numpy()
+    return float(np.abs(got - ref).max())
