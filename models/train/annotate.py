@@ -318,7 +318,8 @@ def page_box(H: np.ndarray, page: MarkerPage, calib: Calibration, margin: int = 
 
 
 def refine_pose(H: np.ndarray, events: np.ndarray, page: MarkerPage, ink: np.ndarray, ink_px_per_mm: float,
-                calib: Calibration, rays: SensorRays, iterations: int = 40) -> tuple[np.ndarray, float] | None:
+                calib: Calibration, rays: SensorRays, iterations: int = 40,
+                max_jump_px: float = 12.0) -> tuple[np.ndarray, float] | None:
     """Align the page's rendered edges to the events' count image (``cv2.findTransformECC``, a
     homography in sensor pixels), and fold the correction back into page -> normalised ``H``.
 
@@ -344,7 +345,7 @@ def refine_pose(H: np.ndarray, events: np.ndarray, page: MarkerPage, ink: np.nda
     grid = np.stack(np.meshgrid(np.linspace(0, w_mm, 7), np.linspace(0, h_mm, 5)), -1).reshape(-1, 2)
     uv = project_page(H, calib, grid)
     moved = apply_h(warp.astype(np.float64), uv - [x0, y0]) + [x0, y0]
-    if np.abs(moved - uv).max() > 12.0:  # a jump this large is a wrong optimum, not a correction
+    if np.abs(moved - uv).max() > max_jump_px:  # a jump this large is a wrong optimum, not a correction
         return None
     refined, _ = cv2.findHomography(grid, calib.unproject(moved), 0)
     if refined is None:
@@ -415,7 +416,9 @@ def detect_track(events: np.ndarray, page: MarkerPage, calib: Calibration, cfg: 
                 det_h.append(seed)
             continue
         lo, hi = np.searchsorted(events["t"], [t - span_ms * 1e3, t])
-        refined = refine_pose(seed, events[lo:hi], page, ink, cfg.ink_px_per_mm, calib, rays)
+        # a page search is good to a few per cent of the page's size (its scale and angle steps)
+        jump = max(12.0, 0.04 * page.size_mm[0] * match.px_per_mm) if from_search else 12.0
+        refined = refine_pose(seed, events[lo:hi], page, ink, cfg.ink_px_per_mm, calib, rays, max_jump_px=jump)
         if refined is None or refined[1] < cfg.min_cc:
             continue
         det_t.append(t - span_ms * 500)  # the events' middle
