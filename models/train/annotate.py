@@ -8,6 +8,10 @@ known page, placed by the page-to-sensor homography found from the markers in th
 2. **Markers.** ``cv2.aruco`` finds them (detector tuned for these images: wider adaptive
    thresholds, finer cell sampling) in images every ``image_every_ms``; several decay constants are
    tried per image and the detections are pooled by marker id.
+   **Without markers** (dim light: the noise drowns their cells) the page itself is searched in
+   the events (``page_search.find_page``: its rendered edge map against 25 ms of events, over a
+   grid of scales and rotations), whenever there is neither a marker pose nor a live track.
+   Hot pixels (``page_search.hot_pixel_mask``) are dropped from the events used for poses.
 3. **Homography.** Detected corners are undistorted with the recording's calibration and
    page-mm -> normalised-image homographies fitted with RANSAC (``cv2.findHomography``). Each
    detection is summarised by where four reference points of the page land; those tracks are
@@ -39,6 +43,14 @@ import numpy as np
 
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.marker_page import MarkerPage, mm_to_px
+from darkread.models.train.page_search import (
+    SearchConfig,
+    count_image,
+    edge_map,
+    find_page,
+    homography_from_affine,
+    hot_pixel_mask,
+)
 from darkread.models.train.windows import Windows, read_events, window_stack
 
 log = logging.getLogger(__name__)
@@ -70,6 +82,10 @@ class AnnotateConfig:
     max_offset_ms: float = 8.0
     offset_step_ms: float = 1.0
     refine_offset: bool = True
+    search_page: bool = True  # without markers and without a track, search the page in the events
+    search_events_ms: float = 25.0  # events of this span make the search image
+    search_every_ms: float = 100.0  # at most one search per this interval
+    search: SearchConfig = SearchConfig()
 
 
 # -- event images and markers ------------------------------------------------------------------
@@ -258,13 +274,6 @@ def alignment_residual(H_est: np.ndarray, H_true_cam: np.ndarray, calib: Calibra
 # -- matching (time offset) --------------------------------------------------------------------
 
 
-def edge_map(coverage: np.ndarray) -> np.ndarray:
-    """Where a moving page fires: the gradient magnitude of its ink, lightly blurred."""
-    gx = cv2.Sobel(coverage, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(coverage, cv2.CV_32F, 0, 1, ksize=3)
-    return cv2.GaussianBlur(np.sqrt(gx * gx + gy * gy), (0, 0), 1.0)
-
-
 def ncc(a: np.ndarray, b: np.ndarray) -> float:
     a = a - a.mean()
     b = b - b.mean()
@@ -309,7 +318,8 @@ def page_box(H: np.ndarray, page: MarkerPage, calib: Calibration, margin: int = 
 
 
 def refine_pose(H: np.ndarray, events: np.ndarray, page: MarkerPage, ink: np.ndarray, ink_px_per_mm: float,
-                calib: Calibration, rays: SensorRays, iterations: int = 40) -> tuple[np.ndarray, float] | None:
+                calib: Calibration, rays: SensorRays, iterations: int = 40,
+                max_jump_px: float = 12.0) -> tuple[np.ndarray, float] | None:
     """Align the page's rendered edges to the events' count image (``cv2.findTransformECC``, a
     homography in sensor pixels), and fold the correction back into page -> normalised ``H``.
 
@@ -335,7 +345,7 @@ def refine_pose(H: np.ndarray, events: np.ndarray, page: MarkerPage, ink: np.nda
     grid = np.stack(np.meshgrid(np.linspace(0, w_mm, 7), np.linspace(0, h_mm, 5)), -1).reshape(-1, 2)
     uv = project_page(H, calib, grid)
     moved = apply_h(warp.astype(np.float64), uv - [x0, y0]) + [x0, y0]
-    if np.abs(moved - uv).max() > 12.0:  # a jump this large is a wrong optimum, not a correction
+    if np.abs(moved - uv).max() > max_jump_px:  # a jump this large is a wrong optimum, not a correction
         return None
     refined, _ = cv2.findHomography(grid, calib.unproject(moved), 0)
     if refined is None:
@@ -356,16 +366,19 @@ def detect_track(events: np.ndarray, page: MarkerPage, calib: Calibration, cfg: 
     known = set(page.markers)
     rays = SensorRays(calib)
     ink = page.ink_at(cfg.ink_px_per_mm)
+    hot = hot_pixel_mask(events, width, height)
+    events = events[~hot[events["y"], events["x"]]]  # hot pixels say nothing about the page
     t_first, t_last = float(events["t"][0]), float(events["t"][-1])
-    times = np.arange(t_first + max(cfg.taus_ms) * 1e3, t_last, cfg.image_every_ms * 1e3)
-    det_t, det_h, per_image, rms, ccs = [], [], [], [], []
-    n_marker_poses = n_tracked = 0
+    start = min(max(cfg.taus_ms), cfg.search_events_ms if cfg.search_page else np.inf) * 1e3
+    times = np.arange(t_first + start, t_last, cfg.image_every_ms * 1e3)
+    det_t, det_h, per_image, rms, ccs, search_scores = [], [], [], [], [], []
+    n_marker_poses = n_tracked = n_searched = n_search_poses = 0
     last: tuple[float, np.ndarray] | None = None
-    last_detection = -np.inf
+    last_detection = last_search = -np.inf
     for t in tqdm(times, desc="poses", disable=not progress, leave=False):
         tracking = last is not None and t - last[0] <= cfg.max_gap_ms * 1e3
         found: dict[int, np.ndarray] = {}
-        if not tracking or t - last_detection >= cfg.redetect_ms * 1e3:
+        if (not tracking or t - last_detection >= cfg.redetect_ms * 1e3) and t - t_first >= max(cfg.taus_ms) * 1e3:
             last_detection = t
             for tau in cfg.taus_ms:  # until enough markers are found
                 image = to_detection_image(decayed_image(events, t, tau * 1e3, width, height))
@@ -384,6 +397,17 @@ def detect_track(events: np.ndarray, page: MarkerPage, calib: Calibration, cfg: 
         from_markers = seed is not None
         if seed is None and tracking:
             seed = last[1]
+        span_ms = cfg.refine_events_ms
+        from_search = False
+        if seed is None and cfg.search_page and cfg.refine_pose and t - last_search >= cfg.search_every_ms * 1e3:
+            last_search = t
+            n_searched += 1
+            lo, hi = np.searchsorted(events["t"], [t - cfg.search_events_ms * 1e3, t])
+            match = find_page(count_image(events[lo:hi], width, height), page, cfg.search)
+            if match is not None:
+                seed = homography_from_affine(match.affine, page, calib)
+                search_scores.append(match.score)
+                span_ms, from_search = cfg.search_events_ms, True
         if seed is None:
             continue
         if not cfg.refine_pose:
@@ -391,14 +415,17 @@ def detect_track(events: np.ndarray, page: MarkerPage, calib: Calibration, cfg: 
                 det_t.append(t)
                 det_h.append(seed)
             continue
-        lo, hi = np.searchsorted(events["t"], [t - cfg.refine_events_ms * 1e3, t])
-        refined = refine_pose(seed, events[lo:hi], page, ink, cfg.ink_px_per_mm, calib, rays)
+        lo, hi = np.searchsorted(events["t"], [t - span_ms * 1e3, t])
+        # a page search is good to a few per cent of the page's size (its scale and angle steps)
+        jump = max(12.0, 0.04 * page.size_mm[0] * match.px_per_mm) if from_search else 12.0
+        refined = refine_pose(seed, events[lo:hi], page, ink, cfg.ink_px_per_mm, calib, rays, max_jump_px=jump)
         if refined is None or refined[1] < cfg.min_cc:
             continue
-        det_t.append(t - cfg.refine_events_ms * 500)  # the events' middle
+        det_t.append(t - span_ms * 500)  # the events' middle
         det_h.append(refined[0])
         ccs.append(refined[1])
-        n_tracked += not from_markers
+        n_tracked += not from_markers and not from_search
+        n_search_poses += from_search
         last = (t, refined[0])
     track = PoseTrack.from_detections(np.array(det_t), det_h, reference_points(page), cfg.max_gap_ms * 1e3,
                                       outlier=cfg.outlier_px / calib.fx)
@@ -412,6 +439,9 @@ def detect_track(events: np.ndarray, page: MarkerPage, calib: Calibration, cfg: 
         "markers_per_image_mean": round(float(np.mean(per_image)) if per_image else 0.0, 3),
         "poses": int(len(det_t)),
         "poses_tracked_without_markers": int(n_tracked),
+        "page_searches": int(n_searched),
+        "poses_from_page_search": int(n_search_poses),
+        "page_search_score_median": round(float(np.median(search_scores)), 3) if search_scores else None,
         "outliers_dropped": int(len(det_t) - len(track)),
         "corner_rms_px_median": round(float(np.median(rms)), 3) if rms else None,
         "refine_correlation_median": round(float(np.median(ccs)), 3) if ccs else None,
@@ -462,7 +492,7 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
     calib = rec.calibration
     track, stats = detect_track(events, page, calib, cfg, width, height, progress=progress)
     if len(track) == 0:
-        raise AnnotationError(f"{recording}: no markers of {layout.name} found in the events "
+        raise AnnotationError(f"{recording}: no markers of {layout.name} found in the events, nor the page itself "
                               f"({stats['detection_images']} event images; is this a recording of that page?)")
     windows = window_stack(rec, events, (width, height), every_ms=cfg.window_every_ms, max_windows=cfg.max_windows)
     if len(windows.t_end_us) == 0:
