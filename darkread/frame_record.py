@@ -34,6 +34,9 @@ class FrameRecord:
     levels: np.ndarray | None = field(default=None, kw_only=True, repr=False)
     n_levels: int = field(default=2, kw_only=True)
     frames: int = field(default=1, kw_only=True)  # frames fused into this record (its weight when stitched)
+    # how far the whole scene had moved in the sensor by ``t_us`` (sensor px, since the stream began;
+    # ``edge.scene_motion``): the head's motion, from which the stitcher predicts the frame's place
+    scene_px: tuple[float, float] | None = field(default=None, kw_only=True)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mask", ink_mask(self.mask, f"frame {self.frame_id}"))
@@ -42,6 +45,8 @@ class FrameRecord:
         if int(self.frames) < 1:
             raise ValueError(f"frame {self.frame_id}: frames must be >= 1, got {self.frames}")
         object.__setattr__(self, "frames", int(self.frames))
+        if self.scene_px is not None:
+            object.__setattr__(self, "scene_px", (float(self.scene_px[0]), float(self.scene_px[1])))
         if self.levels is not None:
             object.__setattr__(self, "levels", ink_levels(self.levels, self.n_levels, self.mask.shape, f"frame {self.frame_id}"))
 

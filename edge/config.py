@@ -54,6 +54,9 @@ class PipelineConfig:
     lossless: bool = False  # True: the reader waits for inference instead of skipping windows
     stall_s: float = 5.0  # no events for this long: the watchdog is no longer fed (systemd restarts us)
     sensor_roi: bool = False  # move the sensor's ROI with the foveal window (EVK4: less USB traffic)
+    # measure the head's motion from all the sensor's events (edge.scene_motion) and send it with
+    # each frame and view: the stitcher predicts from it. Not with sensor_roi (only the window's events come then)
+    scene_motion: bool = True
     # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
     # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
     infer: str = INFER_MODES[0]

@@ -40,6 +40,7 @@ from darkread.edge.events import Events
 from darkread.edge.fovea import FoveaConfig, in_window, window_origin
 from darkread.edge.gaze import GazeLookup, GazeSample
 from darkread.edge.ring import EventRing
+from darkread.edge.scene_motion import SceneMotion
 from darkread.edge.sources.base import EventSource
 from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.view_fusion import ViewFuser, ViewRecord
@@ -114,11 +115,13 @@ def make_frame(
     voxel: VoxelConfig,
     infer: Infer,
     frame_id: int,
+    scene_px: tuple[float, float] | None = None,
 ) -> FrameResult | None:
     """Bin the window's events and infer. None when the window holds no events.
 
     ``window`` are exactly the events to bin (``fovea.window_events``), all inside the window at
-    ``origin``; ``t_us`` is the frame's timestamp, the time ``gaze`` was looked up.
+    ``origin``; ``t_us`` is the frame's timestamp, the time ``gaze`` was looked up; ``scene_px``
+    the scene's motion by then (``edge.scene_motion``), if measured.
     """
     if window.shape[0] == 0:
         return None
@@ -137,6 +140,7 @@ def make_frame(
         events_used=int(window.shape[0]),
         mask=mask,
         inference_ms=inference_ms,
+        scene_px=scene_px,
     )
 
 
@@ -187,6 +191,10 @@ class Pipeline:
         self._source_done = threading.Event()
         self._thread: threading.Thread | None = None
         self._last_t: int | None = None
+        # the head's motion from all events (the reader thread pushes, the processing thread asks)
+        measure_scene = settings.scene_motion and not settings.sensor_roi
+        self.scene = SceneMotion(self.sensor_wh) if measure_scene else None
+        self._scene_lock = threading.Lock()
         self.on_change = settings.infer == "on-change"
         if self.on_change:
             self.gate = GazeGate(gaze)
@@ -204,6 +212,9 @@ class Pipeline:
     def sink(self, events: Events) -> None:
         if events.shape[0] == 0:
             return
+        if self.scene is not None:
+            with self._scene_lock:
+                self.scene.push(events)
         if self.on_change and self.settings.lossless:
             self._sink_steps(events)
             return
@@ -398,7 +409,7 @@ class Pipeline:
         if new_foveated == 0 and not moved:
             return
         window = self._recent_events(origin, t_frame)
-        frame = make_frame(window, origin, gaze, t_frame, self.voxel, self.infer, self.frames_made)
+        frame = make_frame(window, origin, gaze, t_frame, self.voxel, self.infer, self.frames_made, self._scene_at(t_frame))
         if frame is None:
             return
         self.frames_made += 1
@@ -481,7 +492,7 @@ class Pipeline:
         window = self._recent_events(origin, t, t_from=t_from)
         if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
             return False
-        frame = make_frame(window, origin, gaze, t, self.voxel, self.infer, self.frames_made)
+        frame = make_frame(window, origin, gaze, t, self.voxel, self.infer, self.frames_made, self._scene_at(t))
         if frame is None:
             return False
         self.frames_made += 1
@@ -512,6 +523,13 @@ class Pipeline:
         self.views_made += 1
         self.metrics.add("views")
         self.on_frame(view, arrival)
+
+    def _scene_at(self, t_us: int) -> tuple[float, float] | None:
+        """The scene's motion at ``t_us`` (None when not measured)."""
+        if self.scene is None:
+            return None
+        with self._scene_lock:
+            return self.scene.at(t_us)
 
     def _recent_events(self, origin: tuple[int, int], t_until: int, t_from: int | None = None) -> Events:
         """Exactly the window's events for one frame: the newest ``n_events`` inside the window at

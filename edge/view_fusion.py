@@ -48,6 +48,7 @@ class ViewRecord(FrameRecord):
             seq=0, view_id=self.frame_id, t0_us=self.t0_us, t_us=self.t_us, origin=self.origin,
             gaze_px=self.gaze_px, gaze_rad=self.gaze_rad, frames=self.frames, events_used=self.events_used,
             shape=(int(levels.shape[0]), int(levels.shape[1])), n_levels=self.n_levels, levels=levels.tobytes(), enc=enc,
+            scene_px=self.scene_px,
         )
 
 
@@ -176,4 +177,5 @@ class ViewFuser:
             frame_id=int(view_id), t_us=self._last.t_us, mask=threshold(levels, self.n_levels),
             origin=self._last.origin, gaze_px=(float(gaze[0]), float(gaze[1])), levels=levels, n_levels=self.n_levels,
             t0_us=self._first.t_us, frames=self._frames, events_used=self._events, gaze_rad=self._gaze_rad,
+            scene_px=self._last.scene_px,
         )

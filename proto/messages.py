@@ -306,6 +306,7 @@ class Frame(_Checked):
     shape: tuple[int, int] = _spec(_mask_shape)  # (rows, cols)
     bits: bytes = _spec(_bytes, repr=False)  # the ink mask, darkread.mask_bits.pack_bits (decoded form)
     enc: str = _spec(_choice(FRAME_ENCODINGS), "bits")  # v2: how ``bits`` go on the wire
+    scene_px: tuple[float, float] | None = _spec(_optional(_pair_float), None)  # the scene's motion so far, sensor px
 
     @classmethod
     def of(
@@ -316,7 +317,7 @@ class Frame(_Checked):
         shape, bits = pack_mask(record.mask)
         return cls(
             seq=seq, frame_id=record.frame_id, t_us=record.t_us, origin=record.origin, gaze_px=record.gaze_px,
-            gaze_rad=gaze_rad, events_used=events_used, shape=shape, bits=bits, enc=enc,
+            gaze_rad=gaze_rad, events_used=events_used, shape=shape, bits=bits, enc=enc, scene_px=record.scene_px,
         )
 
     def _to_wire(self, payload: dict[str, Any]) -> None:
@@ -331,7 +332,7 @@ class Frame(_Checked):
 
     def record(self) -> FrameRecord:
         """The frame record this message carries."""
-        return FrameRecord(self.frame_id, self.t_us, self.mask(), self.origin, self.gaze_px)
+        return FrameRecord(self.frame_id, self.t_us, self.mask(), self.origin, self.gaze_px, scene_px=self.scene_px)
 
 
 @dataclass(frozen=True)
@@ -377,6 +378,7 @@ class View(_Checked):
     n_levels: int = _spec(lambda v, n: _int(v, n, 2, MAX_LEVELS))
     levels: bytes = _spec(_bytes, repr=False)  # one level index per pixel, row-major (decoded form)
     enc: str = _spec(_choice(LEVEL_ENCODINGS), "png")
+    scene_px: tuple[float, float] | None = _spec(_optional(_pair_float), None)  # the scene's motion so far, sensor px
 
     def ink(self) -> np.ndarray:
         """uint8 [rows, cols] level indices, 0 (paper) .. n_levels - 1 (surely ink)."""
@@ -387,14 +389,14 @@ class View(_Checked):
         as that many frames), with ``mask`` the ink where the probability is at least one half."""
         levels = self.ink()
         return FrameRecord(self.view_id, self.t_us, threshold_levels(levels, self.n_levels), self.origin, self.gaze_px,
-                           levels=levels, n_levels=self.n_levels, frames=self.frames)  # fmt: skip
+                           levels=levels, n_levels=self.n_levels, frames=self.frames, scene_px=self.scene_px)  # fmt: skip
 
     def as_frame(self) -> Frame:
         """The thresholded view as a binary ``frame`` of the same seq (for a reader of binary frames)."""
         shape, bits = pack_mask(self.record().mask)
         return Frame(
             seq=self.seq, frame_id=self.view_id, t_us=self.t_us, origin=self.origin, gaze_px=self.gaze_px,
-            gaze_rad=self.gaze_rad, events_used=self.events_used, shape=shape, bits=bits,
+            gaze_rad=self.gaze_rad, events_used=self.events_used, shape=shape, bits=bits, scene_px=self.scene_px,
         )
 
     def _to_wire(self, payload: dict[str, Any]) -> None:

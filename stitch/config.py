@@ -37,6 +37,16 @@ class StitchConfig:
                             predicts the next frame's place (tremor averages out, drift is followed)
                             once they span 60 ms; frames 3 ms apart (busy text) give their median
                             (a slope over a few ms is jitter, not drift).
+      scene_anchor_frames   frames that carry the scene's motion (``FrameRecord.scene_px``, measured
+                            from all the sensor's events on the glasses) are predicted from it
+                            instead: page position - sensor position + scene offset stays put while
+                            the head moves, so its median over this many recent frames minus the
+                            new frame's scene offset is where the frame lands. One fused view per
+                            fixation gives the line fit a few points a second: across a return
+                            sweep it missed by half a window; 0 turns it off.
+      scene_gap_ms          ... for a frame this long after the last registered one: frames a few
+                            milliseconds apart follow the head better by their own corrections (the
+                            scene's motion is good to ~15 %), the scene bridges the gaps.
       wide_search_px        a frame whose best match lies on the rim of the search window, or scores
                             ``weak_match_drop`` below the recent matches' median, is searched again
                             this far around the prediction (the head moved more than predicted, and
@@ -118,6 +128,8 @@ class StitchConfig:
     sweep_sample_ms: float = 20.0
     search_radius_px: int = 16
     drift_window_frames: int = 6
+    scene_anchor_frames: int = 3
+    scene_gap_ms: float = 50.0
     wide_search_px: int = 40
     weak_match_drop: float = 0.2
     anchor_search_px: int = 200
@@ -159,6 +171,8 @@ class StitchConfig:
             raise ValueError("sweep_confirm_frames must be >= 0, sweep_context_frames and min_line_frames >= 1")
         if self.roll_every_frames < 1 or self.roll_window < 1:
             raise ValueError("roll_every_frames and roll_window must be >= 1")
+        if self.scene_anchor_frames < 0:
+            raise ValueError(f"scene_anchor_frames must be >= 0, got {self.scene_anchor_frames}")
         if self.drift_window_frames < 1:
             raise ValueError(f"drift_window_frames must be >= 1, got {self.drift_window_frames}")
         if self.search_radius_px < 0:

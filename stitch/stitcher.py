@@ -95,6 +95,13 @@ def predict_correction(
     return values.mean(axis=0) + slope * (min(float(t_us), times[-1] + max_ahead_us) - times.mean())
 
 
+def predict_from_scene(anchors: Sequence[np.ndarray], scene_px: tuple[float, float]) -> np.ndarray:
+    """Head-motion correction of a frame taken when the scene had moved ``scene_px``, from recent
+    frames' ``correction + scene offset`` (constant while only the head moves; their median
+    drops a frame that registered a line off)."""
+    return _median_rows(np.asarray(anchors, dtype=np.float64)) - np.asarray(scene_px, dtype=np.float64)
+
+
 def _median(values: Iterable[float]) -> float:
     """np.median of a few values, without its overhead (~30x): called several times per frame."""
     return float(statistics.median(values))
@@ -133,6 +140,8 @@ class PageStitcher:
         self._strip: LineStrip | None = None
         # (t_us, page position - sensor position) of recent frames: the head motion, sub-pixel
         self._corrections: deque[tuple[int, np.ndarray]] = deque(maxlen=cfg.drift_window_frames)
+        # correction + scene offset of recent frames that carry one (see ``predict_from_scene``)
+        self._anchors: deque[np.ndarray] = deque(maxlen=max(cfg.scene_anchor_frames, 1))
         self._rolls: deque[float] = deque(maxlen=cfg.roll_window)  # frame rotation vs the page
         self._scores: deque[float] = deque(maxlen=cfg.drift_window_frames)  # recent match scores
         self._registered = 0
@@ -167,6 +176,7 @@ class PageStitcher:
         twin._lines = list(self._lines)
         twin._strip = None if self._strip is None else self._strip.fork()
         twin._corrections = deque(self._corrections, maxlen=self._corrections.maxlen)
+        twin._anchors = deque(self._anchors, maxlen=self._anchors.maxlen)
         twin._rolls = deque(self._rolls, maxlen=self._rolls.maxlen)
         twin._scores = deque(self._scores, maxlen=self._scores.maxlen)
         twin._positions = dict(self._positions)
@@ -221,7 +231,12 @@ class PageStitcher:
             self._strip = LineStrip()
         h, w = mask.shape
         r = cfg.search_radius_px
-        correction = predict_correction(self._corrections, frame.t_us)
+        use_scene = cfg.scene_anchor_frames > 0 and frame.scene_px is not None
+        gap_us = frame.t_us - self._corrections[-1][0] if self._corrections else 0
+        if use_scene and self._anchors and gap_us >= cfg.scene_gap_ms * 1e3:
+            correction = predict_from_scene(self._anchors, frame.scene_px)
+        else:
+            correction = predict_correction(self._corrections, frame.t_us)
         px, py = np.round(np.asarray(frame.origin) + correction).astype(int).tolist()
         x, y = float(px), float(py)
         reference, seen = self._page.reference(self._strip, (px - r, py - r, px + w + r, py + h + r))
@@ -252,6 +267,8 @@ class PageStitcher:
             y = py + reg.shift_xy[1] + (reg.subpixel_xy[1] if cfg.subpixel else 0.0)
             correction = np.array([x, y]) - np.asarray(frame.origin)
             self._corrections.append((frame.t_us, correction))
+            if use_scene:
+                self._anchors.append(correction + np.asarray(frame.scene_px))
             self._scores.append(score)
             self._registered += 1
             if search_roll:

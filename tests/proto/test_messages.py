@@ -30,6 +30,7 @@ from darkread.proto.messages import (
     Hello,
     NewPage,
     Page,
+    View,
     Welcome,
     decode,
     encode,
@@ -365,3 +366,22 @@ def test_numbered_is_replace_of_the_seq_alone(kind: str, seq: int) -> None:
 def test_numbered_refuses_a_wild_seq(seq: object) -> None:
     with pytest.raises(InvalidFieldError):
         EXAMPLES["frame"].numbered(seq)  # type: ignore[arg-type]
+
+
+def test_the_scene_motion_is_an_optional_field_of_frames_and_views() -> None:
+    """Glasses that measure the head's motion send it; older ones omit it (no version bump)."""
+    frame = EXAMPLES["frame"]
+    assert "scene_px" not in msgpack.unpackb(encode(frame)) and decode(encode(frame), max_bytes=LIMIT).scene_px is None
+    moved = Frame(**{**frame.__dict__, "scene_px": (-12.5, 3.25)})
+    decoded = decode(encode(moved), max_bytes=LIMIT)
+    assert decoded.scene_px == (-12.5, 3.25) and decoded.record().scene_px == (-12.5, 3.25)
+    levels = np.array([[0, 3, 7, 0, 1]] * 4, np.uint8)
+    view = View(seq=1, view_id=2, t0_us=0, t_us=3, origin=(1, 2), gaze_px=(0.5, 0.5), gaze_rad=(0.0, 0.0), frames=2,
+                events_used=4, shape=(4, 5), n_levels=8, levels=levels.tobytes(), scene_px=(4.0, -1.0))  # fmt: skip
+    back = decode(encode(view), max_bytes=LIMIT)
+    assert back.scene_px == (4.0, -1.0) and back.record().scene_px == (4.0, -1.0) and back.as_frame().scene_px == (4.0, -1.0)
+    for bad in ([float("nan"), 0.0], [1.0], "up"):
+        payload = msgpack.unpackb(encode(moved))
+        payload["scene_px"] = bad
+        with pytest.raises(InvalidFieldError, match="scene_px"):
+            decode(msgpack.packb(payload), max_bytes=LIMIT)

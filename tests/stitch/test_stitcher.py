@@ -319,3 +319,34 @@ def test_the_closed_form_drift_line_is_the_least_squares_line() -> None:
     t_next = int(times[-1]) + 20_000
     assert np.allclose(predict_correction(recent, t_next), intercept + slope * (t_next - centre), atol=1e-9)
     assert np.allclose(predict_correction(recent[:2], t_next), np.median(values[:2], axis=0))
+
+
+def test_the_scene_offset_predicts_the_head_motion_it_cancels() -> None:
+    from darkread.stitch.stitcher import predict_from_scene
+
+    # page position - sensor position + scene offset stays put; one anchor a line off is outvoted
+    anchors = [np.array([10.0, 5.0]), np.array([10.5, 5.0]), np.array([10.0, 35.0])]
+    assert np.allclose(predict_from_scene(anchors, (40.0, -20.0)), [-30.0, 25.0])
+
+
+def test_sparse_frames_under_a_large_head_motion_land_by_the_scene_motion() -> None:
+    """One or two frames per fixation 150 ms apart (as fused views come) while the head moves
+    150 px: the line fit through the last corrections misses and frames are dropped; with the
+    scene's motion (here the simulator's head offset plus half a pixel of noise) every frame lands."""
+    import dataclasses as dc
+
+    from reading_factory import ScanParams, render_page
+
+    page = render_page()
+    params = ScanParams(drift_amplitude_px=150.0, tremor_px=2.0, frames_per_fixation=(1, 2), frame_dt_us=150_000, drop_prob=0.0)
+    reading = simulate_reading(page, params, seed=2)
+    rng = np.random.default_rng(2)
+    with_scene = [dc.replace(f, scene_px=(h[0] + rng.normal(0, 0.5), h[1] + rng.normal(0, 0.5)))
+                  for f, h in zip(reading.frames, reading.head_xy)]  # fmt: skip
+    blind, guided = stitch_page(reading.frames), stitch_page(with_scene)
+    f1_blind, _ = ink_f1_aligned(blind.image, page.mask, tolerance_px=1)
+    f1_guided, _ = ink_f1_aligned(guided.image, page.mask, tolerance_px=1)
+    assert guided.frames_dropped == 0 and f1_guided > 0.98
+    assert blind.frames_dropped > 5 and f1_blind < 0.9  # what the scene's motion is for
+    off = stitch_page(with_scene, StitchConfig(scene_anchor_frames=0))
+    assert off.frames_dropped == blind.frames_dropped  # 0 turns it off

@@ -91,6 +91,16 @@ async def test_frames_come_back_as_written_oldest_first_in_pages(store: SessionS
     np.testing.assert_array_equal(got.mask, want.mask)
 
 
+async def test_the_scene_motion_a_frame_carries_comes_back_and_its_absence_too(store: SessionStore) -> None:
+    import dataclasses
+
+    await store.open_session(spec("s"))
+    await store.add_frame("s", dataclasses.replace(frame(0), scene_px=(-3.5, 120.25)))
+    await store.add_frame("s", frame(1))
+    moved, plain = await store.frames("s")
+    assert moved.scene_px == (-3.5, 120.25) and plain.scene_px is None
+
+
 async def test_concurrent_streams_each_get_every_write(store: SessionStore) -> None:
     await asyncio.gather(*(store.open_session(spec(f"s{i}")) for i in range(10)))
     results = await asyncio.gather(*(store.add_frame(f"s{i}", frame(seq)) for seq in range(40) for i in range(10)))

@@ -1,0 +1,77 @@
+"""The scene's motion from all events: a moving pattern is followed, noise and chunking change nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from darkread.edge.events import make_events
+from darkread.edge.scene_motion import SceneMotion, SceneMotionConfig
+
+SENSOR = (1280, 720)
+
+
+def moving_pattern(velocity_px_s: tuple[float, float], seconds: float = 0.6, seed: int = 0, noise_hz: float = 0.0):
+    """Events of a rigid pattern of edges (random short strokes) moving at ``velocity_px_s``: every
+    millisecond each stroke pixel fires with some probability where it is then; plus uniform noise."""
+    rng = np.random.default_rng(seed)
+    n_strokes = 600
+    base = rng.uniform([100, 100], [1180, 620], (n_strokes, 2))
+    along = np.arange(6)[:, None, None] * rng.choice([[1, 0], [0, 1]], n_strokes)[None, :, :]  # 6-px strokes
+    points = (base[None, :, :] + along).reshape(-1, 2)
+    xs, ys, ts = [], [], []
+    for ms in range(int(seconds * 1000)):
+        t = ms * 1000
+        shift = np.asarray(velocity_px_s) * t / 1e6
+        fire = rng.random(points.shape[0]) < 0.15
+        p = np.round(points[fire] + shift).astype(int)
+        keep = (p[:, 0] >= 0) & (p[:, 0] < SENSOR[0]) & (p[:, 1] >= 0) & (p[:, 1] < SENSOR[1])
+        xs.append(p[keep, 0])
+        ys.append(p[keep, 1])
+        ts.append(np.full(int(keep.sum()), t) + rng.integers(0, 1000, int(keep.sum())))
+        if noise_hz:
+            k = rng.poisson(noise_hz * SENSOR[0] * SENSOR[1] / 1000)
+            xs.append(rng.integers(0, SENSOR[0], k))
+            ys.append(rng.integers(0, SENSOR[1], k))
+            ts.append(t + rng.integers(0, 1000, k))
+    t = np.concatenate(ts)
+    order = np.argsort(t, kind="stable")
+    x, y = np.concatenate(xs)[order], np.concatenate(ys)[order]
+    return make_events(x, y, rng.integers(0, 2, x.shape[0]), t[order])
+
+
+@pytest.mark.parametrize("velocity", [(150.0, 0.0), (-80.0, 120.0), (0.0, -250.0)])
+def test_a_moving_pattern_is_followed_to_within_a_sixth_of_its_motion(velocity) -> None:  # noqa: ANN001
+    events = moving_pattern(velocity)
+    scene = SceneMotion(SENSOR)
+    scene.push(events)
+    for t_us in (200_000, 400_000, 560_000):
+        expected = np.asarray(velocity) * t_us / 1e6
+        error = np.hypot(*(np.asarray(scene.at(t_us)) - expected))
+        assert error <= 3.0 + 0.16 * np.hypot(*expected), (t_us, scene.at(t_us), expected)
+
+
+def test_a_still_scene_under_noise_does_not_drift() -> None:
+    scene = SceneMotion(SENSOR)
+    scene.push(moving_pattern((0.0, 0.0), noise_hz=2.0))
+    assert np.hypot(*scene.at(590_000)) < 4.0
+
+
+def test_the_chunking_of_the_stream_changes_nothing() -> None:
+    events = moving_pattern((120.0, -60.0), seed=3)
+    whole = SceneMotion(SENSOR)
+    whole.push(events)
+    pieces = SceneMotion(SENSOR)
+    cuts = np.sort(np.random.default_rng(1).integers(0, events.shape[0], 40))
+    for part in np.split(events, cuts):
+        pieces.push(part)
+    for t_us in range(0, 600_000, 37_000):
+        assert pieces.at(t_us) == whole.at(t_us)
+
+
+def test_before_any_event_there_is_no_offset_and_the_history_is_bounded() -> None:
+    scene = SceneMotion(SENSOR, SceneMotionConfig(slice_us=1_000))
+    assert scene.at(0) is None
+    scene.push(moving_pattern((50.0, 0.0), seconds=1.2))  # 1,200 slices: more than are kept
+    assert scene.at(1_190_000) is not None
+    assert scene._times.shape[0] <= 1_000  # noqa: SLF001 - the bound is the point of this test
