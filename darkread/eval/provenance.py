@@ -35,11 +35,16 @@ def git_commit(repo: str | Path | None = None) -> str:
     return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "unknown"
 
 
+def model_digest(path: str | Path) -> str:
+    """The first 12 hex digits of the model file's sha256: which weights a figure came from."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
+
+
 def describe_model(path: str | Path) -> str:
     path = Path(path)
     if not path.is_file():
         return f"{path.name} (missing)"
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+    digest = model_digest(path)
     stamp = dt.datetime.fromtimestamp(path.stat().st_mtime, dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     return f"{path.name} (sha256 {digest}, {path.stat().st_size:,} bytes, {stamp})"
 

@@ -43,9 +43,9 @@ import numpy as np
 
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.marker_page import MarkerPage, mm_to_px
+from darkread.edge.calibrate.event_image import count_image
 from darkread.models.train.page_search import (
     SearchConfig,
-    count_image,
     edge_map,
     find_page,
     homography_from_affine,

@@ -16,7 +16,6 @@ comparisons of several tuned models.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 from collections.abc import Sequence
@@ -26,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from darkread.eval.provenance import model_digest
 from darkread.models.train.ink_scores import ink_counts, scores_from_counts
 
 log = logging.getLogger(__name__)
@@ -42,10 +42,6 @@ class ScoredWindows:
     voxels: np.ndarray  # float [n,4,100,200]
     targets: np.ndarray | None  # uint8 [n,100,200], None when no ground truth exists
     source: str  # where the targets come from
-
-
-def model_digest(path: str | Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
 
 
 def is_recording(path: Path) -> bool:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from darkread.edge.calibrate.event_image import count_image
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.marker_page import MarkerPage
 
@@ -51,15 +52,8 @@ def hot_pixel_mask(events: np.ndarray, width: int, height: int, factor: float = 
     A hot pixel fires hundreds of times a second whatever it sees; the page's edges fire as
     often but along lines, so a pixel is hot when it beats ``factor`` x the 5x5 median around it.
     """
-    counts = np.bincount(events["y"].astype(np.int64) * width + events["x"], minlength=width * height)
-    counts = counts.reshape(height, width).astype(np.float32)
+    counts = count_image(events, width, height)
     return counts > factor * cv2.medianBlur(counts, 5) + floor
-
-
-def count_image(events: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Events per pixel (float32 [h, w]), both polarities."""
-    pixel = events["y"].astype(np.int64) * width + events["x"]
-    return np.bincount(pixel, minlength=width * height).astype(np.float32).reshape(height, width)
 
 
 def edge_map(coverage: np.ndarray, sigma: float = 1.0) -> np.ndarray:

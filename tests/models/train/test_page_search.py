@@ -5,18 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from darkread.edge.calibrate.event_image import count_image
+from darkread.edge.events import EVENT_CD_DTYPE
 from darkread.models.synth.camera import random_calibration
 from darkread.models.synth.marker_page import MarkerPageSpec, lay_out
 from darkread.models.train.annotate import SensorRays, page_box, project_page, reference_points, refine_pose, render_coverage
 from darkread.models.train.page_search import (
-    count_image,
     edge_map,
     find_page,
     homography_from_affine,
     hot_pixel_mask,
 )
 
-EV_DTYPE = np.dtype([("x", "<u2"), ("y", "<u2"), ("p", "<i2"), ("t", "<i8")])
 LINES = ("Areopagitica, John Milton 1644", "as good almost kill a man as k", "ill a good book; who kills a m")
 
 
@@ -43,7 +43,7 @@ def dim_light_events(calib, page, H, rays, seed: int = 0) -> np.ndarray:
     rate.reshape(-1)[hot] += 600 * 0.025
     counts = rng.poisson(rate).reshape(-1)
     pixel = np.repeat(np.arange(w * h), counts)
-    events = np.zeros(len(pixel), EV_DTYPE)
+    events = np.zeros(len(pixel), EVENT_CD_DTYPE)
     events["x"], events["y"] = pixel % w, pixel // w
     events["p"] = rng.integers(0, 2, len(pixel))
     events["t"] = np.sort(rng.integers(0, 25_000, len(pixel)))
