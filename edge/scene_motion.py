@@ -52,12 +52,12 @@ class SceneMotionConfig:
     stride: int = STRIDE
 
 
-def count_image(events: Events, grid_wh: tuple[int, int], cell_px: int) -> np.ndarray:
-    """float32 [rows, cols] event counts per ``cell_px`` cell (both polarities)."""
+def cell_index(events: Events, grid_wh: tuple[int, int], cell_px: int) -> np.ndarray:
+    """Each event's ``cell_px`` cell, row-major in the ``grid_wh`` grid (both polarities)."""
     cols, rows = grid_wh
     cx = np.minimum(events["x"].astype(np.intp) // cell_px, cols - 1)
     cy = np.minimum(events["y"].astype(np.intp) // cell_px, rows - 1)
-    return np.bincount(cy * cols + cx, minlength=rows * cols).astype(np.float32).reshape(rows, cols)
+    return cy * cols + cx
 
 
 def slice_shift(reference: np.ndarray, current: np.ndarray, window: np.ndarray, cfg: SceneMotionConfig) -> tuple[float, float] | None:
@@ -99,21 +99,26 @@ class SceneMotion:
         if events.shape[0] == 0:
             return
         t = events["t"]
+        slice_us = self.cfg.slice_us
         if self._slice_end is None:
-            self._slice_end = int(t[0]) + self.cfg.slice_us
+            self._slice_end = int(t[0]) + slice_us
             self._record(int(t[0]))
+        cells = cell_index(events, self.grid_wh, self.cfg.cell_px)
+        # the slice ends this chunk passes, and where each cuts it (a running maximum keeps the
+        # cuts ordered when a real sensor's times jitter back by a few microseconds)
+        n_ends = max(0, (int(t[-1]) - self._slice_end) // slice_us + 1)
+        cuts = np.maximum.accumulate(np.searchsorted(t, self._slice_end + slice_us * np.arange(n_ends), side="left"))
         start = 0
-        while start < t.shape[0]:
-            stop = int(np.searchsorted(t, self._slice_end, side="left")) if t[-1] >= self._slice_end else t.shape[0]
-            stop = max(stop, start)
-            if stop > start:
-                piece = events[start:stop]
-                self._current += count_image(piece, self.grid_wh, self.cfg.cell_px)
-                self._count += stop - start
-            if stop == t.shape[0] and t[-1] < self._slice_end:
-                break
+        for cut in cuts.tolist():
+            self._count_cells(cells[start:cut])
             self._close_slice()
-            start = stop
+            start = cut
+        self._count_cells(cells[start:])
+
+    def _count_cells(self, cells: np.ndarray) -> None:
+        if cells.shape[0]:
+            self._current += np.bincount(cells, minlength=self._current.size).reshape(self._current.shape)
+            self._count += int(cells.shape[0])
 
     def _close_slice(self) -> None:
         assert self._slice_end is not None  # noqa: S101
