@@ -55,7 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                           "the stand-in for a real camera when adapting the model)")
     rec.add_argument("--markers", action="store_true",
                      help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "
-                          "page.layout.json and the simulator's true page pose per millisecond (pose_truth.npz, for scoring)")
+                          "page.layout.json (every recording carries the simulator's true page pose per millisecond, "
+                          "pose_truth.npz, and a plain page its ink, page_ink.npz: for scoring only)")
     rec.set_defaults(func=_recording)
 
     ds = sub.add_parser(

@@ -53,11 +53,12 @@ class RecordingSpec:
     scanpath: str = "model"  # "human": a real reader's fixations replayed (models/synth/human_scanpath.py)
     scanpath_file: str | None = None
     regime: str = "standard"  # "shifted": a sensor and a font training never saw
-    markers: bool = False  # the text printed with ArUco markers around it (page.layout.json, pose_truth.npz)
+    markers: bool = False  # the text printed with ArUco markers around it (page.layout.json)
 
 
 LAYOUT_NAME = "page.layout.json"
 POSE_TRUTH_NAME = "pose_truth.npz"
+PAGE_INK_NAME = "page_ink.npz"  # a plain page's ink (a marker page's is re-created from its layout)
 POSE_TRUTH_STEP_US = 1000
 
 
@@ -160,6 +161,27 @@ def write_pose_truth(path: Path, session: Session, seconds: float, event_t0: int
     )
 
 
+def write_page_ink(path: Path, session: Session) -> None:
+    """A plain page's ink raster, the simulator's own texture, in ``pose_truth.npz``'s millimetre frame.
+
+    With the pose truth it gives every window its true ink (how ``train compare`` scores plain
+    pages); a marker page does not need it, its layout re-creates the page.
+    """
+    np.savez_compressed(
+        path, ink=session.page.coverage.astype(np.float32), px_per_mm=np.float64(session.texels_per_mm),
+        note=np.array("ink coverage 0..1; pixel (i, j) covers x in [j, j + 1) / px_per_mm, y in [i, i + 1) / px_per_mm"),
+    )
+
+
+def load_page_ink(recording: str | Path) -> tuple[np.ndarray, float] | None:
+    """(ink coverage, px_per_mm) of a plain synthetic page, or None when the recording has none."""
+    path = Path(recording) / PAGE_INK_NAME
+    if not path.is_file():
+        return None
+    with np.load(path) as data:
+        return data["ink"].astype(np.float32), float(data["px_per_mm"])
+
+
 def simulate_region(
     session: Session, region: Region, seconds: float, rng: np.random.Generator, *, progress: bool = False
 ) -> np.ndarray:
@@ -200,7 +222,11 @@ def drop_same_time_duplicates(events: np.ndarray, width: int = SENSOR_WH[0]) -> 
 
 
 def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = True) -> dict:
-    """Write a recording folder (events.raw, general_eye_gaze.csv, calibration.json, text.txt, meta.json)."""
+    """Write a recording folder (events.raw, general_eye_gaze.csv, calibration.json, text.txt, meta.json).
+
+    Beside them, for scoring only, the simulator's truth: ``pose_truth.npz`` (page pose per ms) and
+    the page's ink (``page.layout.json`` for a marker page, ``page_ink.npz`` for a plain one).
+    """
     if spec.seconds <= 0:
         raise ValueError("--seconds must be positive")
     if not 0.5 <= spec.lux <= 100_000:
@@ -268,7 +294,9 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         from darkread.models.synth.marker_page import save_layout
 
         save_layout(out / LAYOUT_NAME, session.marker_page)
-        write_pose_truth(out / POSE_TRUTH_NAME, session, seconds, event_t0)
+    else:
+        write_page_ink(out / PAGE_INK_NAME, session)
+    write_pose_truth(out / POSE_TRUTH_NAME, session, seconds, event_t0)
     (out / "text.txt").write_text(session.page.text, encoding="ascii")
     duration = round(seconds, 3)
     face_family = session.page.font.removesuffix(" Bold")
@@ -296,6 +324,7 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     }
     if session.marker_page is not None:
         meta["markers"] = {"layout": LAYOUT_NAME, "pose_truth": POSE_TRUTH_NAME, "n_markers": len(session.marker_page.markers)}
+    meta["truth"] = {"pose": POSE_TRUTH_NAME, "ink": LAYOUT_NAME if session.marker_page is not None else PAGE_INK_NAME}
     if spec.scanpath != "model" or spec.scanpath_file is not None:
         from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath
 

@@ -200,7 +200,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compare", help="before/after: ink F1 and end-to-end CER of the shipped and a tuned model",
                        description="Score the shipped network and a tuned one (--model) on recordings they were not tuned on: "
                                    "ink F1 of the windows the glasses cut against the simulator's ground truth (a recording "
-                                   "with pose_truth.npz and page.layout.json, or a shard directory's own targets), and the "
+                                   "with pose_truth.npz and page.layout.json or page_ink.npz, as `darkread synth recording` "
+                                   "writes them, or a shard directory's own targets), and the "
                                    "CER of reading each recording end to end exactly as `darkread read --model` does. Writes "
                                    "OUT/compare.json, OUT/compare.md (printed) and OUT/compare.png; reads are cached per model "
                                    "under OUT/cache, so a rerun resumes.")

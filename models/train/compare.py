@@ -4,7 +4,8 @@ Two figures per input, for each model:
 
 * **ink F1** of the windows the glasses would cut (gaze -> fovea -> 1600 events -> voxel grid),
   against the simulator's ground truth: the page's ink under its true pose (``pose_truth.npz``
-  with ``page.layout.json``, what ``synth recording --markers`` writes). A shard directory
+  with ``page.layout.json`` for a marker page or ``page_ink.npz`` for a plain one, what
+  ``synth recording`` writes). A shard directory
   (``darkread synth dataset``, or ``train annotate``'s output) is scored on its own targets.
 * **end-to-end CER**: the recording read exactly as ``darkread read --model`` reads it (a real edge
   and cloud on loopback, the page stitched and read by OCR) against its ``text.txt``.
@@ -18,7 +19,7 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,29 +49,53 @@ def is_recording(path: Path) -> bool:
     return (path / "events.raw").is_file() or any(path.glob("*.raw"))
 
 
+InkSource = Callable[[np.ndarray, Any], tuple[np.ndarray, float]]  # (page -> camera H, calibration) -> (ink, px per mm)
+
+
+def page_ink_source(recording: Path) -> InkSource | None:
+    """The simulator's page ink in ``pose_truth.npz``'s millimetre frame, at a scale fit for a pose.
+
+    A marker page is re-created from ``page.layout.json`` and resampled to ~1.25 texels per sensor
+    pixel (as the simulator's texture); a plain page's texture is ``page_ink.npz`` itself.
+    """
+    from darkread.models.synth.recording import LAYOUT_NAME, load_page_ink
+
+    if (recording / LAYOUT_NAME).is_file():
+        from darkread.models.synth.marker_page import load_layout
+        from darkread.models.train.annotate import pixels_per_mm
+
+        page = load_layout(recording / LAYOUT_NAME)
+        centre_mm = np.asarray(page.text_box_mm).reshape(2, 2).mean(axis=0)
+        cache: dict[float, np.ndarray] = {}
+
+        def marker_ink(H: np.ndarray, calib: Any) -> tuple[np.ndarray, float]:
+            s = max(1.0, round(1.25 * pixels_per_mm(H, calib, centre_mm) * 4) / 4)
+            if s not in cache:
+                cache[s] = page.ink_at(s)
+            return cache[s], s
+
+        return marker_ink
+    plain = load_page_ink(recording)
+    return None if plain is None else (lambda H, calib: plain)
+
+
 def truth_windows(recording: str | Path, every_ms: float = 40.0, max_windows: int = 400) -> ScoredWindows:
     """The recording's windows with the simulator's ink under the true pose (targets None without it)."""
-    from darkread.models.synth.marker_page import load_layout
-    from darkread.models.train.annotate import load_pose_truth, pixels_per_mm, render_target, window_rays
+    from darkread.models.train.annotate import load_pose_truth, render_target, window_rays
     from darkread.models.train.windows import read_events, window_stack
 
     path = Path(recording)
     rec, events, wh = read_events(path)
     windows = window_stack(rec, events, wh, every_ms=every_ms, max_windows=max_windows)
     truth = load_pose_truth(path)
-    layout = path / "page.layout.json"
-    if truth is None or not layout.is_file() or len(windows.t_end_us) == 0:
-        return ScoredWindows(windows.voxels, None, "none (no pose_truth.npz + page.layout.json)")
-    page = load_layout(layout)
-    centre_mm = np.asarray(page.text_box_mm).reshape(2, 2).mean(axis=0)
-    ink_cache: dict[float, np.ndarray] = {}
+    ink = page_ink_source(path)
+    if truth is None or ink is None or len(windows.t_end_us) == 0:
+        return ScoredWindows(windows.voxels, None, "none (no pose_truth.npz with page.layout.json or page_ink.npz)")
     targets = np.zeros((len(windows.t_end_us), *windows.voxels.shape[-2:]), np.uint8)
     for i, (t_end, origin) in enumerate(zip(windows.t_end_us, windows.origins)):
         H = truth.at(float(t_end))  # page mm -> camera point: a page -> normalised-image homography
-        s = max(1.0, round(1.25 * pixels_per_mm(H, rec.calibration, centre_mm) * 4) / 4)
-        if s not in ink_cache:
-            ink_cache[s] = page.ink_at(s)
-        targets[i] = render_target(ink_cache[s], s, H, window_rays(rec.calibration, tuple(origin)))
+        page_ink, s = ink(H, rec.calibration)
+        targets[i] = render_target(page_ink, s, H, window_rays(rec.calibration, tuple(origin)))
     return ScoredWindows(windows.voxels, targets, "simulator's true pose")
 
 

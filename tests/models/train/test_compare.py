@@ -45,3 +45,38 @@ def test_compare_scores_each_model_on_a_shard_directory(tmp_path, two_models, sh
     assert saved["models"]["tuned"]["sha256_12"] != saved["models"]["shipped"]["sha256_12"]
     table = (tmp_path / "out" / "compare.md").read_text()
     assert "| val | 1 | 6 |" in table and (tmp_path / "out" / "compare.png").stat().st_size > 1000
+
+
+def test_a_plain_synthetic_page_is_scored_against_the_simulators_own_ink(tmp_path, two_models) -> None:
+    """A recording without markers carries its truth too: every window's target is the simulator's ink mask."""
+    from darkread.models.synth.recording import RecordingSpec, session_spec, write_recording
+    from darkread.models.synth.scene import Region
+    from darkread.models.synth.session import make_session
+    from darkread.models.train.annotate import load_pose_truth
+    from darkread.models.train.compare import truth_windows
+
+    spec = RecordingSpec(lux=100.0, motion="normal", kind="words", seconds=0.45, seed=11, xheight_px=10.0, n_lines=3,
+                         line_chars=22, regime="shifted")
+    rec = tmp_path / "plain"
+    meta = write_recording(rec, spec, progress=False)
+    assert meta["truth"] == {"pose": "pose_truth.npz", "ink": "page_ink.npz"} and not (rec / "page.layout.json").exists()
+    scored = truth_windows(rec)
+    assert scored.targets is not None and len(scored.targets) >= 5 and scored.source == "simulator's true pose"
+
+    session = make_session(session_spec(spec), spec.seed)  # the same scene, re-made from its seed
+    t0_us = load_pose_truth(rec).t_us[0]  # the event clock's start
+    from darkread.models.train.windows import read_events, window_stack
+
+    windows = window_stack(*read_events(rec), every_ms=40.0)
+    inked = 0
+    for target, (x0, y0), t_end in zip(scored.targets, windows.origins, windows.t_end_us):
+        expected = session.scene.ink_mask(Region.of(session.calib, int(x0), int(y0), 200, 100), (t_end - t0_us) * 1e-6)
+        assert np.mean(target == expected) > 0.999  # measured 0.99995-1 (half a texel off: 0.992-0.997)
+        inked += int(expected.sum() > 100)
+    assert inked >= 3  # the gaze is on the text: the windows hold ink
+
+    report = compare([rec], two_models, tmp_path / "out", read=False, progress=False)
+    row = report["rows"][0]
+    assert row["truth"] == "simulator's true pose" and row["shipped"]["ink"]["windows"] == len(scored.targets)
+    (rec / "page_ink.npz").unlink()
+    assert truth_windows(rec).targets is None  # the pose alone is not a truth
