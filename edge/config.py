@@ -63,7 +63,8 @@ class PipelineConfig:
     min_interval_ms: float = 10.0  # on-change: at most one inference per this much event time while frames change the view ...
     settled_interval_ms: float = 400.0  # ... and per this much once a frame agreed with it (the view is sent first: one more frame adds little)
     settled_score: float = 0.85  # agreed: the frame registered onto its view at least this well (its match score)
-    renew_fraction: float = 1.0  # on-change: infer again once this share of n_events is new ...
+    renew_fraction: float = 0.5  # on-change: infer again once this share of n_events is new (windows overlap by the rest:
+    # in dim light the frames that do not agree are what the page is averaged from; 1.0 read 10 and 5 lux worse) ...
     move_px: float = 6.0  # ... or the window moved this far since the last inference (a view's window is placed once)
     min_events: int = 400  # on-change: a frame may have fewer than n_events (low light), not fewer than this
     first_wait_ms: float = 60.0  # on-change: the first frame of a fixation comes this long into it (landing settled)

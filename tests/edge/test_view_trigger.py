@@ -156,8 +156,8 @@ def test_the_trigger_waits_for_the_landing_then_bounds_the_rate() -> None:
     assert trigger.due(start + 60_000, start, 500, 500, (0, 0))  # then even a thin window (low light) will do
     trigger.inferred(start + 60_000, (0, 0))
     assert not trigger.due(start + 65_000, start, 9000, 9000, (50, 0))  # moved, but within min_interval_ms (10 ms)
-    assert not trigger.due(start + 170_000, start, 1000, 9000, (0, 0))  # not enough new, not moved
-    assert trigger.due(start + 170_000, start, 1600, 9000, (0, 0))  # a window's worth of new events
+    assert not trigger.due(start + 170_000, start, 700, 9000, (0, 0))  # not enough new, not moved
+    assert trigger.due(start + 170_000, start, 800, 9000, (0, 0))  # renew_fraction (half) of a window is new
     assert trigger.due(start + 170_000, start, 10, 9000, (8, 0))  # or the window moved
 
 
