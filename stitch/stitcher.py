@@ -232,6 +232,8 @@ class PageStitcher:
         h, w = mask.shape
         r = cfg.search_radius_px
         use_scene = cfg.scene_anchor_frames > 0 and frame.scene_px is not None
+        if frame.scene_px is None:
+            self._anchors.clear()  # the head's motion was not measured: the offsets before and after do not chain
         gap_us = frame.t_us - self._corrections[-1][0] if self._corrections else 0
         if use_scene and self._anchors and gap_us >= cfg.scene_gap_ms * 1e3:
             correction = predict_from_scene(self._anchors, frame.scene_px)

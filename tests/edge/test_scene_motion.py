@@ -75,3 +75,17 @@ def test_before_any_event_there_is_no_offset_and_the_history_is_bounded() -> Non
     scene.push(moving_pattern((50.0, 0.0), seconds=1.2))  # 1,200 slices: more than are kept
     assert scene.at(1_190_000) is not None
     assert scene._times.shape[0] <= 1_000  # noqa: SLF001 - the bound is the point of this test
+
+
+def test_noise_without_a_scene_gives_no_offset_rather_than_a_wandering_one() -> None:
+    """Dim light: plenty of events, but slices that find no peak make the motion unknown (None)."""
+    rng = np.random.default_rng(5)
+    n = 400_000  # ~0.7 M noise events per second over the array, no page
+    t = np.sort(rng.integers(0, 600_000, n))
+    noise = make_events(rng.integers(0, SENSOR[0], n), rng.integers(0, SENSOR[1], n), rng.integers(0, 2, n), t)
+    scene = SceneMotion(SENSOR)
+    scene.push(noise)
+    assert [scene.at(t_us) for t_us in (300_000, 450_000, 590_000)] == [None, None, None]
+    lit = SceneMotion(SENSOR)  # the same noise over a page: the page's edges give a peak every slice
+    lit.push(moving_pattern((60.0, 0.0), noise_hz=2.0))
+    assert all(lit.at(t_us) is not None for t_us in (300_000, 450_000, 590_000))
