@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -258,6 +259,21 @@ def pixels_per_mm(H: np.ndarray, calib: Calibration, at_mm: np.ndarray) -> float
     p = np.array([at_mm, at_mm + [1.0, 0.0], at_mm + [0.0, 1.0]], np.float64)
     uv = project_page(H, calib, p)
     return float((np.linalg.norm(uv[1] - uv[0]) + np.linalg.norm(uv[2] - uv[0])) / 2)
+
+
+def page_ink_for_pose(page: MarkerPage) -> Callable[[np.ndarray, Calibration], tuple[np.ndarray, float]]:
+    """(H, calibration) -> the page's ink raster and its texels per mm, ~1.25 texels per sensor pixel
+    under that pose (as the simulator's texture); one raster per quarter step of scale, kept."""
+    centre_mm = np.asarray(page.text_box_mm).reshape(2, 2).mean(axis=0)
+    cache: dict[float, np.ndarray] = {}
+
+    def ink_at(H: np.ndarray, calib: Calibration) -> tuple[np.ndarray, float]:
+        s = max(1.0, round(1.25 * pixels_per_mm(H, calib, centre_mm) * 4) / 4)
+        if s not in cache:
+            cache[s] = page.ink_at(s)
+        return cache[s], s
+
+    return ink_at
 
 
 def alignment_residual(H_est: np.ndarray, H_true_cam: np.ndarray, calib: Calibration, origin: tuple[int, int],
@@ -500,7 +516,7 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
     rays = [window_rays(calib, tuple(o)) for o in windows.origins]
     offset_us, offset_scores = (choose_offset(windows, track, page, calib, cfg, rays) if cfg.refine_offset else (0.0, []))
     truth = load_pose_truth(recording)
-    ink_cache: dict[float, np.ndarray] = {}
+    ink_for = page_ink_for_pose(page)
     kept, targets, metas, residuals, residuals_raw = [], [], [], [], []
     meta = rec.meta
     centre_mm = np.asarray(page.text_box_mm).reshape(2, 2).mean(axis=0)
@@ -508,10 +524,8 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
         H = track.at(float(t_end + offset_us))
         if H is None:
             continue
-        s = max(1.0, round(1.25 * pixels_per_mm(H, calib, centre_mm) * 4) / 4)  # 1.25 texels per pixel, as the simulator
-        if s not in ink_cache:
-            ink_cache[s] = page.ink_at(s)
-        target = render_target(ink_cache[s], s, H, rays[i])
+        page_ink, s = ink_for(H, calib)
+        target = render_target(page_ink, s, H, rays[i])
         kept.append(i)
         targets.append(target)
         metas.append(SampleMeta(lux=float(meta.get("lux", 0.0)), motion=str(meta.get("motion", "")), kind="marker_page",

@@ -62,19 +62,9 @@ def page_ink_source(recording: Path) -> InkSource | None:
 
     if (recording / LAYOUT_NAME).is_file():
         from darkread.models.synth.marker_page import load_layout
-        from darkread.models.train.annotate import pixels_per_mm
+        from darkread.models.train.annotate import page_ink_for_pose
 
-        page = load_layout(recording / LAYOUT_NAME)
-        centre_mm = np.asarray(page.text_box_mm).reshape(2, 2).mean(axis=0)
-        cache: dict[float, np.ndarray] = {}
-
-        def marker_ink(H: np.ndarray, calib: Any) -> tuple[np.ndarray, float]:
-            s = max(1.0, round(1.25 * pixels_per_mm(H, calib, centre_mm) * 4) / 4)
-            if s not in cache:
-                cache[s] = page.ink_at(s)
-            return cache[s], s
-
-        return marker_ink
+        return page_ink_for_pose(load_layout(recording / LAYOUT_NAME))
     plain = load_page_ink(recording)
     return None if plain is None else (lambda H, calib: plain)
 
