@@ -13,6 +13,7 @@ import json
 import logging
 import math
 import time
+import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -173,13 +174,24 @@ def write_page_ink(path: Path, session: Session) -> None:
     )
 
 
-def load_page_ink(recording: str | Path) -> tuple[np.ndarray, float] | None:
-    """(ink coverage, px_per_mm) of a plain synthetic page, or None when the recording has none."""
-    path = Path(recording) / PAGE_INK_NAME
+def read_truth(recording: str | Path, name: str, keys: tuple[str, ...]) -> dict[str, np.ndarray] | None:
+    """The arrays ``keys`` of the truth file ``name`` beside a synthetic recording (None when there is
+    none); a damaged one is a ValueError that says which file and how to make it again."""
+    path = Path(recording) / name
     if not path.is_file():
         return None
-    with np.load(path) as data:
-        return data["ink"].astype(np.float32), float(data["px_per_mm"])
+    try:
+        with open(path, "rb") as fh, np.load(fh) as data:  # (np.load(path) leaks its file when the zip is damaged)
+            return {key: np.asarray(data[key]) for key in keys}
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"{path}: not a readable simulator truth file ({type(exc).__name__}: {exc}); "
+                         "make the recording again with `darkread synth recording`") from exc
+
+
+def load_page_ink(recording: str | Path) -> tuple[np.ndarray, float] | None:
+    """(ink coverage, px_per_mm) of a plain synthetic page, or None when the recording has none."""
+    data = read_truth(recording, PAGE_INK_NAME, ("ink", "px_per_mm"))
+    return None if data is None else (data["ink"].astype(np.float32), float(data["px_per_mm"]))
 
 
 def simulate_region(

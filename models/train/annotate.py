@@ -579,8 +579,7 @@ class PoseTruth:
 
 
 def load_pose_truth(recording: Path) -> PoseTruth | None:
-    path = Path(recording) / "pose_truth.npz"
-    if not path.is_file():
-        return None
-    with np.load(path) as data:
-        return PoseTruth(data["t_us"].astype(np.float64), data["H_mm_to_camera"].astype(np.float64))
+    from darkread.models.synth.recording import POSE_TRUTH_NAME, read_truth
+
+    data = read_truth(recording, POSE_TRUTH_NAME, ("t_us", "H_mm_to_camera"))
+    return None if data is None else PoseTruth(data["t_us"].astype(np.float64), data["H_mm_to_camera"].astype(np.float64))

@@ -78,5 +78,9 @@ def test_a_plain_synthetic_page_is_scored_against_the_simulators_own_ink(tmp_pat
     report = compare([rec], two_models, tmp_path / "out", read=False, progress=False)
     row = report["rows"][0]
     assert row["truth"] == "simulator's true pose" and row["shipped"]["ink"]["windows"] == len(scored.targets)
+    ink = (rec / "page_ink.npz").read_bytes()
+    (rec / "page_ink.npz").write_bytes(ink[:300])  # a damaged truth file: one line that names it
+    with pytest.raises(ValueError, match=r"page_ink.npz: not a readable simulator truth file"):
+        truth_windows(rec)
     (rec / "page_ink.npz").unlink()
     assert truth_windows(rec).targets is None  # the pose alone is not a truth
