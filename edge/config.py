@@ -228,4 +228,6 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError(f"config [pipeline] infer must be 'on-change' or 'every-window', not {config.pipeline.infer!r}")
     if min(config.pipeline.min_interval_ms, config.pipeline.settled_interval_ms, config.pipeline.view_every_ms) <= 0 or config.pipeline.min_events <= 0:
         raise ValueError("config [pipeline] min_interval_ms, settled_interval_ms, view_every_ms and min_events must be positive")
+    if not 0 < config.pipeline.renew_fraction <= 1:
+        raise ValueError(f"config [pipeline] renew_fraction is a share of a window's events: above 0, at most 1, not {config.pipeline.renew_fraction:g}")
     return config
