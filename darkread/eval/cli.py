@@ -18,14 +18,16 @@ BOTH = "both"
 EVAL_HELP = """\
 Two forms:
 
-  darkread eval make-suite OUT [--small] [--jobs N]
+  darkread eval make-suite OUT [--small | --subset simulator-check] [--simulator darkread|hesim] [--jobs N]
       write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
       text kinds, three font families incl. one held out of training, x-heights 7-12, motion
       still/normal/walking, and nine 30-lux paragraphs). Each recording ends when the page has been
       read once; texts come from the corpus part never used for training; six more replay a real
       reader's fixations (30 and 10 lux paragraphs, three motions; names end in _human). --small:
       17 short recordings, one axis varied at a time (CI-sized). --match PATTERN: only those
-      recordings (e.g. --match '*lux30_*_human').
+      recordings (e.g. --match '*lux30_*_human'). --simulator hesim: the same scenes, gaze and
+      texts turned into events by a second, independent simulator (hesim-3d); --subset
+      simulator-check: the 18 recordings `make eval-hesim` compares on both simulators.
 
   darkread eval SUITE_DIR [--out docs/eval] [--backend local] [--infer MODE|both] [--beside DIR] [--jobs N]
       read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
@@ -49,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
         description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small] [--match PATTERN] [--jobs N]",
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
@@ -71,6 +73,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--match", metavar="PATTERN",
                         help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
                              "'*lux30_*_human' for the real-scanpath recordings at 30 lux")
+    parser.add_argument("--subset", choices=["simulator-check"],
+                        help="make-suite: a named part of the full suite; simulator-check: its words and paragraph "
+                             "recordings at 30, 10 and 5 lux, every motion (18, same names, seeds and texts)")
+    parser.add_argument("--simulator", choices=["darkread", "hesim"], default="darkread",
+                        help="make-suite: what turns the rendered scenes into events: darkread (our sensor model, "
+                             "default) or hesim (hesim-3d's H-ESIM, IMX636 preset; `make hesim` installs it)")
     parser.add_argument("--infer", default=None, choices=[*INFER_MODES, BOTH],
                         help="the edge's mode (default: the edge's default, PipelineConfig().infer; every-window: every frame; "
                              "on-change: one fused view per fixation; both: the default and the other beside it)")
@@ -95,7 +103,8 @@ def _make_suite(args: argparse.Namespace) -> int:
 
     if not args.make_suite_out:
         raise ValueError("give the output folder: darkread eval make-suite OUT [--small]")
-    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match)
+    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
+                         subset=args.subset, simulator=args.simulator)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
     return 0
 
