@@ -36,6 +36,13 @@ Two forms:
       SUITE_DIR/eval_runs/<mode> (or --work), so an interrupted evaluation resumes (--force redoes
       them). --report-only rebuilds the report from the stored results.
 
+  darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md] [--infer MODE]
+      the same recordings made by two event simulators (make-suite --simulator), both evaluated:
+      mean CER per lux and per lux x motion side by side, with each suite's event rates; printed and
+      written to --out (a .md file, or a folder: FOLDER/simulators.md; default docs/eval/simulators.md,
+      which the report of docs/eval then shows as its "Second simulator" section). `make eval-hesim`
+      runs it all.
+
   Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
   PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
   default SUITE_DIR/eval_runs/<mode>), and the report puts the other mode beside the default:
@@ -51,11 +58,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
         description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]",
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
     parser.add_argument("make_suite_out", nargs="?", metavar="OUT", help=argparse.SUPPRESS)
+    parser.add_argument("second_suite", nargs="?", metavar="OTHER_SUITE", help=argparse.SUPPRESS)
     parser.add_argument("--out", default="docs/eval", metavar="DIR", help="report folder (default docs/eval)")
     parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
                         help="OCR engine for darkread and the RGB baseline (default: local)")
@@ -70,9 +78,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--note", action="append", default=[], metavar="TEXT", help="a line for the report's header (repeatable)")
     parser.add_argument("--small", action="store_true", help="make-suite: the small (CI) suite")
     parser.add_argument("--limit", type=int, metavar="N", help="make-suite: only the first N recordings")
-    parser.add_argument("--match", metavar="PATTERN",
+    parser.add_argument("--match", metavar="PATTERN", action="append",
                         help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
-                             "'*lux30_*_human' for the real-scanpath recordings at 30 lux")
+                             "'*lux30_*_human' for the real-scanpath recordings at 30 lux (repeatable: any of them)")
     parser.add_argument("--subset", choices=["simulator-check"],
                         help="make-suite: a named part of the full suite; simulator-check: its words and paragraph "
                              "recordings at 30, 10 and 5 lux, every motion (18, same names, seeds and texts)")
@@ -91,6 +99,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.target == "compare-simulators":
+        return _compare_simulators(args)
+    if args.second_suite is not None:
+        raise ValueError(f"unexpected argument {args.second_suite!r}")
     if args.target == "make-suite":
         return _make_suite(args)
     if args.make_suite_out is not None:
@@ -106,6 +118,18 @@ def _make_suite(args: argparse.Namespace) -> int:
     entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
                          subset=args.subset, simulator=args.simulator)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
+    return 0
+
+
+def _compare_simulators(args: argparse.Namespace) -> int:
+    from darkread.eval.simulators import SIMULATORS_NAME, write_comparison
+
+    if not (args.make_suite_out and args.second_suite):
+        raise ValueError("give two evaluated suites: darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]")
+    out = Path(args.out)
+    out = out / SIMULATORS_NAME if out.suffix != ".md" else out
+    path = write_comparison(args.make_suite_out, args.second_suite, out, mode=args.infer or default_infer_mode())
+    print(path.read_text())
     return 0
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -146,11 +147,11 @@ def _write_entry(out: Path, entry: SuiteEntry) -> None:
 
 def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
-    match: str | None = None, subset: str | None = None, simulator: str = "darkread",
+    match: str | Sequence[str] | None = None, subset: str | None = None, simulator: str = "darkread",
 ) -> list[SuiteEntry]:
     """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
     ``spec.json`` matches) are kept, so an interrupted run resumes. ``match``: only the recordings
-    whose name matches this shell pattern (e.g. ``*lux30_*_human``); ``subset``: a named part of the
+    whose name matches this shell pattern (e.g. ``*lux30_*_human``), or any of several; ``subset``: a named part of the
     full suite (``simulator-check``); ``simulator``: what turns the scenes into events."""
     from tqdm import tqdm
 
@@ -174,9 +175,10 @@ def make_suite(
     if match:
         from fnmatch import fnmatch
 
-        entries = [e for e in entries if fnmatch(e.name, match) or match in e.name]
+        patterns = [match] if isinstance(match, str) else list(match)
+        entries = [e for e in entries if any(fnmatch(e.name, m) or m in e.name for m in patterns)]
         if not entries:
-            raise ValueError(f"--match {match!r}: no recording of the suite has such a name")
+            raise ValueError(f"--match {' '.join(patterns)}: no recording of the suite has such a name")
     entries = entries[:only]
     (out / SUITE_NAME).write_text(
         json.dumps({"small": small, "subset": subset, "simulator": simulator, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
