@@ -20,10 +20,11 @@ betas b = (1, 1, 0.005, 0.04, 0.004, 0), threshold 0.15, refractory 3 us, dark 0
   (no residual kept); the refractory period masks pixels that fired less than 3 us before.
 
 So the step is part of its model: a pixel crossing several thresholds within one step gives one
-event, and every timestamp falls on a step end. We call it every 500 us (2 kHz, twice the preset's
-``evs_fps``; ``STEP_US``), not at our own 2-8 kHz step (``session.choose_dt_us``, < 0.5 px of image
-motion per step): on one CPU core a step of a 200 k-pixel region costs ~10 ms, so 8 kHz would be
-~80 s per simulated second. With head motion the image then moves up to ~2 px per step.
+event, and every timestamp falls on a step end. We call it at the preset's own rate, ``evs_fps`` =
+1 kHz (``STEP_US`` = 1 ms), not at our own 2-8 kHz step (``session.choose_dt_us``, < 0.5 px of
+image motion per step): on one CPU core a step of a 100 k-pixel region costs ~12 ms, so our rate
+would cost 25-100 s per simulated second. With head motion the image then moves up to a few pixels
+per step, and timestamps have 1 ms resolution.
 
 Light: our scene gives ``E = lux * reflectance`` per pixel (illuminance at the page times the
 paper's or ink's reflectance). A Lambertian page seen through the glasses' lens puts
@@ -57,7 +58,7 @@ HESIM_PRESET = "sony_imx636"
 F_NUMBER = 2.0  # the glasses' event-camera lens (assumption)
 LENS_TRANSMISSION = 0.9  # (assumption)
 LOW_LIGHT_CUTOFF_SENSOR_LUX = 0.08  # IMX636 low-light cut-off, illuminance at the sensor (datasheet figure)
-STEP_US = 500.0  # H-ESIM's interval (see above)
+STEP_US = 1000.0  # H-ESIM's interval: the preset's evs_fps (see above)
 WARM_UP_US = 30_000  # simulated before t = 0 and dropped: the references start exactly at the first image
 INSTALL_HINT = ("install it with `make hesim` (pip install --no-deps hesim-3d==0.1.0 plus the `hesim` extra: "
                 "it declares opencv-python, which must not sit beside our opencv-contrib-python-headless)")
