@@ -93,6 +93,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--beside", metavar="DIR",
                         help="results of the other mode to put beside this run in the report (a --work folder of the same "
                              "suite); with --infer both, where the other mode is evaluated (default SUITE_DIR/eval_runs/<mode>)")
+    parser.add_argument("--no-rgb", action="store_true",
+                        help="leave out the RGB baseline and the bandwidth figures (they need its snapshot): darkread's "
+                             "reading only, e.g. for a second simulator's suite whose scenes another suite already has")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="worker processes (make-suite and evaluation; default 1)")
     parser.set_defaults(func=_run)
@@ -164,7 +167,7 @@ def _results(suite: Path, work: Path, mode: str, args: argparse.Namespace, *, ev
     from darkread.eval.runner import evaluate_suite, load_results
 
     if evaluate:
-        return evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model,
+        return evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model, rgb=not args.no_rgb,
                               force=args.force, jobs=args.jobs, infer=mode)
     results = load_results(work)
     if not results:

@@ -92,6 +92,10 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     assert 0 < bw["events_foveated"] < bw["events"]
     assert json.loads((tmp_path / "run" / "result.json").read_text())["name"] == folder.name
 
+    # --no-rgb: darkread's reading alone (a second simulator's suite has the first one's scenes)
+    alone = evaluate_recording(folder, tmp_path / "run_alone", rgb=False)
+    assert alone["rgb"] is None and alone["bandwidth"] is None and alone["darkread"]["frames"] > 0
+
 
 def test_cli_make_suite_form(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from darkread.cli import main
