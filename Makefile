@@ -82,11 +82,11 @@ eval-small: $(STAMP)  ## the small suite (17 recordings) in both edge modes (a f
 	$(VENV)/bin/darkread eval make-suite runs/eval_small --small --jobs 2
 	$(VENV)/bin/darkread eval runs/eval_small --out runs/eval_small_report --infer both --jobs 2
 
-eval-hesim: hesim  ## the second-simulator check: 18 recordings of the suite made by each simulator (30/10/5 lux), read end to end; CER per lux side by side in docs/eval/simulators.md, the "Second simulator" section of the next `make eval` report (~2 h on 2 cores)
+eval-hesim: hesim  ## the second-simulator check: 18 recordings of the suite made by each simulator (30/10/5 lux), read end to end; CER per lux side by side in docs/eval/simulators.md, the "Second simulator" section of the next `make eval` report (~1 h on 2 cores)
 	nice -n 10 $(VENV)/bin/darkread eval make-suite runs/eval_hesim/darkread --subset simulator-check --jobs 2
 	nice -n 10 $(VENV)/bin/darkread eval make-suite runs/eval_hesim/hesim --subset simulator-check --simulator hesim --jobs 2
 	$(VENV)/bin/darkread eval runs/eval_hesim/darkread --out runs/eval_hesim/report_darkread --jobs 2
-	$(VENV)/bin/darkread eval runs/eval_hesim/hesim --out runs/eval_hesim/report_hesim --jobs 2
+	$(VENV)/bin/darkread eval runs/eval_hesim/hesim --out runs/eval_hesim/report_hesim --no-rgb --compare --jobs 2
 	$(VENV)/bin/darkread eval compare-simulators runs/eval_hesim/darkread runs/eval_hesim/hesim --out docs/eval/simulators.md
 
 train: $(STAMP)  ## reproduce the shipped model from scratch
