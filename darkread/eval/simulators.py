@@ -18,6 +18,12 @@ from darkread.eval.aggregate import group_by, mean, median
 from darkread.eval.results import RecordingResult
 from darkread.eval.tables import pct
 
+HESIM_NOTE = ("How the second one differs (models/synth/README.md): hesim-3d 0.1.0's H-ESIM with its IMX636 preset "
+              "has no photoreceptor low-pass (ours slows in the dark and smears edges), no shot noise on still pixels "
+              "(0.018 Hz of dark events instead of our 0.5-3 Hz at 5 lux), one threshold of 0.15 for every pixel (ours "
+              "0.18-0.32 with mismatch), noise as a firing probability around the threshold, at most one event per pixel "
+              "per 1 ms step stamped at its end; the page's light enters through the camera equation with its dark offset "
+              "at the IMX636's 0.08-lux cut-off. The model was trained on our simulator only.")
 SIMULATORS_NAME = "simulators.md"  # beside the report: `write_report` puts it in as its "Second simulator" section
 
 
@@ -98,6 +104,7 @@ def write_comparison(first_suite: str | Path, second_suite: str | Path, out: str
          "whole sensor. Reproduce: `make eval-hesim` (models/synth/hesim_sensor.py says how the second simulator is "
          "driven)."),
         "",
+        *([HESIM_NOTE, ""] if second.simulator == "hesim" else []),
         *comparison_table(first, second, "lux"),
         "",
         *comparison_table(first, second, ("lux", "motion")),
