@@ -42,6 +42,7 @@ class GazeConfig:
 
 
 INFER_MODES = ("every-window", "on-change")  # ``[pipeline] infer``: the first is the default
+FUSE_MODES = ("probability", "mask")  # ``[pipeline] fuse``: the first is the default
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,10 @@ class PipelineConfig:
     min_events: int = 400  # on-change: a frame may have fewer than n_events (low light), not fewer than this
     first_wait_ms: float = 60.0  # on-change: the first frame of a fixation comes this long into it (landing settled)
     view_every_ms: float = 250.0  # on-change: a long fixation sends its view this often
+    # on-change: what a view averages, the network's calibrated ink "probability" per frame or the
+    # binary "mask" (a view holds 1-3 frames: a mask's average has too few levels to keep faint strokes;
+    # frames doubted all over, in dim light, go in as masks either way: view_fusion.MAX_DOUBT)
+    fuse: str = "probability"
 
 
 @dataclass(frozen=True)
@@ -228,6 +233,8 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError(f"config [pipeline] infer must be 'on-change' or 'every-window', not {config.pipeline.infer!r}")
     if min(config.pipeline.min_interval_ms, config.pipeline.settled_interval_ms, config.pipeline.view_every_ms) <= 0 or config.pipeline.min_events <= 0:
         raise ValueError("config [pipeline] min_interval_ms, settled_interval_ms, view_every_ms and min_events must be positive")
+    if config.pipeline.fuse not in FUSE_MODES:
+        raise ValueError(f"config [pipeline] fuse must be 'probability' or 'mask', not {config.pipeline.fuse!r}")
     if not 0 < config.pipeline.renew_fraction <= 1:
         raise ValueError(f"config [pipeline] renew_fraction is a share of a window's events: above 0, at most 1, not {config.pipeline.renew_fraction:g}")
     return config

@@ -30,7 +30,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -75,6 +75,9 @@ class FrameResult(FrameRecord):
     gaze_rad: tuple[float, float]  # (yaw, pitch), radians
     events_used: int
     inference_ms: float
+    # the network's calibrated ink probability (float32 [h, w]) when asked for (views are fused
+    # from it); never sent: a frame goes on the wire as its binary mask
+    probability: np.ndarray | None = field(default=None, kw_only=True, repr=False, compare=False)
 
     def to_message(self) -> Frame:
         """The wire message (``seq`` is assigned by the uplink)."""
@@ -116,12 +119,14 @@ def make_frame(
     infer: Infer,
     frame_id: int,
     scene_px: tuple[float, float] | None = None,
+    probability: bool = False,
 ) -> FrameResult | None:
     """Bin the window's events and infer. None when the window holds no events.
 
     ``window`` are exactly the events to bin (``fovea.window_events``), all inside the window at
     ``origin``; ``t_us`` is the frame's timestamp, the time ``gaze`` was looked up; ``scene_px``
-    the scene's motion by then (``edge.scene_motion``), if measured.
+    the scene's motion by then (``edge.scene_motion``), if measured. ``probability``: keep the ink
+    probability too, from an ``infer`` that has ``ink_probability`` (a ``Reconstructor``).
     """
     if window.shape[0] == 0:
         return None
@@ -129,7 +134,9 @@ def make_frame(
     bound = getattr(infer, "input_window", None)
     grid = voxel_grid(window, origin[0], origin[1], voxel, out=bound if bound is not None and bound.shape == voxel.shape else None)
     started = time.perf_counter()
-    mask = np.asarray(infer(grid), dtype=np.uint8)
+    soft = getattr(infer, "ink_probability", None) if probability else None
+    ink = soft(grid) if soft is not None else None
+    mask = (ink > 0.5).astype(np.uint8) if ink is not None else np.asarray(infer(grid), dtype=np.uint8)
     inference_ms = (time.perf_counter() - started) * 1e3
     return FrameResult(
         frame_id=frame_id,
@@ -141,6 +148,7 @@ def make_frame(
         mask=mask,
         inference_ms=inference_ms,
         scene_px=scene_px,
+        probability=ink,
     )
 
 
@@ -492,16 +500,17 @@ class Pipeline:
         window = self._recent_events(origin, t, t_from=t_from)
         if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
             return False
-        frame = make_frame(window, origin, gaze, t, self.voxel, self.infer, self.frames_made, self._scene_at(t))
+        soft = self.settings.fuse == "probability"
+        frame = make_frame(window, origin, gaze, t, self.voxel, self.infer, self.frames_made, self._scene_at(t), probability=soft)
         if frame is None:
             return False
         self.frames_made += 1
         self.metrics.add("frames")
         self.metrics.observe_inference(frame.inference_ms)
-        if self.fuser.add(frame, frame.events_used, frame.gaze_rad) is None:
+        if self.fuser.add(frame, frame.events_used, frame.gaze_rad, frame.probability) is None:
             self.metrics.add("views_split")
             self._send_view(arrival)
-            self.fuser.add(frame, frame.events_used, frame.gaze_rad)
+            self.fuser.add(frame, frame.events_used, frame.gaze_rad, frame.probability)
         self.trigger.inferred(t, origin, self.fuser.last_score)
         self._since_infer = 0
         return True
@@ -518,7 +527,7 @@ class Pipeline:
 
     def _send_view(self, arrival: float) -> None:
         view = self.fuser.view(self.views_made)
-        self.fuser = ViewFuser(self.fuser.n_levels, self.fuser.radius)
+        self.fuser = ViewFuser(self.fuser.n_levels, self.fuser.radius, max_doubt=self.fuser.max_doubt)
         self._view_origin = None
         self.views_made += 1
         self.metrics.add("views")

@@ -103,6 +103,15 @@ Measured on the development VM (AMD EPYC, shared by other jobs; best median of 3
 Session: ORT_ENABLE_ALL, 1 intra-op thread, spinning off. {_int8_sentence(latency)}
 Dynamic int8 quantisation is not offered: it is several times slower for conv nets.
 
+## Ink probability (temperature)
+
+Binary frames are `logits > 0`. Where frames are averaged on the glasses (the on-change mode's
+views) the edge uses the calibrated probability `sigmoid(logits / T)` with `T = 1.5`
+(`darkread.edge.reconstruct.INK_TEMPERATURE`): the net is over-confident (Dice loss), and 1.5 has
+the lowest log-loss on 500 held-out synthetic validation windows (0.1374 against 0.1431 at T = 1
+and 0.1445 at T = 2). Reproduce: `darkread train calibrate VAL_DIR` (log-loss per T and a
+reliability table).
+
 ## Training
 
 * Data: synthetic event windows from `darkread.models.synth` (text pages rendered in training

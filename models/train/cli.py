@@ -131,6 +131,17 @@ def _cmd_annotate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from darkread.models.train.calibrate import calibrate
+
+    if not Path(args.val_dir).exists():
+        raise FileNotFoundError(f"{args.val_dir}: no such shard directory (make one with `darkread synth dataset --split val`)")
+    result = calibrate(args.val_dir, args.model, limit=args.limit)
+    print(result.to_markdown())
+    print(f"\nink temperature {result.temperature:g} (the edge uses darkread.edge.reconstruct.INK_TEMPERATURE)")
+    return 0
+
+
 def _cmd_all(args: argparse.Namespace) -> int:
     from darkread.models.train.pipeline import reproduce
 
@@ -245,6 +256,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-offset-ms", type=float, default=8.0, help="time offset search range, +- ms (default 8; 0 = off)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_annotate)
+
+    p = sub.add_parser("calibrate", help="the ink temperature: sigmoid(logits / T) fitted by log-loss on held-out windows",
+                       description="Fit the temperature that makes the network's ink probability mean what it says (the "
+                                   "on-change mode averages it over a view's frames) on a shard directory's windows, and "
+                                   "print the log-loss per temperature and a reliability table.")
+    p.add_argument("val_dir", type=Path, nargs="?", default=DEFAULT_VAL, help=f"shard directory (default {DEFAULT_VAL})")
+    p.add_argument("--model", type=Path, help="ONNX model (default: the shipped one)")
+    p.add_argument("--limit", type=int, default=500, help="windows to use (default 500)")
+    p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("all", help="reproduce the shipped model from scratch: synth -> fit -> export -> int8 -> evaluate -> card")
     p.add_argument("--train-dir", type=Path, default=DEFAULT_TRAIN)

@@ -115,3 +115,14 @@ def test_edge_run_options_become_config_overrides(tmp_path: Path) -> None:
     args = parser.parse_args(["edge", "run", "--speed", "2", "--gaze", "udp", "--gaze-port", "7100"])
     config = load_config(None, environ={}, overrides=overrides_from_args(args))
     assert config.source.speed == 2.0 and config.gaze.kind == "udp" and config.gaze.udp_port == 7100
+
+
+def test_fuse_must_name_what_a_view_averages(tmp_path) -> None:  # noqa: ANN001
+    from darkread.edge.config import load_config
+
+    path = tmp_path / "edge.toml"
+    path.write_text('[pipeline]\nfuse = "maybe"\n')
+    with pytest.raises(ValueError, match="fuse must be 'probability' or 'mask'"):
+        load_config(path)
+    path.write_text('[pipeline]\nfuse = "mask"\n')
+    assert load_config(path).pipeline.fuse == "mask"

@@ -20,10 +20,11 @@ pytestmark = pytest.mark.skipif(
     reason="no shipped sample recording or model in this checkout",
 )
 
-# What the sample makes (3 s, 3 lines, 60 Hz gaze): fixed by the gaze and the event counts alone
-# (the classifier, the trigger, the window), not by the model's arithmetic, so exact on any CPU.
+# What the sample makes (3 s, 3 lines, 60 Hz gaze): fixed by the gaze and the event counts (the
+# classifier, the trigger, the window) and by whether a frame agreed with its view (a match score
+# far from the settled threshold on this sample), so the same on any CPU.
 SAMPLE_VIEWS = 13
-SAMPLE_FRAMES = 29
+SAMPLE_FRAMES = 26
 
 
 def replay(slice_us: int | None) -> tuple[list[ViewRecord], dict[str, int]]:

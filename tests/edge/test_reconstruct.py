@@ -124,3 +124,30 @@ def test_the_bound_input_window_infers_what_a_plain_grid_does() -> None:
     logits = rec.logits(batch)
     for i in range(2):
         np.testing.assert_allclose(rec.logits(batch[i]), logits[i], rtol=1e-5, atol=1e-5)
+
+
+def test_probability_from_logits_is_a_sigmoid_softened_by_the_temperature() -> None:
+    from darkread.edge.reconstruct import probability_from_logits
+
+    logits = np.array([-1e4, -3.0, 0.0, 3.0, 1e4], np.float32)
+    p = probability_from_logits(logits, temperature=1.5)
+    assert p.dtype == np.float32 and np.all(np.isfinite(p))
+    np.testing.assert_allclose(p, 1.0 / (1.0 + np.exp(-np.clip(logits / 1.5, -60, 60))), rtol=1e-6)
+    assert p[2] == 0.5 and p[0] < 1e-20 and p[4] == 1.0
+    # a higher temperature means less confidence on both sides, never another side of one half
+    q = probability_from_logits(logits, temperature=3.0)
+    assert q[3] < p[3] and q[1] > p[1] and q[3] > 0.5 > q[1]
+    assert logits[2] == 0.0  # the logits are not touched
+
+
+@shipped
+def test_ink_probability_is_above_one_half_exactly_where_the_mask_is_ink() -> None:
+    rec = Reconstructor(warmup=0)
+    for seed in range(3):
+        voxel = _voxel(30 + seed)
+        rec.input_window[...] = voxel
+        p = rec.ink_probability(rec.input_window)
+        assert p.shape == (100, 200) and p.dtype == np.float32 and 0.0 <= p.min() and p.max() <= 1.0
+        np.testing.assert_array_equal((p > 0.5).astype(np.uint8), rec(voxel))
+    with pytest.raises(ValueError, match="temperature"):
+        Reconstructor(warmup=0, temperature=0.0)

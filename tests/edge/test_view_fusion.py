@@ -88,3 +88,40 @@ def test_quantise_and_threshold() -> None:
 def test_an_empty_fuser_has_no_view() -> None:
     with pytest.raises(ValueError):
         ViewFuser().view(0)
+
+
+def test_a_view_averages_the_frames_probabilities_when_given_them() -> None:
+    """Two frames the network was unsure of at a stroke (probability 0.4 and 0.45: paper in both
+    masks) make a view with that stroke grey at ~0.43, where their masks' mean says 0."""
+    page = page_of_text()
+    faint = np.zeros((100, 200), np.float32)
+    faint[40:50, 150:152] = 1.0  # a stroke neither mask holds
+    fused, masks_only = ViewFuser(), ViewFuser()
+    for i, doubt in enumerate((0.40, 0.45)):
+        f = frame(page, 20, 0, i, (500, 300))
+        probability = np.where(f.mask > 0, 0.9, 0.0).astype(np.float32) + doubt * faint
+        fused.add(f, probability=probability)
+        masks_only.add(f)
+    grey = fused.view(0).ink_probability()
+    assert grey[45, 151] == pytest.approx(3 / 7, abs=0.08)  # 0.425 -> level 3 of 0..7
+    assert masks_only.view(0).ink_probability()[45, 151] == 0.0
+    ink = page[0:100, 20:220] > 0
+    assert grey[ink].min() == pytest.approx(6 / 7)  # 0.9 -> level 6: the network's confidence, not 1
+    assert fused.view(0).mask[45, 151] == 0  # below one half: still paper for a binary stitcher
+    with pytest.raises(ValueError, match="probability"):
+        ViewFuser().add(frame(page, 0, 0, 0, (0, 0)), probability=np.zeros((50, 50), np.float32))
+
+
+def test_a_frame_the_network_doubted_all_over_is_averaged_as_its_mask() -> None:
+    """Dim light: probabilities between 0.2 and 0.8 everywhere (far more such pixels than ink) are
+    noise, not faint strokes; the frame goes in as its mask."""
+    from darkread.edge.view_fusion import MAX_DOUBT, doubt
+
+    page = page_of_text()
+    f = frame(page, 0, 0, 0, (0, 0))
+    foggy = np.where(f.mask > 0, 0.7, 0.35).astype(np.float32)
+    assert doubt(foggy) > MAX_DOUBT
+    fuser = ViewFuser()
+    fuser.add(f, probability=foggy)
+    np.testing.assert_array_equal(fuser.view(0).ink_probability(), f.mask.astype(np.float64))
+    assert doubt(np.zeros((100, 200), np.float32)) == 0.0
