@@ -1,5 +1,5 @@
-"""The markers' ignore mask: it covers what the markers put in a window and nothing of the text, it is
-stored in shards so that old shards still load, and the fine-tuning loss and score leave it out."""
+"""The markers' ignore mask (made by annotate: tests/models/train/test_annotate.py) is stored in shards
+so that old shards still load, and the fine-tuning loss and score leave it out."""
 
 from __future__ import annotations
 
@@ -8,74 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from darkread.models.synth.recording import RecordingSpec, page_to_camera, session_spec
-from darkread.models.synth.session import make_session
 from darkread.models.synth.shards import SampleMeta, write_shard
-from darkread.models.train.annotate import (
-    marker_area_for_pose,
-    page_coordinates,
-    page_ink_for_pose,
-    project_page,
-    render_ignore,
-    render_target,
-    window_rays,
-)
 from darkread.models.train.data import IGNORE_LABEL, augment, labels, load_dataset, load_shard, random_crop, split_labels
-
-SPEC = RecordingSpec(lux=100, motion="normal", kind="pangram", seconds=1.0, seed=4, xheight_px=9.0, n_lines=2,
-                     line_chars=24, regime="shifted", markers=True)
-
-
-@pytest.fixture(scope="module")
-def session():
-    return make_session(session_spec(SPEC), SPEC.seed)
-
-
-def inside(mm: np.ndarray, boxes: np.ndarray, grow_mm: float) -> np.ndarray:
-    """Page points [n, 2] inside any of the boxes [k, 4] (x0 y0 x1 y1) grown by ``grow_mm``."""
-    x, y = mm[:, :1], mm[:, 1:]
-    b = boxes[None]
-    return ((x >= b[..., 0] - grow_mm) & (x <= b[..., 2] + grow_mm) & (y >= b[..., 1] - grow_mm) & (y <= b[..., 3] + grow_mm)).any(axis=1)
-
-
-def windows_between_markers_and_text(session, t: float):
-    """Windows centred between each marker and the text (both in view), under the true pose at ``t``."""
-    page, calib = session.marker_page, session.calib
-    H = page_to_camera(session, np.array([t]))[0]
-    H = H / H[2, 2]
-    text_top, text_bottom = page.text_box_mm[1], page.text_box_mm[3]
-    for corners in page.markers.values():
-        cx = corners[:, 0].mean()
-        above = corners[:, 1].max() < text_top
-        y = (corners[:, 1].max() + text_top) / 2 if above else (corners[:, 1].min() + text_bottom) / 2
-        uv = project_page(H, calib, np.array([[cx, y]]))[0]
-        yield H, (int(uv[0]) - 100, int(uv[1]) - 50)
-
-
-def test_mask_covers_the_markers_ink_and_no_text(session) -> None:
-    page, calib = session.marker_page, session.calib
-    ink_for, area_for = page_ink_for_pose(page), marker_area_for_pose(page)
-    markers = np.array([[*c.min(axis=0), *c.max(axis=0)] for c in page.markers.values()])
-    glyphs = np.array([g["box_mm"] for g in page.glyphs])
-    checked = 0
-    for t in (0.2, 0.8):
-        for H, origin in windows_between_markers_and_text(session, t):
-            rays = window_rays(calib, origin)
-            ink, s = ink_for(H, calib)
-            area, s_area = area_for(H, calib)
-            target = render_target(ink, s, H, rays).ravel().astype(bool)
-            ignore = render_ignore(area, s_area, H, rays).ravel().astype(bool)
-            mm = page_coordinates(H, rays)
-            on_marker, on_text = inside(mm, markers, 0.3), inside(mm, glyphs, 0.5)
-            if not (target & on_marker).any() or not (target & on_text).any():
-                continue  # this window does not see both
-            checked += 1
-            assert ignore[target & on_marker].all()  # every ink pixel of a marker is ignored
-            assert not (ignore & on_text).any()  # no pixel of any glyph's box is
-            assert not (target & ~ignore & ~on_text).any()  # what ink is left to learn is text
-            assert (target & ~ignore).sum() > 100
-    assert checked >= 4
-
 
 def meta(n: int) -> list[SampleMeta]:
     return [SampleMeta(lux=10.0, motion="normal", kind="marker_page", font="f", xheight_px=9.0, seed=i, x0=0, y0=0,
