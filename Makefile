@@ -6,10 +6,11 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
-EXTRAS ?= edge,cloud,dev,train,gaze
+EXTRAS ?= edge,cloud,dev,train,gaze,hesim
+HESIM  := hesim-3d==0.1.0
 PYTEST_ARGS ?=  # e.g. make test PYTEST_ARGS="-m postgres"
 
-.PHONY: help venv test test-fast bench demo eval eval-small train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
+.PHONY: help venv hesim test test-fast bench demo eval eval-small eval-hesim train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
@@ -20,9 +21,16 @@ $(STAMP): pyproject.toml setup.py
 	$(PIP) install -q -e ".[$(EXTRAS)]"
 	# test oracle for the Aria gaze conventions; its own dependencies (1.6 GB) are not needed
 	$(PIP) install -q --no-deps "projectaria-tools==2.3.0"
+	# the second event simulator, without the opencv-python it declares (it would break our cv2); its
+	# run-time needs are the `hesim` extra
+	$(if $(findstring hesim,$(EXTRAS)),$(PIP) install -q --no-deps "$(HESIM)")
+	$(PY) -c "import cv2; cv2.aruco"
 	touch $(STAMP)
 
 venv: $(STAMP)  ## create .venv and install darkread with all extras
+
+hesim: $(STAMP)  ## the second event simulator (hesim-3d, installed by venv without opencv-python): check it imports beside our cv2
+	$(PY) -c "import cv2, hesim3d; cv2.aruco; print('hesim-3d', hesim3d.__version__, 'beside cv2', cv2.__version__)"
 
 # Debian packages, installed only when run as root with apt-get (a fresh machine, CI, the image);
 # elsewhere the tests that need them skip with the reason. Each target installs only what is missing.
@@ -73,6 +81,13 @@ eval: $(STAMP)  ## the full suite (87 recordings) in both edge modes (~1 h on 2 
 eval-small: $(STAMP)  ## the small suite (17 recordings) in both edge modes (a few minutes); report in runs/eval_small_report
 	$(VENV)/bin/darkread eval make-suite runs/eval_small --small --jobs 2
 	$(VENV)/bin/darkread eval runs/eval_small --out runs/eval_small_report --infer both --jobs 2
+
+eval-hesim: hesim  ## the second-simulator check: 18 recordings of the suite made by each simulator (30/10/5 lux), read end to end; CER per lux side by side in docs/eval/simulators.md, the "Second simulator" section of the next `make eval` report (~1 h on 2 cores)
+	nice -n 10 $(VENV)/bin/darkread eval make-suite runs/eval_hesim/darkread --subset simulator-check --jobs 2
+	nice -n 10 $(VENV)/bin/darkread eval make-suite runs/eval_hesim/hesim --subset simulator-check --simulator hesim --jobs 2
+	$(VENV)/bin/darkread eval runs/eval_hesim/darkread --out runs/eval_hesim/report_darkread --jobs 2
+	$(VENV)/bin/darkread eval runs/eval_hesim/hesim --out runs/eval_hesim/report_hesim --no-rgb --compare --jobs 2
+	$(VENV)/bin/darkread eval compare-simulators runs/eval_hesim/darkread runs/eval_hesim/hesim --out docs/eval/simulators.md
 
 train: $(STAMP)  ## reproduce the shipped model from scratch
 	$(VENV)/bin/darkread train all

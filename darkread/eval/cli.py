@@ -18,14 +18,16 @@ BOTH = "both"
 EVAL_HELP = """\
 Two forms:
 
-  darkread eval make-suite OUT [--small] [--jobs N]
+  darkread eval make-suite OUT [--small | --subset simulator-check] [--simulator darkread|hesim] [--jobs N]
       write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
       text kinds, three font families incl. one held out of training, x-heights 7-12, motion
       still/normal/walking, and nine 30-lux paragraphs). Each recording ends when the page has been
       read once; texts come from the corpus part never used for training; six more replay a real
       reader's fixations (30 and 10 lux paragraphs, three motions; names end in _human). --small:
       17 short recordings, one axis varied at a time (CI-sized). --match PATTERN: only those
-      recordings (e.g. --match '*lux30_*_human').
+      recordings (e.g. --match '*lux30_*_human'). --simulator hesim: the same scenes, gaze and
+      texts turned into events by a second, independent simulator (hesim-3d); --subset
+      simulator-check: the 18 recordings `make eval-hesim` compares on both simulators.
 
   darkread eval SUITE_DIR [--out docs/eval] [--backend local] [--infer MODE|both] [--beside DIR] [--jobs N]
       read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
@@ -33,6 +35,13 @@ Two forms:
       write the Markdown report with PNG plots to --out. Results are kept per recording under
       SUITE_DIR/eval_runs/<mode> (or --work), so an interrupted evaluation resumes (--force redoes
       them). --report-only rebuilds the report from the stored results.
+
+  darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md] [--infer MODE]
+      the same recordings made by two event simulators (make-suite --simulator), both evaluated:
+      mean CER per lux and per lux x motion side by side, with each suite's event rates; printed and
+      written to --out (a .md file, or a folder: FOLDER/simulators.md; default docs/eval/simulators.md,
+      which the report of docs/eval then shows as its "Second simulator" section). `make eval-hesim`
+      runs it all.
 
   Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
   PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
@@ -49,11 +58,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
         description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small] [--match PATTERN] [--jobs N]",
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
     parser.add_argument("make_suite_out", nargs="?", metavar="OUT", help=argparse.SUPPRESS)
+    parser.add_argument("second_suite", nargs="?", metavar="OTHER_SUITE", help=argparse.SUPPRESS)
     parser.add_argument("--out", default="docs/eval", metavar="DIR", help="report folder (default docs/eval)")
     parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
                         help="OCR engine for darkread and the RGB baseline (default: local)")
@@ -68,21 +78,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--note", action="append", default=[], metavar="TEXT", help="a line for the report's header (repeatable)")
     parser.add_argument("--small", action="store_true", help="make-suite: the small (CI) suite")
     parser.add_argument("--limit", type=int, metavar="N", help="make-suite: only the first N recordings")
-    parser.add_argument("--match", metavar="PATTERN",
+    parser.add_argument("--match", metavar="PATTERN", action="append",
                         help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
-                             "'*lux30_*_human' for the real-scanpath recordings at 30 lux")
+                             "'*lux30_*_human' for the real-scanpath recordings at 30 lux (repeatable: any of them)")
+    parser.add_argument("--subset", choices=["simulator-check"],
+                        help="make-suite: a named part of the full suite; simulator-check: its words and paragraph "
+                             "recordings at 30, 10 and 5 lux, every motion (18, same names, seeds and texts)")
+    parser.add_argument("--simulator", choices=["darkread", "hesim"], default="darkread",
+                        help="make-suite: what turns the rendered scenes into events: darkread (our sensor model, "
+                             "default) or hesim (hesim-3d's H-ESIM, IMX636 preset; `make hesim` installs it)")
     parser.add_argument("--infer", default=None, choices=[*INFER_MODES, BOTH],
                         help="the edge's mode (default: the edge's default, PipelineConfig().infer; every-window: every frame; "
                              "on-change: one fused view per fixation; both: the default and the other beside it)")
     parser.add_argument("--beside", metavar="DIR",
                         help="results of the other mode to put beside this run in the report (a --work folder of the same "
                              "suite); with --infer both, where the other mode is evaluated (default SUITE_DIR/eval_runs/<mode>)")
+    parser.add_argument("--no-rgb", action="store_true",
+                        help="leave out the RGB baseline and the bandwidth figures (they need its snapshot): darkread's "
+                             "reading only, e.g. for a second simulator's suite whose scenes another suite already has")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="worker processes (make-suite and evaluation; default 1)")
     parser.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.target == "compare-simulators":
+        return _compare_simulators(args)
+    if args.second_suite is not None:
+        raise ValueError(f"unexpected argument {args.second_suite!r}")
     if args.target == "make-suite":
         return _make_suite(args)
     if args.make_suite_out is not None:
@@ -95,8 +118,21 @@ def _make_suite(args: argparse.Namespace) -> int:
 
     if not args.make_suite_out:
         raise ValueError("give the output folder: darkread eval make-suite OUT [--small]")
-    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match)
+    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
+                         subset=args.subset, simulator=args.simulator)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
+    return 0
+
+
+def _compare_simulators(args: argparse.Namespace) -> int:
+    from darkread.eval.simulators import SIMULATORS_NAME, write_comparison
+
+    if not (args.make_suite_out and args.second_suite):
+        raise ValueError("give two evaluated suites: darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]")
+    out = Path(args.out)
+    out = out / SIMULATORS_NAME if out.suffix != ".md" else out
+    path = write_comparison(args.make_suite_out, args.second_suite, out, mode=args.infer or default_infer_mode())
+    print(path.read_text())
     return 0
 
 
@@ -131,7 +167,7 @@ def _results(suite: Path, work: Path, mode: str, args: argparse.Namespace, *, ev
     from darkread.eval.runner import evaluate_suite, load_results
 
     if evaluate:
-        return evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model,
+        return evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model, rgb=not args.no_rgb,
                               force=args.force, jobs=args.jobs, infer=mode)
     results = load_results(work)
     if not results:

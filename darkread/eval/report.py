@@ -20,6 +20,7 @@ from darkread.eval.aggregate import held_out_fonts, mean, paired, sweep_subset
 from darkread.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
 from darkread.eval.provenance import ReportInfo, run_commits
 from darkread.eval.results import RecordingResult
+from darkread.eval.simulators import simulator_section
 from darkread.eval.tables import (
     backend_table,
     bandwidth_table,
@@ -38,15 +39,27 @@ REPORT_NAME = "README.md"
 RESULTS_NAME = "results.json"
 
 
-def relative_paths(value: Any, suite_dir: Path) -> Any:
-    """``value`` (a result's JSON) with every absolute path written relative to the suite: a
-    committed report must not carry the directories of the machine that made it."""
+PATH_KEYS = frozenset({"page_png", "crop_png", "recording"})  # the fields of a result that name files
+
+
+def relative_paths(value: Any, suite_dir: Path, key: str | None = None) -> Any:
+    """``value`` (a result's JSON) with its file paths written relative to the suite: a committed
+    report must not carry the directories of the machine that made it.
+
+    Only the fields that name files (``PATH_KEYS``) are rewritten, whatever they hold: a text read
+    off a page may well start with "/". Error messages keep their words, with the suite's absolute
+    directory taken out of them. Paths that already are relative (results made so, or rewritten
+    before) stay as they are."""
     if isinstance(value, dict):
-        return {k: relative_paths(v, suite_dir) for k, v in value.items()}
+        return {k: relative_paths(v, suite_dir, k) for k, v in value.items()}
     if isinstance(value, list):
-        return [relative_paths(v, suite_dir) for v in value]
-    if isinstance(value, str) and value.startswith("/") and len(value) > 1 and "\n" not in value:
+        return [relative_paths(v, suite_dir, key) for v in value]
+    if not isinstance(value, str):
+        return value
+    if key in PATH_KEYS and os.path.isabs(value):
         return os.path.relpath(value, suite_dir)
+    if key == "error":
+        return value.replace(f"{suite_dir}{os.sep}", "")
     return value
 
 
@@ -114,6 +127,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         "",
         *grouped_table(results, "lux", "lux", lambda v: f"{v:g}"),
         "",
+        *simulator_section(out),
         "By motion (left darkread, right the RGB snapshot: exposure lengthens as light falls, so motion blur grows):",
         "",
         "![CER vs lux by motion](cer_vs_lux_by_motion.png)",

@@ -103,8 +103,10 @@ def evaluate_recording(
     model: str | None = None,
     ocr_cache: dict[str, Any] | None = None,
     infer: str = "every-window",
+    rgb: bool = True,
 ) -> dict[str, Any]:
-    """Everything the report needs about one recording (errors are recorded per stage)."""
+    """Everything the report needs about one recording (errors are recorded per stage); ``rgb=False``
+    leaves out the RGB baseline and the bandwidth figures (which need its snapshot)."""
     from darkread.eval.bandwidth import measure_bandwidth, page_ink_from_png
     from darkread.eval.error_rates import error_rates
     from darkread.eval.rgb_baseline import baseline_snapshot, read_snapshot
@@ -149,7 +151,7 @@ def evaluate_recording(
         described = {k: v for k, v in snap.describe().items() if not (isinstance(v, float) and math.isnan(v))}
         return {"text": text, "cer": rates.cer, "wer": rates.wer, "source": source, **described, "crop_png": str(crop_png)}
 
-    result["rgb"] = _guard(f"{recording_dir.name}: RGB baseline", run_rgb)
+    result["rgb"] = _guard(f"{recording_dir.name}: RGB baseline", run_rgb) if rgb else None
 
     def run_compare() -> dict[str, Any]:
         page_png = result["darkread"].get("page_png")
@@ -181,7 +183,7 @@ def evaluate_recording(
         )
         return bw.to_json()
 
-    result["bandwidth"] = _guard(f"{recording_dir.name}: bandwidth", run_bandwidth)
+    result["bandwidth"] = _guard(f"{recording_dir.name}: bandwidth", run_bandwidth) if rgb else None
     (run_dir / RESULT_NAME).write_text(json.dumps(result, indent=1))
     return result
 
@@ -197,6 +199,7 @@ def evaluate_suite(
     progress: bool = True,
     jobs: int = 1,
     infer: str = "every-window",
+    rgb: bool = True,
 ) -> list[RecordingResult]:
     """Evaluate every recording of a suite with ``jobs`` worker processes; stored results are reused
     unless ``force``.
@@ -229,14 +232,14 @@ def evaluate_suite(
         cache: dict[str, Any] = {}
         for folder in todo:
             by_name[folder.name] = evaluate_recording(folder, runs / folder.name, backend=backend, compare=engines,
-                                                      model=model, ocr_cache=cache, infer=infer)
+                                                      model=model, ocr_cache=cache, infer=infer, rgb=rgb)
             bar.update()
     else:
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             futures = {pool.submit(evaluate_recording, f, runs / f.name, backend=backend, compare=engines, model=model,
-                                   infer=infer): f
+                                   infer=infer, rgb=rgb): f
                        for f in todo}  # each worker makes its own OCR engines
             for future in as_completed(futures):
                 by_name[futures[future].name] = future.result()

@@ -21,7 +21,8 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import asdict, dataclass
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from darkread.models.synth.rgb_camera import SPEC_NAME
@@ -53,6 +54,7 @@ class SuiteEntry:
     read_once: bool = True
     split: str = "val"
     scanpath: str = "model"  # "human": the shipped real reader's fixations replayed on the page
+    simulator: str = "darkread"  # "hesim": the same scene turned into events by hesim-3d (models/synth/hesim_sensor.py)
 
     def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
         from darkread.models.synth.recording import RecordingSpec
@@ -61,7 +63,7 @@ class SuiteEntry:
             lux=self.lux, motion=self.motion, kind=self.kind, seconds=self.seconds, seed=self.seed, font=self.font,
             xheight_px=self.xheight_px, n_lines=self.n_lines, line_chars=self.line_chars,
             description=f"darkread evaluation suite: {self.name}", split=self.split, read_once=self.read_once,
-            scanpath=self.scanpath,
+            scanpath=self.scanpath, simulator=self.simulator,
         )
 
 
@@ -107,11 +109,24 @@ def suite_entries(*, small: bool = False) -> list[SuiteEntry]:
     return entries
 
 
+# The second-simulator check: the suite's own grid recordings (lux x motion x kind, first in the
+# suite) at these levels and of these kinds, every motion: 6 per level, same names, seeds and texts.
+SIMULATOR_CHECK_LUX: tuple[float, ...] = (30.0, 10.0, 5.0)
+SIMULATOR_CHECK_KINDS: tuple[str, ...] = ("words", "paragraph")
+SUBSETS: tuple[str, ...] = ("simulator-check",)
+
+
+def simulator_check_entries() -> list[SuiteEntry]:
+    """The recordings of the full suite the second simulator re-makes (``--subset simulator-check``)."""
+    grid = len(LUX_LEVELS) * len(MOTIONS) * len(TEXT_KINDS)
+    return [e for e in suite_entries()[:grid] if e.lux in SIMULATOR_CHECK_LUX and e.kind in SIMULATOR_CHECK_KINDS]
+
+
 def spec_document(entry: SuiteEntry) -> dict:
     """What ``spec.json`` holds: the recording spec, without the fields left at their defaults that
     older suites did not have (so their recordings stay complete)."""
     doc = asdict(entry.recording_spec())
-    for key, default in (("scanpath", "model"), ("scanpath_file", None)):
+    for key, default in (("scanpath", "model"), ("scanpath_file", None), ("simulator", "darkread")):
         if doc.get(key) == default:
             doc.pop(key, None)
     return doc
@@ -132,25 +147,41 @@ def _write_entry(out: Path, entry: SuiteEntry) -> None:
 
 def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
-    match: str | None = None,
+    match: str | Sequence[str] | None = None, subset: str | None = None, simulator: str = "darkread",
 ) -> list[SuiteEntry]:
     """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
     ``spec.json`` matches) are kept, so an interrupted run resumes. ``match``: only the recordings
-    whose name matches this shell pattern (e.g. ``*lux30_*_human``)."""
+    whose name matches this shell pattern (e.g. ``*lux30_*_human``), or any of several; ``subset``: a named part of the
+    full suite (``simulator-check``); ``simulator``: what turns the scenes into events."""
     from tqdm import tqdm
 
+    from darkread.models.synth.recording import SIMULATORS
+
+    if simulator not in SIMULATORS:
+        raise ValueError(f"--simulator {simulator!r}: use one of {', '.join(SIMULATORS)}")
+    if subset is not None and subset not in SUBSETS:
+        raise ValueError(f"--subset {subset!r}: use one of {', '.join(SUBSETS)}")
+    if subset is not None and small:
+        raise ValueError("--subset picks from the full suite; leave out --small")
+    if simulator == "hesim":
+        from darkread.models.synth.hesim_sensor import hesim_missing
+
+        if (reason := hesim_missing()) is not None:
+            raise ValueError(f"--simulator hesim: {reason}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    entries = suite_entries(small=small)
+    entries = simulator_check_entries() if subset == "simulator-check" else suite_entries(small=small)
+    entries = [replace(e, simulator=simulator) for e in entries]
     if match:
         from fnmatch import fnmatch
 
-        entries = [e for e in entries if fnmatch(e.name, match) or match in e.name]
+        patterns = [match] if isinstance(match, str) else list(match)
+        entries = [e for e in entries if any(fnmatch(e.name, m) or m in e.name for m in patterns)]
         if not entries:
-            raise ValueError(f"--match {match!r}: no recording of the suite has such a name")
+            raise ValueError(f"--match {' '.join(patterns)}: no recording of the suite has such a name")
     entries = entries[:only]
     (out / SUITE_NAME).write_text(
-        json.dumps({"small": small, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        json.dumps({"small": small, "subset": subset, "simulator": simulator, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )
     bar = tqdm(total=len(entries), desc="recordings", unit="rec", disable=not progress)

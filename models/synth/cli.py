@@ -57,6 +57,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "
                           "page.layout.json (every recording carries the simulator's true page pose per millisecond, "
                           "pose_truth.npz, and a plain page its ink, page_ink.npz: for scoring only)")
+    rec.add_argument("--simulator", choices=("darkread", "hesim"), default="darkread",
+                     help="what turns the rendered scene into events: darkread (our sensor model, default) or hesim "
+                          "(hesim-3d's H-ESIM with its Sony IMX636 preset, a second, independent simulator; the "
+                          "page, motion, gaze, calibration and truth files stay the same; `make hesim` installs it)")
     rec.set_defaults(func=_recording)
 
     ds = sub.add_parser(
@@ -112,6 +116,7 @@ def _recording(args: argparse.Namespace) -> int:
         scanpath_file=args.scanpath_file,
         regime=args.regime,
         markers=args.markers,
+        simulator=args.simulator,
     )
     if args.scanpath_file and not Path(args.scanpath_file).is_file():
         raise FileNotFoundError(f"--scanpath-file {args.scanpath_file}: no such file")

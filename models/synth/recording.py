@@ -55,8 +55,10 @@ class RecordingSpec:
     scanpath_file: str | None = None
     regime: str = "standard"  # "shifted": a sensor and a font training never saw
     markers: bool = False  # the text printed with ArUco markers around it (page.layout.json)
+    simulator: str = "darkread"  # "hesim": hesim-3d's H-ESIM turns the same scene into events (hesim_sensor.py)
 
 
+SIMULATORS: tuple[str, ...] = ("darkread", "hesim")  # our sensor model (sensor.py), the second one (hesim_sensor.py)
 LAYOUT_NAME = "page.layout.json"
 POSE_TRUTH_NAME = "pose_truth.npz"
 PAGE_INK_NAME = "page_ink.npz"  # a plain page's ink (a marker page's is re-created from its layout)
@@ -222,6 +224,25 @@ def simulate_region(
     return events[events["t"] < int(seconds * 1e6)]
 
 
+def simulate_events(
+    spec: RecordingSpec, session: Session, region: Region, seconds: float, rng: np.random.Generator, *,
+    progress: bool = False,
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """(events of the simulated region, noise events of the rest of the sensor, the sensor for
+    ``meta.json``) from the spec's simulator; times in us from the session start."""
+    x0, y0, w, h = region.x0, region.y0, region.width, region.height
+    if spec.simulator == "hesim":
+        from darkread.models.synth import hesim_sensor
+
+        config = hesim_sensor.load_config()
+        signal = hesim_sensor.simulate_region(session, region, seconds, int(rng.integers(0, 1 << 62)), progress=progress)
+        background = hesim_sensor.background_events(config, seconds, hesim_sensor.STEP_US, SENSOR_WH, (x0, y0, w, h), rng)
+        return signal, background, hesim_sensor.describe(config, hesim_sensor.STEP_US)
+    signal = simulate_region(session, region, seconds, rng, progress=progress)
+    background = background_events(session.sensor, 0, int(seconds * 1e6), SENSOR_WH, (x0, y0, w, h), rng)
+    return signal, background, session.sensor.to_dict()
+
+
 def drop_same_time_duplicates(events: np.ndarray, width: int = SENSOR_WH[0]) -> np.ndarray:
     """Time-sorted events with at most one event per pixel and microsecond (as a sensor reports)."""
     pix = events["y"].astype(np.int64) * width + events["x"]
@@ -248,6 +269,13 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     out.mkdir(parents=True, exist_ok=True)
     if spec.split not in ("train", "val"):
         raise ValueError(f"split {spec.split!r}: use 'train' or 'val'")
+    if spec.simulator not in SIMULATORS:
+        raise ValueError(f"simulator {spec.simulator!r}: use one of {', '.join(SIMULATORS)}")
+    if spec.simulator == "hesim":
+        from darkread.models.synth.hesim_sensor import hesim_missing
+
+        if (reason := hesim_missing()) is not None:
+            raise ValueError(f"--simulator hesim: {reason}")
     session = make_session(session_spec(spec), spec.seed)
     seconds = recording_seconds(spec, session)
     rng = np.random.default_rng([spec.seed, 2])
@@ -265,8 +293,7 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         x0, y0, w, h = union_region((x0, y0, w, h), page_region(session, seconds))
     region = Region.of(session.calib, x0, y0, w, h)
     log.info("simulating region x=%d..%d y=%d..%d (%d px)", x0, x0 + w, y0, y0 + h, w * h)
-    signal = simulate_region(session, region, seconds, rng, progress=progress)
-    background = background_events(session.sensor, 0, int(seconds * 1e6), SENSOR_WH, (x0, y0, w, h), rng)
+    signal, background, sensor_doc = simulate_events(spec, session, region, seconds, rng, progress=progress)
     events = drop_same_time_duplicates(concat_events([signal, background]))
     events["t"] += event_t0
 
@@ -329,10 +356,11 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         "event_rate_hz": round(events.size / duration, 1),
         "seed": int(spec.seed),
         "simulated_region_xywh": [x0, y0, w, h],
-        "sensor": session.sensor.to_dict(),
+        "sensor": sensor_doc,
         "page": {k: round(float(v), 4) for k, v in session.extras.items()},
         "generator": "darkread.models.synth",
         "sensor_regime": spec.regime,
+        "simulator": spec.simulator,  # what turned light into events; "sensor" holds its parameters
     }
     if session.marker_page is not None:
         meta["markers"] = {"layout": LAYOUT_NAME, "pose_truth": POSE_TRUTH_NAME, "n_markers": len(session.marker_page.markers)}

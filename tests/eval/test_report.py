@@ -287,3 +287,23 @@ def test_the_stored_results_name_paths_relative_to_the_suite(tmp_path: Path) -> 
     assert portable["bandwidth"]["recording"] == "000"
     assert portable["rgb"]["crop_png"] == "../elsewhere/c.png"
     assert portable["lines"] == ["/", 3] and portable["name"] == "000"
+
+
+def test_write_report_keeps_texts_and_takes_the_suite_out_of_paths_and_errors(tmp_path: Path) -> None:
+    suite = tmp_path / "suite"
+    run = suite / "eval_runs" / "every-window" / "000_bright"
+    docs = fake_results()
+    docs[0]["darkread"] = {**docs[0]["darkread"], "text": "/ a slash first", "page_png": str(run / "read" / "page.png")}
+    docs[0]["rgb"] = {**docs[0]["rgb"], "crop_png": str(run / "rgb_crop.png")}
+    docs[1]["darkread"] = {"error": f"FileNotFoundError: {suite / '001_dark'}/events.raw: no such file"}
+    info = ReportInfo(date="2026-01-02 03:04 UTC", commit="abc1234567", backend="local", model="m", suite="2")
+    write_report(typed(docs), tmp_path / "report", info, suite_dir=suite)
+    stored = json.loads((tmp_path / "report" / "results.json").read_text())
+    assert stored[0]["darkread"]["text"] == "/ a slash first"  # a read is never taken for a path
+    assert stored[0]["darkread"]["page_png"] == "eval_runs/every-window/000_bright/read/page.png"
+    assert stored[0]["rgb"]["crop_png"] == "eval_runs/every-window/000_bright/rgb_crop.png"
+    assert stored[1]["darkread"]["error"] == "FileNotFoundError: 001_dark/events.raw: no such file"
+    assert str(tmp_path) not in (tmp_path / "report" / "results.json").read_text()
+    from darkread.eval.report import relative_paths
+
+    assert relative_paths(stored, suite) == stored  # results written so already stay as they are

@@ -92,6 +92,10 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     assert 0 < bw["events_foveated"] < bw["events"]
     assert json.loads((tmp_path / "run" / "result.json").read_text())["name"] == folder.name
 
+    # --no-rgb: darkread's reading alone (a second simulator's suite has the first one's scenes)
+    alone = evaluate_recording(folder, tmp_path / "run_alone", rgb=False)
+    assert alone["rgb"] is None and alone["bandwidth"] is None and alone["darkread"]["frames"] > 0
+
 
 def test_cli_make_suite_form(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from darkread.cli import main
@@ -118,3 +122,29 @@ def test_real_scanpath_block_is_appended_and_old_specs_stay_complete() -> None:
 def test_make_suite_match_selects_recordings_by_name(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="no recording"):
         make_suite(tmp_path, match="*nothing-like-this*", progress=False)
+
+
+def test_simulator_check_is_the_suites_own_words_and_paragraphs_at_30_10_5_lux() -> None:
+    from dataclasses import replace
+
+    from darkread.eval.suite import simulator_check_entries, spec_document
+
+    check = simulator_check_entries()
+    full = {e.name: e for e in suite_entries()}
+    assert len(check) == 18 and all(full[e.name] == e for e in check)  # same names, seeds, texts, durations
+    for lux in (30.0, 10.0, 5.0):
+        level = [e for e in check if e.lux == lux]
+        assert len(level) == 6 and {e.motion for e in level} == {"still", "normal", "walking"}
+        assert {e.kind for e in level} == {"words", "paragraph"} and {e.scanpath for e in level} == {"model"}
+    assert "simulator" not in spec_document(check[0])  # suites written before the option still match
+    hesim = replace(check[0], simulator="hesim")
+    assert spec_document(hesim)["simulator"] == "hesim" and hesim.recording_spec().simulator == "hesim"
+
+
+def test_make_suite_refuses_an_unknown_simulator_or_subset(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="--simulator 'esim'"):
+        make_suite(tmp_path, simulator="esim", progress=False)
+    with pytest.raises(ValueError, match="--subset 'most'"):
+        make_suite(tmp_path, subset="most", progress=False)
+    with pytest.raises(ValueError, match="leave out --small"):
+        make_suite(tmp_path, subset="simulator-check", small=True, progress=False)
