@@ -101,6 +101,17 @@ class MarkerPage:
         """Ink coverage resampled to ``px_per_mm`` (area average; same page frame convention)."""
         return resample(self.ink, MASTER_PX_PER_MM, px_per_mm)
 
+    def marker_area_at(self, px_per_mm: float, margin_mm: float) -> np.ndarray:
+        """Coverage (float32, the ``ink_at`` raster's shape and frame) of every marker's square grown
+        by ``margin_mm`` on each side: the part of the page that is markers, not text."""
+        area = np.zeros_like(self.ink_at(px_per_mm))
+        for corners in self.markers.values():
+            (x0, y0), (x1, y1) = corners.min(axis=0) - margin_mm, corners.max(axis=0) + margin_mm
+            c0, r0 = np.floor(np.array([x0, y0]) * px_per_mm).astype(int)  # texel j covers [j, j+1) / px_per_mm
+            c1, r1 = np.ceil(np.array([x1, y1]) * px_per_mm).astype(int)
+            area[max(r0, 0) : max(r1, 0), max(c0, 0) : max(c1, 0)] = 1.0
+        return area
+
 
 def resample(image: np.ndarray, from_px_per_mm: float, to_px_per_mm: float) -> np.ndarray:
     """Area resampling keeping the pixel-edge convention: pixel j covers [j, j+1) / px_per_mm."""

@@ -143,10 +143,15 @@ def make_samples(
     return voxels, targets, metas
 
 
-def write_shard(path: Path, voxels: np.ndarray, targets: np.ndarray, metas: list[SampleMeta]) -> None:
+def write_shard(path: Path, voxels: np.ndarray, targets: np.ndarray, metas: list[SampleMeta],
+                ignore: np.ndarray | None = None) -> None:
+    """``ignore`` (uint8 [n,H,W], 1 = not a training pixel, e.g. an annotated window's markers) is
+    stored as packed bits under ``ignore`` only when given: a shard without it has every pixel valid."""
     cols = {k: [getattr(m, k) for m in metas] for k in SampleMeta.__dataclass_fields__}
+    extra = {} if ignore is None else {"ignore": pack_rows(np.asarray(ignore, np.uint8))}
     np.savez_compressed(
         path,
+        **extra,
         voxels=voxels.astype(np.float16),
         targets=pack_rows(targets),
         target_shape=np.array(targets.shape[1:], dtype=np.int32),

@@ -59,6 +59,7 @@ log = logging.getLogger(__name__)
 WINDOW_HW: tuple[int, int] = (100, 200)
 SHARD_NAME = "shard-00000.npz"
 SUMMARY_NAME = "annotation.json"
+MARKER_MARGIN_MM = 1.0  # the ignore mask's margin around each marker: > the alignment residual, < the gap to the text
 
 
 class AnnotationError(ValueError):
@@ -261,19 +262,39 @@ def pixels_per_mm(H: np.ndarray, calib: Calibration, at_mm: np.ndarray) -> float
     return float((np.linalg.norm(uv[1] - uv[0]) + np.linalg.norm(uv[2] - uv[0])) / 2)
 
 
-def page_ink_for_pose(page: MarkerPage) -> Callable[[np.ndarray, Calibration], tuple[np.ndarray, float]]:
-    """(H, calibration) -> the page's ink raster and its texels per mm, ~1.25 texels per sensor pixel
+PageRaster = Callable[[np.ndarray, Calibration], tuple[np.ndarray, float]]  # (H, calibration) -> (raster, texels per mm)
+
+
+def page_raster_for_pose(page: MarkerPage, raster_at: Callable[[float], np.ndarray]) -> PageRaster:
+    """(H, calibration) -> ``raster_at(s)`` and ``s``, its texels per mm, ~1.25 texels per sensor pixel
     under that pose (as the simulator's texture); one raster per quarter step of scale, kept."""
     centre_mm = np.asarray(page.text_box_mm).reshape(2, 2).mean(axis=0)
     cache: dict[float, np.ndarray] = {}
 
-    def ink_at(H: np.ndarray, calib: Calibration) -> tuple[np.ndarray, float]:
+    def at(H: np.ndarray, calib: Calibration) -> tuple[np.ndarray, float]:
         s = max(1.0, round(1.25 * pixels_per_mm(H, calib, centre_mm) * 4) / 4)
         if s not in cache:
-            cache[s] = page.ink_at(s)
+            cache[s] = raster_at(s)
         return cache[s], s
 
-    return ink_at
+    return at
+
+
+def page_ink_for_pose(page: MarkerPage) -> PageRaster:
+    """The page's ink at a pose's scale (the targets)."""
+    return page_raster_for_pose(page, page.ink_at)
+
+
+def marker_area_for_pose(page: MarkerPage, margin_mm: float = MARKER_MARGIN_MM) -> PageRaster:
+    """The markers' squares (grown by ``margin_mm``) at a pose's scale (the ignore masks)."""
+    return page_raster_for_pose(page, lambda s: page.marker_area_at(s, margin_mm))
+
+
+def render_ignore(marker_area: np.ndarray, px_per_mm: float, H: np.ndarray, rays: np.ndarray,
+                  hw: tuple[int, int] = WINDOW_HW) -> np.ndarray:
+    """The window's ignore mask (uint8, 1 = a pixel that sees any of a marker's area): tuning must not
+    learn the markers, which no page a user reads carries; rendered exactly as the target is."""
+    return (render_coverage(marker_area, px_per_mm, H, rays, hw) > 0.0).astype(np.uint8)
 
 
 def alignment_residual(H_est: np.ndarray, H_true_cam: np.ndarray, calib: Calibration, origin: tuple[int, int],
@@ -517,7 +538,8 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
     offset_us, offset_scores = (choose_offset(windows, track, page, calib, cfg, rays) if cfg.refine_offset else (0.0, []))
     truth = load_pose_truth(recording)
     ink_for = page_ink_for_pose(page)
-    kept, targets, metas, residuals, residuals_raw = [], [], [], [], []
+    markers_for = marker_area_for_pose(page)
+    kept, targets, ignores, metas, residuals, residuals_raw = [], [], [], [], [], []
     meta = rec.meta
     centre_mm = np.asarray(page.text_box_mm).reshape(2, 2).mean(axis=0)
     for i, (t_end, origin) in enumerate(zip(windows.t_end_us, windows.origins)):
@@ -526,8 +548,10 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
             continue
         page_ink, s = ink_for(H, calib)
         target = render_target(page_ink, s, H, rays[i])
+        area, s_area = markers_for(H, calib)
         kept.append(i)
         targets.append(target)
+        ignores.append(render_ignore(area, s_area, H, rays[i]))
         metas.append(SampleMeta(lux=float(meta.get("lux", 0.0)), motion=str(meta.get("motion", "")), kind="marker_page",
                                 font=page.spec.font, xheight_px=float(page.xheight_mm * pixels_per_mm(H, calib, centre_mm)),
                                 seed=int(meta.get("seed", 0)), x0=int(origin[0]), y0=int(origin[1]),
@@ -540,7 +564,7 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if kept:
-        write_shard(out / SHARD_NAME, windows.voxels[kept], np.stack(targets), metas)
+        write_shard(out / SHARD_NAME, windows.voxels[kept], np.stack(targets), metas, ignore=np.stack(ignores))
     summary: dict[str, Any] = {
         "recording": str(recording),
         "layout": str(layout),
@@ -550,6 +574,8 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
         "annotated_share": round(len(kept) / len(windows.t_end_us), 4),
         **stats,
         "time_offset_ms": round(offset_us / 1e3, 3),
+        "ignored_pixel_share": round(float(np.mean(ignores)), 4) if ignores else 0.0,
+        "marker_margin_mm": MARKER_MARGIN_MM,
         "config": asdict(cfg),
     }
     if residuals:

@@ -43,6 +43,7 @@ class ScoredWindows:
     voxels: np.ndarray  # float [n,4,100,200]
     targets: np.ndarray | None  # uint8 [n,100,200], None when no ground truth exists
     source: str  # where the targets come from
+    ignore: np.ndarray | None = None  # uint8 [n,100,200], 1 = not scored (an annotated shard's markers)
 
 
 def is_recording(path: Path) -> bool:
@@ -93,7 +94,7 @@ def shard_windows(directory: str | Path, limit: int | None = None) -> ScoredWind
     from darkread.models.train.data import load_dataset
 
     data = load_dataset(directory, limit=limit)
-    return ScoredWindows(data.voxels, data.targets, "shard targets")
+    return ScoredWindows(data.voxels, data.targets, "shard targets", data.ignore)
 
 
 def ink_f1(model: str | Path, scored: ScoredWindows) -> dict[str, Any] | None:
@@ -103,7 +104,11 @@ def ink_f1(model: str | Path, scored: ScoredWindows) -> dict[str, Any] | None:
     if scored.targets is None or len(scored.voxels) == 0:
         return None
     pred = predict_onnx(model, scored.voxels).astype(bool)
-    tp, fp, fn = ink_counts(pred, scored.targets.astype(bool))
+    truth = scored.targets.astype(bool)
+    if scored.ignore is not None:
+        valid = scored.ignore == 0
+        pred, truth = pred[valid], truth[valid]
+    tp, fp, fn = ink_counts(pred, truth)
     return {"tp": tp, "fp": fp, "fn": fn, "windows": len(pred), **{k: round(v, 4) for k, v in scores_from_counts(tp, fp, fn).items()}}
 
 

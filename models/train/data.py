@@ -1,7 +1,9 @@
 """Training data: synthetic shards -> shuffled, augmented torch batches.
 
 A shard ``shard-NNNNN.npz`` holds ``voxels`` float16 [n,4,100,200], ``targets`` packed bits
-(``darkread.mask_bits.pack_rows``, [n,100,25]), ``target_shape`` and per-sample metadata
+(``darkread.mask_bits.pack_rows``, [n,100,25]), optionally ``ignore`` (packed the same way: pixels
+no loss or score may count, e.g. the markers an annotated window sees; a shard without it, every
+synthetic one, has all pixels valid), ``target_shape`` and per-sample metadata
 (``models.synth.shards.METADATA_KEYS``: lux, x-height, motion, font, kind, seed, window origin,
 window end time, event count); ``models/synth/shards.py`` writes them, this module reads them. Shards are streamed a few
 at a time so a 30 k-sample set (~5 GB as float16) never has to sit in memory at once.
@@ -31,19 +33,48 @@ from darkread.models.synth.shards import METADATA_KEYS
 
 log = logging.getLogger(__name__)
 
+IGNORE_LABEL = 255  # in a label array (``labels``): a pixel no loss counts
+
+
 @dataclass
 class Shard:
-    """One shard in memory: voxels float16 [n,4,H,W], targets uint8 [n,H,W] (1 = ink), metadata."""
+    """One shard in memory: voxels float16 [n,4,H,W], targets uint8 [n,H,W] (1 = ink), metadata,
+    and ``ignore`` uint8 [n,H,W] (1 = not a training pixel) or None when every pixel is valid."""
 
     voxels: np.ndarray
     targets: np.ndarray
     meta: dict[str, np.ndarray]
+    ignore: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.voxels.shape[0])
 
     def select(self, index: np.ndarray) -> Shard:
-        return Shard(self.voxels[index], self.targets[index], {k: v[index] for k, v in self.meta.items()})
+        return Shard(self.voxels[index], self.targets[index], {k: v[index] for k, v in self.meta.items()},
+                     None if self.ignore is None else self.ignore[index])
+
+    def ignore_or_none(self) -> np.ndarray:
+        """``ignore`` with every pixel valid (zeros) when the shard has none."""
+        return np.zeros_like(self.targets) if self.ignore is None else self.ignore
+
+
+def concat_shards(parts: Sequence[Shard], meta_keys: Sequence[str] = ()) -> Shard:
+    """Shards one after the other; ``ignore`` is kept when any part has one (the others: all valid)."""
+    ignore = np.concatenate([p.ignore_or_none() for p in parts]) if any(p.ignore is not None for p in parts) else None
+    return Shard(np.concatenate([p.voxels for p in parts]), np.concatenate([p.targets for p in parts]),
+                 {k: np.concatenate([p.meta[k] for p in parts]) for k in meta_keys}, ignore)
+
+
+def labels(targets: np.ndarray, ignore: np.ndarray | None) -> np.ndarray:
+    """Targets (0/1) with ignored pixels set to ``IGNORE_LABEL``: one array that shifts and crops
+    (``augment``, ``random_crop``) move together with the voxels; ``split_labels`` undoes it."""
+    return targets if ignore is None else np.where(ignore != 0, np.uint8(IGNORE_LABEL), targets).astype(np.uint8)
+
+
+def split_labels(labels_: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(targets 0/1, valid 0/1) of a label array."""
+    valid = labels_ != IGNORE_LABEL
+    return (labels_ == 1).astype(np.uint8), valid.astype(np.uint8)
 
 
 def shard_paths(root: str | Path) -> list[Path]:
@@ -64,7 +95,8 @@ def load_shard(path: str | Path) -> Shard:
         target_shape = tuple(int(v) for v in data["target_shape"]) if "target_shape" in data else voxels.shape[-2:]
         targets = unpack_rows(packed, target_shape[-1]) if packed.shape[-1] != target_shape[-1] else packed
         meta = {key: data[key] for key in METADATA_KEYS if key in data}
-    return Shard(voxels=voxels, targets=targets.astype(np.uint8), meta=meta)
+        ignore = unpack_rows(data["ignore"], target_shape[-1]) if "ignore" in data else None
+    return Shard(voxels=voxels, targets=targets.astype(np.uint8), meta=meta, ignore=ignore)
 
 
 def iter_shards(root: str | Path) -> Iterator[Shard]:
@@ -84,11 +116,7 @@ def load_dataset(root: str | Path, limit: int | None = None) -> Shard:
         if limit is not None and total >= limit:
             break
     keys = set.intersection(*(set(p.meta) for p in parts)) if parts else set()
-    merged = Shard(
-        voxels=np.concatenate([p.voxels for p in parts]),
-        targets=np.concatenate([p.targets for p in parts]),
-        meta={k: np.concatenate([p.meta[k] for p in parts]) for k in sorted(keys)},
-    )
+    merged = concat_shards(parts, sorted(keys))
     return merged if limit is None else merged.select(np.arange(min(limit, len(merged))))
 
 

@@ -8,6 +8,8 @@ under that pose. Fine-tuning then
   ``onnx_weights.py`` and checked to give the same logits);
 * keeps the BatchNorms frozen (the annotated windows are few and correlated; their batch
   statistics would overwrite the synthetic ones);
+* leaves out of the loss the pixels an annotated window's ``ignore`` mask marks (the page's
+  markers: no page a user reads carries them, so the network must not learn to draw them);
 * mixes **synthetic standard-regime windows** into every batch (``synthetic_share``), so what the
   network knew of the simulator, and of light levels the recordings do not cover, is not
   forgotten;
@@ -28,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from darkread.models.train.data import Shard, augment, load_dataset, random_crop
+from darkread.models.train.data import Shard, augment, concat_shards, labels, load_dataset, random_crop, split_labels
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +75,7 @@ def load_annotated(dirs: Sequence[str | Path]) -> tuple[Shard, dict[str, int]]:
         counts[str(path)] = len(shard)
     if not parts or sum(counts.values()) == 0:
         raise FinetuneError("no annotated windows to tune on")
-    return Shard(np.concatenate([p.voxels for p in parts]), np.concatenate([p.targets for p in parts]), {}), counts
+    return concat_shards(parts), counts
 
 
 def synthetic_windows(n: int, source: str | Path | None = None, seed: int = 0, progress: bool = True) -> Shard:
@@ -103,8 +105,9 @@ def synthetic_windows(n: int, source: str | Path | None = None, seed: int = 0, p
 
 
 def _batch(pool: Shard, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``k`` random windows: float32 voxels and label arrays (``data.labels``: ignored pixels marked)."""
     take = rng.choice(len(pool), size=k, replace=len(pool) < k)
-    return pool.voxels[take].astype(np.float32), pool.targets[take]
+    return pool.voxels[take].astype(np.float32), labels(pool.targets[take], None if pool.ignore is None else pool.ignore[take])
 
 
 def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, progress: bool = True) -> dict[str, Any]:
@@ -141,8 +144,10 @@ def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, pro
         x, y = augment(np.concatenate(xs), np.concatenate(ys), rng, max_shift=cfg.max_shift)
         if cfg.crop is not None:
             x, y = random_crop(x, y, cfg.crop, rng)
+        y, valid = split_labels(y)
         loss = bce_dice_loss(model(torch.from_numpy(np.ascontiguousarray(x))),
-                             torch.from_numpy(y.astype(np.float32))[:, None], cfg.dice_weight)
+                             torch.from_numpy(y.astype(np.float32))[:, None], cfg.dice_weight,
+                             torch.from_numpy(valid.astype(np.float32))[:, None])
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
@@ -161,7 +166,9 @@ def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, pro
 def _monitor(model: Any, pools: dict[str, Shard], n: int) -> dict[str, float]:
     from darkread.models.train.fit import evaluate_model
 
-    return {name: round(evaluate_model(model, pool.voxels[:n], pool.targets[:n])["f1"], 4) for name, pool in pools.items() if len(pool)}
+    return {name: round(evaluate_model(model, pool.voxels[:n], pool.targets[:n],
+                                       ignore=None if pool.ignore is None else pool.ignore[:n])["f1"], 4)
+            for name, pool in pools.items() if len(pool)}
 
 
 def annotate_missing(recordings: Sequence[str | Path], layout: str | Path | None, root: Path, progress: bool) -> list[Path]:
@@ -218,6 +225,7 @@ def finetune(
         "exported": str(onnx_path),
         "annotated": counts,
         "annotated_windows": len(annotated),
+        "annotated_ignored_pixel_share": round(float(annotated.ignore.mean()), 4) if annotated.ignore is not None else 0.0,
         "synthetic_windows": len(syn_train),
         "synthetic_source": str(synthetic_dir) if synthetic_dir else "simulated (standard regime, training texts)",
         "round_trip_max_logit_difference": {"shipped_onnx_to_torch": round_trip, "torch_to_exported_onnx": exported},

@@ -55,12 +55,21 @@ class FitConfig:
     net: dict[str, object] = field(default_factory=lambda: NetConfig().to_dict())
 
 
-def bce_dice_loss(logits: torch.Tensor, targets: torch.Tensor, dice_weight: float = 0.5) -> torch.Tensor:
-    """BCE for per-pixel calibration plus soft Dice, which keeps thin, rare strokes from being ignored."""
-    bce = F.binary_cross_entropy_with_logits(logits, targets)
+def bce_dice_loss(logits: torch.Tensor, targets: torch.Tensor, dice_weight: float = 0.5,
+                  valid: torch.Tensor | None = None) -> torch.Tensor:
+    """BCE for per-pixel calibration plus soft Dice, which keeps thin, rare strokes from being ignored.
+
+    ``valid`` (same shape, 1 = counts): pixels outside it add nothing to either term, nor to the
+    gradient (an annotated window's markers); None = every pixel counts (the same loss as before).
+    """
+    if valid is None:
+        bce = F.binary_cross_entropy_with_logits(logits, targets)
+    else:
+        bce = F.binary_cross_entropy_with_logits(logits, targets, weight=valid, reduction="sum") / valid.sum().clamp(min=1.0)
     if dice_weight <= 0:
         return bce
-    prob = torch.sigmoid(logits)
+    prob = torch.sigmoid(logits) if valid is None else torch.sigmoid(logits) * valid
+    targets = targets if valid is None else targets * valid
     dims = tuple(range(1, prob.ndim))
     inter = (prob * targets).sum(dims)
     dice = 1 - (2 * inter + 1) / (prob.sum(dims) + targets.sum(dims) + 1)
@@ -90,17 +99,24 @@ def validation_set(paths: list[Path], limit: int) -> Shard:
 
 
 @torch.no_grad()
-def evaluate_model(model: BinaryUNet, voxels: np.ndarray, targets: np.ndarray, batch_size: int = 64) -> dict[str, float]:
+def evaluate_model(model: BinaryUNet, voxels: np.ndarray, targets: np.ndarray, batch_size: int = 64,
+                   ignore: np.ndarray | None = None) -> dict[str, float]:
+    """BCE and pooled ink F1 / IoU; pixels where ``ignore`` is set count in neither."""
     model.eval()
     losses, preds = [], []
     for b in range(0, len(voxels), batch_size):
         x = torch.from_numpy(voxels[b : b + batch_size].astype(np.float32))
         y = torch.from_numpy(targets[b : b + batch_size].astype(np.float32))[:, None]
         logits = model(x)
-        losses.append(float(F.binary_cross_entropy_with_logits(logits, y)) * len(x))
+        w = None if ignore is None else torch.from_numpy((ignore[b : b + batch_size] == 0).astype(np.float32))[:, None]
+        losses.append(float(bce_dice_loss(logits, y, 0.0, w)) * len(x))
         preds.append((logits[:, 0] > 0).numpy())
     pred = np.concatenate(preds) if preds else np.zeros((0, *targets.shape[1:]), bool)
-    scores = ink_scores(pred, targets.astype(bool))
+    truth = targets.astype(bool)
+    if ignore is not None:
+        valid = ignore == 0
+        pred, truth = pred[valid], truth[valid]
+    scores = ink_scores(pred, truth)
     return {"bce": sum(losses) / max(1, len(voxels)), "f1": float(scores["f1"]), "iou": float(scores["iou"])}
 
 

@@ -14,8 +14,12 @@ from darkread.models.train.annotate import (
     alignment_residual,
     apply_h,
     fit_homography,
+    marker_area_for_pose,
+    page_coordinates,
+    page_ink_for_pose,
     project_page,
     reference_points,
+    render_ignore,
     render_target,
     window_rays,
 )
@@ -89,3 +93,49 @@ def test_residual_is_zero_for_the_truth_and_the_shift_otherwise():
     assert alignment_residual(normalised(H_cam), H_cam, calib, (500, 300)) == pytest.approx(0.0, abs=1e-6)
     shift = np.array([[1.0, 0.0, 2.0 / calib.fx], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])  # ~2 px to the right
     assert alignment_residual(shift @ normalised(H_cam), H_cam, calib, (500, 300)) == pytest.approx(2.0, rel=0.1)
+
+
+def inside(mm: np.ndarray, boxes: np.ndarray, grow_mm: float) -> np.ndarray:
+    """Page points [n, 2] inside any of the boxes [k, 4] (x0 y0 x1 y1) grown by ``grow_mm``."""
+    x, y = mm[:, :1], mm[:, 1:]
+    b = boxes[None]
+    return ((x >= b[..., 0] - grow_mm) & (x <= b[..., 2] + grow_mm) & (y >= b[..., 1] - grow_mm) & (y <= b[..., 3] + grow_mm)).any(axis=1)
+
+
+def windows_between_markers_and_text(session, t: float):
+    """Windows centred between each marker and the text (both in view), under the true pose at ``t``."""
+    page, calib = session.marker_page, session.calib
+    H = page_to_camera(session, np.array([t]))[0]
+    H = H / H[2, 2]
+    text_top, text_bottom = page.text_box_mm[1], page.text_box_mm[3]
+    for corners in page.markers.values():
+        cx = corners[:, 0].mean()
+        above = corners[:, 1].max() < text_top
+        y = (corners[:, 1].max() + text_top) / 2 if above else (corners[:, 1].min() + text_bottom) / 2
+        uv = project_page(H, calib, np.array([[cx, y]]))[0]
+        yield H, (int(uv[0]) - 100, int(uv[1]) - 50)
+
+
+def test_mask_covers_the_markers_ink_and_no_text(session) -> None:
+    page, calib = session.marker_page, session.calib
+    ink_for, area_for = page_ink_for_pose(page), marker_area_for_pose(page)
+    markers = np.array([[*c.min(axis=0), *c.max(axis=0)] for c in page.markers.values()])
+    glyphs = np.array([g["box_mm"] for g in page.glyphs])
+    checked = 0
+    for t in (0.2, 0.8):
+        for H, origin in windows_between_markers_and_text(session, t):
+            rays = window_rays(calib, origin)
+            ink, s = ink_for(H, calib)
+            area, s_area = area_for(H, calib)
+            target = render_target(ink, s, H, rays).ravel().astype(bool)
+            ignore = render_ignore(area, s_area, H, rays).ravel().astype(bool)
+            mm = page_coordinates(H, rays)
+            on_marker, on_text = inside(mm, markers, 0.3), inside(mm, glyphs, 0.5)
+            if not (target & on_marker).any() or not (target & on_text).any():
+                continue  # this window does not see both
+            checked += 1
+            assert ignore[target & on_marker].all()  # every ink pixel of a marker is ignored
+            assert not (ignore & on_text).any()  # no pixel of any glyph's box is
+            assert not (target & ~ignore & ~on_text).any()  # what ink is left to learn is text
+            assert (target & ~ignore).sum() > 100
+    assert checked >= 4
