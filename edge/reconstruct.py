@@ -158,15 +158,17 @@ class Reconstructor:
         out = self._run(batch)[:, 0]
         return out[0] if single else out
 
+    def _logits_now(self, voxel: np.ndarray) -> np.ndarray:
+        """Logits of ``voxel``; of the bound window in place (no copy) when it is ``input_window``."""
+        return self._run_window() if voxel is self.input_window and voxel is not None else self.logits(voxel)
+
     def ink_probability(self, voxel: np.ndarray) -> np.ndarray:
         """Calibrated ink probability float32 in [0, 1] (``> 0.5`` exactly where ``__call__`` says ink)."""
-        logits = self._run_window() if voxel is self.input_window and voxel is not None else self.logits(voxel)
-        return probability_from_logits(logits, self.temperature)
+        return probability_from_logits(self._logits_now(voxel), self.temperature)
 
     def __call__(self, voxel: np.ndarray) -> np.ndarray:
         """Binary ink mask (uint8, 1 = ink) of the same leading shape as ``logits``."""
-        logits = self._run_window() if voxel is self.input_window and voxel is not None else self.logits(voxel)
-        return (logits > 0).astype(np.uint8)
+        return (self._logits_now(voxel) > 0).astype(np.uint8)
 
 
 def probability_from_logits(logits: np.ndarray, temperature: float = INK_TEMPERATURE) -> np.ndarray:
