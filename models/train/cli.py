@@ -131,6 +131,13 @@ def _cmd_annotate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, not {value}")
+    return value
+
+
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from darkread.models.train.calibrate import calibrate
 
@@ -263,7 +270,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                    "print the log-loss per temperature and a reliability table.")
     p.add_argument("val_dir", type=Path, nargs="?", default=DEFAULT_VAL, help=f"shard directory (default {DEFAULT_VAL})")
     p.add_argument("--model", type=Path, help="ONNX model (default: the shipped one)")
-    p.add_argument("--limit", type=int, default=500, help="windows to use (default 500)")
+    p.add_argument("--limit", type=_positive_int, default=500, help="windows to use (default 500)")
     p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("all", help="reproduce the shipped model from scratch: synth -> fit -> export -> int8 -> evaluate -> card")

@@ -23,6 +23,7 @@ Augmentation (all exact for the physics of the voxel grid, none changes glyph sh
 from __future__ import annotations
 
 import logging
+import zipfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -89,13 +90,18 @@ def shard_paths(root: str | Path) -> list[Path]:
 
 
 def load_shard(path: str | Path) -> Shard:
-    with np.load(path, allow_pickle=False) as data:
-        voxels = data["voxels"]
-        packed = data["targets"]
-        target_shape = tuple(int(v) for v in data["target_shape"]) if "target_shape" in data else voxels.shape[-2:]
-        targets = unpack_rows(packed, target_shape[-1]) if packed.shape[-1] != target_shape[-1] else packed
-        meta = {key: data[key] for key in METADATA_KEYS if key in data}
-        ignore = unpack_rows(data["ignore"], target_shape[-1]) if "ignore" in data else None
+    """One shard file; a truncated or foreign file is a ``ValueError`` naming it (one line for the CLI)."""
+    try:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:  # (np.load(path) leaks its file on a damaged zip)
+            voxels = data["voxels"]
+            packed = data["targets"]
+            target_shape = tuple(int(v) for v in data["target_shape"]) if "target_shape" in data else voxels.shape[-2:]
+            targets = unpack_rows(packed, target_shape[-1]) if packed.shape[-1] != target_shape[-1] else packed
+            meta = {key: data[key] for key in METADATA_KEYS if key in data}
+            ignore = unpack_rows(data["ignore"], target_shape[-1]) if "ignore" in data else None
+    except (zipfile.BadZipFile, EOFError, KeyError, ValueError) as exc:
+        raise ValueError(f"{path}: not a readable training shard ({exc}); make it again with `darkread synth dataset` "
+                         "or `darkread train annotate`") from exc
     return Shard(voxels=voxels, targets=targets.astype(np.uint8), meta=meta, ignore=ignore)
 
 

@@ -26,3 +26,20 @@ def test_log_loss_and_reliability_by_hand() -> None:
     assert log_loss(np.array([0.0]), np.array([1]), 1.0) == pytest.approx(np.log(2.0))
     table = reliability(np.array([0.05, 0.05, 0.95, 1.0]), np.array([0, 1, 1, 1]), bins=10)
     assert table[0] == (0.0, 0.5, 2) and table[9] == (0.9, 1.0, 2) and np.isnan(table[5][1])
+
+
+def test_a_truncated_shard_is_one_line_naming_it(tmp_path) -> None:  # noqa: ANN001
+    import subprocess
+    import sys
+
+    from darkread.models.train.data import load_shard
+
+    bad = tmp_path / "shard-00000.npz"
+    bad.write_bytes(b"PK\x03\x04 not really a zip")
+    with pytest.raises(ValueError, match="shard-00000.npz: not a readable training shard"):
+        load_shard(bad)
+    cli = [sys.executable, "-m", "darkread", "train", "calibrate"]
+    result = subprocess.run([*cli, str(tmp_path)], capture_output=True, text=True, timeout=120, check=False)
+    assert result.returncode == 1 and "not a readable training shard" in result.stderr and "Traceback" not in result.stderr
+    result = subprocess.run([*cli, str(tmp_path), "--limit", "0"], capture_output=True, text=True, timeout=120, check=False)
+    assert result.returncode == 2 and "must be at least 1" in result.stderr
