@@ -32,6 +32,7 @@ FOVEA = FoveaConfig()
 VOXEL = VoxelConfig()
 N_EVENTS = PipelineConfig().n_events  # events per voxel grid, as the edge bins them
 SAMPLES_PER_PAGE = 8
+LUX_RANGE: tuple[float, float] = (4.0, 1200.0)  # the light of a training sample, log-uniform (lux)
 SHARD_SIZE = 250
 MAX_WINDOW_S = 0.5  # give up collecting events after this much simulated time
 SHARD_FORMAT_VERSION = 1
@@ -108,9 +109,10 @@ def gaze_window_origin(session: Session, scene: Scene, t_s: float, rng: np.rando
 
 
 def make_samples(
-    spec: SessionSpec, seed: int, n: int, *, lux: float | None = None
+    spec: SessionSpec, seed: int, n: int, *, lux: float | None = None, lux_range: tuple[float, float] = LUX_RANGE
 ) -> tuple[np.ndarray, np.ndarray, list[SampleMeta]]:
-    """``n`` samples from one page session: voxels float16 [n,4,100,200], targets uint8 [n,100,200]."""
+    """``n`` samples from one page session: voxels float16 [n,4,100,200], targets uint8 [n,100,200];
+    each sample's light is ``lux``, else the spec's, else log-uniform over ``lux_range``."""
     session = make_session(spec, seed)
     rng = np.random.default_rng([seed, 1])
     voxels = np.zeros((n, VOXEL.bins, VOXEL.height, VOXEL.width), dtype=np.float16)
@@ -118,7 +120,7 @@ def make_samples(
     metas = []
     duration = session.scanpath.t[-1]
     for i in range(n):
-        sample_lux = lux if lux is not None else (spec.lux if spec.lux is not None else random_lux(rng))
+        sample_lux = lux if lux is not None else (spec.lux if spec.lux is not None else random_lux(rng, *lux_range))
         scene, params = session.with_lux(sample_lux, rng)
         t_s = float(rng.uniform(0.3, max(0.31, duration - MAX_WINDOW_S)))
         x0, y0 = gaze_window_origin(session, scene, t_s, rng)
@@ -173,16 +175,17 @@ def shard_seed(base_seed: int, split: str, held_out: bool, shard_index: int, pag
     return int(ss.generate_state(1, dtype=np.uint32)[0])
 
 
-def build_shard(args: tuple[Path, int, int, int, str, bool]) -> dict:
-    """Make shard ``index`` with ``count`` samples (a multiprocessing task)."""
-    out_dir, index, count, base_seed, split, held_out = args
+def build_shard(args: tuple[Path, int, int, int, str, bool] | tuple[Path, int, int, int, str, bool, tuple[float, float]]) -> dict:
+    """Make shard ``index`` with ``count`` samples (a multiprocessing task; the lux range is optional)."""
+    out_dir, index, count, base_seed, split, held_out = args[:6]
+    lux_range = args[6] if len(args) > 6 else LUX_RANGE  # type: ignore[misc]
     t0 = time.perf_counter()
     spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0)
     parts_v, parts_t, metas = [], [], []
     page = 0
     while len(metas) < count:
         k = min(SAMPLES_PER_PAGE, count - len(metas))
-        v, t, m = make_samples(spec, shard_seed(base_seed, split, held_out, index, page), k)
+        v, t, m = make_samples(spec, shard_seed(base_seed, split, held_out, index, page), k, lux_range=lux_range)
         parts_v.append(v)
         parts_t.append(t)
         metas.extend(m)
@@ -224,17 +227,22 @@ def build_dataset(
     held_out: bool = False,
     shard_size: int = SHARD_SIZE,
     progress: bool = True,
+    lux_range: tuple[float, float] = LUX_RANGE,
 ) -> dict:
-    """Write ``samples`` samples as shards plus ``dataset.json``; deterministic for ``seed`` (any worker count)."""
+    """Write ``samples`` samples as shards plus ``dataset.json``; deterministic for ``seed`` (any worker count).
+    ``lux_range``: the light, log-uniform between the two (a low-light set for the dark end, say 4..40)."""
     if samples < 1:
         raise ValueError("--samples must be at least 1")
+    lo, hi = (float(v) for v in lux_range)
+    if not (0 < lo <= hi):
+        raise ValueError(f"--lux {lo:g} {hi:g}: give two light levels, 0 < LOW <= HIGH")
     if split not in ("train", "val"):
         raise ValueError(f"unknown split {split!r}; use 'train' or 'val'")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n_shards = math.ceil(samples / shard_size)
     tasks = [
-        (out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out)) for i in range(n_shards)
+        (out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out), (lo, hi)) for i in range(n_shards)
     ]
     todo = [t for t in tasks if not (out / f"shard-{t[1]:05d}.npz").exists()]
     t0 = time.perf_counter()
@@ -277,7 +285,7 @@ def build_dataset(
         "fovea": asdict(FOVEA),
         "target": "uint8 1 = ink, 0 = paper; ideal ink mask warped into the window at t_end; np.packbits on axis -1",
         "parameters": {
-            "lux": "log-uniform 4..1200",
+            "lux": f"log-uniform {lo:g}..{hi:g}",
             "motion": {"still": 0.3, "normal": 0.5, "walking": 0.2},
             "text_kind": {"letters": 0.15, "words": 0.3, "pangram": 0.15, "paragraph": 0.4},
             "xheight_px": "uniform 5..16 (nominal)",

@@ -39,7 +39,10 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
 def _cmd_fit(args: argparse.Namespace) -> int:
     from darkread.models.train.fit import fit
 
-    summary = fit(args.train_dir, args.run_dir, _fit_config(args), resume=not args.restart)
+    config = _fit_config(args)
+    if args.init is not None and str(args.init).endswith(".onnx"):
+        config.freeze_batchnorm = True
+    summary = fit(args.train_dir, args.run_dir, config, resume=not args.restart, init_checkpoint=args.init)
     print(json.dumps(summary, indent=1, default=float))
     return 0
 
@@ -165,9 +168,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.set_defaults(func=lambda _args: (train.print_help(), 2)[1])
 
     p = sub.add_parser("fit", help="train on synthetic shards (time-budgeted, resumes from RUN_DIR/last.pt)")
-    p.add_argument("train_dir", type=Path, nargs="?", default=DEFAULT_TRAIN, help=f"dataset of shard-*.npz (default {DEFAULT_TRAIN})")
+    p.add_argument("train_dir", type=Path, nargs="*", default=[DEFAULT_TRAIN], metavar="TRAIN_DIR",
+                   help=f"dataset(s) of shard-*.npz; several are mixed shard by shard (default {DEFAULT_TRAIN})")
     _add_fit_options(p)
     p.add_argument("--restart", action="store_true", help="ignore an existing last.pt and start fresh")
+    p.add_argument("--init", type=Path, metavar="MODEL",
+                   help="start from these weights instead of a fresh network: a checkpoint (.pt) or an exported "
+                        "network (.onnx, e.g. models/binary_unet.onnx; its BatchNorms are folded, so they stay frozen)")
     p.set_defaults(func=_cmd_fit)
 
     p = sub.add_parser("export", help="ONNX fp32 + static int8 QDQ from a checkpoint")

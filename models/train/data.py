@@ -22,6 +22,7 @@ Augmentation (all exact for the physics of the voxel grid, none changes glyph sh
 
 from __future__ import annotations
 
+import itertools
 import logging
 import zipfile
 from collections.abc import Iterator, Sequence
@@ -78,8 +79,15 @@ def split_labels(labels_: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (labels_ == 1).astype(np.uint8), valid.astype(np.uint8)
 
 
-def shard_paths(root: str | Path) -> list[Path]:
-    """Shards of a dataset directory (sorted), or a single shard file."""
+def shard_paths(root: str | Path | Sequence[str | Path]) -> list[Path]:
+    """Shards of a dataset directory (sorted), or a single shard file; several roots: all their shards
+    (a training mix, e.g. a standard set and a low-light one), interleaved so the first shards,
+    where the held-out validation samples come from, hold some of every set."""
+    if not isinstance(root, (str, Path)):
+        per_root = [shard_paths(r) for r in root]
+        if not per_root:
+            raise FileNotFoundError("no training set given")
+        return [p for group in itertools.zip_longest(*per_root) for p in group if p is not None]
     path = Path(root)
     if path.is_file():
         return [path]

@@ -115,7 +115,7 @@ def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, pro
     import torch
     from tqdm import tqdm
 
-    from darkread.models.train.fit import bce_dice_loss
+    from darkread.models.train.fit import bce_dice_loss, training_mode
 
     if len(annotated) == 0:
         raise FinetuneError("no annotated windows to tune on")
@@ -125,10 +125,7 @@ def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, pro
     n_syn = int(round(cfg.batch_size * cfg.synthetic_share)) if len(synthetic) else 0
     n_ann = cfg.batch_size - n_syn
     optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=0.0)
-    model.train()
-    for module in model.modules():
-        if isinstance(module, torch.nn.BatchNorm2d):
-            module.eval()
+    training_mode(model, freeze_batchnorm=True)
     budget_s, started = cfg.minutes * 60.0, time.perf_counter()
     losses: list[float] = []
     step = 0

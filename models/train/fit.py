@@ -11,7 +11,7 @@ import json
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -52,6 +52,7 @@ class FitConfig:
     seed: int = 0
     augmentation: bool = True
     crop: tuple[int, int] | None = (64, 128)  # train on random crops (validation uses whole windows)
+    freeze_batchnorm: bool = False  # keep BatchNorms in eval mode (weights from an ONNX file: folded, identity BNs)
     net: dict[str, object] = field(default_factory=lambda: NetConfig().to_dict())
 
 
@@ -120,6 +121,16 @@ def evaluate_model(model: BinaryUNet, voxels: np.ndarray, targets: np.ndarray, b
     return {"bce": sum(losses) / max(1, len(voxels)), "f1": float(scores["f1"]), "iou": float(scores["iou"])}
 
 
+def training_mode(model: torch.nn.Module, *, freeze_batchnorm: bool) -> None:
+    """``model.train()``, the BatchNorms left in eval mode when frozen: an exported network's
+    BatchNorms are folded into its convolutions, so batch statistics would undo what it learned."""
+    model.train()
+    if freeze_batchnorm:
+        for module in model.modules():
+            if isinstance(module, torch.nn.BatchNorm2d):
+                module.eval()
+
+
 def save_checkpoint(path: Path, model: BinaryUNet, optimizer: torch.optim.Optimizer, state: dict[str, object]) -> None:
     tmp = path.with_suffix(".tmp")
     torch.save({"model": model.state_dict(), "optimizer": optimizer.state_dict(), **state}, tmp)
@@ -135,8 +146,19 @@ def load_model(checkpoint: str | Path) -> BinaryUNet:
     return model.eval()
 
 
+def load_initial_weights(path: str | Path, config: NetConfig) -> BinaryUNet:
+    """Starting weights for a fit: a checkpoint (.pt) or an exported network (.onnx, e.g. the shipped one)."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"--init {path}: no such file")
+    if str(path).endswith(".onnx"):
+        from darkread.models.train.onnx_weights import model_from_onnx
+
+        return model_from_onnx(path, config)
+    return load_model(path)
+
+
 def fit(
-    train_dir: str | Path,
+    train_dir: str | Path | Sequence[str | Path],
     out_dir: str | Path,
     config: FitConfig | None = None,
     *,
@@ -165,7 +187,7 @@ def fit(
 
     model = BinaryUNet(NetConfig.from_dict(config.net))
     if init_checkpoint is not None:
-        model.load_state_dict(load_model(init_checkpoint).state_dict())
+        model.load_state_dict(load_initial_weights(init_checkpoint, NetConfig.from_dict(config.net)).state_dict())
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     state: dict[str, object] = {"step": 0, "epoch": 0, "elapsed_s": 0.0, "best_f1": -1.0, "history": []}
     last = out / LAST_CHECKPOINT
@@ -203,7 +225,7 @@ def fit(
     done = False
     while not done and int(state["epoch"]) < config.max_epochs:  # type: ignore[call-overload]
         epoch = int(state["epoch"])  # type: ignore[call-overload]
-        model.train()
+        training_mode(model, freeze_batchnorm=config.freeze_batchnorm)
         started = time.monotonic()
         base_elapsed = float(state["elapsed_s"])  # type: ignore[arg-type]
         last_save = started
@@ -241,7 +263,7 @@ def fit(
         if not done:
             state["epoch"] = epoch + 1
         validate()
-        model.train()
+        training_mode(model, freeze_batchnorm=config.freeze_batchnorm)
     summary = {
         "steps": state["step"],
         "epochs": state["epoch"],

@@ -52,3 +52,17 @@ def test_shard_round_trip(tmp_path):
     assert data.voxels.shape == (5, 4, 100, 200) and data.targets.shape == (5, 100, 200)
     assert data.meta["motion"].dtype.kind == "U" and data.meta["font"][0] in {f.name for f in faces_for("train")}
     assert np.all(data.meta["lux"] > 0)
+
+
+def test_a_lux_range_bounds_the_light_of_every_sample(tmp_path):
+    manifest = build_dataset(tmp_path, 4, workers=1, seed=5, shard_size=4, progress=False, lux_range=(5.0, 12.0))
+    assert manifest["parameters"]["lux"] == "log-uniform 5..12"
+    lux = load_dataset(tmp_path).meta["lux"]
+    assert np.all((lux >= 5.0) & (lux <= 12.0))
+
+
+def test_a_reversed_lux_range_is_refused(tmp_path):
+    import pytest
+
+    with pytest.raises(ValueError, match="0 < LOW <= HIGH"):
+        build_dataset(tmp_path, 4, workers=1, seed=5, progress=False, lux_range=(40.0, 4.0))

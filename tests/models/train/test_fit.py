@@ -37,3 +37,49 @@ def test_checkpoints_resume_where_they_stopped(fake_dataset, tmp_path: Path) -> 
     assert [h["epoch"] for h in history] == [1.0, 2.0]
     model = load_model(out / "best.pt")
     assert not model.training
+
+
+def test_several_training_sets_are_interleaved_shard_by_shard(fake_dataset) -> None:
+    from darkread.models.train.data import shard_paths
+
+    standard, low = fake_dataset(shards=3, name="standard"), fake_dataset(shards=1, name="low")
+    paths = shard_paths([standard, low])
+    assert [p.parent.name for p in paths] == ["standard", "low", "standard", "standard"]
+    assert shard_paths([standard]) == shard_paths(standard)
+
+
+def test_a_fit_from_an_exported_network_starts_where_it_left_off(fake_dataset, tmp_path: Path) -> None:
+    """--init model.onnx: the folded BatchNorms stay frozen, so the first validation equals the ONNX net's."""
+    import torch
+    from darkread.models.train.export import export_onnx
+    from darkread.models.train.fit import evaluate_model, load_initial_weights
+    from darkread.models.train.net import BinaryUNet
+    from darkread.models.train.data import load_dataset
+
+    net = NetConfig(widths=(4, 8, 16, 16), blocks=(1, 1, 1))
+    torch.manual_seed(3)
+    model = BinaryUNet(net).eval()
+    for module in model.modules():  # non-trivial BatchNorm statistics, as a trained net has
+        if isinstance(module, torch.nn.BatchNorm2d):
+            module.running_mean.uniform_(-0.2, 0.2)
+            module.running_var.uniform_(0.5, 2.0)
+    onnx_path = export_onnx(model, tmp_path / "start.onnx")
+    root = fake_dataset(shards=1, per_shard=16)
+    data = load_dataset(root)
+    expected = evaluate_model(model, data.voxels, data.targets)
+    started = load_initial_weights(onnx_path, net)
+    assert abs(evaluate_model(started, data.voxels, data.targets)["bce"] - expected["bce"]) < 1e-4
+    summary = fit(root, tmp_path / "run", _tiny_config(lr=1e-4, freeze_batchnorm=True, net=net.to_dict()),
+                  progress=False, init_checkpoint=onnx_path)
+    assert summary["steps"] > 0
+    tuned = load_model(tmp_path / "run" / "last.pt")
+    bns = [m for m in tuned.modules() if isinstance(m, torch.nn.BatchNorm2d)]
+    assert all(float(m.running_mean.abs().max()) == 0.0 for m in bns)  # frozen: still the identity of a folded net
+
+
+def test_init_from_a_missing_file_is_one_clear_error(tmp_path: Path) -> None:
+    import pytest
+    from darkread.models.train.fit import load_initial_weights
+
+    with pytest.raises(FileNotFoundError, match="--init .*no such file"):
+        load_initial_weights(tmp_path / "nope.onnx", NetConfig())
