@@ -16,7 +16,7 @@ logger = logging.getLogger(__name__)
 BOTH = "both"
 
 EVAL_HELP = """\
-Two forms:
+Four forms:
 
   darkread eval make-suite OUT [--small | --subset simulator-check] [--simulator darkread|hesim] [--jobs N]
       write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
@@ -43,6 +43,13 @@ Two forms:
       which the report of docs/eval then shows as its "Second simulator" section). `make eval-hesim`
       runs it all.
 
+  darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md] [--infer MODE]
+      where an evaluated suite's errors come from: each page read again with its frames placed by
+      the simulator's true pose (perfect stitching) and with every frame replaced by its window's
+      true ink (perfect frames), and each frame's ink recall and precision against that truth;
+      mean CER of the three by lux and motion, printed and written to --out (a .md file, or a
+      folder: FOLDER/attribution.md) with the per-recording figures beside it (.json).
+
   Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
   PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
   default SUITE_DIR/eval_runs/<mode>), and the report puts the other mode beside the default:
@@ -58,7 +65,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
         description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]",
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
@@ -104,6 +111,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     if args.target == "compare-simulators":
         return _compare_simulators(args)
+    if args.target == "attribute":
+        return _attribute(args)
     if args.second_suite is not None:
         raise ValueError(f"unexpected argument {args.second_suite!r}")
     if args.target == "make-suite":
@@ -132,6 +141,22 @@ def _compare_simulators(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out = out / SIMULATORS_NAME if out.suffix != ".md" else out
     path = write_comparison(args.make_suite_out, args.second_suite, out, mode=args.infer or default_infer_mode())
+    print(path.read_text())
+    return 0
+
+
+def _attribute(args: argparse.Namespace) -> int:
+    from darkread.eval.attribution import ATTRIBUTION_NAME, write_attribution
+
+    if not args.make_suite_out or args.second_suite is not None:
+        raise ValueError("give one evaluated suite: darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]")
+    suite = Path(args.make_suite_out)
+    if not suite.is_dir():
+        raise FileNotFoundError(f"{suite}: no such suite directory")
+    work = Path(args.work) if args.work else suite / "eval_runs" / (args.infer if args.infer not in (None, BOTH) else default_infer_mode())
+    out = Path(args.out)
+    out = out / ATTRIBUTION_NAME if out.suffix != ".md" else out
+    path = write_attribution(suite, work, out, backend=args.backend)
     print(path.read_text())
     return 0
 

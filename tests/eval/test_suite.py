@@ -96,6 +96,20 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     alone = evaluate_recording(folder, tmp_path / "run_alone", rgb=False)
     assert alone["rgb"] is None and alone["bandwidth"] is None and alone["darkread"]["frames"] > 0
 
+    # where its errors come from: the stored frames against the simulator's truth, read three ways
+    from darkread.eval.attribution import write_attribution
+
+    work = tmp_path / "attribution_work"
+    work.mkdir()
+    (tmp_path / "run").rename(work / folder.name)
+    report = write_attribution(tmp_path, work, tmp_path / "attribution.md", backend="rapidocr", progress=False)
+    (row,) = json.loads(report.with_suffix(".json").read_text())
+    assert row["name"] == folder.name and row["frames"] == result["darkread"]["frames"]
+    assert row["cer_stitched"] == min(1.0, result["darkread"]["cer"])
+    assert 0.0 <= row["cer_ideal"] <= 1.0 and 0.0 <= row["cer_placed"] <= 1.0
+    assert 0.0 < row["frame_recall"] <= 1.0 and 0.0 < row["frame_precision"] <= 1.0
+    assert f"| {short.lux:g} | **all** | 1 |" in report.read_text()
+
 
 def test_cli_make_suite_form(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from darkread.cli import main
