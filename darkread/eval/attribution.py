@@ -199,9 +199,10 @@ def attribution_table(rows: Sequence[Attribution]) -> str:
     return "\n".join(lines)
 
 
-def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "local", progress: bool = True) -> Path:
+def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "local", progress: bool = True,
+                      notes: Sequence[str] = ()) -> Path:
     """Attribute every evaluated recording of ``suite`` (results in ``work``); a markdown report at ``out``
-    and the per-recording figures beside it (``.json``)."""
+    (``notes``: lines under its first paragraph) and the per-recording figures beside it (``.json``)."""
     from tqdm import tqdm
 
     from darkread.eval.runner import make_ocr_backend
@@ -228,6 +229,7 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
         "times: as the cloud stitched it; with the same frames placed by the simulator's true pose (perfect stitching); "
         "and with each frame replaced by its window's true ink, placed the same way (perfect frames). Frame ink "
         f"recall and precision: ink within {TOLERANCE_PX} px of the window's true ink, pooled over the frames.",
+        *([""] + [f"- {note}" for note in notes] if notes else []),
         "",
         attribution_table(rows),
         "",
@@ -235,3 +237,14 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
     out.write_text(text, encoding="utf-8")
     out.with_suffix(".json").write_text(json.dumps([asdict(r) for r in rows], indent=1), encoding="utf-8")
     return out
+
+
+def attribution_section(out_dir: str | Path) -> list[str]:
+    """The report's "Where the errors come from" section: ``attribution.md`` beside it (written by
+    ``darkread eval attribute``), without its title; nothing when there is none."""
+    path = Path(out_dir) / ATTRIBUTION_NAME
+    if not path.is_file():
+        return []
+    body = path.read_text(encoding="utf-8").splitlines()
+    body = body[1:] if body and body[0].startswith("# ") else body
+    return ["## Where the errors come from", *body, ""]

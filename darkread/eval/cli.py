@@ -156,7 +156,7 @@ def _attribute(args: argparse.Namespace) -> int:
     work = Path(args.work) if args.work else suite / "eval_runs" / (args.infer if args.infer not in (None, BOTH) else default_infer_mode())
     out = Path(args.out)
     out = out / ATTRIBUTION_NAME if out.suffix != ".md" else out
-    path = write_attribution(suite, work, out, backend=args.backend)
+    path = write_attribution(suite, work, out, backend=args.backend, notes=args.note)
     print(path.read_text())
     return 0
 

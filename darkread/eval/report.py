@@ -20,6 +20,7 @@ from darkread.eval.aggregate import held_out_fonts, mean, paired, sweep_subset
 from darkread.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
 from darkread.eval.provenance import ReportInfo, run_commits
 from darkread.eval.results import RecordingResult
+from darkread.eval.attribution import attribution_section
 from darkread.eval.simulators import simulator_section
 from darkread.eval.tables import (
     backend_table,
@@ -128,6 +129,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         *grouped_table(results, "lux", "lux", lambda v: f"{v:g}"),
         "",
         *simulator_section(out),
+        *attribution_section(out),
         "By motion (left darkread, right the RGB snapshot: exposure lengthens as light falls, so motion blur grows):",
         "",
         "![CER vs lux by motion](cer_vs_lux_by_motion.png)",

@@ -88,6 +88,11 @@ def test_report_on_a_two_recording_suite(tmp_path: Path) -> None:
         with Image.open(tmp_path / name) as image:
             assert image.format == "PNG" and image.size[0] > 300
     assert json.loads((tmp_path / "results.json").read_text())[1]["name"] == "001_dark"
+    assert "## Where the errors come from" not in md  # no attribution.md beside it
+
+    (tmp_path / "attribution.md").write_text("# Where the reading errors come from\n\n| lux | motion |\n|---:|---|\n")
+    md = write_report(typed(fake_results()), tmp_path, info).read_text()
+    assert "## Where the errors come from\n\n| lux | motion |" in md
 
 
 def test_headline_compares_30_lux_paragraphs_with_the_paper() -> None:
