@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 
 ATTRIBUTION_NAME = "attribution.md"
+CACHE_NAME = "attribution.json"  # per recording, beside its result.json: a rerun (or a larger suite) reuses it
 TOLERANCE_PX = 1  # ink within this many pixels counts as found (strokes are ~2 px wide)
 PAGE_GAIN = 2.0  # placed pages: mean ink share x this, clipped (a stroke seen in half the frames is black)
 
@@ -199,10 +200,25 @@ def attribution_table(rows: Sequence[Attribution]) -> str:
     return "\n".join(lines)
 
 
+def cached_attribution(run_dir: Path, backend: str) -> Attribution | None:
+    """The attribution stored beside a recording's result, if it is of that result and engine."""
+    from darkread.eval.runner import RESULT_NAME
+
+    cache, result = run_dir / CACHE_NAME, run_dir / RESULT_NAME
+    if not cache.is_file() or (result.is_file() and result.stat().st_mtime_ns > cache.stat().st_mtime_ns):
+        return None
+    stored = json.loads(cache.read_text(encoding="utf-8"))
+    if stored.pop("backend", None) != backend:
+        return None
+    return Attribution(**stored)
+
+
 def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "local", progress: bool = True,
                       notes: Sequence[str] = ()) -> Path:
     """Attribute every evaluated recording of ``suite`` (results in ``work``); a markdown report at ``out``
-    (``notes``: lines under its first paragraph) and the per-recording figures beside it (``.json``)."""
+    (``notes``: lines under its first paragraph) and the per-recording figures beside it (``.json``).
+    Each recording's figures are also kept beside its result (``attribution.json``), so a rerun only
+    attributes what is new or was evaluated again."""
     from tqdm import tqdm
 
     from darkread.eval.runner import make_ocr_backend
@@ -216,7 +232,11 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
         recording = suite / run_dir.name
         if not recording.is_dir():
             continue
-        row = attribute_recording(recording, run_dir / "read", lambda page: engine.read(page).text)
+        row = cached_attribution(run_dir, backend)
+        if row is None:
+            row = attribute_recording(recording, run_dir / "read", lambda page: engine.read(page).text)
+            if row is not None:
+                (run_dir / CACHE_NAME).write_text(json.dumps({"backend": backend, **asdict(row)}), encoding="utf-8")
         if row is not None:
             rows.append(row)
     if not rows:

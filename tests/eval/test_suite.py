@@ -109,6 +109,10 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     assert 0.0 <= row["cer_ideal"] <= 1.0 and 0.0 <= row["cer_placed"] <= 1.0
     assert 0.0 < row["frame_recall"] <= 1.0 and 0.0 < row["frame_precision"] <= 1.0
     assert f"| {short.lux:g} | **all** | 1 |" in report.read_text()
+    kept = (work / folder.name / "attribution.json").stat().st_mtime_ns  # a rerun reuses the stored figures
+    assert write_attribution(tmp_path, work, tmp_path / "again.md", backend="rapidocr", progress=False).is_file()
+    assert (work / folder.name / "attribution.json").stat().st_mtime_ns == kept
+    assert json.loads((tmp_path / "again.json").read_text()) == [row]
 
 
 def test_cli_make_suite_form(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
