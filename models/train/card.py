@@ -171,6 +171,25 @@ window) counts as both a false positive and a false negative. Compare methods, n
 
 Samples (events, network, baseline, target at 1000 and 5 lux): `docs/model_samples.png`.
 
+## Where the low-light errors come from, and a fine-tune that did not help
+
+`darkread eval attribute` (docs/eval/attribution.md) reads each evaluated page again with its
+frames placed by the simulator's true pose and with every frame replaced by its window's true ink.
+At 10 and 5 lux the true ink placed that way reads at 0.9 % and 0.2 % CER, the network's frames
+placed by the true pose at 52 % and 76 %, and as the cloud stitched them at 38 % and 69 %: the
+stitcher is not what fails (its content registration does better than the true pose: with head
+motion at 10 lux most frames match the page's pose 20-40 ms before their time stamp best, at
+100 lux the pose at it), the frames are. Their ink recall
+falls from 87 % (10 lux, still) to 73 % (normal head motion) and 39 % (walking); 42 % at 5 lux.
+
+Tried on 2026-12-03 and **not shipped**: these weights fine-tuned (`darkread train fit --init
+models/binary_unet.onnx`, BatchNorms frozen, lr 1e-3 peak, 45 min, 3,225 steps on one core) on a
+mix of 8,000 low-light windows (`darkread synth dataset --lux 4 40`, seed 21) and 3,000 standard ones
+(seed 31). Held-out windows of that mix (538): ink F1 59.9 -> 60.9 % (below 10 lux 49.7 -> 51.9 %,
+10-40 lux 61.9 -> 62.9 %, above 40 lux 71.8 -> 70.8 %). End to end on the suite's 10- and 5-lux
+recordings (every-window mode, same machine and run): 10 lux 37.9 -> 36.6 %, 5 lux 68.5 -> 71.9 %
+CER: one point of F1 does not move a page whose frames miss half their strokes.
+
 ## Limitations
 
 * Trained on synthetic data only; the simulator's noise model is an estimate (no public per-lux
