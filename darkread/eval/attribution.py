@@ -93,53 +93,60 @@ def stored_frames(cloud_dir: Path) -> list[Any]:
     return asyncio.run(read())
 
 
-def _window_box(truth: PageTruth, origin: tuple[int, int], shape: tuple[int, int], H: np.ndarray) -> tuple[int, int, int, int] | None:
-    """The part of the page raster (row0, row1, col0, col1) a window can see under ``H`` (its corners'
-    rays on the page, 2 texels of margin); None when it sees none of it."""
-    from darkread.models.train.annotate import page_coordinates, window_rays
+@dataclass(frozen=True)
+class Placement:
+    """Where one window lies on the page raster under the true pose: the raster box it can see
+    (row0, row1, col0, col1) and, for each texel of it, the window pixel it samples."""
 
-    rays = window_rays(truth.calibration, origin, shape)
+    box: tuple[int, int, int, int]
+    map_x: np.ndarray  # float32 [rows, cols]: window column of each texel
+    map_y: np.ndarray  # float32 [rows, cols]: window row
+    inside: np.ndarray  # bool [rows, cols]: the texel falls inside the window
+
+
+def place_window(truth: PageTruth, rays: np.ndarray, origin: tuple[int, int], shape: tuple[int, int],
+                 H: np.ndarray) -> Placement | None:
+    """The placement of a window (``rays``: its pixels' undistorted rays) under ``H``; None when it sees
+    none of the page. Only the box its corners span (2 texels of margin) is projected."""
+    from darkread.models.train.annotate import page_coordinates, project_page
+
     h, w = shape
-    corners = rays[[0, w - 1, (h - 1) * w, h * w - 1]]
-    px = page_coordinates(H, corners) * truth.px_per_mm
+    corners = page_coordinates(H, rays[[0, w - 1, (h - 1) * w, h * w - 1]]) * truth.px_per_mm
     rows, cols = truth.ink.shape
-    c0, r0 = np.floor(px.min(axis=0)).astype(int) - 2
-    c1, r1 = np.ceil(px.max(axis=0)).astype(int) + 2
+    c0, r0 = np.floor(corners.min(axis=0)).astype(int) - 2
+    c1, r1 = np.ceil(corners.max(axis=0)).astype(int) + 2
     r0, c0, r1, c1 = max(r0, 0), max(c0, 0), min(r1, rows), min(c1, cols)
-    return (r0, r1, c0, c1) if r1 > r0 and c1 > c0 else None
+    if r1 <= r0 or c1 <= c0:
+        return None
+    gy, gx = np.mgrid[r0:r1, c0:c1].astype(np.float64)
+    points = np.c_[(gx.ravel() + 0.5) / truth.px_per_mm, (gy.ravel() + 0.5) / truth.px_per_mm]
+    uv = project_page(H, truth.calibration, points).reshape(r1 - r0, c1 - c0, 2)
+    map_x = (uv[..., 0] - origin[0]).astype(np.float32)
+    map_y = (uv[..., 1] - origin[1]).astype(np.float32)
+    inside = (map_x >= 0) & (map_x <= w - 1) & (map_y >= 0) & (map_y <= h - 1)
+    return Placement((r0, r1, c0, c1), map_x, map_y, inside)
 
 
-def place_frames(masks: Sequence[np.ndarray], origins: Sequence[tuple[int, int]], times_us: Sequence[float],
-                 truth: PageTruth) -> np.ndarray:
-    """Frames averaged on the page raster where the true pose puts them: uint8, black ink on white."""
-    from darkread.models.train.annotate import project_page
-
-    total = np.zeros(truth.ink.shape, np.float32)
-    seen = np.zeros(truth.ink.shape, np.float32)
-    for mask, (x0, y0), t_us in zip(masks, origins, times_us, strict=True):
-        H = truth.pose_at(float(t_us))
-        box = _window_box(truth, (x0, y0), mask.shape, H)
-        if box is None:
+def compose(masks: Sequence[np.ndarray], placements: Sequence[Placement | None], page_shape: tuple[int, int]) -> np.ndarray:
+    """Windows averaged on the page raster at their placements: uint8, black ink on white."""
+    total = np.zeros(page_shape, np.float32)
+    seen = np.zeros(page_shape, np.float32)
+    for mask, placed in zip(masks, placements, strict=True):
+        if placed is None:
             continue
-        r0, r1, c0, c1 = box
-        gy, gx = np.mgrid[r0:r1, c0:c1].astype(np.float64)
-        points = np.c_[(gx.ravel() + 0.5) / truth.px_per_mm, (gy.ravel() + 0.5) / truth.px_per_mm]
-        uv = project_page(H, truth.calibration, points).reshape(r1 - r0, c1 - c0, 2)
-        mx = (uv[..., 0] - x0).astype(np.float32)
-        my = (uv[..., 1] - y0).astype(np.float32)
-        inside = (mx >= 0) & (mx <= mask.shape[1] - 1) & (my >= 0) & (my <= mask.shape[0] - 1)
-        total[r0:r1, c0:c1] += cv2.remap(mask.astype(np.float32), mx, my, cv2.INTER_LINEAR, borderValue=0.0) * inside
-        seen[r0:r1, c0:c1] += inside
+        r0, r1, c0, c1 = placed.box
+        sampled = cv2.remap(mask.astype(np.float32), placed.map_x, placed.map_y, cv2.INTER_LINEAR, borderValue=0.0)
+        total[r0:r1, c0:c1] += sampled * placed.inside
+        seen[r0:r1, c0:c1] += placed.inside
     share = np.where(seen > 0, total / np.maximum(seen, 1.0), 0.0)
     return (255.0 * (1.0 - np.clip(share * PAGE_GAIN, 0.0, 1.0))).astype(np.uint8)
 
 
-def window_truth(truth: PageTruth, origin: tuple[int, int], shape: tuple[int, int], t_us: float) -> np.ndarray:
+def window_truth(truth: PageTruth, rays: np.ndarray, shape: tuple[int, int], H: np.ndarray) -> np.ndarray:
     """The true binary ink of a window (uint8, 1 = ink), as the training targets define it."""
-    from darkread.models.train.annotate import render_target, window_rays
+    from darkread.models.train.annotate import render_target
 
-    rays = window_rays(truth.calibration, origin, shape)
-    return render_target(truth.ink, truth.px_per_mm, truth.pose_at(float(t_us)), rays, shape)
+    return render_target(truth.ink, truth.px_per_mm, H, rays, shape)
 
 
 def ink_found(predicted: np.ndarray, target: np.ndarray, tolerance_px: int = TOLERANCE_PX) -> tuple[int, int, int, int]:
@@ -159,11 +166,16 @@ def attribute_recording(recording: Path, read_dir: Path, read_page: Callable[[np
     if truth is None:
         return None
     result = json.loads((read_dir.parent / RESULT_NAME).read_text(encoding="utf-8"))
+    from darkread.models.train.annotate import window_rays
+
     frames = stored_frames(read_dir / "cloud")
     masks = [f.mask for f in frames]
-    origins = [(int(f.origin[0]), int(f.origin[1])) for f in frames]
-    times = [float(f.t_us) for f in frames]
-    ideal = [window_truth(truth, o, m.shape, t) for m, o, t in zip(masks, origins, times, strict=True)]
+    ideal, placements = [], []
+    for frame in frames:  # one pose, one set of rays and one placement per frame, for both pages
+        origin, H = (int(frame.origin[0]), int(frame.origin[1])), truth.pose_at(float(frame.t_us))
+        rays = window_rays(truth.calibration, origin, frame.mask.shape)
+        ideal.append(window_truth(truth, rays, frame.mask.shape, H))
+        placements.append(place_window(truth, rays, origin, frame.mask.shape, H))
     counts = np.array([ink_found(m, i) for m, i in zip(masks, ideal, strict=True)] or [[0, 0, 0, 0]], np.int64).sum(axis=0)
     reference = (recording / "text.txt").read_text(encoding="utf-8")
 
@@ -173,8 +185,8 @@ def attribute_recording(recording: Path, read_dir: Path, read_page: Callable[[np
     return Attribution(
         name=recording.name, lux=float(result["lux"]), motion=str(result["motion"]), frames=len(frames),
         cer_stitched=min(1.0, float(result["darkread"].get("cer", 1.0))),
-        cer_placed=cer(place_frames(masks, origins, times, truth)),
-        cer_ideal=cer(place_frames(ideal, origins, times, truth)),
+        cer_placed=cer(compose(masks, placements, truth.ink.shape)),
+        cer_ideal=cer(compose(ideal, placements, truth.ink.shape)),
         frame_recall=float(counts[0] / max(1, counts[1])), frame_precision=float(counts[2] / max(1, counts[3])),
     )
 

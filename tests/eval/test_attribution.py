@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 from darkread.edge.io.calibration import Calibration
-from darkread.eval.attribution import PageTruth, attribution_table, Attribution, ink_found, place_frames, window_truth
+from darkread.eval.attribution import (Attribution, PageTruth, attribution_table, compose, ink_found, place_window,
+                                      window_truth)
+from darkread.models.train.annotate import window_rays
 
 
 def _truth() -> PageTruth:
@@ -22,9 +24,11 @@ def _truth() -> PageTruth:
 def test_true_windows_placed_back_give_the_page_ink() -> None:
     truth = _truth()
     origins = [(250, 200), (330, 215)]
-    windows = [window_truth(truth, o, (100, 200), 0.0) for o in origins]
+    H = truth.pose_at(0.0)
+    rays = [window_rays(truth.calibration, o, (100, 200)) for o in origins]
+    windows = [window_truth(truth, r, (100, 200), H) for r in rays]
     assert all(w.any() for w in windows)
-    page = place_frames(windows, origins, [0.0, 0.0], truth)
+    page = compose(windows, [place_window(truth, r, o, (100, 200), H) for r, o in zip(rays, origins)], truth.ink.shape)
     ink = page < 128
     seen = ink.any(axis=0)
     assert ink.sum() > 0
