@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 from collections import defaultdict
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -25,6 +26,8 @@ from typing import Any
 
 import cv2
 import numpy as np
+
+log = logging.getLogger(__name__)
 
 ATTRIBUTION_NAME = "attribution.md"
 CACHE_NAME = "attribution.json"  # per recording, beside its result.json: a rerun (or a larger suite) reuses it
@@ -219,10 +222,14 @@ def cached_attribution(run_dir: Path, backend: str) -> Attribution | None:
     cache, result = run_dir / CACHE_NAME, run_dir / RESULT_NAME
     if not cache.is_file() or (result.is_file() and result.stat().st_mtime_ns > cache.stat().st_mtime_ns):
         return None
-    stored = json.loads(cache.read_text(encoding="utf-8"))
-    if stored.pop("backend", None) != backend:
+    try:
+        stored = json.loads(cache.read_text(encoding="utf-8"))
+        if stored.pop("backend", None) != backend:
+            return None
+        return Attribution(**stored)
+    except (ValueError, TypeError, AttributeError):  # truncated or foreign: a cache, so attribute again
+        log.warning("%s: unreadable, attributing %s again", cache, run_dir.name)
         return None
-    return Attribution(**stored)
 
 
 def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "local", progress: bool = True,

@@ -113,6 +113,10 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     assert write_attribution(tmp_path, work, tmp_path / "again.md", backend="rapidocr", progress=False).is_file()
     assert (work / folder.name / "attribution.json").stat().st_mtime_ns == kept
     assert json.loads((tmp_path / "again.json").read_text()) == [row]
+    (work / folder.name / "attribution.json").write_text('{"backend": "rapidocr", "name": ')  # truncated: attributed again
+    assert write_attribution(tmp_path, work, tmp_path / "again.md", backend="rapidocr", progress=False).is_file()
+    assert json.loads((tmp_path / "again.json").read_text()) == [row]
+    assert json.loads((work / folder.name / "attribution.json").read_text())["name"] == folder.name
 
 
 def test_cli_make_suite_form(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
