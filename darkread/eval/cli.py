@@ -145,6 +145,11 @@ def _compare_simulators(args: argparse.Namespace) -> int:
     return 0
 
 
+def _first_mode(args: argparse.Namespace) -> str:
+    """The edge mode an evaluation reads first: --infer's, or the edge's default (for none or both)."""
+    return default_infer_mode() if args.infer in (None, BOTH) else args.infer
+
+
 def _attribute(args: argparse.Namespace) -> int:
     from darkread.eval.attribution import ATTRIBUTION_NAME, write_attribution
 
@@ -153,7 +158,7 @@ def _attribute(args: argparse.Namespace) -> int:
     suite = Path(args.make_suite_out)
     if not suite.is_dir():
         raise FileNotFoundError(f"{suite}: no such suite directory")
-    work = Path(args.work) if args.work else suite / "eval_runs" / (args.infer if args.infer not in (None, BOTH) else default_infer_mode())
+    work = Path(args.work) if args.work else suite / "eval_runs" / _first_mode(args)
     out = Path(args.out)
     out = out / ATTRIBUTION_NAME if out.suffix != ".md" else out
     path = write_attribution(suite, work, out, backend=args.backend, notes=args.note)
@@ -167,7 +172,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     from darkread.eval.report import write_report
 
     suite = Path(args.target)
-    mode = default_infer_mode() if args.infer in (None, BOTH) else args.infer
+    mode = _first_mode(args)
     runs = [(mode, Path(args.work) if args.work else suite / "eval_runs" / mode)]
     if args.infer == BOTH or args.beside:
         other = other_infer_mode(mode)

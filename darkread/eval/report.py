@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from darkread.eval.aggregate import held_out_fonts, mean, paired, sweep_subset
+from darkread.eval.attribution import attribution_section
 from darkread.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
 from darkread.eval.provenance import ReportInfo, run_commits
 from darkread.eval.results import RecordingResult
-from darkread.eval.attribution import attribution_section
 from darkread.eval.simulators import simulator_section
 from darkread.eval.tables import (
     backend_table,

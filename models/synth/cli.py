@@ -77,9 +77,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     help="train: training fonts and texts; val: validation texts, all fonts incl. held-out")
     ds.add_argument("--held-out", action="store_true", help="only the held-out font families")
     ds.add_argument("--shard-size", type=int, default=250, help="samples per shard")
-    ds.add_argument("--lux", type=float, nargs=2, default=[4.0, 1200.0], metavar=("LOW", "HIGH"),
-                    help="light at the page, log-uniform between LOW and HIGH lux (default 4 1200; "
-                         "e.g. 4 40 for a low-light set to mix into training)")
+    ds.add_argument("--lux", type=float, nargs=2, metavar=("LOW", "HIGH"),
+                    help="light at the page, log-uniform between LOW and HIGH lux (default: the training range, "
+                         "4 1200; e.g. 4 40 for a low-light set to mix into training)")
     ds.set_defaults(func=_dataset)
 
 
@@ -94,7 +94,7 @@ def _dataset(args: argparse.Namespace) -> int:
         split=args.split,
         held_out=args.held_out,
         shard_size=args.shard_size,
-        lux_range=(args.lux[0], args.lux[1]),
+        **({"lux_range": (args.lux[0], args.lux[1])} if args.lux else {}),
     )
     print(f"{manifest['samples']} samples in {len(manifest['shards'])} shards -> {args.out} "
           f"({manifest['samples_per_s']} samples/s)")

@@ -73,7 +73,10 @@ class Session:
         return replace(self.scene, lux=float(lux)), regime_sensor_params(self.spec.regime, rng, lux)
 
 
-def random_lux(rng: np.random.Generator, lo: float = 4.0, hi: float = 1200.0) -> float:
+LUX_RANGE: tuple[float, float] = (4.0, 1200.0)  # the light of a training sample, log-uniform (lux)
+
+
+def random_lux(rng: np.random.Generator, lo: float = LUX_RANGE[0], hi: float = LUX_RANGE[1]) -> float:
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 

@@ -24,7 +24,7 @@ from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
 from darkread.models.synth.scene import Region, Scene
 from darkread.models.synth.sensor import EventSensor, SensorParams, concat_events
-from darkread.models.synth.session import Session, SessionSpec, choose_dt_us, make_session, random_lux
+from darkread.models.synth.session import LUX_RANGE, Session, SessionSpec, choose_dt_us, make_session, random_lux
 
 log = logging.getLogger(__name__)
 
@@ -32,7 +32,6 @@ FOVEA = FoveaConfig()
 VOXEL = VoxelConfig()
 N_EVENTS = PipelineConfig().n_events  # events per voxel grid, as the edge bins them
 SAMPLES_PER_PAGE = 8
-LUX_RANGE: tuple[float, float] = (4.0, 1200.0)  # the light of a training sample, log-uniform (lux)
 SHARD_SIZE = 250
 MAX_WINDOW_S = 0.5  # give up collecting events after this much simulated time
 SHARD_FORMAT_VERSION = 1
@@ -175,10 +174,9 @@ def shard_seed(base_seed: int, split: str, held_out: bool, shard_index: int, pag
     return int(ss.generate_state(1, dtype=np.uint32)[0])
 
 
-def build_shard(args: tuple[Path, int, int, int, str, bool] | tuple[Path, int, int, int, str, bool, tuple[float, float]]) -> dict:
-    """Make shard ``index`` with ``count`` samples (a multiprocessing task; the lux range is optional)."""
-    out_dir, index, count, base_seed, split, held_out = args[:6]
-    lux_range = args[6] if len(args) > 6 else LUX_RANGE  # type: ignore[misc]
+def build_shard(args: tuple[Path, int, int, int, str, bool, tuple[float, float]]) -> dict:
+    """Make shard ``index`` with ``count`` samples (a multiprocessing task)."""
+    out_dir, index, count, base_seed, split, held_out, lux_range = args
     t0 = time.perf_counter()
     spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0)
     parts_v, parts_t, metas = [], [], []

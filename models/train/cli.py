@@ -37,11 +37,10 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_fit(args: argparse.Namespace) -> int:
-    from darkread.models.train.fit import fit
+    from darkread.models.train.fit import fit, is_exported_network
 
     config = _fit_config(args)
-    if args.init is not None and str(args.init).endswith(".onnx"):
-        config.freeze_batchnorm = True
+    config.freeze_batchnorm = args.init is not None and is_exported_network(args.init)
     summary = fit(args.train_dir, args.run_dir, config, resume=not args.restart, init_checkpoint=args.init)
     print(json.dumps(summary, indent=1, default=float))
     return 0

@@ -146,11 +146,16 @@ def load_model(checkpoint: str | Path) -> BinaryUNet:
     return model.eval()
 
 
+def is_exported_network(path: str | Path) -> bool:
+    """An ONNX file (BatchNorms folded into its convolutions, so a fit from it keeps them frozen), not a checkpoint."""
+    return str(path).endswith(".onnx")
+
+
 def load_initial_weights(path: str | Path, config: NetConfig) -> BinaryUNet:
     """Starting weights for a fit: a checkpoint (.pt) or an exported network (.onnx, e.g. the shipped one)."""
     if not Path(path).is_file():
         raise FileNotFoundError(f"--init {path}: no such file")
-    if str(path).endswith(".onnx"):
+    if is_exported_network(path):
         from darkread.models.train.onnx_weights import model_from_onnx
 
         return model_from_onnx(path, config)
