@@ -12,7 +12,7 @@ import logging
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -202,6 +202,8 @@ def fit(
         optimizer.load_state_dict(data["optimizer"])
         state = {k: data[k] for k in state}
         rng = np.random.default_rng([config.seed, int(state["step"])])  # type: ignore[list-item]
+        if data.get("fit_config", {}).get("freeze_batchnorm") and not config.freeze_batchnorm:
+            config = replace(config, freeze_batchnorm=True)  # a run that began from an exported network stays frozen
         log.info("resumed from %s at step %s, %.0f s used", last, state["step"], state["elapsed_s"])
     log.info("network: %d parameters, %s", count_parameters(model), config.net)
     held_out = validation_set(paths, config.validation_samples)

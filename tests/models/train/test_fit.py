@@ -76,6 +76,11 @@ def test_a_fit_from_an_exported_network_starts_where_it_left_off(fake_dataset, t
     bns = [m for m in tuned.modules() if isinstance(m, torch.nn.BatchNorm2d)]
     assert all(float(m.running_mean.abs().max()) == 0.0 for m in bns)  # frozen: still the identity of a folded net
 
+    # resumed without --init (a config that does not say frozen): the run stays frozen
+    fit(root, tmp_path / "run", _tiny_config(lr=1e-4, max_epochs=3, net=net.to_dict()), progress=False)
+    resumed = load_model(tmp_path / "run" / "last.pt")
+    assert all(float(m.running_mean.abs().max()) == 0.0 for m in resumed.modules() if isinstance(m, torch.nn.BatchNorm2d))
+
 
 def test_init_from_a_missing_file_is_one_clear_error(tmp_path: Path) -> None:
     import pytest
