@@ -32,7 +32,6 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from darkread.proto.errors import (
     AuthenticationError,
-    BadMaskError,
     CloseCode,
     ForbiddenError,
     MalformedMessageError,
@@ -54,6 +53,7 @@ from darkread.proto.messages import (
     Page,
     View,
     Welcome,
+    check_view_shape,
     content_version,
     decode,
     encode,
@@ -199,8 +199,7 @@ class StreamConnection:
         if isinstance(message, Frame | View):  # a fixation's fused view: stored with its levels and frame count
             if self.hello.mode != "frames":
                 raise UnexpectedMessageError(f"{message.TYPE} received but hello.mode is 'pages'")
-            if message.shape != self.hello.fovea:
-                raise BadMaskError(f"frame shape {message.shape} differs from hello.fovea {self.hello.fovea}")
+            check_view_shape(message, tuple(self.hello.fovea), self.hello.v)
             return _Pending(asyncio.ensure_future(store.add_frame(session_id, stored_frame(message))), "frame", session_id)
         if isinstance(message, Page):
             if self.hello.mode != "pages":

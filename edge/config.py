@@ -70,6 +70,7 @@ class PipelineConfig:
     min_events: int = 400  # on-change: a frame may have fewer than n_events (low light), not fewer than this
     first_wait_ms: float = 60.0  # on-change: the first frame of a fixation comes this long into it (landing settled)
     view_every_ms: float = 250.0  # on-change: a long fixation sends its view this often
+    dither_px: int = 20  # on-change: a view's frames alternate this far above and below its window (0: all in it)
     # on-change: what a view averages, the network's calibrated ink "probability" per frame or the
     # binary "mask" (a view holds 1-3 frames: a mask's average has too few levels to keep faint strokes;
     # frames doubted all over, in dim light, go in as masks either way: view_fusion.MAX_DOUBT)

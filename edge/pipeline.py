@@ -43,7 +43,7 @@ from darkread.edge.ring import EventRing
 from darkread.edge.scene_motion import SceneMotion
 from darkread.edge.sources.base import EventSource
 from darkread.edge.telemetry import EdgeMetrics
-from darkread.edge.view_fusion import ViewFuser, ViewRecord
+from darkread.edge.view_fusion import MARGIN_PX, ViewFuser, ViewRecord
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 from darkread.frame_record import FrameRecord
@@ -207,7 +207,9 @@ class Pipeline:
         if self.on_change:
             self.gate = GazeGate(gaze)
             self.trigger = ViewTrigger(settings)
-            self.fuser = ViewFuser()
+            # the canvas reaches as far as the head drifts, beyond both dithered windows
+            self._fuser_margin = MARGIN_PX + 2 * max(settings.dither_px, 0)
+            self.fuser = ViewFuser(margin_px=self._fuser_margin)
             self.views_made = 0
             self._chunks = 0  # chunks not yet looked at by a processing step
             self._fixation: int | None = None  # the current fixation's key (its first row, event clock)
@@ -479,7 +481,7 @@ class Pipeline:
         centre = self._fixation_centre(t) or gaze.pixel
         origin = window_origin(centre, self.sensor_wh, self.fovea)
         if origin != self._origin and self.settings.sensor_roi:
-            self.source.set_roi(origin[0], origin[1], self.fovea.width, self.fovea.height)
+            self._roi_for_view(origin)
         self._origin = self._view_origin = origin
         return origin, gaze
 
@@ -497,11 +499,12 @@ class Pipeline:
     def _infer_into_view(self, origin: tuple[int, int], gaze: GazeSample, t: int, t_from: int, arrival: float) -> bool:
         """One frame of the current fixation (its events only, up to ``n_events``), fused into the
         view; a frame that does not register onto the view sends it and starts the next one."""
-        window = self._recent_events(origin, t, t_from=t_from)
+        placed = self._dithered(origin, len(self.fuser))
+        window = self._recent_events(placed, t, t_from=t_from)
         if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
             return False
         soft = self.settings.fuse == "probability"
-        frame = make_frame(window, origin, gaze, t, self.voxel, self.infer, self.frames_made, self._scene_at(t), probability=soft)
+        frame = make_frame(window, placed, gaze, t, self.voxel, self.infer, self.frames_made, self._scene_at(t), probability=soft)
         if frame is None:
             return False
         self.frames_made += 1
@@ -515,6 +518,25 @@ class Pipeline:
         self._since_infer = 0
         return True
 
+    def _roi_for_view(self, origin: tuple[int, int]) -> None:
+        """The sensor's ROI over the view's window and both dithered ones (all its frames' events)."""
+        top, bottom = self._dithered(origin, 0), self._dithered(origin, 1)
+        y0, y1 = min(origin[1], top[1]), max(origin[1], bottom[1]) + self.fovea.height
+        self.source.set_roi(origin[0], y0, self.fovea.width, y1 - y0)
+
+    def _dithered(self, origin: tuple[int, int], k: int) -> tuple[int, int]:
+        """The window of a view's ``k``-th frame: the view's window moved up (even ``k``) or down
+        (odd) by ``dither_px``, inside the sensor. The tracker's bias (about 1 deg) puts the line
+        being read anywhere in the window, often at its edge; two frames a few tens of pixels apart
+        see it whole, and the view is the union of its frames' windows."""
+        d = self.settings.dither_px
+        if d <= 0:
+            return origin
+        fov = self.fovea
+        dy = -d if k % 2 == 0 else d
+        centre = (origin[0] + fov.width // 2, origin[1] + fov.height // 2 + dy)
+        return window_origin(centre, self.sensor_wh, fov)
+
     def _end_view(self, arrival: float, t_end: int) -> None:
         """The fixation ended at ``t_end``: a fixation too short for a frame gets one now; send its view."""
         lasted = self._fixation is not None and t_end - self._fixation >= self.gate.cfg.min_fixation_ms * 1e3
@@ -527,7 +549,7 @@ class Pipeline:
 
     def _send_view(self, arrival: float) -> None:
         view = self.fuser.view(self.views_made)
-        self.fuser = ViewFuser(self.fuser.n_levels, self.fuser.radius, max_doubt=self.fuser.max_doubt)
+        self.fuser = ViewFuser(self.fuser.n_levels, self.fuser.radius, self._fuser_margin, self.fuser.max_doubt)
         self._view_origin = None
         self.views_made += 1
         self.metrics.add("views")

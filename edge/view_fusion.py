@@ -1,11 +1,12 @@
 """One view per fixation: its frames registered to each other and fused into ink probability.
 
 During a fixation the eye rests and the window stays where the fixation's gaze centre put it
-(the pipeline locks it), but the head drifts, so the frames of one fixation show the same few
-words a few pixels apart. Each frame is placed at its sensor offset from the frame before,
-refined by the stitcher's own registration (:func:`darkread.stitch.register.register_frame`,
-correlation against what the view already holds); the view so far moves with it, so the view is
-always in the newest frame's window and at its time (where and when the stitcher predicts it). A
+(the pipeline locks it, and moves its frames a little above and below it), but the head drifts,
+so the frames of one fixation show the same few words a few pixels apart. Each frame is placed at
+its sensor offset from the frame before, refined by the stitcher's own registration
+(:func:`darkread.stitch.register.register_frame`, correlation against what the view already
+holds); the view is the union of its frames' windows, placed as the newest frame saw it (where and
+when the stitcher predicts it), so it can be larger than one window. A
 frame that does not register onto the view (the head jumped, or the classifier joined two
 fixations) is not blended in blind: ``add`` says so and the caller starts a new view with it.
 The mean of the frames' ink probabilities (of their binary masks, without the network's
@@ -102,6 +103,7 @@ class ViewFuser:
         self._first: FrameRecord | None = None
         self._last: FrameRecord | None = None
         self._last_xy = (0.0, 0.0)  # the newest frame's top-left, in the first frame's coordinates
+        self._box = (0, 0, 0, 0)  # union of the frames' windows (x0, y0, x1, y1), first frame's coordinates
         self._sum: np.ndarray | None = None
         self._count: np.ndarray | None = None
         self._frames = 0
@@ -151,6 +153,7 @@ class ViewFuser:
         soft = probability is not None and doubt(probability) <= self.max_doubt
         self._accumulate(np.asarray(probability, np.float32) if soft else mask, xy)
         self._last, self._last_xy = frame, xy
+        self._grow_box(xy, mask.shape)
         self._frames += 1
         self._events += int(events_used)
         self._gaze_sum += frame.gaze_px
@@ -179,6 +182,15 @@ class ViewFuser:
         self.last_score = float(found.score)
         return px + found.shift_xy[0] + found.subpixel_xy[0], py + found.shift_xy[1] + found.subpixel_xy[1]
 
+    def _grow_box(self, xy: tuple[float, float], shape: tuple[int, int]) -> None:
+        """Take the frame's window (top-left ``xy``, nearest pixel) into the view's box, within the canvas."""
+        x, y = int(round(xy[0])), int(round(xy[1]))
+        box = (x, y, x + shape[1], y + shape[0])
+        if self._frames:
+            box = (min(box[0], self._box[0]), min(box[1], self._box[1]), max(box[2], self._box[2]), max(box[3], self._box[3]))
+        m = self.margin
+        self._box = (max(box[0], -m), max(box[1], -m), min(box[2], shape[1] + m), min(box[3], shape[0] + m))
+
     def _accumulate(self, mask: np.ndarray, xy: tuple[float, float]) -> None:
         """Add ``mask`` with its top-left at ``xy`` (first frame's coordinates; bilinear below a
         pixel, as the stitcher does); what falls beyond the margin is left out."""
@@ -191,18 +203,21 @@ class ViewFuser:
         self._count += cv2.warpAffine(np.ones((h, w), np.float32), move, size, flags=flags, borderMode=border, borderValue=0.0)
 
     def view(self, view_id: int) -> ViewRecord:
-        """The fused view so far, in the newest frame's window; the fuser must hold a frame."""
+        """The fused view so far: the union of its frames' windows (the fuser must hold a frame),
+        placed where the newest frame's window is at its time."""
         if self._first is None or self._last is None or self._sum is None or self._count is None:
             raise ValueError("no frame to fuse")
-        h, w = self._last.mask.shape
-        x, y = int(round(self._last_xy[0])) + self.margin, int(round(self._last_xy[1])) + self.margin
-        count = _crop(self._count, x, y, w, h)
-        probability = np.where(count > 0.5, _crop(self._sum, x, y, w, h) / np.maximum(count, 1e-6), 0.0)
+        x0, y0, x1, y1 = self._box
+        lx, ly = int(round(self._last_xy[0])), int(round(self._last_xy[1]))
+        m = self.margin
+        count = _crop(self._count, x0 + m, y0 + m, x1 - x0, y1 - y0)
+        probability = np.where(count > 0.5, _crop(self._sum, x0 + m, y0 + m, x1 - x0, y1 - y0) / np.maximum(count, 1e-6), 0.0)
         levels = quantise(probability, self.n_levels)
         gaze = self._gaze_sum / self._frames
+        origin = (self._last.origin[0] + x0 - lx, self._last.origin[1] + y0 - ly)
         return ViewRecord(
             frame_id=int(view_id), t_us=self._last.t_us, mask=threshold(levels, self.n_levels),
-            origin=self._last.origin, gaze_px=(float(gaze[0]), float(gaze[1])), levels=levels, n_levels=self.n_levels,
+            origin=origin, gaze_px=(float(gaze[0]), float(gaze[1])), levels=levels, n_levels=self.n_levels,
             t0_us=self._first.t_us, frames=self._frames, events_used=self._events, gaze_rad=self._gaze_rad,
             scene_px=self._last.scene_px,
         )

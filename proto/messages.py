@@ -6,7 +6,8 @@ Every message is one msgpack map with a ``type`` string; each type is a frozen d
 subclasses (see ``errors.py``). Unknown extra keys are ignored so a peer may add optional
 fields without a version bump; anything that changes meaning bumps ``PROTOCOL_VERSION``.
 Version 2 adds compressed masks (``enc``, see ``codecs.py``) and the fused ``view``; version 3 the
-CCITT G4 page (``enc="g4"``); a server still accepts version 1 and 2 clients (``SUPPORTED_VERSIONS``).
+CCITT G4 page (``enc="g4"``); version 4 lets a view be larger than the fovea (the union of its frames'
+windows, ``WIDE_VIEW_VERSION``); a server still accepts version 1-3 clients (``SUPPORTED_VERSIONS``).
 The field list with units and limits is in ``README.md`` next to this file.
 """
 
@@ -35,8 +36,10 @@ from .errors import (
     VersionMismatchError,
 )
 
-PROTOCOL_VERSION = 3
-SUPPORTED_VERSIONS = (1, 2, 3)  # what a server accepts in hello.v (and answers in welcome.v)
+PROTOCOL_VERSION = 4
+SUPPORTED_VERSIONS = (1, 2, 3, 4)  # what a server accepts in hello.v (and answers in welcome.v)
+WIDE_VIEW_VERSION = 4  # from this version a view may be larger than hello.fovea (up to MAX_VIEW_GROWTH per side)
+MAX_VIEW_GROWTH = 2
 MAX_LEVELS = 16  # grey levels of a view
 DEFAULT_MAX_MESSAGE_BYTES = 4 * 1024 * 1024
 MAX_MASK_PIXELS = 16 * 1024 * 1024  # 16 Mpx: a stitched page of 4096 x 4096 fits
@@ -409,6 +412,19 @@ class View(_Checked):
         values["levels"] = decompress_levels(shape, _bytes(values.get("levels"), "view.levels"), enc)
 
 
+def check_view_shape(message: Frame | View, fovea: tuple[int, int], version: int) -> None:
+    """A frame is one foveal window; a view of a version 4 session the union of its frames' windows,
+    from the fovea up to ``MAX_VIEW_GROWTH`` times its side (before version 4: the fovea)."""
+    h, w = message.shape
+    fh, fw = fovea
+    if isinstance(message, View) and version >= WIDE_VIEW_VERSION:
+        if not (fh <= h <= MAX_VIEW_GROWTH * fh and fw <= w <= MAX_VIEW_GROWTH * fw):
+            raise BadMaskError(f"view shape {message.shape} is outside hello.fovea {fovea} .. {MAX_VIEW_GROWTH}x its sides")
+    elif message.shape != fovea:
+        raise BadMaskError(f"{message.TYPE} shape {message.shape} differs from hello.fovea {fovea}"
+                           + (f" (a larger view needs protocol version {WIDE_VIEW_VERSION})" if isinstance(message, View) else ""))
+
+
 def content_version(message: Message) -> int:
     """The lowest protocol version that has everything ``message`` uses (a session may not send newer)."""
     enc = getattr(message, "enc", "bits")
@@ -563,6 +579,8 @@ __all__ = [
     "MESSAGE_TYPES",
     "PROTOCOL_VERSION",
     "SUPPORTED_VERSIONS",
+    "MAX_VIEW_GROWTH",
+    "WIDE_VIEW_VERSION",
     "Ack",
     "Error",
     "Frame",
@@ -577,6 +595,7 @@ __all__ = [
     "Welcome",
     "check_mask",
     "check_mask_shape",
+    "check_view_shape",
     "content_version",
     "decode",
     "encode",

@@ -128,6 +128,43 @@ def test_version_2_views_and_compressed_frames_are_stored_as_frame_records(serve
     np.testing.assert_allclose(stored[1].ink_probability()[45, 85], 1 / 3)
 
 
+def test_a_view_larger_than_the_fovea_is_stored_in_version_4_and_refused_before(server: LiveServer) -> None:
+    """Version 4: a view is the union of its frames' windows (up to twice the fovea's side); a
+    frame is still one window, and a version 3 session keeps its views to the fovea."""
+
+    def view(seq: int, shape: tuple[int, int]) -> View:
+        levels = np.zeros(shape, np.uint8)
+        levels[shape[0] - 12 : shape[0] - 2, 20:80] = 7  # ink below the fovea's rows
+        return View(seq=seq, view_id=seq, t0_us=0, t_us=5000 + seq, origin=(500, 280), gaze_px=(600.0, 350.0),
+                    gaze_rad=(0.0, 0.0), frames=2, events_used=3200, shape=shape, n_levels=8, levels=levels.tobytes())
+
+    async def scenario() -> None:
+        ws, welcome = await open_stream(server, "sess-wide")
+        assert welcome.v == 4
+        async with ws:
+            await ws.send(encode(view(0, (140, 200))))
+            assert decode(await ws.recv(), max_bytes=LIMIT) == Ack(seq=0)
+            await ws.send(encode(view(1, (201, 200))))  # beyond twice the fovea's rows
+            error, code, _ = await expect_error_close(ws)
+            assert code == CloseCode.BAD_MASK and "outside hello.fovea" in error.message
+        ws, _ = await open_stream(server, "sess-wide-frame")
+        async with ws:
+            await ws.send(encode(frame(0, shape=(140, 200))))  # a frame is one window, in every version
+            error, code, _ = await expect_error_close(ws)
+            assert code == CloseCode.BAD_MASK and "differs from hello.fovea" in error.message
+        ws, welcome = await open_stream(server, "sess-wide-v3", v=3)
+        assert welcome.v == 3
+        async with ws:
+            await ws.send(encode(view(0, (140, 200))))
+            error, code, _ = await expect_error_close(ws)
+            assert code == CloseCode.BAD_MASK and "needs protocol version 4" in error.message
+
+    asyncio.run(scenario())
+    stored = asyncio.run(server.context.store.frames("sess-wide"))
+    assert len(stored) == 1 and stored[0].mask.shape == (140, 200) and stored[0].mask[130:138, 20:80].all()
+    assert asyncio.run(server.context.store.frames("sess-wide-v3")) == []
+
+
 def test_a_version_1_client_is_still_served_and_kept_to_version_1(server: LiveServer) -> None:
     async def scenario() -> None:
         ws, welcome = await open_stream(server, "sess-v1", v=1)
@@ -194,7 +231,7 @@ def _raw_frame(**changes: Any) -> bytes:
 BAD_INPUTS = {
     "malformed msgpack": ([b"\xc1\x00\x00"], CloseCode.MALFORMED),
     "not a map": ([msgpack.packb([1, 2, 3])], CloseCode.MALFORMED),
-    "wrong protocol version": ([msgpack.packb({**msgpack.unpackb(encode(hello("x"))), "v": 4})], CloseCode.VERSION_MISMATCH),
+    "wrong protocol version": ([msgpack.packb({**msgpack.unpackb(encode(hello("x"))), "v": 5})], CloseCode.VERSION_MISMATCH),
     "frame before hello": ([encode(frame(0))], CloseCode.UNEXPECTED),
     "oversized message": (["hello", b"\x00" * 70_000], CloseCode.MESSAGE_TOO_BIG),
     "frame of the wrong shape": (["hello", encode(frame(0, shape=(50, 200)))], CloseCode.BAD_MASK),
@@ -297,7 +334,7 @@ def test_a_g4_page_is_stored_in_version_3_and_refused_in_version_2(server: LiveS
     page = Page(seq=0, page_id=3, t_us=5, shape=shape, bits=bits, lines=((5, 20, 80, 30),), enc="g4")
 
     async def scenario() -> None:
-        ws, welcome = await open_stream(server, "sess-g4", mode="pages")
+        ws, welcome = await open_stream(server, "sess-g4", mode="pages", v=3)
         assert welcome.v == 3
         async with ws:
             await ws.send(encode(page))

@@ -27,7 +27,7 @@ def frame(page: np.ndarray, x: int, y: int, i: int, origin: tuple[int, int]) -> 
     return FrameRecord(i, 1000 * i, page[y : y + 100, x : x + 200], origin, (origin[0] + 100.0, origin[1] + 50.0))
 
 
-def test_frames_moved_on_the_sensor_are_registered_and_the_view_is_in_the_newest_window() -> None:
+def test_frames_moved_on_the_sensor_are_registered_and_the_view_is_the_union_of_their_windows() -> None:
     page = page_of_text()
     fuser = ViewFuser()
     fuser.add(frame(page, 20, 10, 0, (500, 300)))
@@ -36,11 +36,28 @@ def test_frames_moved_on_the_sensor_are_registered_and_the_view_is_in_the_newest
     placed = fuser.add(frame(page, 23, 12, 1, (500, 300)))
     assert placed == pytest.approx((3.0, 2.0), abs=0.5)
     view = fuser.view(7)
-    assert view.frames == 2 and view.frame_id == 7 and view.origin == (500, 300) and view.t0_us == 0 and view.t_us == 1000
-    # the view is the newest frame's window (where and when the stitcher predicts it): both
-    # frames agree on it, so it is the page itself there
-    np.testing.assert_array_equal(threshold(view.levels), page[12:112, 23:223])
+    assert view.frames == 2 and view.frame_id == 7 and view.t0_us == 0 and view.t_us == 1000
+    # the view covers both windows, placed where the newest frame's window is at its time (where
+    # the stitcher predicts it): the first frame's window lies 3 px left and 2 px up of it
+    assert view.origin == (497, 298) and view.levels.shape == (102, 203)
+    np.testing.assert_array_equal(threshold(view.levels), page[10:112, 20:223])  # both agree: the page itself
     assert view.gaze_px == (600.0, 350.0)  # the mean of its frames' gaze
+
+
+def test_frames_in_windows_above_and_below_make_one_taller_view() -> None:
+    """The pipeline moves a view's frames up and down (the tracker's bias can put the line being
+    read at the window's edge): the view holds what either saw, each part averaged over the
+    frames that saw it."""
+    page = page_of_text()
+    fuser = ViewFuser()
+    fuser.add(frame(page, 40, 0, 0, (400, 200)))
+    placed = fuser.add(frame(page, 40, 30, 1, (400, 230)))  # the window 30 px lower, the same text
+    assert placed == pytest.approx((0.0, 30.0), abs=0.5)
+    view = fuser.view(0)
+    assert view.origin == (400, 200) and view.levels.shape == (130, 200)
+    np.testing.assert_array_equal(threshold(view.levels), page[0:130, 40:240])
+    message = decode(encode(view.to_message()), max_bytes=1 << 20)
+    assert isinstance(message, View) and message.shape == (130, 200) and message.origin == (400, 200)
 
 
 def test_a_frame_that_does_not_register_is_left_out_for_the_next_view() -> None:

@@ -93,9 +93,12 @@ def the_same_text(grid: np.ndarray) -> np.ndarray:
     return glyphs(grid.shape[1:])
 
 
-def run_on_change(gaze: ScanGaze, events: Events, infer=the_same_text, **settings: object):  # noqa: ANN001, ANN201
+def run_on_change(gaze: ScanGaze, events: Events, infer=the_same_text, source=None, **settings: object):  # noqa: ANN001, ANN201
+    """Views of one lossless replay. The frames stay in the view's window (``dither_px`` 0) unless
+    asked: ``the_same_text`` sees the same words wherever the window is."""
     views: list[tuple[ViewRecord, float]] = []
-    source = Chunks(events)
+    source = source or Chunks(events)
+    settings = {"dither_px": 0, **settings}
     config = PipelineConfig(lossless=True, infer="on-change", **settings)  # type: ignore[arg-type]
     metrics = EdgeMetrics()
     pipeline = Pipeline(source, gaze, infer, lambda v, t: views.append((v, t)), config, metrics=metrics)
@@ -137,6 +140,52 @@ def test_a_view_stays_in_one_window_placed_at_the_fixations_mean_gaze() -> None:
         assert view.frames >= 2
         # the window is where the fixation's rows are on average, not where one noisy row was
         assert abs(view.origin[0] + 100 - (400.0 + PX_PER_DEG * 2.0 * i)) <= 2.0
+
+
+def test_a_views_frames_look_above_and_below_its_window_and_the_view_holds_both() -> None:
+    """The tracker's bias can put the line being read at the window's edge: a view's frames go
+    ``dither_px`` above and below its window, and the view is the union of what they saw."""
+    rng = np.random.default_rng(8)
+    page = np.zeros(SENSOR[::-1], np.uint8)  # text that stays put on the sensor (a still head)
+    for row in range(250, 480, 30):
+        x = 300
+        while x < 900:
+            w = int(rng.integers(3, 8))
+            page[row : row + int(rng.integers(8, 14)), x : x + w] = 1
+            x += w + int(rng.integers(3, 7))
+    ys, xs = np.nonzero(page)
+    gaze = ScanGaze(n_fixations=2)
+    duration = int(gaze.t[-1]) + 20_000
+    n = duration * 400_000 // 1_000_000  # events at the ink only, 400 kev/s
+    pick = rng.integers(0, ys.size, n)
+    events = make_events(xs[pick], ys[pick], rng.integers(0, 2, n), np.sort(rng.integers(0, duration, n)))
+    views, metrics = run_on_change(gaze, events, infer=ink_where_events, dither_px=20, n_events=8000)
+    assert len(views) == 2 and metrics.totals["views_split"] == 0
+    for view in views:
+        assert view.frames >= 2
+        x0, y0 = view.origin
+        assert y0 == 360 - 50 - 20 and view.mask.shape == (140, 200)  # 20 px above the window to 20 px below it
+        seen = page[y0 : y0 + 140, x0 : x0 + 200]
+        assert np.mean(view.mask == seen) > 0.97  # the union, each part from the frames that saw it
+
+
+class RoiChunks(Chunks):
+    def __init__(self, events: Events) -> None:
+        super().__init__(events)
+        self.rois: list[tuple[int, ...]] = []
+
+    def set_roi(self, *roi: int) -> None:
+        self.rois.append(roi)
+
+
+def test_the_sensor_roi_spans_a_views_dithered_windows() -> None:
+    gaze = ScanGaze(n_fixations=2)
+    events = busy_events(int(gaze.t[-1]) + 20_000)
+    source = RoiChunks(events)
+    views, _ = run_on_change(gaze, events, source=source, dither_px=20, sensor_roi=True, scene_motion=False)
+    assert views and source.rois
+    for x0, y0, w, h in source.rois:
+        assert (w, h) == (200, 140) and y0 == 360 - 50 - 20  # the window 20 px up to 20 px down
 
 
 def test_a_long_fixation_sends_its_view_every_view_every_ms() -> None:

@@ -275,7 +275,7 @@ def test_unknown_type(kind: object) -> None:
         decode(msgpack.packb({"type": kind, "seq": 1}), max_bytes=LIMIT)
 
 
-@pytest.mark.parametrize("version", [0, 4, "1", True])
+@pytest.mark.parametrize("version", [0, 5, "1", True])
 def test_wrong_protocol_version(version: object) -> None:
     with pytest.raises(VersionMismatchError) as caught:
         decode(_with("hello", v=version), max_bytes=LIMIT)
@@ -343,8 +343,8 @@ def test_invalid_messages_cannot_be_built() -> None:
         pack_mask(np.zeros((3,), np.uint8))
 
 
-def test_protocol_version_is_three_and_one_is_still_accepted() -> None:
-    assert PROTOCOL_VERSION == 3
+def test_protocol_version_is_four_and_one_is_still_accepted() -> None:
+    assert PROTOCOL_VERSION == 4
     assert decode(bytes.fromhex(GOLDEN["hello"]), max_bytes=LIMIT).v == 1
 
 
