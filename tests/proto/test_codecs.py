@@ -42,11 +42,17 @@ VALID = {
     "v2_view_zlib": View(seq=12, view_id=4, t0_us=1000000, t_us=1200000, frames=3, events_used=4800, shape=(4, 5),
                          n_levels=4, levels=LEVELS, enc="zlib", **GAZE),
     "v3_page_g4": Page(seq=10, page_id=2, t_us=2000000, shape=(4, 5), bits=SMALL_BITS, lines=((1, 1, 4, 3),), enc="g4"),
+    # version 4: a view may be larger than the fovea (the union of its frames' windows; the
+    # session checks its shape against hello.fovea, the message decodes as in version 2)
+    "v4_hello": Hello(device_id="glasses-01", session_id="s-0002", mode="frames", sensor=(1280, 720),
+                      fovea=(4, 5), token="k", v=4),
+    "v4_view_wide_zlib": View(seq=13, view_id=5, t0_us=1000000, t_us=1200000, frames=2, events_used=3200, shape=(6, 5),
+                              n_levels=4, levels=LEVELS + bytes([0, 2, 3, 2, 0, 0, 0, 1, 0, 0]), enc="zlib", **GAZE),
 }
 # zlib output is fixed for a given input and level; PNG bytes may differ between libpng builds,
 # so those fixtures are checked by decoding (and re-encoding round trips), not byte for byte
 # T.6 fixes every code of a G4 stream (libtiff ends it with EOFB), so the G4 page is byte exact too
-BYTE_EXACT = {"v2_hello", "v2_frame_zlib", "v2_view_zlib", "v3_page_g4"}
+BYTE_EXACT = {"v2_hello", "v2_frame_zlib", "v2_view_zlib", "v3_page_g4", "v4_hello", "v4_view_wide_zlib"}
 HOSTILE = {
     "hostile_frame_zlib_bomb": BadMaskError,  # 16 MiB of zeros declared as a 4 x 5 mask
     "hostile_frame_zlib_trailing": BadMaskError,
