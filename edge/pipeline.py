@@ -514,7 +514,7 @@ class Pipeline:
             self.metrics.add("views_split")
             self._send_view(arrival)
             self.fuser.add(frame, frame.events_used, frame.gaze_rad, frame.probability)
-        self.trigger.inferred(t, origin, self.fuser.last_score)
+        self.trigger.inferred(t, origin, self.fuser.last_score, self.fuser.last_doubt)
         self._since_infer = 0
         return True
 

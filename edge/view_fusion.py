@@ -111,6 +111,7 @@ class ViewFuser:
         self._gaze_sum = np.zeros(2)
         self._gaze_rad = (0.0, 0.0)
         self.last_score: float | None = None  # the newest frame's match onto the view (None: placed unmatched)
+        self.last_doubt: float | None = None  # how much the network doubted the newest frame (None: no probability given)
 
     def __len__(self) -> int:
         return self._frames
@@ -150,7 +151,8 @@ class ViewFuser:
             if found is None:
                 return None
             xy = found
-        soft = probability is not None and doubt(probability) <= self.max_doubt
+        self.last_doubt = doubt(probability) if probability is not None else None
+        soft = self.last_doubt is not None and self.last_doubt <= self.max_doubt
         self._accumulate(np.asarray(probability, np.float32) if soft else mask, xy)
         self._last, self._last_xy = frame, xy
         self._grow_box(xy, mask.shape)

@@ -4,9 +4,10 @@ The information arrives at fixation rate (about four a second when reading), not
 So nothing is inferred while the eye is in a saccade or a blink (the window moves and the voxels
 smear); during a fixation a frame is inferred when enough new events arrived or the window moved,
 at most every ``min_interval_ms`` while frames still change the view, and no more (within
-``settled_interval_ms``) once a frame agreed with it: at 100 lux two frames of a fixation register
-onto each other at 0.85-0.93 and a third adds nothing, while at low light noisy frames never agree
-and every window's worth of new events is inferred, as the every-window mode would. The frames of one fixation are fused into one view that is
+``settled_interval_ms``) once a frame the network was sure of agreed with it: at 100 lux two frames
+of a fixation register onto each other at 0.85-0.93 and a third adds nothing, while in dim light
+(and on small text) frames that agree are still noisy, so every window's worth of new events is
+inferred and averaged in, as the every-window mode would. The frames of one fixation are fused into one view that is
 sent when the fixation ends, and every ``view_every_ms`` during a long one.
 
 ``GazeGate`` feeds the tracker's rows (from the :class:`~darkread.edge.gaze.GazeLookup`, on the
@@ -106,9 +107,13 @@ class ViewTrigger:
             return t_us - fixation_start_us >= s.first_wait_ms * 1e3
         return t_us - self.last_infer_us >= self.interval_us()
 
-    def inferred(self, t_us: int, origin: tuple[int, int], match_score: float | None = None) -> None:
+    def inferred(self, t_us: int, origin: tuple[int, int], match_score: float | None = None, doubt: float | None = None) -> None:
         """An inference at ``t_us``; ``match_score``: how well its frame registered onto the view
-        (None: it started the view or was placed unmatched)."""
+        (None: it started the view or was placed unmatched); ``doubt``: how unsure the network was
+        of it (``view_fusion.doubt``). A frame agreeing with its view settles it only if the network
+        was sure of it (``settle_max_doubt``): a doubtful one (dim light, small text) agrees with
+        its view and is still noisy, and the view is better for every frame averaged in."""
         self.last_infer_us = int(t_us)
         self.last_origin = origin
-        self.settled = match_score is not None and match_score >= self.settings.settled_score
+        sure = doubt is None or doubt <= self.settings.settle_max_doubt
+        self.settled = sure and match_score is not None and match_score >= self.settings.settled_score

@@ -234,3 +234,17 @@ def test_once_a_frame_agrees_with_its_view_the_trigger_waits_longer() -> None:
     assert trigger.due(start + 424_000, start, 1600, 9000, (0, 0))
     trigger.reset()  # the next fixation starts afresh
     assert not trigger.settled
+
+
+def test_a_frame_the_network_doubted_does_not_settle_its_view() -> None:
+    """Dim light or small text: frames that agree with their view are still noisy, and the view
+    is better for every frame averaged in; only a frame the network was sure of settles it."""
+    trigger = ViewTrigger(PipelineConfig(infer="on-change", settled_score=0.85, settle_max_doubt=1.1))
+    start = 1_000_000
+    trigger.inferred(start, (0, 0), None, doubt=1.0)
+    trigger.inferred(start + 12_000, (0, 0), 0.93, doubt=1.8)  # agreed, but doubted (10 lux: ~1.6-2.2)
+    assert not trigger.settled and trigger.due(start + 24_000, start, 1600, 9000, (0, 0))
+    trigger.inferred(start + 24_000, (0, 0), 0.93, doubt=1.1)  # agreed and sure (100 lux: ~1.0-1.4)
+    assert trigger.settled and not trigger.due(start + 36_000, start, 1600, 9000, (0, 0))
+    trigger.inferred(start + 424_000, (0, 0), 0.93)  # no probability (fuse = "mask"): agreement alone settles
+    assert trigger.settled
