@@ -241,4 +241,6 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError(f"config [pipeline] fuse must be 'probability' or 'mask', not {config.pipeline.fuse!r}")
     if not 0 < config.pipeline.renew_fraction <= 1:
         raise ValueError(f"config [pipeline] renew_fraction is a share of a window's events: above 0, at most 1, not {config.pipeline.renew_fraction:g}")
+    if config.pipeline.dither_px < 0 or config.pipeline.settle_max_doubt <= 0:
+        raise ValueError("config [pipeline] dither_px must be >= 0 (0: a view's frames all in its window) and settle_max_doubt positive")
     return config

@@ -208,7 +208,7 @@ class Pipeline:
             self.gate = GazeGate(gaze)
             self.trigger = ViewTrigger(settings)
             # the canvas reaches as far as the head drifts, beyond both dithered windows
-            self._fuser_margin = MARGIN_PX + 2 * max(settings.dither_px, 0)
+            self._fuser_margin = MARGIN_PX + 2 * settings.dither_px
             self.fuser = ViewFuser(margin_px=self._fuser_margin)
             self.views_made = 0
             self._chunks = 0  # chunks not yet looked at by a processing step

@@ -33,7 +33,8 @@ def test_config_env_beats_file_and_types_are_checked(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     "text",
     ["[uplink]\nmode = 'video'\n", "[nosuch]\nx = 1\n", "[uplink]\nnosuch = 1\n", "not toml [",
-     "[pipeline]\nrenew_fraction = 0\n", "[pipeline]\nrenew_fraction = 1.5\n"],
+     "[pipeline]\nrenew_fraction = 0\n", "[pipeline]\nrenew_fraction = 1.5\n", "[pipeline]\ndither_px = -5\n",
+     "[pipeline]\nsettle_max_doubt = 0\n"],
 )
 def test_config_rejects_bad_files(tmp_path: Path, text: str) -> None:
     toml = tmp_path / "edge.toml"
