@@ -171,14 +171,16 @@ class ViewFuser:
         h, w = mask.shape
         px = int(round(self._last_xy[0])) + frame.origin[0] - self._last.origin[0]
         py = int(round(self._last_xy[1])) + frame.origin[1] - self._last.origin[1]
-        probability = self._sum / np.maximum(self._count, 1e-6)
-        if frame.mask.mean() < MIN_INK_FRACTION or float((probability >= 0.5).mean()) < MIN_INK_FRACTION:
+        # (ink where sum / count >= 1/2, without dividing the whole canvas)
+        view_ink = np.count_nonzero(self._sum >= 0.5 * np.maximum(self._count, 1e-6)) / self._sum.size
+        if frame.mask.mean() < MIN_INK_FRACTION or view_ink < MIN_INK_FRACTION:
             self.last_score = None
             return float(px), float(py)  # blank paper: nothing to correlate, nothing to blur
         r, m = self.radius, self.margin
         box = (px + m - r, py + m - r, w + 2 * r, h + 2 * r)
-        known = _crop(self._count, *box) > 0.5
-        found = register_frame(_crop(probability, *box), known.astype(np.float32), mask, r)
+        count = _crop(self._count, *box)
+        probability = _crop(self._sum, *box) / np.maximum(count, 1e-6)  # only the search box
+        found = register_frame(probability, (count > 0.5).astype(np.float32), mask, r)
         if found is None or found.score < MIN_SCORE or found.on_rim:
             return None
         self.last_score = float(found.score)
@@ -195,14 +197,21 @@ class ViewFuser:
 
     def _accumulate(self, mask: np.ndarray, xy: tuple[float, float]) -> None:
         """Add ``mask`` with its top-left at ``xy`` (first frame's coordinates; bilinear below a
-        pixel, as the stitcher does); what falls beyond the margin is left out."""
+        pixel, as the stitcher does); what falls beyond the margin is left out. Only the canvas
+        rows and columns the frame touches are resampled (a whole-pixel move of both the frame
+        and the output keeps every bilinear weight, so the sums are the same)."""
         assert self._sum is not None and self._count is not None  # noqa: S101
         h, w = mask.shape
-        move = np.array([[1.0, 0.0, xy[0] + self.margin], [0.0, 1.0, xy[1] + self.margin]], np.float32)
-        size = (self._sum.shape[1], self._sum.shape[0])
+        x, y = xy[0] + self.margin, xy[1] + self.margin
+        x0, y0 = max(int(np.floor(x)), 0), max(int(np.floor(y)), 0)
+        x1, y1 = min(int(np.floor(x)) + w + 1, self._sum.shape[1]), min(int(np.floor(y)) + h + 1, self._sum.shape[0])
+        if x0 >= x1 or y0 >= y1:
+            return
+        move = np.array([[1.0, 0.0, x - x0], [0.0, 1.0, y - y0]], np.float32)
+        size = (x1 - x0, y1 - y0)
         flags, border = cv2.INTER_LINEAR, cv2.BORDER_CONSTANT
-        self._sum += cv2.warpAffine(mask, move, size, flags=flags, borderMode=border, borderValue=0.0)
-        self._count += cv2.warpAffine(np.ones((h, w), np.float32), move, size, flags=flags, borderMode=border, borderValue=0.0)
+        self._sum[y0:y1, x0:x1] += cv2.warpAffine(mask, move, size, flags=flags, borderMode=border, borderValue=0.0)
+        self._count[y0:y1, x0:x1] += cv2.warpAffine(np.ones((h, w), np.float32), move, size, flags=flags, borderMode=border, borderValue=0.0)
 
     def view(self, view_id: int) -> ViewRecord:
         """The fused view so far: the union of its frames' windows (the fuser must hold a frame),

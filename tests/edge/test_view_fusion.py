@@ -142,3 +142,20 @@ def test_a_frame_the_network_doubted_all_over_is_averaged_as_its_mask() -> None:
     fuser.add(f, probability=foggy)
     np.testing.assert_array_equal(fuser.view(0).ink_probability(), f.mask.astype(np.float64))
     assert doubt(np.zeros((100, 200), np.float32)) == 0.0
+
+
+@pytest.mark.parametrize("xy", [(0.0, 0.0), (3.25, -1.5), (-6.75, 5.5), (9.5, 9.9), (-40.0, 0.0)])
+def test_a_frame_is_resampled_onto_the_canvas_as_a_whole_canvas_warp_would(xy: tuple[float, float]) -> None:
+    """Only the canvas rows and columns a frame touches are resampled: the same sums as warping
+    onto the whole canvas, at the margin's edge and beyond it too."""
+    import cv2
+
+    rng = np.random.default_rng(1)
+    fuser = ViewFuser(margin_px=8)
+    fuser.add(FrameRecord(0, 0, np.zeros((30, 40), np.uint8), (0, 0), (0.0, 0.0)))  # sets up the 46 x 56 canvas
+    before = fuser._sum.copy()
+    mask = rng.random((30, 40)).astype(np.float32)
+    fuser._accumulate(mask, xy)
+    move = np.array([[1.0, 0.0, xy[0] + 8], [0.0, 1.0, xy[1] + 8]], np.float32)
+    whole = cv2.warpAffine(mask, move, (56, 46), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+    np.testing.assert_allclose(fuser._sum - before, whole, atol=1e-6)
