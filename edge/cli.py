@@ -57,8 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--lossless", action="store_true", help="never skip windows: the reader waits for inference")
     run.add_argument(
         "--infer", choices=INFER_MODES,
-        help="every-window (default): infer every n_events foveated events and send every frame; on-change: infer "
-             "during fixations when the view changed and send one fused view per fixation (10x fewer bytes)",
+        help="on-change (default): infer during fixations when the view changed and send one fused view per "
+             "fixation (a tenth of the inferences and bytes); every-window: infer every n_events foveated events and send every frame",
     )
     run.add_argument("--metrics-port", type=int, metavar="PORT", help="serve Prometheus metrics on 127.0.0.1:PORT")
     run.add_argument("--drain-timeout", type=float, metavar="S", help="seconds to wait for acks at exit (default 30)")

@@ -41,7 +41,7 @@ class GazeConfig:
     depth_prior_m: float = 0.45
 
 
-INFER_MODES = ("every-window", "on-change")  # ``[pipeline] infer``: the first is the default
+INFER_MODES = ("on-change", "every-window")  # ``[pipeline] infer``: the first is the default
 FUSE_MODES = ("probability", "mask")  # ``[pipeline] fuse``: the first is the default
 
 

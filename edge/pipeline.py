@@ -10,7 +10,7 @@ jumps to the newest window and counts the windows it skipped; the ring is fixed-
 never grows with load. In ``lossless`` mode (offline replays) the reader thread reconstructs each
 window itself, so it waits for inference instead of skipping.
 
-That is the ``every-window`` mode (the default). ``on-change`` (``[pipeline] infer``) lets the gaze
+That is the ``every-window`` mode (for research and evaluation). ``on-change`` (``[pipeline] infer``, the default) lets the gaze
 decide (:mod:`darkread.edge.view_trigger`): every chunk the reader hands over is one processing
 step that feeds the gaze-event classifier; no inference during saccades and blinks; during a
 fixation one when enough new events arrived, at most every ``min_interval_ms`` until a frame agrees

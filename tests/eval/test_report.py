@@ -119,7 +119,8 @@ def test_cli_rebuilds_the_report_from_stored_results(tmp_path: Path) -> None:
         folder.mkdir(parents=True)
         (folder / "result.json").write_text(json.dumps(result))
     out = tmp_path / "report"
-    assert main(["eval", str(suite), "--report-only", "--out", str(out), "--note", "a second run gave 3.0%"]) == 0
+    assert main(["eval", str(suite), "--report-only", "--infer", "every-window", "--out", str(out),
+                 "--note", "a second run gave 3.0%"]) == 0
     md = (out / "README.md").read_text()
     assert "2 synthetic recordings" in md and "(cer_vs_lux.png)" in md
     assert "\n- a second run gave 3.0%\n" in md
