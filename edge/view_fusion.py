@@ -34,6 +34,7 @@ MARGIN_PX = 32  # the fused canvas reaches this far beyond the first frame's win
 # averaged in as its mask: measured 1.1-1.5 at 100 lux, ~1.55 at 30, ~2 at 10, 2-3 at 5 lux, where
 # the doubt is noise and the page comes from many overlapping views whose masks' majority is sharper
 MAX_DOUBT = 1.8
+MAX_GROWTH = 2  # a view is at most this many windows per side (the protocol's MAX_VIEW_GROWTH)
 MIN_INK_FRACTION = 0.003  # frames (or views) with less ink hold nothing to register: the sensor's offset places them
 
 
@@ -218,8 +219,13 @@ class ViewFuser:
         placed where the newest frame's window is at its time."""
         if self._first is None or self._last is None or self._sum is None or self._count is None:
             raise ValueError("no frame to fuse")
-        x0, y0, x1, y1 = self._box
         lx, ly = int(round(self._last_xy[0])), int(round(self._last_xy[1]))
+        h, w = self._last.mask.shape
+        x0, y0, x1, y1 = self._box
+        # at most MAX_GROWTH times a window per side, around the newest frame's (a long view's drift)
+        reach_x, reach_y = (MAX_GROWTH - 1) * w // 2, (MAX_GROWTH - 1) * h // 2
+        x0, y0 = max(x0, lx - reach_x), max(y0, ly - reach_y)
+        x1, y1 = min(x1, lx + w + reach_x), min(y1, ly + h + reach_y)
         m = self.margin
         count = _crop(self._count, x0 + m, y0 + m, x1 - x0, y1 - y0)
         probability = np.where(count > 0.5, _crop(self._sum, x0 + m, y0 + m, x1 - x0, y1 - y0) / np.maximum(count, 1e-6), 0.0)

@@ -159,3 +159,21 @@ def test_a_frame_is_resampled_onto_the_canvas_as_a_whole_canvas_warp_would(xy: t
     move = np.array([[1.0, 0.0, xy[0] + 8], [0.0, 1.0, xy[1] + 8]], np.float32)
     whole = cv2.warpAffine(mask, move, (56, 46), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
     np.testing.assert_allclose(fuser._sum - before, whole, atol=1e-6)
+
+
+def test_a_view_never_outgrows_what_the_protocol_accepts() -> None:
+    """However far a long view's frames drift, it stays within MAX_VIEW_GROWTH windows per side
+    around its newest frame (the cloud closes a session over a larger one)."""
+    from darkread.edge.view_fusion import MAX_GROWTH
+    from darkread.proto.messages import MAX_VIEW_GROWTH
+
+    assert MAX_GROWTH == MAX_VIEW_GROWTH
+    page = np.zeros((400, 400), np.uint8)
+    page[:140, :320] = page_of_text()
+    page[140:280, :320] = page_of_text(seed=4)
+    fuser = ViewFuser(margin_px=200)
+    for i, y in enumerate(range(0, 180, 20)):  # the text drifts 20 px a frame: 160 px over the view
+        assert fuser.add(frame(page, 40, y, i, (400, 200 + y))) is not None
+    view = fuser.view(0)
+    # the frames reach 160 px above the newest one; the view keeps half a window of that
+    assert view.levels.shape == (150, 200) and view.origin == (400, 200 + 160 - 50)
