@@ -199,7 +199,7 @@ class StreamConnection:
         if isinstance(message, Frame | View):  # a fixation's fused view: stored with its levels and frame count
             if self.hello.mode != "frames":
                 raise UnexpectedMessageError(f"{message.TYPE} received but hello.mode is 'pages'")
-            check_view_shape(message, tuple(self.hello.fovea), self.hello.v)
+            check_view_shape(message, self.hello.fovea, self.hello.v)
             return _Pending(asyncio.ensure_future(store.add_frame(session_id, stored_frame(message))), "frame", session_id)
         if isinstance(message, Page):
             if self.hello.mode != "pages":

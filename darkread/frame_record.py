@@ -15,6 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+MAX_VIEW_GROWTH = 2
+"""A fused view is the union of its frames' windows: at most this many windows per side (the
+glasses cut it so, protocol version 4 refuses larger ones)."""
+
 
 @dataclass(frozen=True)
 class FrameRecord:

@@ -208,8 +208,7 @@ class Pipeline:
             self.gate = GazeGate(gaze)
             self.trigger = ViewTrigger(settings)
             # the canvas reaches as far as the head drifts, beyond both dithered windows
-            self._fuser_margin = MARGIN_PX + 2 * settings.dither_px
-            self.fuser = ViewFuser(margin_px=self._fuser_margin)
+            self.fuser = ViewFuser(margin_px=MARGIN_PX + 2 * settings.dither_px)
             self.views_made = 0
             self._chunks = 0  # chunks not yet looked at by a processing step
             self._fixation: int | None = None  # the current fixation's key (its first row, event clock)
@@ -549,7 +548,7 @@ class Pipeline:
 
     def _send_view(self, arrival: float) -> None:
         view = self.fuser.view(self.views_made)
-        self.fuser = ViewFuser(self.fuser.n_levels, self.fuser.radius, self._fuser_margin, self.fuser.max_doubt)
+        self.fuser = self.fuser.fresh()
         self._view_origin = None
         self.views_made += 1
         self.metrics.add("views")

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from darkread.frame_record import FrameRecord, threshold_levels
+from darkread.frame_record import MAX_VIEW_GROWTH, FrameRecord, threshold_levels
 from darkread.stitch.register import register_frame
 
 N_LEVELS = 8  # the mean of up to ~7 frames to within half a step; few levels compress well in a PNG
@@ -34,7 +34,6 @@ MARGIN_PX = 32  # the fused canvas reaches this far beyond the first frame's win
 # averaged in as its mask: measured 1.1-1.5 at 100 lux, ~1.55 at 30, ~2 at 10, 2-3 at 5 lux, where
 # the doubt is noise and the page comes from many overlapping views whose masks' majority is sharper
 MAX_DOUBT = 1.8
-MAX_GROWTH = 2  # a view is at most this many windows per side (the protocol's MAX_VIEW_GROWTH)
 MIN_INK_FRACTION = 0.003  # frames (or views) with less ink hold nothing to register: the sensor's offset places them
 
 
@@ -50,13 +49,7 @@ class ViewRecord(FrameRecord):
     def to_message(self, enc: str = "png"):  # noqa: ANN201 - proto stays a lazy import
         from darkread.proto.messages import View
 
-        levels = np.ascontiguousarray(self.levels, dtype=np.uint8)
-        return View(
-            seq=0, view_id=self.frame_id, t0_us=self.t0_us, t_us=self.t_us, origin=self.origin,
-            gaze_px=self.gaze_px, gaze_rad=self.gaze_rad, frames=self.frames, events_used=self.events_used,
-            shape=(int(levels.shape[0]), int(levels.shape[1])), n_levels=self.n_levels, levels=levels.tobytes(), enc=enc,
-            scene_px=self.scene_px,
-        )
+        return View.of(self, t0_us=self.t0_us, gaze_rad=self.gaze_rad, events_used=self.events_used, enc=enc)
 
 
 def quantise(probability: np.ndarray, n_levels: int = N_LEVELS) -> np.ndarray:
@@ -116,6 +109,10 @@ class ViewFuser:
 
     def __len__(self) -> int:
         return self._frames
+
+    def fresh(self) -> ViewFuser:
+        """An empty fuser with the same settings (the next view)."""
+        return ViewFuser(self.n_levels, self.radius, self.margin, self.max_doubt)
 
     @property
     def t0_us(self) -> int:
@@ -222,8 +219,8 @@ class ViewFuser:
         lx, ly = int(round(self._last_xy[0])), int(round(self._last_xy[1]))
         h, w = self._last.mask.shape
         x0, y0, x1, y1 = self._box
-        # at most MAX_GROWTH times a window per side, around the newest frame's (a long view's drift)
-        reach_x, reach_y = (MAX_GROWTH - 1) * w // 2, (MAX_GROWTH - 1) * h // 2
+        # at most MAX_VIEW_GROWTH windows per side, around the newest frame's (a long view's drift)
+        reach_x, reach_y = (MAX_VIEW_GROWTH - 1) * w // 2, (MAX_VIEW_GROWTH - 1) * h // 2
         x0, y0 = max(x0, lx - reach_x), max(y0, ly - reach_y)
         x1, y1 = min(x1, lx + w + reach_x), min(y1, ly + h + reach_y)
         m = self.margin

@@ -22,7 +22,7 @@ from typing import Any, ClassVar, Literal, TypeAlias
 import msgpack
 import numpy as np
 
-from darkread.frame_record import FrameRecord, threshold_levels
+from darkread.frame_record import MAX_VIEW_GROWTH, FrameRecord, threshold_levels
 from darkread.mask_bits import pack_bits, packed_length, unpack_bits
 
 from .codecs import LEVEL_ENCODINGS, MASK_ENCODINGS, compress_bits, compress_levels, decompress_bits, decompress_levels
@@ -39,7 +39,6 @@ from .errors import (
 PROTOCOL_VERSION = 4
 SUPPORTED_VERSIONS = (1, 2, 3, 4)  # what a server accepts in hello.v (and answers in welcome.v)
 WIDE_VIEW_VERSION = 4  # from this version a view may be larger than hello.fovea (up to MAX_VIEW_GROWTH per side)
-MAX_VIEW_GROWTH = 2
 MAX_LEVELS = 16  # grey levels of a view
 DEFAULT_MAX_MESSAGE_BYTES = 4 * 1024 * 1024
 MAX_MASK_PIXELS = 16 * 1024 * 1024  # 16 Mpx: a stitched page of 4096 x 4096 fits
@@ -382,6 +381,23 @@ class View(_Checked):
     levels: bytes = _spec(_bytes, repr=False)  # one level index per pixel, row-major (decoded form)
     enc: str = _spec(_choice(LEVEL_ENCODINGS), "png")
     scene_px: tuple[float, float] | None = _spec(_optional(_pair_float), None)  # the scene's motion so far, sensor px
+
+    @classmethod
+    def of(
+        cls, record: FrameRecord, *, seq: int = 0, t0_us: int | None = None, gaze_rad: tuple[float, float] = (0.0, 0.0),
+        events_used: int = 0, enc: str = "png",
+    ) -> View:
+        """The wire message carrying the fused ``record`` (it has ``levels``); ``t0_us``, its first
+        frame's time, defaults to ``record.t_us`` (``seq`` is assigned by the uplink)."""
+        if record.levels is None:
+            raise BadMaskError(f"record {record.frame_id} has no grey levels: it is a binary frame, not a view")
+        levels = np.ascontiguousarray(record.levels, dtype=np.uint8)
+        return cls(
+            seq=seq, view_id=record.frame_id, t0_us=record.t_us if t0_us is None else t0_us, t_us=record.t_us,
+            origin=record.origin, gaze_px=record.gaze_px, gaze_rad=gaze_rad, frames=record.frames, events_used=events_used,
+            shape=(int(levels.shape[0]), int(levels.shape[1])), n_levels=record.n_levels, levels=levels.tobytes(), enc=enc,
+            scene_px=record.scene_px,
+        )
 
     def ink(self) -> np.ndarray:
         """uint8 [rows, cols] level indices, 0 (paper) .. n_levels - 1 (surely ink)."""

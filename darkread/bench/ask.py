@@ -89,14 +89,8 @@ def repeated(frames: list[StoredFrame], count: int, first_seq: int = 0) -> list[
 def to_wire(frame: StoredFrame) -> bytes:
     """The stored record as the glasses sent it: a fused view with its levels (it may be larger
     than the fovea), or a binary frame."""
-    if frame.levels is None:
-        return encode(Frame.of(frame, seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used))
-    levels = np.ascontiguousarray(frame.levels, dtype=np.uint8)
-    return encode(View(
-        seq=frame.seq, view_id=frame.frame_id, t0_us=frame.t_us, t_us=frame.t_us, origin=frame.origin, gaze_px=frame.gaze_px,
-        gaze_rad=frame.gaze_rad, frames=frame.frames, events_used=frame.events_used, shape=levels.shape,
-        n_levels=frame.n_levels, levels=levels.tobytes(), scene_px=frame.scene_px,
-    ))
+    extra = {"seq": frame.seq, "gaze_rad": frame.gaze_rad, "events_used": frame.events_used}
+    return encode(Frame.of(frame, **extra) if frame.levels is None else View.of(frame, **extra))
 
 
 def preload(data_dir: Path, session_id: str, frames: list[StoredFrame]) -> None:

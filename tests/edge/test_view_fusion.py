@@ -164,10 +164,8 @@ def test_a_frame_is_resampled_onto_the_canvas_as_a_whole_canvas_warp_would(xy: t
 def test_a_view_never_outgrows_what_the_protocol_accepts() -> None:
     """However far a long view's frames drift, it stays within MAX_VIEW_GROWTH windows per side
     around its newest frame (the cloud closes a session over a larger one)."""
-    from darkread.edge.view_fusion import MAX_GROWTH
-    from darkread.proto.messages import MAX_VIEW_GROWTH
+    from darkread.proto.messages import WIDE_VIEW_VERSION, check_view_shape
 
-    assert MAX_GROWTH == MAX_VIEW_GROWTH
     page = np.zeros((400, 400), np.uint8)
     page[:140, :320] = page_of_text()
     page[140:280, :320] = page_of_text(seed=4)
@@ -177,3 +175,4 @@ def test_a_view_never_outgrows_what_the_protocol_accepts() -> None:
     view = fuser.view(0)
     # the frames reach 160 px above the newest one; the view keeps half a window of that
     assert view.levels.shape == (150, 200) and view.origin == (400, 200 + 160 - 50)
+    check_view_shape(view.to_message(), (100, 200), WIDE_VIEW_VERSION)  # what the cloud accepts

@@ -213,3 +213,15 @@ def test_random_compressed_bits_raise_only_bad_mask(data: bytes, enc: str) -> No
         assert exc.close_code == CloseCode.BAD_MASK
         return
     assert len(bits) == len(pack_bits(np.zeros((8, 8))))
+
+
+def test_view_of_carries_a_fused_record_and_refuses_a_binary_one() -> None:
+    from darkread.frame_record import FrameRecord
+
+    levels = np.frombuffer(LEVELS, np.uint8).reshape(4, 5)
+    record = FrameRecord(3, 1200000, (levels >= 2).astype(np.uint8), GAZE["origin"], GAZE["gaze_px"],
+                         levels=levels, n_levels=4, frames=3)
+    view = View.of(record, seq=11, t0_us=1000000, gaze_rad=GAZE["gaze_rad"], events_used=4800)
+    assert view == VALID["v2_view_png"]
+    with pytest.raises(BadMaskError, match="binary frame, not a view"):
+        View.of(FrameRecord(3, 0, np.zeros((4, 5), np.uint8), (0, 0), (0.0, 0.0)))
