@@ -80,6 +80,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ds.add_argument("--lux", type=float, nargs=2, metavar=("LOW", "HIGH"),
                     help="light at the page, log-uniform between LOW and HIGH lux (default: the training range, "
                          "4 1200; e.g. 4 40 for a low-light set to mix into training)")
+    ds.add_argument("--target-time", choices=("end", "evidence"), default="end",
+                    help="when each target shows the page: end (the window's newest event, default) or evidence "
+                         "(the time, up to 60 ms earlier, its events match best: in the dark events trail the page)")
     ds.set_defaults(func=_dataset)
 
 
@@ -94,6 +97,7 @@ def _dataset(args: argparse.Namespace) -> int:
         split=args.split,
         held_out=args.held_out,
         shard_size=args.shard_size,
+        target_time=args.target_time,
         **({"lux_range": (args.lux[0], args.lux[1])} if args.lux else {}),
     )
     print(f"{manifest['samples']} samples in {len(manifest['shards'])} shards -> {args.out} "

@@ -35,10 +35,16 @@ SAMPLES_PER_PAGE = 8
 SHARD_SIZE = 250
 MAX_WINDOW_S = 0.5  # give up collecting events after this much simulated time
 SHARD_FORMAT_VERSION = 1
+# When a training target is drawn. "end": the ink at the window's newest event. "evidence": the
+# ink at the time its events show best; in the dark the photoreceptor lags and a window spans more
+# time, so the events trail the page by 10-30 ms and a target at the newest event teaches a blur.
+TARGET_TIMES: tuple[str, ...] = ("end", "evidence")
+EVIDENCE_LAGS_MS = np.arange(0.0, 60.1, 2.5)  # the lags searched for the evidence time
 
 
 # Per-sample arrays of a shard besides voxels and targets (what ``write_shard`` writes).
-METADATA_KEYS: tuple[str, ...] = ("lux", "xheight_px", "motion", "font", "kind", "seed", "window_origin", "t_end_us", "n_events")
+METADATA_KEYS: tuple[str, ...] = ("lux", "xheight_px", "motion", "font", "kind", "seed", "window_origin", "t_end_us", "n_events",
+                                  "target_lag_us")
 
 
 @dataclass
@@ -53,6 +59,7 @@ class SampleMeta:
     y0: int
     t_end_us: int
     n_events: int
+    target_lag_us: int = 0  # the target shows the ink this long before t_end (0: at t_end)
 
 
 def simulate_window(
@@ -91,6 +98,43 @@ def simulate_window(
     return events, t
 
 
+def event_image(events: np.ndarray, x0: int, y0: int, shape: tuple[int, int]) -> np.ndarray:
+    """Events per pixel of the window at (x0, y0), both polarities, lightly blurred (float32 [h, w])."""
+    import cv2
+
+    image = np.zeros(shape, np.float32)
+    np.add.at(image, (events["y"].astype(np.intp) - y0, events["x"].astype(np.intp) - x0), 1.0)
+    return cv2.GaussianBlur(image, (0, 0), 1.0)
+
+
+def ink_edges(mask: np.ndarray) -> np.ndarray:
+    """Where a moving print makes events: the ink mask's outline, lightly blurred (float32)."""
+    import cv2
+
+    edge = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
+    return cv2.GaussianBlur(edge.astype(np.float32), (0, 0), 1.0)
+
+
+def best_lag(evidence: np.ndarray, edge_maps: np.ndarray) -> int:
+    """Index of the edge map [k, h, w] that correlates best with the event image (0 on a tie or a
+    flat window: no evidence of a lag is no lag)."""
+    a = (evidence - evidence.mean()).ravel()
+    b = edge_maps.reshape(len(edge_maps), -1)
+    b = b - b.mean(axis=1, keepdims=True)
+    score = (b @ a) / (np.sqrt((b * b).sum(axis=1) * float(a @ a)) + 1e-9)
+    if np.ptp(score) < 1e-3:
+        return 0
+    return int(np.argmax(score))
+
+
+def evidence_target(scene: Scene, region: Region, events: np.ndarray, t_end: float) -> tuple[np.ndarray, float]:
+    """(ink mask, lag s): the window's ink at the time its events match best, searched over
+    ``EVIDENCE_LAGS_MS`` before ``t_end``."""
+    masks = [scene.ink_mask(region, t_end - lag * 1e-3) for lag in EVIDENCE_LAGS_MS]
+    k = best_lag(event_image(events, region.x0, region.y0, masks[0].shape), np.stack([ink_edges(m) for m in masks]))
+    return masks[k], float(EVIDENCE_LAGS_MS[k]) * 1e-3
+
+
 def gaze_window_origin(session: Session, scene: Scene, t_s: float, rng: np.random.Generator) -> tuple[int, int]:
     """Window origin from a noisy, late gaze estimate (tracker bias + noise, sometimes far off)."""
     tr = session.tracker
@@ -108,10 +152,14 @@ def gaze_window_origin(session: Session, scene: Scene, t_s: float, rng: np.rando
 
 
 def make_samples(
-    spec: SessionSpec, seed: int, n: int, *, lux: float | None = None, lux_range: tuple[float, float] = LUX_RANGE
+    spec: SessionSpec, seed: int, n: int, *, lux: float | None = None, lux_range: tuple[float, float] = LUX_RANGE,
+    target_time: str = "end",
 ) -> tuple[np.ndarray, np.ndarray, list[SampleMeta]]:
     """``n`` samples from one page session: voxels float16 [n,4,100,200], targets uint8 [n,100,200];
-    each sample's light is ``lux``, else the spec's, else log-uniform over ``lux_range``."""
+    each sample's light is ``lux``, else the spec's, else log-uniform over ``lux_range``; each
+    target is the ink at ``target_time`` (``TARGET_TIMES``). The windows and voxels do not depend on it."""
+    if target_time not in TARGET_TIMES:
+        raise ValueError(f"unknown target time {target_time!r}; use one of {', '.join(TARGET_TIMES)}")
     session = make_session(spec, seed)
     rng = np.random.default_rng([seed, 1])
     voxels = np.zeros((n, VOXEL.bins, VOXEL.height, VOXEL.width), dtype=np.float16)
@@ -125,8 +173,12 @@ def make_samples(
         x0, y0 = gaze_window_origin(session, scene, t_s, rng)
         region = Region.of(scene.calib, x0, y0, FOVEA.width, FOVEA.height)
         events, t_end = simulate_window(scene, params, region, t_s, rng)
-        voxels[i] = voxel_grid(events[-N_EVENTS:], x0, y0, VOXEL).astype(np.float16)  # region events: all inside
-        targets[i] = scene.ink_mask(region, t_end)
+        window = events[-N_EVENTS:]
+        voxels[i] = voxel_grid(window, x0, y0, VOXEL).astype(np.float16)  # region events: all inside
+        if target_time == "evidence":
+            targets[i], lag_s = evidence_target(scene, region, window, t_end)
+        else:
+            targets[i], lag_s = scene.ink_mask(region, t_end), 0.0
         metas.append(
             SampleMeta(
                 lux=float(sample_lux),
@@ -139,6 +191,7 @@ def make_samples(
                 y0=int(y0),
                 t_end_us=int(round(t_end * 1e6)),
                 n_events=int(events.size),
+                target_lag_us=int(round(lag_s * 1e6)),
             )
         )
     return voxels, targets, metas
@@ -165,6 +218,7 @@ def write_shard(path: Path, voxels: np.ndarray, targets: np.ndarray, metas: list
         window_origin=np.array([[m.x0, m.y0] for m in metas], dtype=np.int32).reshape(-1, 2),
         t_end_us=np.array(cols["t_end_us"], dtype=np.int64),
         n_events=np.array(cols["n_events"], dtype=np.int32),
+        target_lag_us=np.array(cols["target_lag_us"], dtype=np.int64),
     )
 
 
@@ -174,16 +228,17 @@ def shard_seed(base_seed: int, split: str, held_out: bool, shard_index: int, pag
     return int(ss.generate_state(1, dtype=np.uint32)[0])
 
 
-def build_shard(args: tuple[Path, int, int, int, str, bool, tuple[float, float]]) -> dict:
+def build_shard(args: tuple[Path, int, int, int, str, bool, tuple[float, float], str]) -> dict:
     """Make shard ``index`` with ``count`` samples (a multiprocessing task)."""
-    out_dir, index, count, base_seed, split, held_out, lux_range = args
+    out_dir, index, count, base_seed, split, held_out, lux_range, target_time = args
     t0 = time.perf_counter()
     spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0)
     parts_v, parts_t, metas = [], [], []
     page = 0
     while len(metas) < count:
         k = min(SAMPLES_PER_PAGE, count - len(metas))
-        v, t, m = make_samples(spec, shard_seed(base_seed, split, held_out, index, page), k, lux_range=lux_range)
+        v, t, m = make_samples(spec, shard_seed(base_seed, split, held_out, index, page), k, lux_range=lux_range,
+                               target_time=target_time)
         parts_v.append(v)
         parts_t.append(t)
         metas.extend(m)
@@ -226,9 +281,13 @@ def build_dataset(
     shard_size: int = SHARD_SIZE,
     progress: bool = True,
     lux_range: tuple[float, float] = LUX_RANGE,
+    target_time: str = "end",
 ) -> dict:
     """Write ``samples`` samples as shards plus ``dataset.json``; deterministic for ``seed`` (any worker count).
-    ``lux_range``: the light, log-uniform between the two (a low-light set for the dark end, say 4..40)."""
+    ``lux_range``: the light, log-uniform between the two (a low-light set for the dark end, say 4..40);
+    ``target_time``: when each target shows the page (``TARGET_TIMES``)."""
+    if target_time not in TARGET_TIMES:
+        raise ValueError(f"--target-time {target_time!r}: use one of {', '.join(TARGET_TIMES)}")
     if samples < 1:
         raise ValueError("--samples must be at least 1")
     lo, hi = (float(v) for v in lux_range)
@@ -240,7 +299,8 @@ def build_dataset(
     out.mkdir(parents=True, exist_ok=True)
     n_shards = math.ceil(samples / shard_size)
     tasks = [
-        (out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out), (lo, hi)) for i in range(n_shards)
+        (out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out), (lo, hi), target_time)
+        for i in range(n_shards)
     ]
     todo = [t for t in tasks if not (out / f"shard-{t[1]:05d}.npz").exists()]
     t0 = time.perf_counter()
@@ -281,7 +341,10 @@ def build_dataset(
         "voxel": {"bins": VOXEL.bins, "n_events": N_EVENTS, "height": VOXEL.height, "width": VOXEL.width,
                   "normalize": VOXEL.normalize},
         "fovea": asdict(FOVEA),
-        "target": "uint8 1 = ink, 0 = paper; ideal ink mask warped into the window at t_end; np.packbits on axis -1",
+        "target": "uint8 1 = ink, 0 = paper; ideal ink mask warped into the window at "
+                  + ("t_end" if target_time == "end" else "t_end - target_lag_us, the lag its events match best")
+                  + "; np.packbits on axis -1",
+        "target_time": target_time,
         "parameters": {
             "lux": f"log-uniform {lo:g}..{hi:g}",
             "motion": {"still": 0.3, "normal": 0.5, "walking": 0.2},

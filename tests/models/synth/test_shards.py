@@ -7,7 +7,9 @@ import numpy as np
 from darkread.models.train.data import iter_shards, load_dataset
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES, faces_for
 from darkread.models.synth.session import SessionSpec
-from darkread.models.synth.shards import build_dataset, make_samples
+import pytest
+
+from darkread.models.synth.shards import EVIDENCE_LAGS_MS, best_lag, build_dataset, ink_edges, make_samples
 
 
 def test_samples_are_deterministic_for_a_seed():
@@ -29,6 +31,30 @@ def test_sample_shapes_and_target_convention():
     assert targets.mean() < 0.5  # ink is the minority class (1 = ink)
     assert all(m.n_events >= 1600 for m in metas)
     assert np.count_nonzero(voxels[0]) > 500
+
+
+def test_best_lag_finds_the_edges_the_events_show():
+    mask = np.zeros((100, 200), np.uint8)
+    mask[40:60, 50:58] = mask[40:60, 90:120] = 1
+    maps = np.stack([ink_edges(np.roll(mask, k, axis=1)) for k in range(6)])  # the print moving right
+    for k in range(6):
+        assert best_lag(ink_edges(np.roll(mask, k, axis=1)), maps) == k
+    assert best_lag(np.zeros((100, 200), np.float32), maps) == 0  # no events: no evidence of a lag
+    assert best_lag(ink_edges(mask), np.stack([ink_edges(mask)] * 3)) == 0  # a still print: no lag
+
+
+def test_evidence_targets_keep_the_windows_and_lag_in_the_dark():
+    spec = SessionSpec(duration_s=2.0, xheight_px=10.0, lux=6.0, motion="walking")
+    end = make_samples(spec, 5, 6)
+    evidence = make_samples(spec, 5, 6, target_time="evidence")
+    np.testing.assert_array_equal(end[0], evidence[0])  # same windows, same voxels
+    lags = np.array([m.target_lag_us for m in evidence[2]])
+    assert all(m.target_lag_us == 0 for m in end[2])
+    assert lags.max() <= EVIDENCE_LAGS_MS[-1] * 1e3 and lags.mean() > 5_000  # events trail the page in the dark
+    moved = [i for i, lag in enumerate(lags) if lag > 0]
+    assert any(not np.array_equal(end[1][i], evidence[1][i]) for i in moved)
+    with pytest.raises(ValueError, match="target time"):
+        make_samples(spec, 5, 1, target_time="later")
 
 
 def test_font_split_is_disjoint():
