@@ -29,7 +29,7 @@ def create_backend(settings: Settings) -> OcrBackend:
         else:
             from .rapid import RapidOcrBackend
 
-            engine = RapidOcrBackend()
+            engine = RapidOcrBackend(engines=settings.ocr_threads)  # one per thread reading pages
         if not settings.ocr_lexicon:
             return engine
         from .lexicon import LexiconCorrected

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import queue
 import threading
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -15,7 +18,7 @@ log = logging.getLogger(__name__)
 
 # Bundled PP-OCR det/rec models only (others download at run time). The angle classifier is
 # off: on upright text it flips lines 180 degrees. One thread per session: on small CPUs ORT
-# with two threads is bimodal, one is stable; scale with processes instead.
+# with two threads is bimodal, one is stable; scale with engines, one per OCR thread, instead.
 RAPIDOCR_PARAMS: dict[str, Any] = {
     "Global.use_cls": False,
     "Global.log_level": "warning",
@@ -29,41 +32,69 @@ RAPIDOCR_PARAMS: dict[str, Any] = {
 
 
 class RapidOcrBackend:
+    """``engines`` independent engines, one per thread reading at once (an engine is not safe to
+    call from two threads at once, and one engine would read one page at a time however many
+    cores the service has); each has its own models in memory (tens of MB)."""
+
     name = "rapidocr"
 
-    def __init__(self, params: dict[str, Any] | None = None) -> None:
+    def __init__(self, params: dict[str, Any] | None = None, engines: int = 1) -> None:
+        if engines < 1:
+            raise ValueError(f"engines must be at least 1, not {engines}")
         self._params = {**RAPIDOCR_PARAMS, **(params or {})}
-        self._engine: Any = None
-        self._lock = threading.Lock()  # the engine is not safe to call from two threads at once
+        self.engines = engines
+        self._idle: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._made = 0
+        self._making = threading.Lock()
 
-    def _load(self) -> Any:
-        if self._engine is None:
-            try:
-                from rapidocr import RapidOCR
-            except ImportError as exc:
-                raise OcrUnavailableError(
-                    "rapidocr is not installed (pip install 'rapidocr>=3' onnxruntime)", backend=self.name
-                ) from exc
-            engine = RapidOCR(params=self._params)
-            # rapidocr 3 loads its models on first use: a second and more on the first question
-            # (and its CPU counted against it); ``ready`` loads them now
-            for load in ("_load_det_model", "_load_rec_model"):
-                getattr(engine, load, lambda: None)()
-            self._engine = engine
-        return self._engine
+    def _new_engine(self) -> Any:
+        try:
+            from rapidocr import RapidOCR
+        except ImportError as exc:
+            raise OcrUnavailableError(
+                "rapidocr is not installed (pip install 'rapidocr>=3' onnxruntime)", backend=self.name
+            ) from exc
+        engine = RapidOCR(params=self._params)
+        # rapidocr 3 loads its models on first use: a second and more on the first question
+        # (and its CPU counted against it); ``ready`` loads them now
+        for load in ("_load_det_model", "_load_rec_model"):
+            getattr(engine, load, lambda: None)()
+        return engine
+
+    def _make_one(self) -> Any | None:
+        """A new engine if fewer than ``engines`` exist, else None."""
+        with self._making:
+            if self._made >= self.engines:
+                return None
+            engine = self._new_engine()
+            self._made += 1
+            return engine
 
     def ready(self) -> bool:
+        """Loads every engine now, so no question pays for it."""
         try:
-            with self._lock:
-                self._load()
+            while (engine := self._make_one()) is not None:
+                self._idle.put(engine)
         except OcrError:
             return False
         return True
 
+    @contextlib.contextmanager
+    def _engine(self) -> Iterator[Any]:
+        """An idle engine (made if there are fewer than ``engines``, else waited for), for one call."""
+        try:
+            engine = self._idle.get_nowait()
+        except queue.Empty:
+            engine = self._make_one() or self._idle.get()
+        try:
+            yield engine
+        finally:
+            self._idle.put(engine)
+
     def read(self, image: np.ndarray) -> OcrResult:
         array = check_image(image, self.name)
-        with self._lock:
-            output = self._load()(array)
+        with self._engine() as engine:
+            output = engine(array)
         if output.txts is None or output.boxes is None:
             return OcrResult(text="", lines=[])
         lines = []

@@ -50,9 +50,40 @@ def test_rapidocr_reads_a_clean_line_at_x_height_10(rapid: RapidOcrBackend) -> N
 def test_ready_loads_the_models_so_the_first_question_does_not() -> None:
     """rapidocr 3 loads its detection and recognition models on first use; ``ready`` (the
     service's warm-up and /readyz) must do it, or the first ask pays a second or more for it."""
-    backend = RapidOcrBackend()
+    backend = RapidOcrBackend(engines=2)
     assert backend.ready()
-    assert backend._engine.text_det is not None and backend._engine.text_rec is not None
+    with backend._engine() as first, backend._engine() as second:
+        assert first is not second  # both made by ready, none waits for the other
+        assert all(e.text_det is not None and e.text_rec is not None for e in (first, second))
+
+
+def test_engines_read_in_parallel_threads_and_each_right() -> None:
+    import threading
+
+    backend = RapidOcrBackend(engines=2)
+    lines = {text: render_line(text, 10) for text in ("reading in the dark", "with event cameras")}
+    got: dict[str, list[str]] = {text: [] for text in lines}
+    barrier = threading.Barrier(2)
+
+    def read(text: str) -> None:
+        barrier.wait()
+        for _ in range(3):
+            got[text].append(" ".join(backend.read(lines[text]).text.split()))
+
+    threads = [threading.Thread(target=read, args=(text,)) for text in lines]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert got == {text: [text] * 3 for text in lines}
+    assert backend._made == 2
+
+
+def test_the_service_makes_one_engine_per_ocr_thread() -> None:
+    backend = create_backend(Settings(_env_file=None, ocr_threads=3, ocr_lexicon=False))  # type: ignore[call-arg]
+    assert isinstance(backend, RapidOcrBackend) and backend.engines == 3
+    with pytest.raises(ValueError, match="at least 1"):
+        RapidOcrBackend(engines=0)
 
 
 def test_rapidocr_reads_two_lines_in_order(rapid: RapidOcrBackend) -> None:
