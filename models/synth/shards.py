@@ -14,6 +14,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from darkread.edge.config import PipelineConfig
@@ -100,8 +101,6 @@ def simulate_window(
 
 def event_image(events: np.ndarray, x0: int, y0: int, shape: tuple[int, int]) -> np.ndarray:
     """Events per pixel of the window at (x0, y0), both polarities, lightly blurred (float32 [h, w])."""
-    import cv2
-
     image = np.zeros(shape, np.float32)
     np.add.at(image, (events["y"].astype(np.intp) - y0, events["x"].astype(np.intp) - x0), 1.0)
     return cv2.GaussianBlur(image, (0, 0), 1.0)
@@ -109,8 +108,6 @@ def event_image(events: np.ndarray, x0: int, y0: int, shape: tuple[int, int]) ->
 
 def ink_edges(mask: np.ndarray) -> np.ndarray:
     """Where a moving print makes events: the ink mask's outline, lightly blurred (float32)."""
-    import cv2
-
     edge = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
     return cv2.GaussianBlur(edge.astype(np.float32), (0, 0), 1.0)
 
