@@ -10,7 +10,10 @@ waits for at most one frame, then for the frames stored before it only as long a
 ``catch_up_s``, and otherwise answers from the page as stitched so far (its version says how
 far). While a question is being rendered and read, stitching of every session pauses (at most
 ``questions_first_s`` per batch, so it never starves): on a busy host the OCR of an answer
-otherwise shared the cores with a stitching backlog that no answer waits for. Sessions idle for
+otherwise shared the cores with a stitching backlog that no answer waits for. A session that a
+question is waiting for is the exception: its stitching is what that answer waits for, so it
+goes on (with many wearers asking, some question is always being read, and every question then
+waited its whole ``catch_up_s`` for stitching that had paused for the others). Sessions idle for
 ``live_idle_s`` are dropped from memory (rebuilt when asked again).
 """
 
@@ -79,6 +82,8 @@ class SessionPages:
         self.subscribers: set[asyncio.Queue[dict[str, Any]]] = set()
         self._breaks_applied = 0
         self._renders_waiting = 0  # questions waiting for ``lock``: the stitch thread stops its batch early
+        self._catching_up = 0  # questions waiting for this session's stitching: it does not give way to others
+        self._wanted = asyncio.Event()  # set while ``_catching_up``
         self._wake = asyncio.Event()
         self._wake.set()  # catch up with what is stored (after a restart: rebuild)
         self._progress = asyncio.Condition()
@@ -111,7 +116,7 @@ class SessionPages:
                         # read after the frames: the glasses send in seq order and commits keep
                         # it, so every break before these frames is visible now
                         breaks = await store.page_breaks(self.session_id)
-                    await self.owner.questions_first()
+                    await self.owner.questions_first(self._wanted)
                     async with self.lock:
                         done = await loop.run_in_executor(self.owner.stitch_pool, self._stitch, frames, breaks)
                     self.stitched_seq = frames[done - 1].seq
@@ -140,7 +145,7 @@ class SessionPages:
                 self.paginator.add(frame)
             except ValueError as exc:  # a frame the stitcher cannot use (too small): left out, once
                 log.warning("session %s: frame seq %d not stitched: %s", self.session_id, frame.seq, exc)
-            if self._renders_waiting or self.owner.reading:
+            if self._renders_waiting or (self.owner.reading and not self._catching_up):
                 return done
         return len(frames)
 
@@ -150,12 +155,19 @@ class SessionPages:
         def reached() -> bool:
             return self.idle or (upto_seq is not None and self.stitched_seq >= upto_seq)
 
-        async with self._progress:
-            try:
-                await asyncio.wait_for(self._progress.wait_for(reached), timeout_s)
-            except TimeoutError:
-                return False
-        return True
+        self._catching_up += 1
+        self._wanted.set()
+        try:
+            async with self._progress:
+                try:
+                    await asyncio.wait_for(self._progress.wait_for(reached), timeout_s)
+                except TimeoutError:
+                    return False
+            return True
+        finally:
+            self._catching_up -= 1
+            if not self._catching_up:
+                self._wanted.clear()
 
     def summaries(self) -> list[PageSummary]:
         return [
@@ -331,11 +343,19 @@ class LivePages:
             if not self.reading:
                 self._no_reading.set()
 
-    async def questions_first(self) -> None:
-        """Before a stitch batch: wait while questions are being read (``questions_first_s`` at most)."""
-        if self.reading:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._no_reading.wait(), self.cfg.questions_first_s)
+    async def questions_first(self, wanted: asyncio.Event | None = None) -> None:
+        """Before a stitch batch: wait while questions are being read (``questions_first_s`` at
+        most), unless ``wanted`` is or becomes set (a question waits for this very session)."""
+        if not self.reading or (wanted is not None and wanted.is_set()):
+            return
+        waits = [asyncio.ensure_future(self._no_reading.wait())]
+        if wanted is not None:
+            waits.append(asyncio.ensure_future(wanted.wait()))
+        try:
+            await asyncio.wait(waits, timeout=self.cfg.questions_first_s, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for wait in waits:
+                wait.cancel()
 
     async def events(self, session_id: str) -> AsyncIterator[dict[str, Any]]:
         pages = self.get(session_id)

@@ -87,3 +87,42 @@ async def test_stitching_gives_way_while_a_question_is_read_but_never_starves(tm
     finally:
         await pages.close()
         await store.close()
+
+
+async def test_the_session_a_question_waits_for_does_not_give_way(tmp_path: Path) -> None:
+    """With many wearers asking, some question is always being read; a question waiting for its
+    own session's frames must not wait for that session's stitching to give way to the others."""
+    store, records = await stored(tmp_path, 1)
+    pages = LivePages(store, CountingOcr(), LiveConfig(questions_first_s=5.0))
+    try:
+        waited = pages.get("s")
+        await waited.close()  # fed by hand below
+        with pages.answering():  # another session's question is being read
+            waited._catching_up = 1  # ... and a question waits for this one
+            assert await asyncio.to_thread(waited._stitch, records[:10], []) == 10  # the batch goes on
+            waited._wanted.set()
+            started = asyncio.get_running_loop().time()
+            await pages.questions_first(waited._wanted)
+            assert asyncio.get_running_loop().time() - started < 0.1
+            waited._wanted.clear()
+            pending = asyncio.ensure_future(pages.questions_first(waited._wanted))
+            await asyncio.sleep(0.05)
+            assert not pending.done()  # nobody waits for it: it gives way ...
+            waited._wanted.set()  # ... until a question comes for it
+            await asyncio.wait_for(pending, 1.0)
+    finally:
+        await pages.close()
+        await store.close()
+
+
+async def test_a_question_keeps_its_session_stitching_under_other_questions(tmp_path: Path) -> None:
+    store, records = await stored(tmp_path, 2)
+    pages = LivePages(store, CountingOcr(), LiveConfig(questions_first_s=5.0, catch_up_s=3.0, batch_frames=8))
+    try:
+        with pages.answering():  # another session's question is read the whole time
+            started = asyncio.get_running_loop().time()
+            assert await pages.get("s").caught_up(3.0, upto_seq=records[-1].seq)
+            assert asyncio.get_running_loop().time() - started < 2.5  # not a 5 s pause per batch
+    finally:
+        await pages.close()
+        await store.close()
