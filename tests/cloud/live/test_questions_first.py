@@ -5,6 +5,8 @@ far, naming its version (real SQLite store, real stitcher; the OCR engine counts
 from __future__ import annotations
 
 import asyncio
+import contextlib
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -32,6 +34,20 @@ async def stored(tmp_path: Path, passes: int) -> tuple[SqliteStore, list]:
     for record in records:
         await store.add_frame("s", record)
     return store, records
+
+
+@contextlib.asynccontextmanager
+async def hand_fed(tmp_path: Path, cfg: LiveConfig) -> AsyncIterator[tuple[LivePages, object, list]]:
+    """Live pages over one stored pass, with the session's own stitch task stopped: fed by hand."""
+    store, records = await stored(tmp_path, 1)
+    pages = LivePages(store, CountingOcr(), cfg)
+    try:
+        session = pages.get("s")
+        await session.close()
+        yield pages, session, records
+    finally:
+        await pages.close()
+        await store.close()
 
 
 async def test_a_waiting_question_ends_the_batch_after_the_current_frame(tmp_path: Path) -> None:
@@ -70,11 +86,7 @@ async def test_a_question_during_a_backlog_answers_from_the_page_so_far(tmp_path
 
 
 async def test_stitching_gives_way_while_a_question_is_read_but_never_starves(tmp_path: Path) -> None:
-    store, records = await stored(tmp_path, 1)
-    pages = LivePages(store, CountingOcr(), LiveConfig(questions_first_s=0.2))
-    try:
-        other = pages.get("s")
-        await other.close()  # fed by hand below
+    async with hand_fed(tmp_path, LiveConfig(questions_first_s=0.2)) as (pages, other, records):
         with pages.answering():  # another session's question is being read
             assert await asyncio.to_thread(other._stitch, records[:10], []) == 1
             started = asyncio.get_running_loop().time()
@@ -84,19 +96,12 @@ async def test_stitching_gives_way_while_a_question_is_read_but_never_starves(tm
         await pages.questions_first()  # answered: no wait
         assert asyncio.get_running_loop().time() - started < 0.1
         assert await asyncio.to_thread(other._stitch, records[1:10], []) == 9
-    finally:
-        await pages.close()
-        await store.close()
 
 
 async def test_the_session_a_question_waits_for_does_not_give_way(tmp_path: Path) -> None:
     """With many wearers asking, some question is always being read; a question waiting for its
     own session's frames must not wait for that session's stitching to give way to the others."""
-    store, records = await stored(tmp_path, 1)
-    pages = LivePages(store, CountingOcr(), LiveConfig(questions_first_s=5.0))
-    try:
-        waited = pages.get("s")
-        await waited.close()  # fed by hand below
+    async with hand_fed(tmp_path, LiveConfig(questions_first_s=5.0)) as (pages, waited, records):
         with pages.answering():  # another session's question is being read
             waited._catching_up = 1  # ... and a question waits for this one
             assert await asyncio.to_thread(waited._stitch, records[:10], []) == 10  # the batch goes on
@@ -110,9 +115,6 @@ async def test_the_session_a_question_waits_for_does_not_give_way(tmp_path: Path
             assert not pending.done()  # nobody waits for it: it gives way ...
             waited._wanted.set()  # ... until a question comes for it
             await asyncio.wait_for(pending, 1.0)
-    finally:
-        await pages.close()
-        await store.close()
 
 
 async def test_a_question_keeps_its_session_stitching_under_other_questions(tmp_path: Path) -> None:
