@@ -77,7 +77,7 @@ Used by `darkread.edge.reconstruct.Reconstructor`. {headline}
 
 | file | what | size |
 |---|---|---|
-| `binary_unet.onnx` | fp32, opset 17, dynamic batch axis, BatchNorm folded, each bilinear resize as two constant matrix products (`resize_as_matmul`: the same output, cheaper on one core) | {info.get('size_fp32_kb', 0):.0f} kB |
+| `binary_unet.onnx` | fp32, opset 17, dynamic batch axis, BatchNorm folded | {info.get('size_fp32_kb', 0):.0f} kB |
 | `binary_unet_int8.onnx` | static int8 QDQ (per-channel int8 weights, uint8 activations), calibrated on {info.get('calibration_windows', '?')} training voxel grids | {info.get('size_int8_kb', 0):.0f} kB |
 
 ## Architecture
@@ -88,8 +88,7 @@ Four-scale U-Net built for one CPU core at 100x200: one narrow 3x3 conv at full 
 ({', '.join(str(b) for b in fit['net']['blocks'])} per scale), decoder by 1x1 projection + size-based
 bilinear resize + **add** (not concat) skip + separable refinement, 1x1 head.
 **{fit['parameters']:,} parameters.** Size-based resize makes the odd 100 -> 50 -> 25 -> 13 pyramid
-round-trip without padding; the export writes each resize as rows @ X @ columns with constant
-interpolation matrices, which onnxruntime runs in about half the time of its Resize. Full-resolution work (the memory-bound part at this size) is kept to
+round-trip without padding. Full-resolution work (the memory-bound part at this size) is kept to
 {fit['net']['widths'][0]} channels; that is what brings it near the 2 ms goal.
 
 ## Latency (`python -m darkread.bench --only inference`, one core, onnxruntime {latency.get('ort_version', '')})

@@ -6,7 +6,7 @@ import numpy as np
 import onnx
 import torch
 from darkread.edge.reconstruct import Reconstructor
-from darkread.models.train.export import OPSET, export_onnx, linear_resize_matrix, quantize_int8
+from darkread.models.train.export import OPSET, export_onnx, quantize_int8
 from darkread.models.train.net import BinaryUNet
 
 
@@ -41,28 +41,3 @@ def test_int8_model_stays_close_to_fp32(tmp_path: Path) -> None:
     b = Reconstructor(int8, warmup=0).logits(x)
     assert b.shape == a.shape
     assert np.corrcoef(a.ravel(), b.ravel())[0, 1] > 0.95
-
-
-def test_export_has_no_resize_left(tmp_path: Path) -> None:
-    graph = onnx.load(str(export_onnx(_trained_looking_model(), tmp_path / "net.onnx"))).graph
-    ops = [n.op_type for n in graph.node]
-    assert "Resize" not in ops and ops.count("MatMul") == 6  # three upsamplings, rows and columns each
-
-
-def test_resize_matrix_is_onnxruntimes_linear_resize() -> None:
-    """The contract resize_as_matmul relies on, against the op it replaces (odd and even sizes)."""
-    import onnxruntime as ort
-    from onnx import TensorProto, helper
-
-    for (h, w), (big_h, big_w) in (((13, 25), (25, 50)), ((50, 100), (100, 200)), ((7, 3), (9, 8))):
-        node = helper.make_node("Resize", ["x", "", "", "sizes"], ["y"], mode="linear", coordinate_transformation_mode="half_pixel")
-        graph = helper.make_graph(
-            [node], "resize", [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 2, h, w])],
-            [helper.make_tensor_value_info("y", TensorProto.FLOAT, None)],
-            [helper.make_tensor("sizes", TensorProto.INT64, [4], [1, 2, big_h, big_w])],
-        )
-        model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)])
-        x = np.random.default_rng(h).normal(size=(1, 2, h, w)).astype(np.float32)
-        want = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, {"x": x})[0]
-        got = linear_resize_matrix(h, big_h) @ x @ linear_resize_matrix(w, big_w).T
-        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)
