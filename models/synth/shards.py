@@ -99,11 +99,22 @@ def simulate_window(
     return events, t
 
 
-def event_image(events: np.ndarray, x0: int, y0: int, shape: tuple[int, int]) -> np.ndarray:
-    """Events per pixel of the window at (x0, y0), both polarities, lightly blurred (float32 [h, w])."""
-    image = np.zeros(shape, np.float32)
-    np.add.at(image, (events["y"].astype(np.intp) - y0, events["x"].astype(np.intp) - x0), 1.0)
-    return cv2.GaussianBlur(image, (0, 0), 1.0)
+def window_count_image(window_events: np.ndarray, origin: tuple[int, int], hw: tuple[int, int] = (FOVEA.height, FOVEA.width)) -> np.ndarray:
+    """Events per pixel of the window at ``origin``, both polarities, lightly blurred (float32 ``hw``):
+    what a window's events show of the page, for matching it against the ink's edges (here and in
+    ``train.annotate``)."""
+    x = window_events["x"].astype(np.int64) - origin[0]
+    y = window_events["y"].astype(np.int64) - origin[1]
+    counts = np.bincount(y * hw[1] + x, minlength=hw[0] * hw[1]).astype(np.float32).reshape(hw)
+    return cv2.GaussianBlur(counts, (0, 0), 1.0)
+
+
+def ncc(a: np.ndarray, b: np.ndarray) -> float:
+    """Normalised cross-correlation of two images of one shape (0 when either is flat)."""
+    a = a - a.mean()
+    b = b - b.mean()
+    den = float(np.sqrt((a * a).sum() * (b * b).sum()))
+    return float((a * b).sum() / den) if den > 0 else 0.0
 
 
 def ink_edges(mask: np.ndarray) -> np.ndarray:
@@ -115,10 +126,7 @@ def ink_edges(mask: np.ndarray) -> np.ndarray:
 def best_lag(evidence: np.ndarray, edge_maps: np.ndarray) -> int:
     """Index of the edge map [k, h, w] that correlates best with the event image (0 on a tie or a
     flat window: no evidence of a lag is no lag)."""
-    a = (evidence - evidence.mean()).ravel()
-    b = edge_maps.reshape(len(edge_maps), -1)
-    b = b - b.mean(axis=1, keepdims=True)
-    score = (b @ a) / (np.sqrt((b * b).sum(axis=1) * float(a @ a)) + 1e-9)
+    score = np.array([ncc(edge, evidence) for edge in edge_maps])
     if np.ptp(score) < 1e-3:
         return 0
     return int(np.argmax(score))
@@ -128,7 +136,8 @@ def evidence_target(scene: Scene, region: Region, events: np.ndarray, t_end: flo
     """(ink mask, lag s): the window's ink at the time its events match best, searched over
     ``EVIDENCE_LAGS_MS`` before ``t_end``."""
     masks = [scene.ink_mask(region, t_end - lag * 1e-3) for lag in EVIDENCE_LAGS_MS]
-    k = best_lag(event_image(events, region.x0, region.y0, masks[0].shape), np.stack([ink_edges(m) for m in masks]))
+    evidence = window_count_image(events, (region.x0, region.y0), masks[0].shape)
+    k = best_lag(evidence, np.stack([ink_edges(m) for m in masks]))
     return masks[k], float(EVIDENCE_LAGS_MS[k]) * 1e-3
 
 

@@ -44,6 +44,7 @@ import numpy as np
 
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.marker_page import MarkerPage, mm_to_px
+from darkread.models.synth.shards import ncc, window_count_image
 from darkread.edge.calibrate.event_image import count_image
 from darkread.models.train.page_search import (
     SearchConfig,
@@ -306,23 +307,6 @@ def alignment_residual(H_est: np.ndarray, H_true_cam: np.ndarray, calib: Calibra
     mm = page_coordinates(H_est, calib.unproject(uv))
     cam = np.c_[mm, np.ones(len(mm))] @ np.asarray(H_true_cam).T
     return float(np.mean(np.linalg.norm(calib.project(cam) - uv, axis=1)))
-
-
-# -- matching (time offset) --------------------------------------------------------------------
-
-
-def ncc(a: np.ndarray, b: np.ndarray) -> float:
-    a = a - a.mean()
-    b = b - b.mean()
-    den = float(np.sqrt((a * a).sum() * (b * b).sum()))
-    return float((a * b).sum() / den) if den > 0 else 0.0
-
-
-def window_count_image(window_events: np.ndarray, origin: tuple[int, int], hw: tuple[int, int] = WINDOW_HW) -> np.ndarray:
-    x = window_events["x"].astype(np.int64) - origin[0]
-    y = window_events["y"].astype(np.int64) - origin[1]
-    counts = np.bincount(y * hw[1] + x, minlength=hw[0] * hw[1]).astype(np.float32).reshape(hw)
-    return cv2.GaussianBlur(counts, (0, 0), 1.0)
 
 
 # -- the whole recording -----------------------------------------------------------------------
