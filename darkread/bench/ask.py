@@ -224,21 +224,21 @@ def _stop(process: object) -> None:
         process.wait(timeout=30)  # type: ignore[attr-defined]
 
 
-def _wearers(base: str, frames: list[StoredFrame], stagger_s: float, prefix: str = "wearer") -> tuple[float, bool]:
+def _wearers(base: str, frames: list[StoredFrame], stagger_s: float) -> tuple[float, bool]:
     """20 wearers at 1x real time, each asking every few seconds; p95 answer and exactly-once.
     Wearer i starts ``i / 20 * stagger_s`` after the first (0: all at once)."""
     import httpx
 
     async def one(i: int) -> list[float]:
         await asyncio.sleep(i * stagger_s / WEARERS)
-        return await stream_and_ask(base, f"{prefix}-{i}", frames, WEARER_ASK_EVERY_S)
+        return await stream_and_ask(base, f"wearer-{i}", frames, WEARER_ASK_EVERY_S)
 
     async def all_of_them() -> list[list[float]]:
         return await asyncio.gather(*(one(i) for i in range(WEARERS)))
 
     latencies = [ms for one_wearer in asyncio.run(all_of_them()) for ms in one_wearer]
     with httpx.Client(base_url=base, headers=HEADERS, timeout=60) as http:
-        counts = [http.get(f"/v1/sessions/{prefix}-{i}").json()["frames"] for i in range(WEARERS)]
+        counts = [http.get(f"/v1/sessions/wearer-{i}").json()["frames"] for i in range(WEARERS)]
     return p95(latencies), all(count == len(frames) for count in counts)
 
 
