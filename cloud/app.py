@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import time
 from collections.abc import AsyncIterator
@@ -123,13 +122,15 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
         try:
             yield
         finally:
+            # every step is bounded: a systemd stop or a failover must not wait on a stuck part
             sweeper.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await sweeper
-            with contextlib.suppress(Exception):
-                await warm
+            await asyncio.wait({sweeper}, timeout=5.0)
+            if not (await asyncio.wait({warm}, timeout=settings.shutdown_timeout_s))[0]:
+                log.warning("OCR models still loading after %.0f s; shutdown goes on", settings.shutdown_timeout_s)
+            elif not warm.cancelled() and warm.exception() is not None:  # said by /readyz and the questions
+                log.debug("OCR warm-up failed: %s", warm.exception())
             unsubscribe()
-            await context.pages.close()
+            await context.pages.close(timeout_s=min(5.0, settings.shutdown_timeout_s))
             close = getattr(engine, "close", None)
             if callable(close):
                 close()

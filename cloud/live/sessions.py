@@ -262,14 +262,19 @@ class SessionPages:
                     queue.get_nowait()
             queue.put_nowait(event)
 
-    async def close(self) -> None:
+    async def close(self, timeout_s: float = 5.0) -> None:
+        """Stop the session's task; one that does not stop within ``timeout_s`` is left behind, so
+        a cancellation lost in a database driver cannot hold the whole shutdown."""
         self.task.cancel()
         if self._pushing is not None:
             self._pushing.cancel()
         if self._later is not None:
             self._later.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await self.task
+        done, _ = await asyncio.wait({self.task}, timeout=timeout_s)
+        if not done:
+            log.warning("session %s: its page task did not stop within %.1f s; left behind", self.session_id, timeout_s)
+        elif not self.task.cancelled() and (exc := self.task.exception()) is not None:
+            log.warning("session %s: its page task had stopped: %s", self.session_id, exc)
 
 
 def page_event(reading: PageReading) -> dict[str, Any]:
@@ -382,8 +387,12 @@ class LivePages:
             await self.forget(sid)
         return idle
 
-    async def close(self) -> None:
-        for sid in list(self._sessions):
-            await self.forget(sid)
-        self.stitch_pool.shutdown(wait=True, cancel_futures=True)
-        self.ocr_pool.shutdown(wait=True, cancel_futures=True)
+    async def close(self, timeout_s: float = 5.0) -> None:
+        """Stop every session (together, ``timeout_s`` at most) and the pools (the batch being
+        stitched and the page being read finish first, ``timeout_s`` at most, off the event loop)."""
+        sessions = [self._sessions.pop(sid) for sid in list(self._sessions)]
+        await asyncio.gather(*(pages.close(timeout_s) for pages in sessions))
+        for what, pool in (("stitching", self.stitch_pool), ("reading", self.ocr_pool)):
+            stopping = asyncio.ensure_future(asyncio.to_thread(pool.shutdown, wait=True, cancel_futures=True))
+            if not (await asyncio.wait({stopping}, timeout=timeout_s))[0]:
+                log.warning("%s still busy after %.1f s; shutdown goes on", what, timeout_s)

@@ -537,10 +537,8 @@ class PostgresStore:
         except TimeoutError:
             log.warning("PostgreSQL writer did not finish within %.0f s; its pending writes are left behind", timeout_s)
         self._listener.cancel()
-        try:
-            await self._listener
-        except asyncio.CancelledError:
-            pass
+        if not (await asyncio.wait({self._listener}, timeout=5.0))[0]:
+            log.warning("PostgreSQL LISTEN connection did not close within 5 s; left behind")
         await self.pool.close()
         if self._blob_pool is not None:
             await asyncio.to_thread(self._blob_pool.close)

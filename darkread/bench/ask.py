@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from darkread.bench import BenchContext, Figure
-from darkread.bench.cloud import API_KEY, _start_server
+from darkread.bench.cloud import API_KEY, start_server, stop_server
 from darkread.cloud.store import SessionSpec, SqliteStore, StoredFrame
 from darkread.paths import SAMPLE_RECORDING
 from darkread.proto.messages import Ack, Frame, Hello, View, Welcome, decode, encode
@@ -199,7 +199,7 @@ def _server(ctx: BenchContext, name: str, ocr_threads: int = ASK_OCR_THREADS) ->
 
     os.environ.update(DARKREAD_ASK_RATE_PER_MIN="1000000", DARKREAD_ASK_BURST="10000",  # asks every 0.5 s
                       DARKREAD_OCR_THREADS=str(ocr_threads))
-    process, port = _start_server(ctx.scratch / name)
+    process, port = start_server(ctx.scratch / name)
     base = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline:
@@ -210,18 +210,6 @@ def _server(ctx: BenchContext, name: str, ocr_threads: int = ASK_OCR_THREADS) ->
             pass
         time.sleep(0.5)
     return process, base
-
-
-def _stop(process: object) -> None:
-    """SIGTERM, and SIGKILL if the service has not shut down after 60 s."""
-    import subprocess
-
-    process.terminate()  # type: ignore[attr-defined]
-    try:
-        process.wait(timeout=60)  # type: ignore[attr-defined]
-    except subprocess.TimeoutExpired:
-        process.kill()  # type: ignore[attr-defined]
-        process.wait(timeout=30)  # type: ignore[attr-defined]
 
 
 def _wearers(base: str, frames: list[StoredFrame], stagger_s: float) -> tuple[float, bool]:
@@ -270,7 +258,7 @@ def reading_cpu(ctx: BenchContext, frames: list[StoredFrame], kind: str) -> tupl
         asyncio.run(_wait_rebuilt(base, name, timeout_s=600))  # questions do not wait for stitching: the CPU must
         cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000  # type: ignore[attr-defined]
     finally:
-        _stop(process)
+        stop_server(process)
     reading_s = (stream[-1].t_us - stream[0].t_us) / 1e6
     return cpu_ms / reading_s, reading_s
 
@@ -313,7 +301,7 @@ def run(ctx: BenchContext) -> list[Figure]:
             behind_s = asyncio.run(_wait_rebuilt(base, name, timeout_s=600))  # every frame stitched, its CPU counted
             cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000  # type: ignore[attr-defined]
         finally:
-            _stop(process)
+            stop_server(process)
         ctx.notes.append(f"ask {size}: {len(latencies)} answers, max {max(latencies):.0f} ms, pages rebuilt from "
                          f"{size - len(live)} stored frames in {rebuild_s:.0f} s, stitching done {behind_s:.1f} s after "
                          f"the last answer; {_load()}")  # fmt: skip
@@ -340,7 +328,7 @@ def run(ctx: BenchContext) -> list[Figure]:
             ctx.notes.append(f"wearers{suffix}: a stream failed ({type(exc).__name__}: {exc}); the host is too busy for {WEARERS}")
             wearers_p95, exactly_once = float("nan"), False
         finally:
-            _stop(process)
+            stop_server(process)
         how = (f"starting over {stagger_s:g} s, {passes} passes" if stagger_s else
                "all starting at once, one pass: every first question at the same instant")
         figures.append(Figure(f"wearers{suffix}_ask_p95_ms_{WEARERS}", wearers_p95,

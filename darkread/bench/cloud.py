@@ -56,17 +56,19 @@ def _free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def _start_server(data_dir: Path, database_url: str | None = None, port: int = 0) -> tuple[subprocess.Popen[bytes], int]:
+def start_server(data_dir: Path, database_url: str | None = None, port: int = 0) -> tuple[subprocess.Popen[bytes], int]:
     port = port or _free_port()
     env = {**os.environ, "DARKREAD_API_KEY": API_KEY}
     if database_url:
         env["DARKREAD_DATABASE_URL"] = database_url
-    process = subprocess.Popen(
-        [sys.executable, "-m", "darkread.cli", "-q", "cloud", "serve", "--port", str(port), "--data-dir", str(data_dir)],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
+    data_dir.parent.mkdir(parents=True, exist_ok=True)
+    with open(data_dir.with_name(data_dir.name + ".log"), "ab") as server_log:  # warnings and errors only
+        process = subprocess.Popen(
+            [sys.executable, "-m", "darkread.cli", "-q", "cloud", "serve", "--port", str(port), "--data-dir", str(data_dir)],
+            env=env,
+            stdout=server_log,
+            stderr=server_log,
+        )
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         if process.poll() is not None:
@@ -76,8 +78,23 @@ def _start_server(data_dir: Path, database_url: str | None = None, port: int = 0
                 return process, port
         except OSError:
             time.sleep(0.1)
-    process.terminate()
+    process.kill()
+    process.wait(timeout=30)
     raise RuntimeError("the cloud service did not start within 60 s")
+
+
+def stop_server(process: subprocess.Popen[bytes], timeout_s: float = 30.0) -> None:
+    """SIGTERM, and SIGKILL (said on stderr, with where the service's log is) if it has not shut
+    down within ``timeout_s``: its own shutdown is bounded well below that."""
+    process.terminate()
+    try:
+        process.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait(timeout=30)
+        where = process.args[-1] if isinstance(process.args, list) else "?"
+        print(f"[bench] warning: the cloud service did not stop within {timeout_s:.0f} s of SIGTERM and was killed;"
+              f" its log: {where}.log", file=sys.stderr)
 
 
 async def _one_stream(url: str, session_id: str, frames: list[bytes], deadline: float) -> int:
@@ -136,7 +153,7 @@ def _store_alone(open_store: Callable[[], Awaitable[SessionStore]], count: int) 
 
 def _ingest_rates(data_dir: Path, database_url: str | None, total: int, time_limit_s: float, least: int) -> dict[int, float]:
     """Frames/s acknowledged by one instance with 1, 10 and 50 streams."""
-    process, port = _start_server(data_dir, database_url)
+    process, port = start_server(data_dir, database_url)
     try:
         url = f"ws://127.0.0.1:{port}/v1/stream"
         return {
@@ -144,8 +161,7 @@ def _ingest_rates(data_dir: Path, database_url: str | None, total: int, time_lim
             for streams in STREAMS
         }
     finally:
-        process.terminate()
-        process.wait(timeout=30)
+        stop_server(process)
 
 
 def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
@@ -153,7 +169,7 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
     from darkread.bench.replays import count_stored_in, run_replays
 
     database_url = pg.create_database("replays")
-    instances = [list(_start_server(ctx.scratch / f"replay-{name}", database_url)) for name in "ab"]
+    instances = [list(start_server(ctx.scratch / f"replay-{name}", database_url)) for name in "ab"]
     killed_at: list[float] = []
 
     def kill_and_restart_a() -> None:
@@ -161,7 +177,7 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
         process.send_signal(signal.SIGKILL)
         process.wait(timeout=10)
         killed_at.append(time.monotonic())
-        instances[0] = list(_start_server(ctx.scratch / "replay-a", database_url, port=port))
+        instances[0] = list(start_server(ctx.scratch / "replay-a", database_url, port=port))
 
     sessions, seconds = ctx.runs(50, 50, 4), float(ctx.runs(60, 15, 2))
     logging.getLogger("darkread.edge.uplink").setLevel(logging.ERROR)  # 25 failovers, one line each
@@ -171,8 +187,7 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
                               at_half=kill_and_restart_a)  # fmt: skip
     finally:
         for process, _ in instances:
-            process.terminate()
-            process.wait(timeout=30)
+            stop_server(process)
     what = f"{sessions} replays at 1x over 2 instances, {outcome.seconds:.0f} s, A SIGKILLed halfway"
     ctx.notes.append(
         f"{what}: {outcome.submitted} frames submitted, {outcome.stored} stored, {outcome.lost} lost, "
