@@ -1,6 +1,13 @@
 """OCR of only what changed: a page's lines are read one by one, and a line whose ink did not
 change since it was last read keeps its text.
 
+A changed line is read from its own crop; a crop that reads nothing is read again in place: all
+such lines together, each box where it is on the page and the rest of the page white, so the
+text detector sees them at the page's own scale and layout. (On a crop of one 15-30 px line it
+often finds nothing: on a 30-lux page of words two lines of three read nothing. The page as a
+whole is no cure: the detector then reads faint grey beside a line into it, "ahe quickbrown".)
+An engine that reports no boxes (a multimodal LLM) reads crops only.
+
 Lines are matched by content, not by position (a page's coordinates shift when it grows up or
 left): a line is unchanged when a line read before has the same size within ``size_tol_px``
 and differs in at most ``diff_tol`` of its ink pixels. An offline engine's dictionary
@@ -14,7 +21,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..ocr.base import OcrBackend, OcrResult
+from ..ocr.base import OcrBackend, OcrLine, OcrResult
 from ..ocr.lexicon import LexiconCorrected, LexiconCorrector
 from .paging import Box, RenderedPage
 
@@ -86,22 +93,18 @@ class LineReader:
     def read(self, page: RenderedPage) -> PageReading:
         if page.version in self.readings:
             return self.readings[page.version]
-        lines, known, fresh, truncated = [], [], 0, False
-        for box in page.bands:
-            x0, y0, x1, y1 = box
-            ink = page.ink[y0:y1, x0:x1]
-            match = next((k for k in self._known if _same_ink(k.ink, ink, self.size_tol_px, self.diff_tol)), None)
-            if match is None:
-                crop = cv2.copyMakeBorder(page.grey[y0:y1, x0:x1], *(BORDER_PX,) * 4, cv2.BORDER_CONSTANT, value=255)
-                result: OcrResult = self.engine.read(crop)
-                text = " ".join(line.text.strip() for line in result.lines if line.text.strip()) or result.text.strip()
-                scores = [line.confidence for line in result.lines if line.confidence is not None]
-                match = _Known(ink.copy(), text, float(np.mean(scores)) if scores else None, page.version)
-                truncated |= result.truncated
-                fresh += 1
-            known.append(match)
-            if match.text:
-                lines.append(ReadLine(box, match.text, match.confidence, match.version))
+        inks = [page.ink[y0:y1, x0:x1] for x0, y0, x1, y1 in page.bands]
+        matches = [next((k for k in self._known if _same_ink(k.ink, ink, self.size_tol_px, self.diff_tol)), None) for ink in inks]
+        changed = [i for i, match in enumerate(matches) if match is None]
+        truncated = False
+        if changed:
+            texts, truncated = self._read_changed(page, changed)
+            for i in changed:
+                text, confidence = texts[i]
+                matches[i] = _Known(inks[i].copy(), text, confidence, page.version)
+        known = [match for match in matches if match is not None]
+        lines = [ReadLine(box, m.text, m.confidence, m.version) for box, m in zip(page.bands, known) if m.text]
+        fresh = len(changed)
         self._known = known  # only the lines of the newest version are kept
         raw = "\n".join(line.text for line in lines)
         text = self.corrector.correct(raw) if self.corrector is not None and raw else raw
@@ -113,3 +116,58 @@ class LineReader:
         while len(self.readings) > self.keep_versions:
             del self.readings[min(self.readings)]
         return reading
+
+    def _read_changed(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
+        """Text and mean confidence of each changed band, and whether the engine stopped early:
+        each band's own crop first; the bands whose crop read nothing again, in place."""
+        texts, truncated = self._read_crops(page, changed)
+        empty = [i for i in changed if not texts[i][0]]
+        if empty:
+            in_place, stopped = self._read_in_place(page, empty)
+            texts.update({i: found for i, found in in_place.items() if found[0]})
+            truncated |= stopped
+        return texts, truncated
+
+    def _read_in_place(self, page: RenderedPage, bands: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
+        """The given bands read together, each where it is on the page and the rest of the page
+        white; each text found goes to the band its box lies in. Nothing from an engine that
+        reports no boxes."""
+        canvas = np.full_like(page.grey, 255)
+        for i in bands:
+            x0, y0, x1, y1 = page.bands[i]
+            canvas[y0:y1, x0:x1] = page.grey[y0:y1, x0:x1]
+        result: OcrResult = self.engine.read(_bordered(canvas))
+        if any(line.box is None for line in result.lines):
+            return {}, result.truncated
+        found: dict[int, list[OcrLine]] = {i: [] for i in bands}
+        for line in result.lines:
+            if line.text.strip() and line.box is not None:
+                found[_band_of(line.box, page.bands, bands)].append(line)
+        texts = {}
+        for i, band_lines in found.items():
+            scores = [line.confidence for line in band_lines if line.confidence is not None]
+            texts[i] = (" ".join(line.text.strip() for line in band_lines), float(np.mean(scores)) if scores else None)
+        return texts, result.truncated
+
+    def _read_crops(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
+        """The changed bands one crop at a time."""
+        texts, truncated = {}, False
+        for i in changed:
+            x0, y0, x1, y1 = page.bands[i]
+            result = self.engine.read(_bordered(page.grey[y0:y1, x0:x1]))
+            text = " ".join(line.text.strip() for line in result.lines if line.text.strip()) or result.text.strip()
+            scores = [line.confidence for line in result.lines if line.confidence is not None]
+            texts[i] = (text, float(np.mean(scores)) if scores else None)
+            truncated |= result.truncated
+        return texts, truncated
+
+
+def _bordered(image: np.ndarray) -> np.ndarray:
+    return cv2.copyMakeBorder(image, *(BORDER_PX,) * 4, cv2.BORDER_CONSTANT, value=255)
+
+
+def _band_of(box: Box, bands: tuple[Box, ...], candidates: list[int]) -> int:
+    """The candidate band a text box (in bordered page coordinates) belongs to: the one its
+    vertical centre lies in, else the nearest (a box reaching past its line's padding)."""
+    centre = (box[1] + box[3]) / 2 - BORDER_PX
+    return min(candidates, key=lambda i: 0.0 if bands[i][1] <= centre < bands[i][3] else min(abs(centre - bands[i][1]), abs(centre - bands[i][3])))

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import pytest
 from page_readings import LINES, CountingOcr, reading_frames
 
 from darkread.cloud.live import LineReader, Paginator, PagingConfig
+from darkread.cloud.live.reading import BORDER_PX
+from darkread.cloud.ocr.base import OcrLine, OcrResult
+from darkread.stitch.page import text_bands
 from darkread.cloud.store import StoredFrame
 from darkread.cloud.stream import stored_frame
 
@@ -80,3 +85,57 @@ def test_a_frame_too_small_to_stitch_is_refused_and_changes_nothing() -> None:
     with pytest.raises(ValueError, match="too small"):
         paginator.add(StoredFrame(0, 0, np.ones((4, 4), np.uint8), (0, 0), (0.0, 0.0), seq=0))
     assert paginator.pages == [] and paginator.current is None
+
+
+@dataclass
+class BlindOnCrops:
+    """An engine whose detector finds nothing on an image under ``min_height`` px (as a text
+    detector on a crop of one small line) and reports each row band of ink with its box otherwise."""
+
+    min_height: int = 60
+    name: str = "blind-on-crops"
+    shapes: list[tuple[int, int]] = field(default_factory=list)
+
+    def read(self, image: np.ndarray) -> OcrResult:
+        self.shapes.append(image.shape)
+        if image.shape[0] < self.min_height:
+            return OcrResult("", [])
+        lines = []
+        for top, bottom, _ in text_bands((image < 128).astype(np.uint8)):
+            cols = np.flatnonzero((image[top:bottom] < 128).any(axis=0))
+            lines.append(OcrLine(f"ink at {top}", (int(cols[0]), top, int(cols[-1]) + 1, bottom), 0.9))
+        return OcrResult("\n".join(line.text for line in lines), lines)
+
+
+def test_lines_a_crop_reads_nothing_are_read_again_in_place_each_keeping_its_own_text() -> None:
+    paginator = paginate(frames())
+    page = paginator.render(paginator.current)
+    assert page is not None and len(page.bands) == len(LINES)
+    ocr = BlindOnCrops()
+    reading = LineReader(ocr).read(page)
+    # three crops (nothing), then one read of the page's size with the three lines in place
+    assert len(ocr.shapes) == len(LINES) + 1 and ocr.shapes[-1][0] > page.grey.shape[0]
+    assert reading.lines_read == len(LINES) and len(reading.lines) == len(LINES)
+    tops = [int(line.text.split()[-1]) - BORDER_PX for line in reading.lines]
+    for top, line in zip(tops, reading.lines):  # each text went to the line its box lies in
+        assert line.box[1] <= top + 1 and top < line.box[3]
+    assert len(set(tops)) == len(LINES)
+
+
+def test_an_engine_without_boxes_reads_crops_only() -> None:
+    paginator = paginate(frames())
+    page = paginator.render(paginator.current)
+    assert page is not None
+
+    @dataclass
+    class NoBoxes:
+        name: str = "no-boxes"
+        calls: int = 0
+
+        def read(self, image: np.ndarray) -> OcrResult:
+            self.calls += 1
+            return OcrResult("" if image.shape[0] < 60 else "page text", [OcrLine("" if image.shape[0] < 60 else "page text")])
+
+    ocr = NoBoxes()
+    reading = LineReader(ocr).read(page)
+    assert ocr.calls == len(LINES) + 1 and reading.lines == ()  # the in-place read had no boxes: not used
