@@ -56,7 +56,7 @@ class Settings(BaseSettings):
     ask_catch_up_s: float = Field(
         0.3, ge=0, description="an ask waits at most this for frames stored before it, then reads the page as stitched so far"
     )
-    page_lost_after_s: float = Field(0.25, gt=0, description="registration lost this long (event time) starts a page")
+    page_lost_after_s: float = Field(0.5, gt=0, description="registration lost this long (event time) starts a page")
     max_page_pixels: int = Field(2_000_000, ge=10_000, description="a page whose canvas outgrows this starts anew")
     min_stitch_gap_ms: float = Field(
         0.0, ge=0, description="skip frames this close in time to the last stitched one at the same gaze (0 = stitch all)"

@@ -34,7 +34,8 @@ Box = tuple[int, int, int, int]
 
 @dataclass(frozen=True)
 class PagingConfig:
-    lost_after_s: float = 0.25  # registration lost this long (event time) starts a new page ...
+    lost_after_s: float = 0.5  # registration lost this long (event time) starts a new page ...
+    # (at 10 lux while walking, every-window frames of one page failed for up to 0.27 s and then registered again)
     lost_min_frames: int = 8  # ... after at least this many inked frames failed
     weak_drop: float = 0.2  # a match this far below the page's median score counts as failed
     score_window: int = 50  # registered frames the page's median score is taken over
