@@ -143,11 +143,7 @@ class LineReader:
         for line in result.lines:
             if line.text.strip() and line.box is not None:
                 found[_band_of(line.box, page.bands, bands)].append(line)
-        texts = {}
-        for i, band_lines in found.items():
-            scores = [line.confidence for line in band_lines if line.confidence is not None]
-            texts[i] = (" ".join(line.text.strip() for line in band_lines), float(np.mean(scores)) if scores else None)
-        return texts, result.truncated
+        return {i: _joined(band_lines) for i, band_lines in found.items()}, result.truncated
 
     def _read_crops(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
         """The changed bands one crop at a time."""
@@ -155,11 +151,16 @@ class LineReader:
         for i in changed:
             x0, y0, x1, y1 = page.bands[i]
             result = self.engine.read(_bordered(page.grey[y0:y1, x0:x1]))
-            text = " ".join(line.text.strip() for line in result.lines if line.text.strip()) or result.text.strip()
-            scores = [line.confidence for line in result.lines if line.confidence is not None]
-            texts[i] = (text, float(np.mean(scores)) if scores else None)
+            text, confidence = _joined(result.lines)
+            texts[i] = (text or result.text.strip(), confidence)
             truncated |= result.truncated
         return texts, truncated
+
+
+def _joined(lines: list[OcrLine]) -> tuple[str, float | None]:
+    """One line's text from the pieces the engine found in it, and their mean confidence."""
+    scores = [line.confidence for line in lines if line.confidence is not None]
+    return " ".join(line.text.strip() for line in lines if line.text.strip()), float(np.mean(scores)) if scores else None
 
 
 def _bordered(image: np.ndarray) -> np.ndarray:
