@@ -1,9 +1,9 @@
 """OCR of only what changed: a page's lines are read one by one, and a line whose ink did not
 change since it was last read keeps its text.
 
-A changed line is read from its own crop; a crop that reads nothing is read again in place: all
-such lines together, each box where it is on the page and the rest of the page white, so the
-text detector sees them at the page's own scale and layout. (On a crop of one 15-30 px line it
+A changed line is read from its own crop; a line whose crop reads nothing takes its text from a
+reading in place: all changed lines together, each box where it is on the page and the rest of
+the page white, so the text detector sees them at the page's own scale and layout. (On a crop of one 15-30 px line it
 often finds nothing: on a 30-lux page of words two lines of three read nothing. The page as a
 whole is no cure: the detector then reads faint grey beside a line into it, "ahe quickbrown".)
 An engine that reports no boxes (a multimodal LLM) reads crops only.
@@ -119,12 +119,15 @@ class LineReader:
 
     def _read_changed(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
         """Text and mean confidence of each changed band, and whether the engine stopped early:
-        each band's own crop first; the bands whose crop read nothing again, in place."""
+        each band's own crop first; if a crop read nothing, every changed band is read again in
+        place (the more of the page's layout the detector sees, the more it finds: on two pages
+        it found one more line than with the empty lines alone), and the bands whose crop read
+        nothing take that text."""
         texts, truncated = self._read_crops(page, changed)
         empty = [i for i in changed if not texts[i][0]]
         if empty:
-            in_place, stopped = self._read_in_place(page, empty)
-            texts.update({i: found for i, found in in_place.items() if found[0]})
+            in_place, stopped = self._read_in_place(page, changed)
+            texts.update({i: in_place[i] for i in empty if in_place.get(i, ("", None))[0]})
             truncated |= stopped
         return texts, truncated
 

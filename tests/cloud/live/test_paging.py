@@ -139,3 +139,28 @@ def test_an_engine_without_boxes_reads_crops_only() -> None:
     ocr = NoBoxes()
     reading = LineReader(ocr).read(page)
     assert ocr.calls == len(LINES) + 1 and reading.lines == ()  # the in-place read had no boxes: not used
+
+
+def test_only_the_lines_whose_crop_read_nothing_take_the_in_place_text() -> None:
+    paginator = paginate(frames())
+    page = paginator.render(paginator.current)
+    assert page is not None and len(page.bands) == len(LINES)
+
+    @dataclass
+    class BlindOnTheMiddleCrop(BlindOnCrops):
+        crops: int = 0
+        lines_in_place: int = 0
+
+        def read(self, image: np.ndarray) -> OcrResult:
+            if image.shape[0] >= self.min_height:  # in place: every changed line, each with its own box
+                self.lines_in_place = len(text_bands((image < 128).astype(np.uint8)))
+                return super().read(image)
+            self.crops += 1
+            text = "" if self.crops == 2 else f"crop {self.crops}"
+            return OcrResult(text, [OcrLine(text, (0, 0, image.shape[1], image.shape[0]), 0.8)] if text else [])
+
+    ocr = BlindOnTheMiddleCrop()
+    reading = LineReader(ocr).read(page)
+    texts = [line.text for line in reading.lines]
+    assert texts[0] == "crop 1" and texts[2] == "crop 3" and texts[1].startswith("ink at")
+    assert len(ocr.shapes) == 1 and ocr.lines_in_place == len(LINES)  # one reading in place, of all three lines
