@@ -58,6 +58,9 @@ class PipelineConfig:
     # measure the head's motion from all the sensor's events (edge.scene_motion) and send it with
     # each frame and view: the stitcher predicts from it. Not with sensor_roi (only the window's events come then)
     scene_motion: bool = True
+    # move each window's events back along the head's motion during its span (edge.deblur): in dim
+    # light a window spans 20-50 ms and a moving head smears its strokes over 4-10 px
+    deblur: bool = True
     # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
     # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
     infer: str = INFER_MODES[0]

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from darkread.edge.config import PipelineConfig
+from darkread.edge.deblur import DeblurConfig, deblur_window
 from darkread.edge.events import Events
 from darkread.edge.fovea import FoveaConfig, in_window, window_origin
 from darkread.edge.gaze import GazeLookup, GazeSample
@@ -184,6 +185,7 @@ class Pipeline:
         self.ring = EventRing(settings.ring_capacity)
         self.watchdog = watchdog
         self.sensor_wh = (int(source.width), int(source.height))
+        self.deblur = DeblurConfig(enabled=settings.deblur)
         self.frames_made = 0
         self.error: BaseException | None = None
         self._origin: tuple[int, int] | None = None
@@ -563,7 +565,9 @@ class Pipeline:
 
     def _recent_events(self, origin: tuple[int, int], t_until: int, t_from: int | None = None) -> Events:
         """Exactly the window's events for one frame: the newest ``n_events`` inside the window at
-        ``origin`` with ``t <= t_until`` (and ``t >= t_from``), searching back through the ring as needed.
+        ``origin`` with ``t <= t_until`` (and ``t >= t_from``), searching back through the ring as needed,
+        moved back along the head's motion during their span (``edge.deblur``; measured from them and
+        the sensor's other events of that span around the window).
 
         The search starts from twice the depth the previous window needed, so a frame copies a
         few thousand ring events, not the whole history.
@@ -583,4 +587,9 @@ class Pipeline:
         if used.shape[0]:
             depth = recent.shape[0] - int(used[0])
             self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), MAX_HISTORY_EVENTS))
-        return recent[used]
+        window = recent[used]
+        if self.deblur.enabled and used.shape[0]:
+            window, smear = deblur_window(window, recent[int(used[0]) :], origin, (cfg.height, cfg.width), self.sensor_wh, self.deblur)
+            if smear != (0.0, 0.0):
+                self.metrics.add("frames_deblurred")
+        return window

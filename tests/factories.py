@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darkread.edge.events import EVENT_CD_DTYPE
+from darkread.edge.events import EVENT_CD_DTYPE, make_events
 
 
 def random_events(
@@ -98,3 +98,28 @@ def under_light(session, lux: float):
     from dataclasses import replace
 
     return replace(session, scene=replace(session.scene, lux=lux))
+
+
+def moving_strokes(velocity_px_s: tuple[float, float], span_ms: float = 30.0, seed: int = 0, noise_share: float = 0.0,
+                   origin: tuple[int, int] = (540, 310), sensor: tuple[int, int] = (1280, 720)):
+    """Events of random 5-px strokes around the 100x200 window at ``origin`` moving rigidly at ``velocity_px_s`` for
+    ``span_ms`` (each stroke pixel fires now and then where it is at that time), plus a share of
+    uniform noise events."""
+    rng = np.random.default_rng(seed)
+    base = rng.uniform([origin[0] - 60, origin[1] - 60], [origin[0] + 260, origin[1] + 160], (300, 2))
+    along = np.arange(5)[:, None, None] * rng.choice([[1, 0], [0, 1]], 300)[None, :, :]
+    points = (base[None, :, :] + along).reshape(-1, 2)
+    n = int(points.shape[0] * span_ms / 4)  # each pixel fires every ~4 ms
+    t = np.sort(rng.uniform(0, span_ms * 1000, n)).astype(np.int64) + 1_000_000
+    which = rng.integers(0, points.shape[0], n)
+    xy = points[which] + np.outer((t - t[0]) / 1e6, velocity_px_s)
+    if noise_share:
+        k = int(n * noise_share)
+        noise_xy = rng.uniform([origin[0] - 60, origin[1] - 60], [origin[0] + 260, origin[1] + 160], (k, 2))
+        xy = np.concatenate([xy, noise_xy])
+        t = np.concatenate([t, rng.integers(int(t[0]), int(t[-1]) + 1, k)])
+        order = np.argsort(t, kind="stable")
+        xy, t = xy[order], t[order]
+    xy = np.rint(xy).astype(int)
+    keep = (xy[:, 0] >= 0) & (xy[:, 0] < sensor[0]) & (xy[:, 1] >= 0) & (xy[:, 1] < sensor[1])
+    return make_events(xy[keep, 0], xy[keep, 1], rng.integers(0, 2, int(keep.sum())), t[keep])

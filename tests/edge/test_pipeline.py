@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from factories import random_events, sum_bins_model
+from factories import moving_strokes, random_events, sum_bins_model
 
 from darkread.edge.config import PipelineConfig
 from darkread.edge.events import EVENT_CD_DTYPE, Events, empty_events
@@ -352,3 +352,14 @@ def test_lossless_replay_is_reproducible() -> None:
         runs.append([(f.t_us, f.events_used) for f, _ in frames])
     assert len(runs[0]) > 12 // 2 and runs[0][-1][0] == int(ev["t"][-1])  # the event-clock period adds frames
     assert runs[0] == runs[1]
+
+
+@pytest.mark.parametrize("deblur", [True, False])
+def test_windows_of_a_moving_page_are_deblurred_and_counted(deblur: bool) -> None:
+    ev = moving_strokes((300.0, 100.0), span_ms=60.0)
+    source = ListSource(chunked(ev, 2000), pause_s=0.002)
+    frames, metrics, _ = run_pipeline(source, FixedGaze(), every_window(deblur=deblur))
+    assert frames
+    assert (metrics.totals["frames_deblurred"] > 0) is deblur
+    if deblur:  # a moved event that would leave the window is dropped, so some frames bin fewer
+        assert min(frame.events_used for frame, _ in frames) < 1600

@@ -1,0 +1,156 @@
+"""A window's events moved to where the page was at its newest event, so head motion does not smear the strokes.
+
+In dim light a window's 1600 events span 20-50 ms, and a moving head slides the page 4-10 px in
+that time: every stroke is smeared over that length, and the network (trained on windows of every
+speed) finds a third fewer of them. The motion is measured from the events themselves, by contrast
+maximisation: moved back along the right motion, the events of one edge pile up on one line, and
+the image of counts is sharpest. The motion is taken as steady over the window's span (one
+displacement, from its first event to its newest), and searched on a dense grid: the events are
+split by time into ``slices`` count images, and the sharpness of the warped image is the sum of
+their pairwise correlations at the shifts the displacement gives them, which one FFT per slice
+and pair gives for every displacement at once. Events around the window (``margin_px``) vote too.
+
+Measured against the simulator's true pose (ink F1 of the network's frames, 10 lux): normal head
+motion 0.657 -> 0.683, walking 0.597 -> 0.676 (0.743 and 0.730 with the true motion); 30 lux
+walking 0.785 -> 0.837; still pages and bright light unchanged. Pure: numpy and OpenCV.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from darkread.edge.events import Events
+from darkread.edge.fovea import in_window
+
+
+@dataclass(frozen=True)
+class DeblurConfig:
+    enabled: bool = True
+    margin_px: int = 60  # events this far around the window vote for its motion (more edges, a surer peak)
+    max_shift_px: int = 16  # the page moves at most this far during one window (walking, 5 lux: ~10 px) ...
+    max_speed_px_s: float = 1000.0  # ... and at most this fast (a walking head's bounce peaks near it): on a
+    # short window a far peak is the text's own period (letters, lines), not motion
+    step_px: float = 0.25  # the displacement grid (after a search at whole pixels)
+    slices: int = 3  # count images by time; their pairwise correlations give the sharpness
+    blur_px: float = 1.5  # Gaussian blur of the count images (sparse events in the dark: a smoother peak)
+    min_span_us: int = 3000  # a shorter window (bright light) smears under a pixel: left as it is
+    min_events: int = 200  # fewer events in the region: no motion worth measuring
+    min_smear_px: float = 1.5  # a smaller smear is left as it is (moving events by a fraction only re-rounds them)
+    min_gain: float = 1.015  # ... and so is one that sharpens the events by less than this factor
+    bin_px: int = 2  # events counted in cells this wide
+
+    def __post_init__(self) -> None:
+        if self.margin_px < 0 or self.max_shift_px < 1 or not self.step_px > 0 or self.slices < 2 or self.blur_px < 0:
+            raise ValueError(f"DeblurConfig: margin >= 0, max shift >= 1, step > 0, slices >= 2, blur >= 0 expected: {self}")
+
+
+def region_of(origin: tuple[int, int], shape_hw: tuple[int, int], sensor_wh: tuple[int, int], margin_px: int) -> tuple[int, int, int, int]:
+    """(x0, y0, width, height) of the window grown by ``margin_px``, within the sensor."""
+    x0, y0 = max(origin[0] - margin_px, 0), max(origin[1] - margin_px, 0)
+    x1 = min(origin[0] + shape_hw[1] + margin_px, sensor_wh[0])
+    y1 = min(origin[1] + shape_hw[0] + margin_px, sensor_wh[1])
+    return x0, y0, max(x1 - x0, 1), max(y1 - y0, 1)
+
+
+def estimate_smear(events: Events, region: tuple[int, int, int, int], t_ref_us: int, span_us: float,
+                   cfg: DeblurConfig = DeblurConfig()) -> tuple[float, float]:
+    """The page's displacement (px, x right, y down) over the ``span_us`` before ``t_ref_us``, from
+    ``events`` of that time in ``region`` (x0, y0, width, height); (0, 0) with too few events."""
+    x0, y0, width, height = region
+    inside = events[in_window(events, x0, y0, width, height)]
+    if inside.shape[0] < cfg.min_events or span_us <= 0:
+        return 0.0, 0.0
+    k_n = cfg.slices
+    r = int(np.clip(np.ceil(cfg.max_speed_px_s * span_us / 1e6), 1, cfg.max_shift_px))
+    age = (t_ref_us - inside["t"].astype(np.float64)) / span_us  # 0 at the reference, 1 a span before
+    oldest = float(age.max())
+    if not oldest > 0:
+        return 0.0, 0.0
+    slot = np.minimum((age * (k_n / oldest)).astype(np.intp), k_n - 1)
+    b = cfg.bin_px  # counted in b x b cells: a quarter of the transforms, the peak still found to a fraction of a cell
+    pad = -(-r // b) + 1
+    shape = (cv2.getOptimalDFTSize(-(-height // b) + 2 * pad), cv2.getOptimalDFTSize(-(-width // b) + 2 * pad))
+    plane = shape[0] * shape[1]
+    cells = (inside["y"].astype(np.intp) - y0) // b + pad, (inside["x"].astype(np.intp) - x0) // b + pad
+    images = np.bincount(slot * plane + cells[0] * shape[1] + cells[1], minlength=k_n * plane).reshape(k_n, *shape).astype(np.float32)
+    counts = np.bincount(slot, minlength=k_n)
+    mean_age = np.bincount(slot, weights=age, minlength=k_n) / np.maximum(counts, 1)
+    sigma = cfg.blur_px / b
+    spectra = [cv2.dft(cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image) for image in images]  # (real, packed)
+    pairs = []  # (correlation, lag in cells) of each pair of slices
+    for i in range(k_n):
+        for j in range(i + 1, k_n):
+            if counts[i] and counts[j]:
+                # correlation[s] = sum_y image_i(y) image_j(y + s): their overlap when j sits s further on
+                correlation = cv2.idft(cv2.mulSpectrums(spectra[j], spectra[i], 0, conjB=True), flags=cv2.DFT_REAL_OUTPUT | cv2.DFT_SCALE)
+                pairs.append((correlation, np.float32((mean_age[i] - mean_age[j]) / b)))
+    if not pairs:
+        return 0.0, 0.0
+    # a coarse search (linear interpolation: cheap, but it pulls peaks onto whole cells), then a
+    # fine one around its best (cubic: no such pull)
+    dx, dy = _displacements(float(r), 1.0)
+    best, _ = _best(pairs, dx, dy, cv2.INTER_LINEAR)
+    dx, dy = _displacements(1.0, cfg.step_px)
+    found, top = _best(pairs, dx + np.float32(best[0]), dy + np.float32(best[1]), cv2.INTER_CUBIC)
+    if max(abs(found[0]), abs(found[1])) >= r:
+        return 0.0, 0.0  # the best lies at the edge of what was searched: no peak inside it
+    _, still = _best(pairs, *_displacements(0.0, 1.0), cv2.INTER_CUBIC)
+    # a peak barely above the still page's is noise (on still pages the best is 0.1-2 % above it;
+    # a smear the network suffers from is 2-12 %)
+    return found if top >= cfg.min_gain * still else (0.0, 0.0)
+
+
+def _best(pairs: list[tuple[np.ndarray, np.float32]], dx: np.ndarray, dy: np.ndarray, interpolation: int) -> tuple[tuple[float, float], float]:
+    """The displacement of the grid (``dx``, ``dy``) under which the slices overlap most, and that overlap."""
+    sharpness = np.zeros(dx.shape, np.float32)
+    for correlation, lag in pairs:
+        # (at fractional shifts, circularly: a negative shift wraps to the far end)
+        sharpness += cv2.remap(correlation, dx * lag, dy * lag, interpolation, borderMode=cv2.BORDER_WRAP)
+    k = np.unravel_index(int(np.argmax(sharpness)), sharpness.shape)
+    return (float(dx[k]), float(dy[k])), float(sharpness[k])
+
+
+@lru_cache(maxsize=4)
+def _displacements(max_shift_px: float, step_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """The displacement grid searched (x and y, float32 [n, n])."""
+    grid = np.arange(-max_shift_px, max_shift_px + 1e-9, step_px, dtype=np.float32)
+    dx, dy = np.meshgrid(grid, grid)
+    return dx, dy
+
+
+def deblur(window: Events, smear: tuple[float, float], t_ref_us: int, span_us: float, origin: tuple[int, int],
+           shape_hw: tuple[int, int]) -> Events:
+    """``window``'s events moved along ``smear`` (the page's displacement over ``span_us`` before
+    ``t_ref_us``) to where the page was at ``t_ref_us``; those that leave the window are dropped."""
+    if smear == (0.0, 0.0) or window.shape[0] == 0 or span_us <= 0:
+        return window
+    ahead = (t_ref_us - window["t"].astype(np.float64)) / span_us
+    x = np.rint(window["x"] + smear[0] * ahead)
+    y = np.rint(window["y"] + smear[1] * ahead)
+    keep = (x >= origin[0]) & (x < origin[0] + shape_hw[1]) & (y >= origin[1]) & (y < origin[1] + shape_hw[0])
+    moved = window[keep]  # (a copy: the caller's events stay as they were)
+    moved["x"] = x[keep].astype(np.uint16)
+    moved["y"] = y[keep].astype(np.uint16)
+    return moved
+
+
+def deblur_window(window: Events, nearby: Events, origin: tuple[int, int], shape_hw: tuple[int, int],
+                  sensor_wh: tuple[int, int], cfg: DeblurConfig = DeblurConfig()) -> tuple[Events, tuple[float, float]]:
+    """The window's events deblurred, and the smear found ((0, 0): left as they were).
+
+    ``nearby``: the sensor's events of the window's span (at least those around the window)."""
+    if not cfg.enabled or window.shape[0] < 2:
+        return window, (0.0, 0.0)
+    t_ref, t_first = int(window["t"][-1]), int(window["t"][0])
+    span = float(t_ref - t_first)
+    if span < cfg.min_span_us:
+        return window, (0.0, 0.0)
+    voters = nearby[(nearby["t"] >= t_first) & (nearby["t"] <= t_ref)]
+    smear = estimate_smear(voters, region_of(origin, shape_hw, sensor_wh, cfg.margin_px), t_ref, span, cfg)
+    if np.hypot(*smear) < cfg.min_smear_px:
+        return window, (0.0, 0.0)
+    return deblur(window, smear, t_ref, span, origin, shape_hw), smear
