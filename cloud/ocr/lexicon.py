@@ -1,6 +1,6 @@
 """Dictionary correction of an offline engine's text: the language prior an LLM reader has built in.
 
-Reconstructed strokes at 6-10 px x-height confuse a few glyph pairs (e/o, i/l, a/o, c/e); an
+Reconstructed strokes at 6-10 px x-height confuse a few glyph pairs (e/o, i/l, a/o, c/e, s/e); an
 engine without a language model reports them as read ("aro then buslest"), where GPT-4o would
 read "are then busiest". The correction is deliberately conservative, because a general spelling
 corrector "fixes" rare words that were read right (tardiest -> hardiest):
@@ -49,7 +49,10 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 _TOKEN = re.compile(r"^(?P<lead>[^A-Za-z]*)(?P<word>[A-Za-z]+)(?P<trail>(?:'[A-Za-z]{1,2})?[^A-Za-z]*)$")  # author's
-_CONFUSABLE_GROUPS = ("eoac", "ilt", "nu", "hb", "rt", "vy")
+# (s and e: small closed glyphs a dim reconstruction fills in alike, "foundere of our true",
+# "formal and slavieh": on the stored pages of the suite 100 lux 3.0 -> 2.7 %, 30-lux paragraphs
+# 1.5 -> 1.1 % CER; clean prose lines changed 0.9 -> 1.1 %)
+_CONFUSABLE_GROUPS = ("eoac", "ilt", "nu", "hb", "rt", "vy", "se")
 CONFUSABLE: frozenset[tuple[str, str]] = frozenset(
     (a, b) for group in _CONFUSABLE_GROUPS for a in group for b in group if a != b
 )

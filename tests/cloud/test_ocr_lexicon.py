@@ -39,6 +39,7 @@ def test_misread_prose_is_corrected_in_its_case_and_punctuation(corrector: Lexic
     assert corrector.correct("should be Oxtirpato, and") == "should be Extirpate, and"
     assert corrector.correct("the outhor's name, or at least") == "the author's name, or at least"
     assert corrector.correct("rollglons and civil\nsupremacies, so Itsalf") == "religions and civil\nsupremacies, so itself"
+    assert corrector.correct("foundere of our true\nformal and slavieh, as ye") == "founders of our true\nformal and slavish, as ye"
 
 
 def test_real_words_misread_for_others_are_judged_by_their_neighbours(corrector: LexiconCorrector) -> None:
