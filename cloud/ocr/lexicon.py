@@ -6,7 +6,8 @@ read "are then busiest". The correction is deliberately conservative, because a 
 corrector "fixes" rare words that were read right (tardiest -> hardiest):
 
 * only lines that read as language are touched: at least ``min_known_fraction`` of their words
-  must already be dictionary words (words of two letters or more; random letters, codes and part numbers stay as read);
+  must already be dictionary words or one lookalike glyph from one (words of two letters or more; random letters,
+  codes and part numbers stay as read);
 * only alphabetic words of at least ``min_length`` letters that are *not* in the dictionary are
   replaced, and only by a dictionary word that differs from them in lookalike glyphs alone
   (``CONFUSABLE``; at most 1, 2 or 3 of them for words of up to 4, 7 or more letters), or by one
@@ -144,6 +145,13 @@ class LexiconCorrector:
             return corrected if corrected != lowered else word  # no such word: perhaps a name (Irenaeus)
         return self._closest(word)
 
+    def _one_glyph_from_known(self, word: str) -> bool:
+        """Whether swapping one lookalike glyph of ``word`` (alphabetic, at least ``min_length``) makes a dictionary word."""
+        if len(word) < self.min_length or not word.isalpha():
+            return False
+        counts = self._words().words
+        return any(w in counts for w in misreadings(word.lower(), 1))
+
     def _closest(self, word: str) -> str:
         """The most frequent dictionary word the unknown ``word`` may be a misreading of, or ``word``."""
         read = word.lower()
@@ -168,7 +176,9 @@ class LexiconCorrector:
         words = [m.group("word") for m in parsed if m is not None and len(m.group("word")) > 1]
         if not words:
             return line, False
-        known = sum(self.known(w) for w in words) / len(words)
+        # (a word one lookalike glyph from a dictionary word counts: "Slxty zlppers were qulckly"
+        # is prose whose i lost their dots)
+        known = sum(self.known(w) or self._one_glyph_from_known(w) for w in words) / len(words)
         if known < self.min_known_fraction:
             return line, False  # not prose: leave letters, codes and numbers as read
         out = []

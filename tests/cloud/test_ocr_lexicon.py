@@ -40,6 +40,8 @@ def test_misread_prose_is_corrected_in_its_case_and_punctuation(corrector: Lexic
     assert corrector.correct("the outhor's name, or at least") == "the author's name, or at least"
     assert corrector.correct("rollglons and civil\nsupremacies, so Itsalf") == "religions and civil\nsupremacies, so itself"
     assert corrector.correct("foundere of our true\nformal and slavieh, as ye") == "founders of our true\nformal and slavish, as ye"
+    # most words misread: still prose when each is one lookalike glyph from a word (i without dots)
+    assert corrector.correct("Slxty zlppers were qulckly") == "Sixty zippers were quickly"
 
 
 def test_real_words_misread_for_others_are_judged_by_their_neighbours(corrector: LexiconCorrector) -> None:
