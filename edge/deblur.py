@@ -11,8 +11,8 @@ their pairwise correlations at the shifts the displacement gives them, which one
 and pair gives for every displacement at once. Events around the window (``margin_px``) vote too.
 
 Measured against the simulator's true pose (ink F1 of the network's frames, 10 lux): normal head
-motion 0.657 -> 0.683, walking 0.597 -> 0.676 (0.743 and 0.730 with the true motion); 30 lux
-walking 0.785 -> 0.837; still pages and bright light unchanged. Pure: numpy and OpenCV.
+motion 0.657 -> 0.690, walking 0.597 -> 0.673 (0.743 and 0.730 with the true motion); 30 lux
+walking 0.785 -> 0.821; still pages and bright light unchanged (docs/deblur.md). Pure: numpy and OpenCV.
 """
 
 from __future__ import annotations
@@ -44,8 +44,8 @@ class DeblurConfig:
     bin_px: int = 2  # events counted in cells this wide
 
     def __post_init__(self) -> None:
-        if self.margin_px < 0 or self.max_shift_px < 1 or not self.step_px > 0 or self.slices < 2 or self.blur_px < 0:
-            raise ValueError(f"DeblurConfig: margin >= 0, max shift >= 1, step > 0, slices >= 2, blur >= 0 expected: {self}")
+        if self.margin_px < 0 or self.max_shift_px < 1 or not self.step_px > 0 or self.slices < 2 or self.blur_px < 0 or self.bin_px < 1:
+            raise ValueError(f"DeblurConfig: margin >= 0, max shift >= 1, step > 0, slices >= 2, blur >= 0, bin >= 1 expected: {self}")
 
 
 def region_of(origin: tuple[int, int], shape_hw: tuple[int, int], sensor_wh: tuple[int, int], margin_px: int) -> tuple[int, int, int, int]:

@@ -90,7 +90,7 @@ def test_the_region_stays_on_the_sensor() -> None:
     assert region_of((1080, 620), SHAPE, SENSOR, 60) == (1020, 560, 260, 160)
 
 
-@pytest.mark.parametrize("bad", [{"slices": 1}, {"step_px": 0.0}, {"max_shift_px": 0}, {"margin_px": -1}])
+@pytest.mark.parametrize("bad", [{"slices": 1}, {"step_px": 0.0}, {"max_shift_px": 0}, {"margin_px": -1}, {"bin_px": 0}])
 def test_bad_settings_are_refused(bad) -> None:  # noqa: ANN001
     with pytest.raises(ValueError, match="DeblurConfig"):
         DeblurConfig(**bad)
