@@ -114,7 +114,7 @@ def _best(pairs: list[tuple[np.ndarray, np.float32]], dx: np.ndarray, dy: np.nda
     return (float(dx[k]), float(dy[k])), float(sharpness[k])
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=64)  # (one coarse grid per search radius, and the fine one)
 def _displacements(max_shift_px: float, step_px: float) -> tuple[np.ndarray, np.ndarray]:
     """The displacement grid searched (x and y, float32 [n, n])."""
     grid = np.arange(-max_shift_px, max_shift_px + 1e-9, step_px, dtype=np.float32)
