@@ -70,7 +70,7 @@ def estimate_smear(events: Events, region: tuple[int, int, int, int], t_ref_us: 
     oldest = float(age.max())
     if not oldest > 0:
         return 0.0, 0.0
-    slot = np.minimum((age * (k_n / oldest)).astype(np.intp), k_n - 1)
+    slot = np.clip((age * (k_n / oldest)).astype(np.intp), 0, k_n - 1)  # (a sensor's times may jitter past t_ref)
     b = cfg.bin_px  # counted in b x b cells: a quarter of the transforms, the peak still found to a fraction of a cell
     pad = -(-r // b) + 1
     shape = (cv2.getOptimalDFTSize(-(-height // b) + 2 * pad), cv2.getOptimalDFTSize(-(-width // b) + 2 * pad))

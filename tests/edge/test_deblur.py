@@ -107,3 +107,13 @@ def test_no_smear_faster_than_a_head_is_taken() -> None:
     unbounded = estimate_smear(nearby, region, t_ref, span, DeblurConfig(max_speed_px_s=1e6))
     assert np.hypot(*unbounded) > 1000.0 * span / 1e6  # faster than any head: found without the bound
     assert estimate_smear(nearby, region, t_ref, span) == (0.0, 0.0)
+
+
+def test_events_after_the_reference_time_do_not_break_the_search() -> None:
+    """A real sensor's times jitter back: events past t_ref must not index a slice before the first."""
+    events = moving_strokes((300.0, 0.0))
+    window = window_of(events)
+    span = float(window["t"][-1] - window["t"][0])
+    t_ref = int(window["t"][-1] - span / 2)  # half the events lie after it
+    found = estimate_smear(events[events["t"] >= window["t"][0]], region_of(ORIGIN, SHAPE, SENSOR, 60), t_ref, span)
+    assert all(np.isfinite(found)) and max(map(abs, found)) <= DeblurConfig().max_shift_px
