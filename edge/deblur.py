@@ -61,8 +61,10 @@ def estimate_smear(events: Events, region: tuple[int, int, int, int], t_ref_us: 
     """The page's displacement (px, x right, y down) over the ``span_us`` before ``t_ref_us``, from
     ``events`` of that time in ``region`` (x0, y0, width, height); (0, 0) with too few events."""
     x0, y0, width, height = region
+    if span_us <= 0:
+        return 0.0, 0.0
     inside = events[in_window(events, x0, y0, width, height)]
-    if inside.shape[0] < cfg.min_events or span_us <= 0:
+    if inside.shape[0] < cfg.min_events:
         return 0.0, 0.0
     k_n = cfg.slices
     r = int(np.clip(np.ceil(cfg.max_speed_px_s * span_us / 1e6), 1, cfg.max_shift_px))
@@ -149,8 +151,10 @@ def deblur_window(window: Events, nearby: Events, origin: tuple[int, int], shape
     span = float(t_ref - t_first)
     if span < cfg.min_span_us:
         return window, (0.0, 0.0)
-    voters = nearby[(nearby["t"] >= t_first) & (nearby["t"] <= t_ref)]
-    smear = estimate_smear(voters, region_of(origin, shape_hw, sensor_wh, cfg.margin_px), t_ref, span, cfg)
+    region = region_of(origin, shape_hw, sensor_wh, cfg.margin_px)
+    t = nearby["t"]  # (one selection of the region's events of the span: ``nearby`` can be the sensor's tens of thousands)
+    voters = nearby[in_window(nearby, region[0], region[1], region[2], region[3]) & (t >= t_first) & (t <= t_ref)]
+    smear = estimate_smear(voters, region, t_ref, span, cfg)
     if np.hypot(*smear) < cfg.min_smear_px:
         return window, (0.0, 0.0)
     return deblur(window, smear, t_ref, span, origin, shape_hw), smear

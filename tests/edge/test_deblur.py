@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from darkread.edge.deblur import DeblurConfig, deblur, deblur_window, estimate_smear, region_of
+from darkread.edge.fovea import FoveaConfig, window_events
 from factories import moving_strokes
 
 SENSOR = (1280, 720)
@@ -15,9 +16,8 @@ SHAPE = (100, 200)
 
 
 def window_of(events):  # noqa: ANN001, ANN201
-    x, y = events["x"].astype(int), events["y"].astype(int)
-    inside = (x >= ORIGIN[0]) & (x < ORIGIN[0] + SHAPE[1]) & (y >= ORIGIN[1]) & (y < ORIGIN[1] + SHAPE[0])
-    return events[inside][-1600:]
+    """The window's newest 1600 events, as the pipeline takes them."""
+    return window_events(events, ORIGIN, FoveaConfig(height=SHAPE[0], width=SHAPE[1]), 1600)
 
 
 def sharpness(events) -> float:  # noqa: ANN001
