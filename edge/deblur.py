@@ -11,8 +11,8 @@ their pairwise correlations at the shifts the displacement gives them, which one
 and pair gives for every displacement at once. Events around the window (``margin_px``) vote too.
 
 Measured against the simulator's true pose (ink F1 of the network's frames, 10 lux): normal head
-motion 0.657 -> 0.690, walking 0.597 -> 0.673 (0.743 and 0.730 with the true motion); 30 lux
-walking 0.785 -> 0.821; still pages and bright light unchanged (docs/deblur.md). Pure: numpy and OpenCV.
+motion 0.657 -> 0.688, walking 0.597 -> 0.677 (0.743 and 0.730 with the true motion); 30 lux
+walking 0.785 -> 0.819; still pages and bright light unchanged (docs/deblur.md). Pure: numpy and OpenCV.
 """
 
 from __future__ import annotations
