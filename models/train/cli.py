@@ -122,10 +122,14 @@ def _cmd_target(args: argparse.Namespace) -> int:
 
 
 def _cmd_annotate(args: argparse.Namespace) -> int:
-    from darkread.models.train.annotate import AnnotateConfig, annotate_recording
+    from darkread.models.train.annotate import AnnotateConfig, annotate_from_truth, annotate_recording
 
     if not Path(args.recording).is_dir():
         raise FileNotFoundError(f"{args.recording}: no such recording directory")
+    if args.truth:
+        summary = annotate_from_truth(args.recording, args.out, every_ms=args.every_ms, max_windows=args.max_windows)
+        print(json.dumps(summary, indent=1))
+        return 0
     cfg = AnnotateConfig(window_every_ms=args.every_ms, max_windows=args.max_windows,
                          max_offset_ms=args.max_offset_ms, refine_offset=args.max_offset_ms > 0)
     summary = annotate_recording(args.recording, args.layout, args.out, cfg, progress=not args.quiet)
@@ -267,6 +271,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--every-ms", type=float, default=40.0, help="one window per this interval (default 40)")
     p.add_argument("--max-windows", type=int, default=400)
     p.add_argument("--max-offset-ms", type=float, default=8.0, help="time offset search range, +- ms (default 8; 0 = off)")
+    p.add_argument("--truth", action="store_true",
+                   help="a synthetic recording (any page `darkread synth recording` wrote): label every window from the "
+                        "simulator's own pose and ink instead of markers, its events deblurred as on the edge")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_annotate)
 

@@ -44,6 +44,9 @@ class ScoredWindows:
     targets: np.ndarray | None  # uint8 [n,100,200], None when no ground truth exists
     source: str  # where the targets come from
     ignore: np.ndarray | None = None  # uint8 [n,100,200], 1 = not scored (an annotated shard's markers)
+    origins: np.ndarray | None = None  # int [n, 2] (x0, y0) of a recording's windows
+    t_end_us: np.ndarray | None = None  # int64 [n], their newest events
+    n_events: np.ndarray | None = None  # int64 [n], events in each
 
 
 def is_recording(path: Path) -> bool:
@@ -70,14 +73,15 @@ def page_ink_source(recording: Path) -> InkSource | None:
     return None if plain is None else (lambda H, calib: plain)
 
 
-def truth_windows(recording: str | Path, every_ms: float = 40.0, max_windows: int = 400) -> ScoredWindows:
-    """The recording's windows with the simulator's ink under the true pose (targets None without it)."""
+def truth_windows(recording: str | Path, every_ms: float = 40.0, max_windows: int = 400, deblur: bool = False) -> ScoredWindows:
+    """The recording's windows with the simulator's ink under the true pose (targets None without it);
+    ``deblur``: the windows' events deblurred as on the edge (``window_stack``)."""
     from darkread.models.train.annotate import load_pose_truth, render_target, window_rays
     from darkread.models.train.windows import read_events, window_stack
 
     path = Path(recording)
     rec, events, wh = read_events(path)
-    windows = window_stack(rec, events, wh, every_ms=every_ms, max_windows=max_windows)
+    windows = window_stack(rec, events, wh, every_ms=every_ms, max_windows=max_windows, deblur=deblur)
     truth = load_pose_truth(path)
     ink = page_ink_source(path)
     if truth is None or ink is None or len(windows.t_end_us) == 0:
@@ -87,7 +91,8 @@ def truth_windows(recording: str | Path, every_ms: float = 40.0, max_windows: in
         H = truth.at(float(t_end))  # page mm -> camera point: a page -> normalised-image homography
         page_ink, s = ink(H, rec.calibration)
         targets[i] = render_target(page_ink, s, H, window_rays(rec.calibration, tuple(origin)))
-    return ScoredWindows(windows.voxels, targets, "simulator's true pose")
+    return ScoredWindows(windows.voxels, targets, "simulator's true pose", origins=windows.origins, t_end_us=windows.t_end_us,
+                         n_events=np.array([len(w) for w in windows.events], np.int64))
 
 
 def shard_windows(directory: str | Path, limit: int | None = None) -> ScoredWindows:

@@ -41,9 +41,13 @@ def read_events(path: str | Path, *, need_text: bool = False) -> tuple[Any, np.n
 
 
 def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every_ms: float = 40.0,
-                 max_windows: int = 400) -> Windows:
-    """Every ``every_ms`` a window cut exactly as on the edge: gaze -> fovea -> newest 1600 events -> voxels."""
+                 max_windows: int = 400, deblur: bool = False) -> Windows:
+    """Every ``every_ms`` a window cut exactly as on the edge: gaze -> fovea -> newest 1600 events -> voxels.
+
+    ``deblur``: each window's events moved back along the head's motion as the edge does before its
+    voxel grid (``edge.deblur``), so a network tuned on these windows sees what it will be given."""
     from darkread.edge.config import PipelineConfig
+    from darkread.edge.deblur import DeblurConfig, deblur_window
     from darkread.edge.fovea import window_events, window_origin
     from darkread.edge.gaze import GazeMapper
     from darkread.edge.pipeline import MAX_HISTORY_EVENTS
@@ -59,7 +63,10 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
         if gaze is None:
             continue
         origin = window_origin(gaze.pixel, sensor_wh, voxel.fovea)
-        window = window_events(events[max(0, end - MAX_HISTORY_EVENTS) : end], origin, voxel.fovea, n_events)
+        recent = events[max(0, end - MAX_HISTORY_EVENTS) : end]
+        window = window_events(recent, origin, voxel.fovea, n_events)
+        if deblur and len(window):
+            window, _ = deblur_window(window, recent, origin, WINDOW_HW, sensor_wh, DeblurConfig())
         if len(window) >= n_events // 2:
             voxels.append(voxel_grid(window, origin[0], origin[1], voxel))
             origins.append(origin)
