@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from darkread.edge.events import Events
+from darkread.stitch.register import parabola_vertex
 
 CELL_PX = 8  # 1280x720 -> 160x90 cells: sub-cell correlation is still well inside the stitcher's search radius
 SLICE_US = 20_000  # a walking head moves 2-8 px in this time: under a cell, so slices still look alike
@@ -102,17 +103,11 @@ def slice_shift(reference: np.ndarray, current: np.ndarray, transfer: np.ndarray
         return None
     h, w = surface.shape
     # the peak sits at minus the shift (circularly); a parabola through its neighbours refines it
-    sx = -((px + w // 2) % w - w // 2) - _vertex(surface[py, (px - 1) % w], peak, surface[py, (px + 1) % w])
-    sy = -((py + h // 2) % h - h // 2) - _vertex(surface[(py - 1) % h, px], peak, surface[(py + 1) % h, px])
+    sx = -((px + w // 2) % w - w // 2) - parabola_vertex(float(surface[py, (px - 1) % w]), peak, float(surface[py, (px + 1) % w]))
+    sy = -((py + h // 2) % h - h // 2) - parabola_vertex(float(surface[(py - 1) % h, px]), peak, float(surface[(py + 1) % h, px]))
     if max(abs(sx), abs(sy)) > cfg.max_shift_cells:
         return None
     return float(sx), float(sy)
-
-
-def _vertex(left: float, centre: float, right: float) -> float:
-    """Offset of the top of the parabola through three equally spaced samples (0 if none)."""
-    curvature = float(left) - 2.0 * float(centre) + float(right)
-    return 0.0 if curvature >= 0 else float(np.clip(0.5 * (float(left) - float(right)) / curvature, -0.5, 0.5))
 
 
 class SceneMotion:

@@ -35,7 +35,7 @@ class Registration:
     vertical_margin: float = 2.0
 
 
-def _parabola_vertex(left: float, centre: float, right: float) -> float:
+def parabola_vertex(left: float, centre: float, right: float) -> float:
     """Offset of the vertex of the parabola through three equally spaced samples."""
     curvature = left - 2.0 * centre + right
     if curvature >= 0:  # not a maximum
@@ -145,7 +145,7 @@ def register_frame(
     angle = float(angles_deg[best])
     if 0 < best < len(angles_deg) - 1:
         step = (angles_deg[best + 1] - angles_deg[best - 1]) / 2.0
-        angle += step * _parabola_vertex(peaks[best - 1][0], peaks[best][0], peaks[best + 1][0])
+        angle += step * parabola_vertex(peaks[best - 1][0], peaks[best][0], peaks[best + 1][0])
     by, bx = np.unravel_index(int(np.argmax(scores)), scores.shape)
     return _registration_at(scores, int(by), int(bx), radius, separation_px, overlap, angle)
 
@@ -159,8 +159,8 @@ def _registration_at(
     margin = float(scores[by, bx]) - _runner_up(scores, by, separation_px)
     dx, dy = bx - radius, by - radius
     peak = float(scores[by, bx]) + _CENTRE_PRIOR * (dx * dx + dy * dy) / float(max(1, radius) ** 2)
-    sx = _parabola_vertex(*scores[by, bx - 1 : bx + 2]) if _interior(scores, by, bx, 0) else 0.0
-    sy = _parabola_vertex(*scores[by - 1 : by + 2, bx]) if _interior(scores, by, bx, 1) else 0.0
+    sx = parabola_vertex(*scores[by, bx - 1 : bx + 2]) if _interior(scores, by, bx, 0) else 0.0
+    sy = parabola_vertex(*scores[by - 1 : by + 2, bx]) if _interior(scores, by, bx, 1) else 0.0
     return Registration((dx, dy), peak, overlap, (sx, sy), angle, on_rim, margin)
 
 
