@@ -580,22 +580,24 @@ def annotate_from_truth(recording: str | Path, out: str | Path, every_ms: float 
     needed: any plain page ``synth recording`` wrote), deblurred as the edge deblurs them; writes
     the shard and summary as ``annotate_recording`` does. For tuning on the windows the glasses cut
     while a simulated reader reads (fixations, saccades, head motion), not on random crops."""
+    from darkread.edge.io.recording import open_recording
     from darkread.models.synth.shards import SampleMeta, write_shard
     from darkread.models.train.compare import truth_windows
 
     recording = Path(recording)
     scored = truth_windows(recording, every_ms=every_ms, max_windows=max_windows, deblur=deblur)
+    windows = scored.windows
+    assert windows is not None  # noqa: S101 - truth_windows keeps them
+    if len(windows.t_end_us) == 0:
+        raise AnnotationError(f"{recording}: no windows to annotate (no gaze, or too few events)")
     if scored.targets is None:
         raise AnnotationError(f"{recording}: no simulator truth (pose_truth.npz with page_ink.npz or page.layout.json): "
                               "only a recording `darkread synth recording` made can be annotated with --truth")
-    if len(scored.targets) == 0:
-        raise AnnotationError(f"{recording}: no windows to annotate (no gaze, or too few events)")
-    assert scored.origins is not None and scored.t_end_us is not None and scored.n_events is not None  # noqa: S101
-    meta = json.loads((recording / "meta.json").read_text(encoding="utf-8")) if (recording / "meta.json").is_file() else {}
+    meta = open_recording(recording).meta
     metas = [SampleMeta(lux=float(meta.get("lux", 0.0)), motion=str(meta.get("motion", "")), kind=str(meta.get("text_kind", "")),
                         font=str(meta.get("font", "")), xheight_px=float(meta.get("xheight_px", 0.0)), seed=int(meta.get("seed", 0)),
-                        x0=int(o[0]), y0=int(o[1]), t_end_us=int(t), n_events=int(n))
-             for o, t, n in zip(scored.origins, scored.t_end_us, scored.n_events)]
+                        x0=int(o[0]), y0=int(o[1]), t_end_us=int(t), n_events=len(events))
+             for o, t, events in zip(windows.origins, windows.t_end_us, windows.events)]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_shard(out / SHARD_NAME, scored.voxels, scored.targets, metas)

@@ -28,6 +28,7 @@ import numpy as np
 
 from darkread.eval.provenance import model_digest
 from darkread.models.train.ink_scores import ink_counts, scores_from_counts
+from darkread.models.train.windows import Windows
 
 log = logging.getLogger(__name__)
 
@@ -44,9 +45,7 @@ class ScoredWindows:
     targets: np.ndarray | None  # uint8 [n,100,200], None when no ground truth exists
     source: str  # where the targets come from
     ignore: np.ndarray | None = None  # uint8 [n,100,200], 1 = not scored (an annotated shard's markers)
-    origins: np.ndarray | None = None  # int [n, 2] (x0, y0) of a recording's windows
-    t_end_us: np.ndarray | None = None  # int64 [n], their newest events
-    n_events: np.ndarray | None = None  # int64 [n], events in each
+    windows: Windows | None = None  # a recording's windows as cut (origins, end times, events)
 
 
 def is_recording(path: Path) -> bool:
@@ -85,14 +84,13 @@ def truth_windows(recording: str | Path, every_ms: float = 40.0, max_windows: in
     truth = load_pose_truth(path)
     ink = page_ink_source(path)
     if truth is None or ink is None or len(windows.t_end_us) == 0:
-        return ScoredWindows(windows.voxels, None, "none (no pose_truth.npz with page.layout.json or page_ink.npz)")
+        return ScoredWindows(windows.voxels, None, "none (no pose_truth.npz with page.layout.json or page_ink.npz)", windows=windows)
     targets = np.zeros((len(windows.t_end_us), *windows.voxels.shape[-2:]), np.uint8)
     for i, (t_end, origin) in enumerate(zip(windows.t_end_us, windows.origins)):
         H = truth.at(float(t_end))  # page mm -> camera point: a page -> normalised-image homography
         page_ink, s = ink(H, rec.calibration)
         targets[i] = render_target(page_ink, s, H, window_rays(rec.calibration, tuple(origin)))
-    return ScoredWindows(windows.voxels, targets, "simulator's true pose", origins=windows.origins, t_end_us=windows.t_end_us,
-                         n_events=np.array([len(w) for w in windows.events], np.int64))
+    return ScoredWindows(windows.voxels, targets, "simulator's true pose", windows=windows)
 
 
 def shard_windows(directory: str | Path, limit: int | None = None) -> ScoredWindows:

@@ -65,7 +65,7 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
         origin = window_origin(gaze.pixel, sensor_wh, voxel.fovea)
         recent = events[max(0, end - MAX_HISTORY_EVENTS) : end]
         window = window_events(recent, origin, voxel.fovea, n_events)
-        if deblur and len(window):
+        if deblur:
             window, _ = deblur_window(window, recent, origin, WINDOW_HW, sensor_wh, DeblurConfig())
         if len(window) >= n_events // 2:
             voxels.append(voxel_grid(window, origin[0], origin[1], voxel))

@@ -50,6 +50,17 @@ def test_a_recording_without_truth_is_refused_in_one_line(tmp_path, walking_page
     assert not (tmp_path / "out" / SHARD_NAME).exists()
 
 
+def test_a_recording_too_short_for_a_window_says_so_not_that_truth_is_missing(tmp_path, walking_page) -> None:
+    import shutil
+
+    rec = tmp_path / "cut"
+    shutil.copytree(walking_page, rec)
+    raw = (rec / "events.raw").read_bytes()
+    (rec / "events.raw").write_bytes(raw[: len(raw) // 50])  # a few ms of events: no window is cut
+    with pytest.raises(AnnotationError, match=r"no windows to annotate"):
+        annotate_from_truth(rec, tmp_path / "out")
+
+
 def test_the_cli_annotates_from_truth(tmp_path, walking_page) -> None:
     from tests.darkread_cli import darkread
 
