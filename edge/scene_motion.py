@@ -67,9 +67,15 @@ class SceneMotionConfig:
 def cell_index(events: Events, grid_wh: tuple[int, int], cell_px: int) -> np.ndarray:
     """Each event's ``cell_px`` cell, row-major in the ``grid_wh`` grid (both polarities)."""
     cols, rows = grid_wh
-    cx = np.minimum(events["x"].astype(np.intp) // cell_px, cols - 1)
-    cy = np.minimum(events["y"].astype(np.intp) // cell_px, rows - 1)
-    return cy * cols + cx
+    cx = events["x"].astype(np.intp)  # (then in place: a chunk is tens of thousands of events)
+    np.floor_divide(cx, cell_px, out=cx)
+    np.minimum(cx, cols - 1, out=cx)
+    cells = events["y"].astype(np.intp)
+    np.floor_divide(cells, cell_px, out=cells)
+    np.minimum(cells, rows - 1, out=cells)
+    cells *= cols
+    cells += cx
+    return cells
 
 
 def gaussian_transfer(shape_hw: tuple[int, int], sigma: float) -> np.ndarray:
@@ -82,9 +88,10 @@ def gaussian_transfer(shape_hw: tuple[int, int], sigma: float) -> np.ndarray:
 
 
 def slice_spectrum(counts: np.ndarray, window: np.ndarray) -> np.ndarray:
-    """A slice's count image as correlated: square roots (a few hot pixels must not outweigh the
-    page's edges), mean removed, tapered by ``window``, transformed (packed real layout)."""
-    image = np.sqrt(counts)
+    """A slice's count image (any number type, ``window``'s shape) as correlated: square roots in
+    float32 (a few hot pixels must not outweigh the page's edges), mean removed, tapered by
+    ``window``, transformed (packed real layout)."""
+    image = np.sqrt(counts, dtype=np.float32)
     image -= image.mean()
     image *= window
     return cv2.dft(image)
@@ -119,7 +126,7 @@ class SceneMotion:
         self._window = cv2.createHanningWindow(self.grid_wh, cv2.CV_32F)
         self._transfer = gaussian_transfer(self.grid_wh[::-1], cfg.blur_cells * np.sqrt(2.0))
         self._slice_end: int | None = None
-        self._current = np.zeros(self.grid_wh[::-1], np.float32)
+        self._current = np.zeros(self.grid_wh[0] * self.grid_wh[1], np.int64)  # the open slice's counts per cell (while _count > 0)
         self._count = 0
         self._reference: np.ndarray | None = None  # the reference slice's spectrum
         self._reference_offset = np.zeros(2)  # the scene's offset when the reference slice was taken
@@ -160,7 +167,11 @@ class SceneMotion:
 
     def _count_cells(self, cells: np.ndarray) -> None:
         if cells.shape[0]:
-            self._current += np.bincount(cells, minlength=self._current.size).reshape(self._current.shape)
+            counts = np.bincount(cells, minlength=self._current.shape[0])
+            if self._count:  # (a slice begun in the chunk before)
+                self._current += counts
+            else:  # (the slice's first events: its counts as they are, no zeroed image to add them to)
+                self._current = counts
             self._count += int(cells.shape[0])
 
     def _close_slice(self) -> None:
@@ -168,7 +179,7 @@ class SceneMotion:
         cfg = self.cfg
         failed = False
         if self._count >= cfg.min_events:
-            current = slice_spectrum(self._current, self._window)
+            current = slice_spectrum(self._current.reshape(self._window.shape), self._window)
             shift = None if self._reference is None else slice_shift(self._reference, current, self._transfer, cfg)
             failed = shift is None and self._reference is not None
             if shift is not None:
@@ -178,8 +189,7 @@ class SceneMotion:
                 self._reference, self._reference_offset, self._reference_age = current, self._offset.copy(), 0
         # (a slice with too few events - a still head - leaves the offset and the reference as they were)
         self._record(self._slice_end, failed)
-        self._current = np.zeros_like(self._current)
-        self._count = 0
+        self._count = 0  # (the next slice's first counts replace ``_current``)
         self._slice_end += cfg.slice_us
 
     def _record(self, t_us: int, failed: bool = False) -> None:
