@@ -92,18 +92,18 @@ def slice_spectrum(counts: np.ndarray, window: np.ndarray) -> np.ndarray:
     float32 (a few hot pixels must not outweigh the page's edges), mean removed, tapered by
     ``window``, transformed (packed real layout)."""
     image = np.sqrt(counts, dtype=np.float32)
-    image -= image.mean()
+    image -= np.add.reduce(image, axis=None) / np.float32(image.size)  # ``image.mean()``, bit for bit, without its wrapper
     image *= window
     return cv2.dft(image)
 
 
-def slice_shift(reference: np.ndarray, current: np.ndarray, transfer: np.ndarray, cfg: SceneMotionConfig) -> tuple[float, float] | None:
-    """The scene's shift (cells) from the slice of spectrum ``reference`` to that of ``current``
-    (``slice_spectrum``), their cross-correlation blurred by ``transfer`` (``gaussian_transfer``
-    of sigma * sqrt 2: both images blurred by sigma); None without a peak ``min_peak_sd`` standard
-    deviations above the correlation surface, or one beyond ``max_shift_cells``."""
-    product = cv2.mulSpectrums(cv2.mulSpectrums(reference, current, 0, conjB=True), transfer, 0)
-    surface = cv2.idft(product, flags=cv2.DFT_REAL_OUTPUT)
+def slice_shift(reference: np.ndarray, current: np.ndarray, cfg: SceneMotionConfig) -> tuple[float, float] | None:
+    """The scene's shift (cells) from the reference slice to the slice of spectrum ``current``
+    (``slice_spectrum``); ``reference``: the reference's spectrum already multiplied by the blur's
+    ``gaussian_transfer`` (of sigma * sqrt 2: both images blurred by sigma; once per reference, which
+    serves several slices), so their cross-correlation comes out blurred. None without a peak
+    ``min_peak_sd`` standard deviations above the correlation surface, or one beyond ``max_shift_cells``."""
+    surface = cv2.idft(cv2.mulSpectrums(reference, current, 0, conjB=True), flags=cv2.DFT_REAL_OUTPUT)
     _, peak, _, (px, py) = cv2.minMaxLoc(surface)
     mean, sd = cv2.meanStdDev(surface)
     if not peak - float(mean[0, 0]) >= cfg.min_peak_sd * float(sd[0, 0]) > 0:
@@ -128,7 +128,7 @@ class SceneMotion:
         self._slice_end: int | None = None
         self._current = np.zeros(self.grid_wh[0] * self.grid_wh[1], np.int64)  # the open slice's counts per cell (while _count > 0)
         self._count = 0
-        self._reference: np.ndarray | None = None  # the reference slice's spectrum
+        self._reference: np.ndarray | None = None  # the reference slice's spectrum times the blur's transfer
         self._reference_offset = np.zeros(2)  # the scene's offset when the reference slice was taken
         self._reference_age = 0
         self._offset = np.zeros(2)
@@ -180,13 +180,14 @@ class SceneMotion:
         failed = False
         if self._count >= cfg.min_events:
             current = slice_spectrum(self._current.reshape(self._window.shape), self._window)
-            shift = None if self._reference is None else slice_shift(self._reference, current, self._transfer, cfg)
+            shift = None if self._reference is None else slice_shift(self._reference, current, cfg)
             failed = shift is None and self._reference is not None
             if shift is not None:
                 self._offset = self._reference_offset + np.asarray(shift) * cfg.cell_px
                 self._reference_age += 1
             if shift is None or max(map(abs, shift)) >= cfg.reanchor_cells or self._reference_age >= cfg.max_reference_slices:
-                self._reference, self._reference_offset, self._reference_age = current, self._offset.copy(), 0
+                self._reference = cv2.mulSpectrums(current, self._transfer, 0)
+                self._reference_offset, self._reference_age = self._offset.copy(), 0
         # (a slice with too few events - a still head - leaves the offset and the reference as they were)
         self._record(self._slice_end, failed)
         self._count = 0  # (the next slice's first counts replace ``_current``)
