@@ -17,6 +17,7 @@ walking 0.785 -> 0.819; still pages and bright light unchanged (docs/deblur.md).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -60,25 +61,32 @@ def estimate_smear(events: Events, region: tuple[int, int, int, int], t_ref_us: 
                    cfg: DeblurConfig = DeblurConfig()) -> tuple[float, float]:
     """The page's displacement (px, x right, y down) over the ``span_us`` before ``t_ref_us``, from
     ``events`` of that time in ``region`` (x0, y0, width, height); (0, 0) with too few events."""
-    x0, y0, width, height = region
     if span_us <= 0:
         return 0.0, 0.0
-    inside = events[in_window(events, x0, y0, width, height)]
-    if inside.shape[0] < cfg.min_events:
+    inside = in_window(events, *region)
+    return smear_of(events["x"][inside], events["y"][inside], events["t"][inside], region, t_ref_us, span_us, cfg)
+
+
+def smear_of(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int, int, int], t_ref_us: int, span_us: float,
+             cfg: DeblurConfig = DeblurConfig()) -> tuple[float, float]:
+    """``estimate_smear`` of the region's events given as their coordinates and times (all inside
+    ``region``): the fields a caller selected, not a copy of its event records."""
+    x0, y0, width, height = region
+    if span_us <= 0 or x.shape[0] < cfg.min_events:
         return 0.0, 0.0
     k_n = cfg.slices
-    r = int(np.clip(np.ceil(cfg.max_speed_px_s * span_us / 1e6), 1, cfg.max_shift_px))
-    age = (t_ref_us - inside["t"].astype(np.float64)) / span_us  # 0 at the reference, 1 a span before
+    r = int(min(max(math.ceil(cfg.max_speed_px_s * span_us / 1e6), 1), cfg.max_shift_px))
+    age = (t_ref_us - t.astype(np.float64)) / span_us  # 0 at the reference, 1 a span before
     oldest = float(age.max())
     if not oldest > 0:
         return 0.0, 0.0
-    slot = np.clip((age * (k_n / oldest)).astype(np.intp), 0, k_n - 1)  # (a sensor's times may jitter past t_ref)
+    slot = (age * (k_n / oldest)).astype(np.intp)
+    np.minimum(np.maximum(slot, 0, out=slot), k_n - 1, out=slot)  # (a sensor's times may jitter past t_ref)
     b = cfg.bin_px  # counted in b x b cells: a quarter of the transforms, the peak still found to a fraction of a cell
     pad = -(-r // b) + 1
     shape = (cv2.getOptimalDFTSize(-(-height // b) + 2 * pad), cv2.getOptimalDFTSize(-(-width // b) + 2 * pad))
     plane = shape[0] * shape[1]
-    cells = (inside["y"].astype(np.intp) - y0) // b + pad, (inside["x"].astype(np.intp) - x0) // b + pad
-    images = np.bincount(slot * plane + cells[0] * shape[1] + cells[1], minlength=k_n * plane).reshape(k_n, *shape).astype(np.float32)
+    images = np.bincount(_cell_of(x, y, slot, (x0, y0), b, pad, shape), minlength=k_n * plane).reshape(k_n, *shape).astype(np.float32)
     counts = np.bincount(slot, minlength=k_n)
     mean_age = np.bincount(slot, weights=age, minlength=k_n) / np.maximum(counts, 1)
     sigma = cfg.blur_px / b
@@ -112,8 +120,8 @@ def _best(pairs: list[tuple[np.ndarray, np.float32]], dx: np.ndarray, dy: np.nda
     for correlation, lag in pairs:
         # (at fractional shifts, circularly: a negative shift wraps to the far end)
         sharpness += cv2.remap(correlation, dx * lag, dy * lag, interpolation, borderMode=cv2.BORDER_WRAP)
-    k = np.unravel_index(int(np.argmax(sharpness)), sharpness.shape)
-    return (float(dx[k]), float(dy[k])), float(sharpness[k])
+    k = int(sharpness.argmax())  # (a flat index: np.unravel_index costs more than the argmax)
+    return (float(dx.flat[k]), float(dy.flat[k])), float(sharpness.flat[k])
 
 
 @lru_cache(maxsize=64)  # (one coarse grid per search radius, and the fine one)
@@ -122,6 +130,24 @@ def _displacements(max_shift_px: float, step_px: float) -> tuple[np.ndarray, np.
     grid = np.arange(-max_shift_px, max_shift_px + 1e-9, step_px, dtype=np.float32)
     dx, dy = np.meshgrid(grid, grid)
     return dx, dy
+
+
+def _cell_of(x: np.ndarray, y: np.ndarray, slot: np.ndarray, corner: tuple[int, int], b: int, pad: int,
+             shape: tuple[int, int]) -> np.ndarray:
+    """Each event's index in the stack of ``slot`` count images of ``shape``: its ``b`` x ``b`` cell
+    from ``corner``, ``pad`` cells in (computed in place: thousands of events per window)."""
+    index = y.astype(np.intp)
+    index -= corner[1]
+    index //= b
+    index += pad
+    index *= shape[1]
+    column = x.astype(np.intp)
+    column -= corner[0]
+    column //= b
+    column += pad
+    index += column
+    index += slot * (shape[0] * shape[1])
+    return index
 
 
 def deblur(window: Events, smear: tuple[float, float], t_ref_us: int, span_us: float, origin: tuple[int, int],
@@ -152,9 +178,10 @@ def deblur_window(window: Events, nearby: Events, origin: tuple[int, int], shape
     if span < cfg.min_span_us:
         return window, (0.0, 0.0)
     region = region_of(origin, shape_hw, sensor_wh, cfg.margin_px)
-    t = nearby["t"]  # (one selection of the region's events of the span: ``nearby`` can be the sensor's tens of thousands)
-    voters = nearby[in_window(nearby, region[0], region[1], region[2], region[3]) & (t >= t_first) & (t <= t_ref)]
-    smear = estimate_smear(voters, region, t_ref, span, cfg)
+    t = nearby["t"]  # (one selection of the region's events of the span: ``nearby`` can be the sensor's tens of thousands;
+    # only the fields the estimate reads, not the 16-byte records)
+    voting = in_window(nearby, *region) & (t >= t_first) & (t <= t_ref)
+    smear = smear_of(nearby["x"][voting], nearby["y"][voting], t[voting], region, t_ref, span, cfg)
     if np.hypot(*smear) < cfg.min_smear_px:
         return window, (0.0, 0.0)
     return deblur(window, smear, t_ref, span, origin, shape_hw), smear

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from darkread.edge.deblur import DeblurConfig, deblur, deblur_window, estimate_smear, region_of
-from darkread.edge.fovea import FoveaConfig, window_events
+from darkread.edge.deblur import DeblurConfig, deblur, deblur_window, estimate_smear, region_of, smear_of
+from darkread.edge.fovea import FoveaConfig, in_window, window_events
 from factories import moving_strokes
 
 SENSOR = (1280, 720)
@@ -117,3 +117,17 @@ def test_events_after_the_reference_time_do_not_break_the_search() -> None:
     t_ref = int(window["t"][-1] - span / 2)  # half the events lie after it
     found = estimate_smear(events[events["t"] >= window["t"][0]], region_of(ORIGIN, SHAPE, SENSOR, 60), t_ref, span)
     assert all(np.isfinite(found)) and max(map(abs, found)) <= DeblurConfig().max_shift_px
+
+
+@pytest.mark.parametrize("velocity", [(300.0, 100.0), (0.0, 0.0)])
+def test_the_smear_of_the_fields_is_the_smear_of_the_events(velocity) -> None:  # noqa: ANN001
+    """``smear_of`` (coordinates and times of the region's events) is ``estimate_smear`` without the record copy."""
+    events = moving_strokes(velocity, noise_share=0.3)
+    window = window_of(events)
+    t_ref, span = int(window["t"][-1]), float(window["t"][-1] - window["t"][0])
+    nearby = events[events["t"] >= window["t"][0]]
+    region = region_of(ORIGIN, SHAPE, SENSOR, 60)
+    inside = nearby[in_window(nearby, *region)]
+    found = smear_of(inside["x"], inside["y"], inside["t"], region, t_ref, span)
+    assert found == estimate_smear(nearby, region, t_ref, span)
+    assert smear_of(inside["x"][:10], inside["y"][:10], inside["t"][:10], region, t_ref, span) == (0.0, 0.0)  # too few
