@@ -100,6 +100,7 @@ class ViewFuser:
         self._box = (0, 0, 0, 0)  # union of the frames' windows (x0, y0, x1, y1), first frame's coordinates
         self._sum: np.ndarray | None = None
         self._count: np.ndarray | None = None
+        self._touched = (0, 0, 0, 0)  # canvas box (x0, y0, x1, y1) any frame added to: sum and count are 0 outside it
         self._frames = 0
         self._events = 0
         self._gaze_sum = np.zeros(2)
@@ -169,9 +170,12 @@ class ViewFuser:
         h, w = mask.shape
         px = int(round(self._last_xy[0])) + frame.origin[0] - self._last.origin[0]
         py = int(round(self._last_xy[1])) + frame.origin[1] - self._last.origin[1]
-        # (ink where sum / count >= 1/2, without dividing the whole canvas)
-        view_ink = np.count_nonzero(self._sum >= 0.5 * np.maximum(self._count, 1e-6)) / self._sum.size
-        if frame.mask.mean() < MIN_INK_FRACTION or view_ink < MIN_INK_FRACTION:
+        # (ink where sum / count >= 1/2, without dividing the whole canvas; counted where frames
+        # were added, the rest of the canvas holds none)
+        tx0, ty0, tx1, ty1 = self._touched
+        touched_sum, touched_count = self._sum[ty0:ty1, tx0:tx1], self._count[ty0:ty1, tx0:tx1]
+        view_ink = np.count_nonzero(touched_sum >= 0.5 * np.maximum(touched_count, 1e-6)) / self._sum.size
+        if np.count_nonzero(frame.mask) / frame.mask.size < MIN_INK_FRACTION or view_ink < MIN_INK_FRACTION:
             self.last_score = None
             return float(px), float(py)  # blank paper: nothing to correlate, nothing to blur
         r, m = self.radius, self.margin
@@ -210,6 +214,8 @@ class ViewFuser:
         flags, border = cv2.INTER_LINEAR, cv2.BORDER_CONSTANT
         self._sum[y0:y1, x0:x1] += cv2.warpAffine(mask, move, size, flags=flags, borderMode=border, borderValue=0.0)
         self._count[y0:y1, x0:x1] += cv2.warpAffine(np.ones((h, w), np.float32), move, size, flags=flags, borderMode=border, borderValue=0.0)
+        t = self._touched
+        self._touched = (x0, y0, x1, y1) if t[2] <= t[0] else (min(t[0], x0), min(t[1], y0), max(t[2], x1), max(t[3], y1))
 
     def view(self, view_id: int) -> ViewRecord:
         """The fused view so far: the union of its frames' windows (the fuser must hold a frame),
