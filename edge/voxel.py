@@ -78,11 +78,18 @@ def voxel_grid(
     if cfg.normalize:
         nonzero = values != 0
         if nonzero.any():
-            used = values[nonzero]
-            std = used.std()
-            values[nonzero] = (used - used.mean()) / (std if std > 0 else 1.0)
+            values[nonzero] = _standardised(values[nonzero])
     grid[voxels] = values
     return grid.reshape(bins, height, width)
+
+
+def _standardised(values: np.ndarray) -> np.ndarray:
+    """``(values - values.mean()) / values.std()`` (1 for a zero spread), bit for bit, with the mean
+    and the deviations computed once (numpy's std computes both again: a third of the grid's time)."""
+    deviation = values - np.add.reduce(values) / values.shape[0]
+    std = np.sqrt(np.add.reduce(deviation * deviation) / values.shape[0])
+    deviation /= std if std > 0 else 1.0
+    return deviation
 
 
 def _output(out: np.ndarray | None, size: int) -> np.ndarray:
