@@ -10,6 +10,7 @@ is the size the shipped model was trained for. :func:`in_window` is the one wind
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -56,10 +57,14 @@ def window_origin(
     center_xy: tuple[float, float], sensor_wh: tuple[int, int], cfg: FoveaConfig = FoveaConfig()
 ) -> tuple[int, int]:
     """(x0, y0) of the window centred on the gaze pixel, clamped inside the sensor."""
-    origin = window_origins(np.array([center_xy], dtype=np.float64), sensor_wh, cfg)[0]
-    if not np.all(np.isfinite(origin)):
+    # ``window_origins`` of one centre in plain floats (the same arithmetic): the pipeline places a
+    # window per view and per frame, and a dozen numpy calls on one-element arrays cost ~20x the arithmetic
+    u, v = float(center_xy[0]), float(center_xy[1])
+    if not (math.isfinite(u) and math.isfinite(v)):
         raise ValueError(f"gaze centre {center_xy} is not a finite pixel")
-    return int(origin[0]), int(origin[1])
+    x0 = min(max(math.floor(u + 0.5) - cfg.width // 2, 0), max(int(sensor_wh[0]) - cfg.width, 0))
+    y0 = min(max(math.floor(v + 0.5) - cfg.height // 2, 0), max(int(sensor_wh[1]) - cfg.height, 0))
+    return x0, y0
 
 
 def crop(events: Events, x0: int, y0: int, cfg: FoveaConfig = FoveaConfig()) -> Events:
