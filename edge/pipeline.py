@@ -37,6 +37,7 @@ import numpy as np
 
 from darkread.edge.config import PipelineConfig
 from darkread.edge.deblur import DeblurConfig, deblur_window
+from darkread.edge.denoise import DenoiseConfig, drop_isolated
 from darkread.edge.events import Events
 from darkread.edge.fovea import FoveaConfig, in_window, window_origin
 from darkread.edge.gaze import GazeLookup, GazeSample
@@ -186,6 +187,7 @@ class Pipeline:
         self.watchdog = watchdog
         self.sensor_wh = (int(source.width), int(source.height))
         self.deblur = DeblurConfig(enabled=settings.deblur)
+        self.denoise = DenoiseConfig(enabled=settings.denoise)
         self.frames_made = 0
         self.error: BaseException | None = None
         self._origin: tuple[int, int] | None = None
@@ -567,7 +569,8 @@ class Pipeline:
         """Exactly the window's events for one frame: the newest ``n_events`` inside the window at
         ``origin`` with ``t <= t_until`` (and ``t >= t_from``), searching back through the ring as needed,
         moved back along the head's motion during their span (``edge.deblur``; measured from them and
-        the sensor's other events of that span around the window).
+        the sensor's other events of that span around the window), and in dim light without those
+        that have no neighbour: shot noise (``edge.denoise``; a frame may then have fewer events).
 
         The search starts from twice the depth the previous window needed, so a frame copies a
         few thousand ring events, not the whole history.
@@ -592,4 +595,9 @@ class Pipeline:
             window, smear = deblur_window(window, recent[int(used[0]) :], origin, (cfg.height, cfg.width), self.sensor_wh, self.deblur)
             if smear != (0.0, 0.0):
                 self.metrics.add("frames_deblurred")
+        if self.denoise.enabled and window.shape[0]:
+            before = window.shape[0]
+            window = drop_isolated(window, origin, (cfg.height, cfg.width), self.denoise)
+            if window.shape[0] < before:
+                self.metrics.add("frames_denoised")
         return window

@@ -28,6 +28,7 @@ COUNTERS = (
     "events_foveated",
     "frames",  # inferences: frames made
     "frames_deblurred",  # frames whose events were moved back along the head's motion (edge.deblur)
+    "frames_denoised",  # frames whose isolated events (dim-light shot noise) were dropped (edge.denoise)
     "views",  # on-change mode: fused views of fixations
     "views_split",  # on-change mode: views ended early by a frame that did not register onto them
     "event_us",  # event-clock time covered by the events read (reading time)
@@ -81,7 +82,7 @@ class Snapshot:
             f"views {r['views']:.1f}/s inferences {r['frames']:.1f}/s "
             f"CPU {self.cpu_per_reading_s:.3f} s per reading s infer p50 {self.inference_ms_p50:.1f} p99 {self.inference_ms_p99:.1f} ms "
             f"wire p50 {self.latency_ms_p50:.1f} p99 {self.latency_ms_p99:.1f} ms "
-            f"deblurred {self.totals['frames_deblurred']} skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
+            f"deblurred {self.totals['frames_deblurred']} denoised {self.totals['frames_denoised']} skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
             f"drops {self.totals['events_dropped']} spool {self.spool_depth} "
             f"sent {r['bytes_sent']/1e3:.1f} kB/s ({self.bandwidth_vs_raw():.1%} of raw events, "
             f"{self.bandwidth_vs_rgb():.1%} of one RGB frame per second)"

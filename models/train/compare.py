@@ -72,15 +72,16 @@ def page_ink_source(recording: Path) -> InkSource | None:
     return None if plain is None else (lambda H, calib: plain)
 
 
-def truth_windows(recording: str | Path, every_ms: float = 40.0, max_windows: int = 400, deblur: bool = False) -> ScoredWindows:
+def truth_windows(recording: str | Path, every_ms: float = 40.0, max_windows: int = 400, deblur: bool = False,
+                  denoise: bool = False) -> ScoredWindows:
     """The recording's windows with the simulator's ink under the true pose (targets None without it);
-    ``deblur``: the windows' events deblurred as on the edge (``window_stack``)."""
+    ``deblur``, ``denoise``: the windows' events deblurred and denoised as on the edge (``window_stack``)."""
     from darkread.models.train.annotate import load_pose_truth, render_target, window_rays
     from darkread.models.train.windows import read_events, window_stack
 
     path = Path(recording)
     rec, events, wh = read_events(path)
-    windows = window_stack(rec, events, wh, every_ms=every_ms, max_windows=max_windows, deblur=deblur)
+    windows = window_stack(rec, events, wh, every_ms=every_ms, max_windows=max_windows, deblur=deblur, denoise=denoise)
     truth = load_pose_truth(path)
     ink = page_ink_source(path)
     if truth is None or ink is None or len(windows.t_end_us) == 0:

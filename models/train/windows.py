@@ -41,13 +41,15 @@ def read_events(path: str | Path, *, need_text: bool = False) -> tuple[Any, np.n
 
 
 def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every_ms: float = 40.0,
-                 max_windows: int = 400, deblur: bool = False) -> Windows:
+                 max_windows: int = 400, deblur: bool = False, denoise: bool = False) -> Windows:
     """Every ``every_ms`` a window cut exactly as on the edge: gaze -> fovea -> newest 1600 events -> voxels.
 
     ``deblur``: each window's events moved back along the head's motion as the edge does before its
-    voxel grid (``edge.deblur``), so a network tuned on these windows sees what it will be given."""
+    voxel grid (``edge.deblur``), so a network tuned on these windows sees what it will be given;
+    ``denoise``: a dim-light window's isolated events dropped as the edge drops them (``edge.denoise``)."""
     from darkread.edge.config import PipelineConfig
     from darkread.edge.deblur import DeblurConfig, deblur_window
+    from darkread.edge.denoise import drop_isolated
     from darkread.edge.fovea import window_events, window_origin
     from darkread.edge.gaze import GazeMapper
     from darkread.edge.pipeline import MAX_HISTORY_EVENTS
@@ -67,6 +69,8 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
         window = window_events(recent, origin, voxel.fovea, n_events)
         if deblur:
             window, _ = deblur_window(window, recent, origin, WINDOW_HW, sensor_wh, DeblurConfig())
+        if denoise:
+            window = drop_isolated(window, origin, WINDOW_HW)
         if len(window) >= n_events // 2:
             voxels.append(voxel_grid(window, origin[0], origin[1], voxel))
             origins.append(origin)

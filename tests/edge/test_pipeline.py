@@ -167,7 +167,7 @@ def test_a_model_with_another_window_size_just_works(tmp_path: Path) -> None:
     frames: list[FrameResult] = []
     source = ListSource(chunked(ev, 200))
     pipeline = Pipeline(source, FixedGaze(), reconstructor, lambda f, t: frames.append(f),
-                        every_window(lossless=True), reconstructor.voxel)
+                        every_window(lossless=True, denoise=False), reconstructor.voxel)  # (uniform events: all isolated)
     pipeline.start()
     assert source.done.wait(5)
     pipeline.stop()
@@ -203,7 +203,7 @@ def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, 
 def test_lossless_pipeline_makes_one_frame_per_window() -> None:
     ev = events_in_box(16_000, 540, 310, 200, 100)  # all inside the window at the gaze
     source = ListSource(chunked(ev, 200))
-    settings = every_window(n_events=1600, period_ms=1000.0, lossless=True)
+    settings = every_window(n_events=1600, period_ms=1000.0, lossless=True, denoise=False)  # (uniform events: all noise)
     gaze = FixedGaze()
     frames, metrics, pings = run_pipeline(source, gaze, settings)
     # every 1600 new foveated events make a frame (the first places the window), plus the remainder
@@ -363,3 +363,14 @@ def test_windows_of_a_moving_page_are_deblurred_and_counted(deblur: bool) -> Non
     assert (metrics.totals["frames_deblurred"] > 0) is deblur
     if deblur:  # a moved event that would leave the window is dropped, so some frames bin fewer
         assert min(frame.events_used for frame, _ in frames) < 1600
+
+
+@pytest.mark.parametrize("denoise", [True, False])
+def test_noisy_windows_lose_their_isolated_events_and_are_counted(denoise: bool) -> None:
+    ev = events_in_box(16_000, 540, 310, 200, 100)  # uniform over the window: shot noise, most of it isolated
+    frames, metrics, _ = run_pipeline(ListSource(chunked(ev, 200)), FixedGaze(), every_window(lossless=True, denoise=denoise))
+    assert frames
+    if denoise:
+        assert metrics.totals["frames_denoised"] == len(frames) and all(f.events_used < 1600 for f, _ in frames)
+    else:
+        assert metrics.totals["frames_denoised"] == 0 and all(f.events_used == 1600 for f, _ in frames[:-1])

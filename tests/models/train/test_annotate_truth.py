@@ -27,7 +27,7 @@ def walking_page(tmp_path_factory) -> Path:
 def test_the_shard_holds_the_deblurred_windows_and_the_simulators_ink(tmp_path, walking_page) -> None:
     summary = annotate_from_truth(walking_page, tmp_path / "ann", every_ms=20.0)
     data = load_dataset(tmp_path / "ann")
-    expected = truth_windows(walking_page, every_ms=20.0, deblur=True)
+    expected = truth_windows(walking_page, every_ms=20.0, deblur=True, denoise=True)
     assert expected.targets is not None and len(data.targets) == len(expected.targets) == summary["windows"] >= 10
     assert np.array_equal(data.targets, expected.targets)  # the simulator's ink, exactly
     np.testing.assert_allclose(data.voxels, expected.voxels, atol=2e-3)  # (stored as float16)
