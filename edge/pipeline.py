@@ -196,7 +196,7 @@ class Pipeline:
         self._last_arrival = 0.0
         self._period_t0: int | None = None  # lossless mode: event time of the last period start
         self._started_at = 0.0
-        self._ring_dropped = 0
+        self._ring_overwritten = 0
         self._history = MIN_HISTORY_EVENTS
         self._cond = threading.Condition()
         self._step_lock = threading.Lock()
@@ -255,16 +255,16 @@ class Pipeline:
             self._process(self._take())
 
     def _count_arrival(self, events: Events, n_foveated: int) -> None:
-        """The reader's metrics of one chunk: events in, inside the window, reading time, drops."""
+        """The reader's metrics of one chunk: events in, inside the window, reading time, ring history overwritten."""
         self.metrics.add("events_in", int(events.shape[0]))
         self.metrics.add("events_foveated", n_foveated)
         t_newest = int(events["t"][-1])
         if self._last_t is not None and t_newest > self._last_t:
             self.metrics.add("event_us", t_newest - self._last_t)  # reading time covered: the CPU-per-second figure
         self._last_t = t_newest
-        if self.ring.dropped != self._ring_dropped:
-            self.metrics.add("events_dropped", self.ring.dropped - self._ring_dropped)
-            self._ring_dropped = self.ring.dropped
+        if self.ring.overwritten != self._ring_overwritten:
+            self.metrics.add("events_overwritten", self.ring.overwritten - self._ring_overwritten)
+            self._ring_overwritten = self.ring.overwritten
 
     def _sink_steps(self, events: Events) -> None:
         """Lossless on-change: the chunk into the ring at once, then one processing step per piece

@@ -1,7 +1,10 @@
 """A fixed-size ring of the newest events between the sensor drain thread and the pipeline.
 
 The drain thread must never block on the pipeline (the sensor's own FIFO would overflow), so the
-ring overwrites its oldest events instead of waiting, and counts what it dropped. Storage is one
+ring overwrites its oldest events instead of waiting, and counts how many it overwrote. That is
+history, not loss: every event went through ``Pipeline.sink`` (the scene tracker, the window's
+count) as it arrived, and a window reads only its newest events; a window that was never
+inferred because inference fell behind is counted as ``frames_skipped``. Storage is one
 preallocated structured array; a push is at most two slice copies.
 
 Events are assumed to be pushed in time order (as a sensor or a file delivers them); ``since``
@@ -35,7 +38,7 @@ class EventRing:
         self._count = 0
         self._lock = threading.Lock()
         self.total_pushed = 0
-        self.dropped = 0  # events pushed and overwritten (or never stored) before anyone could read them
+        self.overwritten = 0  # events pushed and later overwritten by newer ones (or never stored: a push larger than the ring)
         self.newest_t: int | None = None
 
     def __len__(self) -> int:
@@ -51,11 +54,11 @@ class EventRing:
         with self._lock:
             self.total_pushed += n
             if n >= self.capacity:  # only the newest `capacity` survive
-                self.dropped += self._count + n - self.capacity
+                self.overwritten += self._count + n - self.capacity
                 self._records[:] = events[n - self.capacity :]
                 self._head, self._count = 0, self.capacity
             else:
-                self.dropped += max(0, self._count + n - self.capacity)
+                self.overwritten += max(0, self._count + n - self.capacity)
                 first = min(n, self.capacity - self._head)
                 self._records[self._head : self._head + first] = events[:first]
                 self._records[: n - first] = events[first:]

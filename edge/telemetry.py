@@ -32,9 +32,9 @@ COUNTERS = (
     "views",  # on-change mode: fused views of fixations
     "views_split",  # on-change mode: views ended early by a frame that did not register onto them
     "event_us",  # event-clock time covered by the events read (reading time)
-    "frames_skipped",
+    "frames_skipped",  # windows never inferred because inference fell behind (live): what a busy edge loses
     "frames_no_gaze",
-    "events_dropped",
+    "events_overwritten",  # ring history overwritten by newer events: normal once the ring is full, no loss
     "messages_sent",
     "bytes_sent",
     "messages_acked",
@@ -58,6 +58,7 @@ class Snapshot:
     latency_ms_p50: float
     latency_ms_p99: float
     spool_depth: int
+    spool_lost: int  # messages the full spool evicted before their ack: the uplink's only loss
     raw_bytes_per_event: float = RAW_EVT3_BYTES_PER_EVENT
     cpu_s: float = 0.0  # process CPU time over the interval
 
@@ -83,7 +84,7 @@ class Snapshot:
             f"CPU {self.cpu_per_reading_s:.3f} s per reading s infer p50 {self.inference_ms_p50:.1f} p99 {self.inference_ms_p99:.1f} ms "
             f"wire p50 {self.latency_ms_p50:.1f} p99 {self.latency_ms_p99:.1f} ms "
             f"deblurred {self.totals['frames_deblurred']} denoised {self.totals['frames_denoised']} skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
-            f"drops {self.totals['events_dropped']} spool {self.spool_depth} "
+            f"spool {self.spool_depth} (lost {self.spool_lost}) "
             f"sent {r['bytes_sent']/1e3:.1f} kB/s ({self.bandwidth_vs_raw():.1%} of raw events, "
             f"{self.bandwidth_vs_rgb():.1%} of one RGB frame per second)"
         )
@@ -110,6 +111,7 @@ class EdgeMetrics:
         self.inference_ms: deque[float] = deque(maxlen=RESERVOIR)
         self.latency_ms: deque[float] = deque(maxlen=RESERVOIR)
         self.spool_depth: Callable[[], int] = lambda: 0
+        self.spool_lost: Callable[[], int] = lambda: 0
         self.raw_bytes_per_event = RAW_EVT3_BYTES_PER_EVENT  # the raw stream's size, for the bandwidth ratio
         self._started = clock()
         self._last_time = self._started
@@ -145,6 +147,7 @@ class EdgeMetrics:
             latency_ms_p50=percentile(latency, 50),
             latency_ms_p99=percentile(latency, 99),
             spool_depth=self.spool_depth(),
+            spool_lost=self.spool_lost(),
             raw_bytes_per_event=self.raw_bytes_per_event,
             cpu_s=cpu_s,
         )
@@ -168,6 +171,7 @@ class EdgeMetrics:
             quantiles = [(f'{{quantile="{q}"}}', percentile(values, q * 100)) for q in (0.5, 0.99)]
             metric(name, "gauge", f"{name.replace('_', ' ')} over the last {RESERVOIR} frames", quantiles)
         metric("spool_depth", "gauge", "messages waiting for an ack", [("", self.spool_depth())])
+        metric("spool_lost", "gauge", "messages the full spool evicted before their ack (lost)", [("", self.spool_lost())])
         reading_s = totals["event_us"] / 1e6
         metric("cpu_seconds_per_reading_second", "gauge", "process CPU time per second of event time since start",
                [("", time.process_time() / reading_s if reading_s > 0 else 0.0)])

@@ -104,6 +104,7 @@ class Uplink:
         self.spool = spool
         self.metrics = metrics or EdgeMetrics()
         self.metrics.spool_depth = lambda: spool.depth
+        self.metrics.spool_lost = lambda: spool.dropped
         self.device_id = settings.device_id or default_device_id()
         # frames waiting in the spool belong to the spool's session: resume it; otherwise start anew
         pending_session = spool.session_id() if spool.depth else None

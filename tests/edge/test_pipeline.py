@@ -242,7 +242,7 @@ def test_no_gaze_means_no_frames_counted() -> None:
     assert metrics.totals["frames_no_gaze"] > 0
 
 
-def test_ring_bounds_memory_and_counts_drops() -> None:
+def test_ring_bounds_memory_and_counts_what_it_overwrote() -> None:
     ev = random_events(100_000, seed=5)
     source = ListSource(chunked(ev, 50_000))
     settings = every_window(period_ms=1.0, ring_capacity=1 << 15)
@@ -253,7 +253,7 @@ def test_ring_bounds_memory_and_counts_drops() -> None:
     source.done.wait(5)
     pipeline.stop()
     assert len(pipeline.ring) == 1 << 15
-    assert metrics.totals["events_dropped"] == 100_000 - (1 << 15)
+    assert metrics.totals["events_overwritten"] == 100_000 - (1 << 15)
 
 
 # -- metrics ---------------------------------------------------------------------------------
@@ -274,6 +274,10 @@ def test_metrics_snapshot_rates_and_percentiles() -> None:
     assert snap.latency_ms_p99 == pytest.approx(9.901)
     assert snap.bandwidth_vs_raw() == pytest.approx(50 / (500 * 2.0))
     assert "inferences" in snap.log_line() and "views" in snap.log_line()
+    assert "drops" not in snap.log_line()  # ring history overwritten is no loss; the spool's evictions are
+    metrics.spool_lost = lambda: 7
+    now[0] = 2.5
+    assert "(lost 7)" in metrics.snapshot().log_line() and "darkread_edge_spool_lost 7" in metrics.prometheus_text()
     now[0] = 3.0
     assert metrics.snapshot().rates["events_in"] == 0.0  # rates cover the last interval only
 

@@ -25,7 +25,7 @@ def test_many_small_pushes_wrap_around() -> None:
         held = ring.last(64)
         newest = events[: min(start + 7, 1000)][-64:]
         assert np.array_equal(held, newest)
-    assert len(ring) == 64 and ring.total_pushed == 1000 and ring.dropped == 1000 - 64
+    assert len(ring) == 64 and ring.total_pushed == 1000 and ring.overwritten == 1000 - 64
     assert ring.newest_t == 999
 
 
@@ -35,14 +35,14 @@ def test_push_larger_than_capacity_keeps_the_newest() -> None:
     ring.push(events[:30])
     ring.push(events[30:])
     assert np.array_equal(ring.last(1000), events[-100:])
-    assert ring.dropped == 400 and ring.total_pushed == 500
+    assert ring.overwritten == 400 and ring.total_pushed == 500
 
 
 def test_last_and_since() -> None:
     events = stream(250)
     ring = EventRing(100)
     ring.push(events[:90])
-    ring.push(events[90:250])  # wraps, 150 dropped
+    ring.push(events[90:250])  # wraps, 150 overwritten
     assert np.array_equal(ring.last(10), events[240:])
     assert np.array_equal(ring.last(0), events[:0])
     assert np.array_equal(ring.since(200), events[200:])
@@ -98,5 +98,5 @@ def test_concurrent_writer_and_reader() -> None:
     done.set()
     thread.join(timeout=10)
     assert not problems
-    assert ring.total_pushed == 200_000 and ring.dropped == 200_000 - 4096
+    assert ring.total_pushed == 200_000 and ring.overwritten == 200_000 - 4096
     assert np.array_equal(ring.last(4096), events[-4096:])

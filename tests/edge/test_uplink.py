@@ -344,3 +344,12 @@ def test_acks_that_stop_advancing_make_the_uplink_reconnect() -> None:
     assert server.stored[uplink.session_id] == list(range(10))
     assert uplink.metrics.totals["ack_timeouts"] == 1 and server.connections == 2
     assert 0.5 <= elapsed < 3.0
+
+
+def test_messages_the_full_spool_evicted_are_reported_as_lost() -> None:
+    spool, metrics = Spool(None, max_messages=4), EdgeMetrics()
+    make_uplink(settings("ws://127.0.0.1:1/v1/stream"), spool, metrics)  # (never started: nothing connects)
+    for _ in range(10):
+        spool.append(spool.allocate_seq(), b"x" * 10)
+    snap = metrics.snapshot()
+    assert snap.spool_depth == 4 and snap.spool_lost == 6 and "(lost 6)" in snap.log_line()
