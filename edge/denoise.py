@@ -15,7 +15,7 @@ out of small letters cost more than it gave.
 
 Measured on the evaluation suite's recordings, read end to end in the default on-change mode with
 and without the filter (same code otherwise, docs/denoise.md): mean CER 10 lux 37.7 -> 32.7 %,
-5 lux 62.6 -> 56.9 %, 30 lux 5.3 -> 4.5 %, 100 lux 2.9 -> 2.9 %, 1000 lux 4.9 -> 4.6 %. Pure: numpy and OpenCV.
+5 lux 62.6 -> 56.9 %, 30 lux 5.3 -> 4.5 %, 100 lux 2.8 -> 2.8 %, 1000 lux 4.9 -> 4.6 %. Pure: numpy and OpenCV.
 """
 
 from __future__ import annotations
