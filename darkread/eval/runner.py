@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import shutil
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -131,6 +132,9 @@ def evaluate_recording(
 
     def run_darkread() -> dict[str, Any]:
         started = time.perf_counter()
+        # a fresh read: an earlier run's cloud data (another session of the same page) would stay
+        # beside this one and the attribution could not tell which session the report read
+        shutil.rmtree(run_dir / "read", ignore_errors=True)
         r = read_recording(recording_dir, backend=backend, model=model, out_dir=run_dir / "read", infer=infer)
         read["result"] = r
         return {

@@ -95,6 +95,11 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     # --no-rgb: darkread's reading alone (a second simulator's suite has the first one's scenes)
     alone = evaluate_recording(folder, tmp_path / "run_alone", rgb=False)
     assert alone["rgb"] is None and alone["bandwidth"] is None and alone["darkread"]["frames"] > 0
+    # evaluated again in the same folder (--force): a fresh read, not a second session beside the first
+    again = evaluate_recording(folder, tmp_path / "run_alone", rgb=False)
+    from darkread.eval.attribution import stored_frames
+
+    assert len(stored_frames(tmp_path / "run_alone" / "read" / "cloud")) == again["darkread"]["frames"]
 
     # where its errors come from: the stored frames against the simulator's truth, read three ways
     from darkread.eval.attribution import write_attribution
