@@ -575,9 +575,9 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
 
 
 def annotate_from_truth(recording: str | Path, out: str | Path, every_ms: float = 40.0, max_windows: int = 400,
-                        deblur: bool = True) -> dict[str, Any]:
+                        deblur: bool = True, denoise: bool = True) -> dict[str, Any]:
     """A synthetic recording's windows labelled from the simulator's own pose and ink (no markers
-    needed: any plain page ``synth recording`` wrote), deblurred and denoised as the edge does; writes
+    needed: any plain page ``synth recording`` wrote), deblurred and denoised as the edge does them; writes
     the shard and summary as ``annotate_recording`` does. For tuning on the windows the glasses cut
     while a simulated reader reads (fixations, saccades, head motion), not on random crops."""
     from darkread.edge.io.recording import open_recording
@@ -585,7 +585,7 @@ def annotate_from_truth(recording: str | Path, out: str | Path, every_ms: float 
     from darkread.models.train.compare import truth_windows
 
     recording = Path(recording)
-    scored = truth_windows(recording, every_ms=every_ms, max_windows=max_windows, deblur=deblur, denoise=deblur)
+    scored = truth_windows(recording, every_ms=every_ms, max_windows=max_windows, deblur=deblur, denoise=denoise)
     windows = scored.windows
     assert windows is not None  # noqa: S101 - truth_windows keeps them
     if len(windows.t_end_us) == 0:
@@ -611,7 +611,7 @@ def annotate_from_truth(recording: str | Path, out: str | Path, every_ms: float 
         "annotated_share": 1.0,
         "ink_share": round(float(scored.targets.mean()), 4),
         "deblurred": bool(deblur),
-        "denoised": bool(deblur),
+        "denoised": bool(denoise),
         "every_ms": every_ms,
     }
     (out / SUMMARY_NAME).write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from factories import random_events
 
 from darkread.edge.events import make_events
@@ -105,3 +107,14 @@ def test_origins_along_gaze_look_up_the_gaze_once_per_millisecond() -> None:
     assert origins.tolist() == [[540, 310]] * 6
     assert asked[0].tolist() == [500, 1500, 2500]  # the middle of each millisecond holding events
     assert origins_along_gaze(np.array([], np.int64), gaze, SENSOR).shape == (0, 2)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    u=st.floats(-200.0, 1500.0, allow_nan=False), v=st.floats(-200.0, 900.0, allow_nan=False),
+    width=st.integers(1, 1400), height=st.integers(1, 800),
+)
+def test_window_origin_is_window_origins_of_one_centre(u: float, v: float, width: int, height: int) -> None:
+    """The scalar version (plain floats, per frame) and the vectorised one place a window alike."""
+    expected = window_origins(np.array([[u, v]]), (width, height))[0]
+    assert window_origin((u, v), (width, height)) == (int(expected[0]), int(expected[1]))
