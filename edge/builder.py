@@ -147,6 +147,7 @@ def build_edge(
     ``watchdog`` is called from the processing loop while events flow (systemd's watchdog ping);
     ``on_frame``, when given, receives the frames instead of an uplink (the bench's encode-only run).
     """
+    from darkread.edge.binning import warm_up as warm_up_binning
     from darkread.edge.io.evt3 import warm_up as warm_up_decoder
 
     metrics = EdgeMetrics()
@@ -159,7 +160,8 @@ def build_edge(
         gaze = _open_gaze(config.gaze, calibration, gaze_track, feeds)
         for feed in feeds:
             undo.callback(feed.stop)
-        warm_up_decoder()  # READY only once the first chunk can be decoded without a JIT pause
+        warm_up_decoder()  # READY only once the first chunk can be decoded without a JIT pause ...
+        warm_up_binning()  # ... and counted (head motion, deblur)
         reconstructor = Reconstructor(config.pipeline.model or None, threads=config.pipeline.threads)
         voxel = reconstructor.voxel
         uplink = pages = None

@@ -24,6 +24,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
+from darkread.edge.binning import cell_tables, slice_counts, voters
 from darkread.edge.events import Events
 from darkread.edge.fovea import in_window
 
@@ -68,27 +69,33 @@ def estimate_smear(events: Events, region: tuple[int, int, int, int], t_ref_us: 
 
 
 def smear_of(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int, int, int], t_ref_us: int, span_us: float,
-             cfg: DeblurConfig = DeblurConfig()) -> tuple[float, float]:
-    """``estimate_smear`` of the region's events given as their coordinates and times (all inside
-    ``region``): the fields a caller selected, not a copy of its event records."""
+             cfg: DeblurConfig = DeblurConfig(), t_first_us: int | None = None) -> tuple[float, float]:
+    """``estimate_smear`` of events given as their coordinates and times: the fields of a
+    caller's events, not a copy of its records. Those inside ``region`` vote; with ``t_first_us``
+    only those of [``t_first_us``, ``t_ref_us``]."""
     x0, y0, width, height = region
-    if span_us <= 0 or x.shape[0] < cfg.min_events:
+    clock = np.iinfo(np.int64)
+    t_first, t_last = (int(clock.min), int(clock.max)) if t_first_us is None else (int(t_first_us), int(t_ref_us))
+    if span_us <= 0:
+        return 0.0, 0.0
+    n, earliest = voters(x, y, t, x0, y0, width, height, t_first, t_last)
+    if n < cfg.min_events:
         return 0.0, 0.0
     k_n = cfg.slices
     r = int(min(max(math.ceil(cfg.max_speed_px_s * span_us / 1e6), 1), cfg.max_shift_px))
-    age = (t_ref_us - t.astype(np.float64)) / span_us  # 0 at the reference, 1 a span before
-    oldest = float(age.max())
+    oldest = (t_ref_us - float(earliest)) / span_us  # 0 at the reference, 1 a span before
     if not oldest > 0:
         return 0.0, 0.0
-    slot = (age * (k_n / oldest)).astype(np.intp)
-    np.minimum(np.maximum(slot, 0, out=slot), k_n - 1, out=slot)  # (a sensor's times may jitter past t_ref)
     b = cfg.bin_px  # counted in b x b cells: a quarter of the transforms, the peak still found to a fraction of a cell
     pad = -(-r // b) + 1
     shape = (cv2.getOptimalDFTSize(-(-height // b) + 2 * pad), cv2.getOptimalDFTSize(-(-width // b) + 2 * pad))
-    plane = shape[0] * shape[1]
-    images = np.bincount(_cell_of(x, y, slot, (x0, y0), b, pad, shape), minlength=k_n * plane).reshape(k_n, *shape).astype(np.float32)
-    counts = np.bincount(slot, minlength=k_n)
-    mean_age = np.bincount(slot, weights=age, minlength=k_n) / np.maximum(counts, 1)
+    images = np.zeros((k_n, shape[0] * shape[1]), np.float32)
+    counts, age_sums = np.zeros(k_n, np.int64), np.zeros(k_n, np.float64)
+    # (by age, each event in one of k_n slices; counted in one compiled pass: edge.binning)
+    column_of, row_of = cell_tables(width, height, b, pad, row_stride=shape[1])
+    slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, int(t_ref_us), float(span_us), oldest, images, counts, age_sums)
+    images = images.reshape(k_n, *shape)
+    mean_age = age_sums / np.maximum(counts, 1)
     sigma = cfg.blur_px / b
     spectra = [cv2.dft(cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image) for image in images]  # (real, packed)
     pairs = []  # (correlation, lag in cells) of each pair of slices
@@ -132,24 +139,6 @@ def _displacements(max_shift_px: float, step_px: float) -> tuple[np.ndarray, np.
     return dx, dy
 
 
-def _cell_of(x: np.ndarray, y: np.ndarray, slot: np.ndarray, corner: tuple[int, int], b: int, pad: int,
-             shape: tuple[int, int]) -> np.ndarray:
-    """Each event's index in the stack of ``slot`` count images of ``shape``: its ``b`` x ``b`` cell
-    from ``corner``, ``pad`` cells in (computed in place: thousands of events per window)."""
-    index = y.astype(np.intp)
-    index -= corner[1]
-    index //= b
-    index += pad
-    index *= shape[1]
-    column = x.astype(np.intp)
-    column -= corner[0]
-    column //= b
-    column += pad
-    index += column
-    index += slot * (shape[0] * shape[1])
-    return index
-
-
 def deblur(window: Events, smear: tuple[float, float], t_ref_us: int, span_us: float, origin: tuple[int, int],
            shape_hw: tuple[int, int]) -> Events:
     """``window``'s events moved along ``smear`` (the page's displacement over ``span_us`` before
@@ -178,10 +167,8 @@ def deblur_window(window: Events, nearby: Events, origin: tuple[int, int], shape
     if span < cfg.min_span_us:
         return window, (0.0, 0.0)
     region = region_of(origin, shape_hw, sensor_wh, cfg.margin_px)
-    t = nearby["t"]  # (one selection of the region's events of the span: ``nearby`` can be the sensor's tens of thousands;
-    # only the fields the estimate reads, not the 16-byte records)
-    voting = in_window(nearby, *region) & (t >= t_first) & (t <= t_ref)
-    smear = smear_of(nearby["x"][voting], nearby["y"][voting], t[voting], region, t_ref, span, cfg)
+    # (``nearby`` can be the sensor's tens of thousands: its fields are read in place, not selected)
+    smear = smear_of(nearby["x"], nearby["y"], nearby["t"], region, t_ref, span, cfg, t_first_us=t_first)
     if np.hypot(*smear) < cfg.min_smear_px:
         return window, (0.0, 0.0)
     return deblur(window, smear, t_ref, span, origin, shape_hw), smear

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from darkread.edge.binning import add_cell_counts, cell_tables
 from darkread.edge.events import Events
 from darkread.stitch.register import parabola_vertex
 
@@ -62,20 +63,6 @@ class SceneMotionConfig:
     max_reference_slices: int = MAX_REFERENCE_SLICES
     stride: int = STRIDE
     trust_us: int = TRUST_US
-
-
-def cell_index(events: Events, grid_wh: tuple[int, int], cell_px: int) -> np.ndarray:
-    """Each event's ``cell_px`` cell, row-major in the ``grid_wh`` grid (both polarities)."""
-    cols, rows = grid_wh
-    cx = events["x"].astype(np.intp)  # (then in place: a chunk is tens of thousands of events)
-    np.floor_divide(cx, cell_px, out=cx)
-    np.minimum(cx, cols - 1, out=cx)
-    cells = events["y"].astype(np.intp)
-    np.floor_divide(cells, cell_px, out=cells)
-    np.minimum(cells, rows - 1, out=cells)
-    cells *= cols
-    cells += cx
-    return cells
 
 
 def gaussian_transfer(shape_hw: tuple[int, int], sigma: float) -> np.ndarray:
@@ -126,7 +113,9 @@ class SceneMotion:
         self._window = cv2.createHanningWindow(self.grid_wh, cv2.CV_32F)
         self._transfer = gaussian_transfer(self.grid_wh[::-1], cfg.blur_cells * np.sqrt(2.0))
         self._slice_end: int | None = None
-        self._current = np.zeros(self.grid_wh[0] * self.grid_wh[1], np.int64)  # the open slice's counts per cell (while _count > 0)
+        cols, rows = self.grid_wh  # (events past the grid's last column or row count in it)
+        self._column_of, self._row_of = cell_tables(cols * cfg.cell_px, rows * cfg.cell_px, cfg.cell_px)
+        self._current = np.zeros(cols * rows, np.int64)  # the open slice's counts per cell (while _count > 0)
         self._count = 0
         self._reference: np.ndarray | None = None  # the reference slice's spectrum times the blur's transfer
         self._reference_offset = np.zeros(2)  # the scene's offset when the reference slice was taken
@@ -153,26 +142,25 @@ class SceneMotion:
         if self._slice_end is None:
             self._slice_end = int(t[0]) + slice_us
             self._record(int(t[0]))
-        cells = cell_index(events, self.grid_wh, self.cfg.cell_px)
+        x, y = events["x"], events["y"]
         # the slice ends this chunk passes, and where each cuts it (a running maximum keeps the
         # cuts ordered when a real sensor's times jitter back by a few microseconds)
         n_ends = max(0, (int(t[-1]) - self._slice_end) // slice_us + 1)
         cuts = np.maximum.accumulate(np.searchsorted(t, self._slice_end + slice_us * np.arange(n_ends), side="left"))
         start = 0
         for cut in cuts.tolist():
-            self._count_cells(cells[start:cut])
+            self._count_cells(x, y, start, cut)
             self._close_slice()
             start = cut
-        self._count_cells(cells[start:])
+        self._count_cells(x, y, start, x.shape[0])
 
-    def _count_cells(self, cells: np.ndarray) -> None:
-        if cells.shape[0]:
-            counts = np.bincount(cells, minlength=self._current.shape[0])
-            if self._count:  # (a slice begun in the chunk before)
-                self._current += counts
-            else:  # (the slice's first events: its counts as they are, no zeroed image to add them to)
-                self._current = counts
-            self._count += int(cells.shape[0])
+    def _count_cells(self, x: np.ndarray, y: np.ndarray, start: int, stop: int) -> None:
+        """Count events ``start:stop`` into the open slice (compiled: one pass, ``edge.binning``)."""
+        if stop > start:
+            if not self._count:  # (the slice's first events)
+                self._current.fill(0)
+            add_cell_counts(x, y, start, stop, self._column_of, self._row_of, self._current)
+            self._count += stop - start
 
     def _close_slice(self) -> None:
         assert self._slice_end is not None  # noqa: S101
@@ -190,7 +178,7 @@ class SceneMotion:
                 self._reference_offset, self._reference_age = self._offset.copy(), 0
         # (a slice with too few events - a still head - leaves the offset and the reference as they were)
         self._record(self._slice_end, failed)
-        self._count = 0  # (the next slice's first counts replace ``_current``)
+        self._count = 0  # (the next slice's first counts start from zero)
         self._slice_end += cfg.slice_us
 
     def _record(self, t_us: int, failed: bool = False) -> None:

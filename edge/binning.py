@@ -1,0 +1,83 @@
+"""Events binned into count images, compiled: one pass over the events instead of a dozen array passes.
+
+The head-motion tracker (``scene_motion``) counts every event of the sensor into coarse cells, a
+million events a few seconds; the deblur (``deblur``) counts a window's neighbourhood into one
+image per time slice. In numpy each is a chain of whole-array passes (a strided field copy per
+coordinate, a floor division, a clip, a multiply, an add, a bincount), and on the edge's one core
+those passes cost more than the counting: compiled, each event is read once and counted in place.
+The counts are exactly numpy's (integers; the slice ages summed in event order, as ``np.bincount``
+sums its weights), which the tests check against the numpy formulation.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+
+def cell_tables(width: int, height: int, cell_px: int, pad: int = 0, row_stride: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(column of each x, flat offset of each y's row) of ``cell_px`` cells over ``width`` x
+    ``height`` pixels, ``pad`` cells in; rows ``row_stride`` cells apart (default: as many as there
+    are columns plus both pads). Looked up per event: an integer division per coordinate costs
+    more than the rest of the counting."""
+    columns = np.arange(width, dtype=np.int64) // cell_px + pad
+    stride = int(columns[-1]) + 1 + pad if row_stride is None else row_stride
+    rows = (np.arange(height, dtype=np.int64) // cell_px + pad) * stride
+    return columns, rows
+
+
+@nb.njit(cache=True, nogil=True)
+def add_cell_counts(x, y, start, stop, column_of, row_of, out):  # noqa: ANN001, ANN201  # pragma: no cover - compiled
+    """Add events ``start:stop`` of (``x``, ``y``) to ``out`` (int64, flat) at ``row_of[y] +
+    column_of[x]`` (``cell_tables``); a coordinate past a table's end counts as its last entry."""
+    last_x, last_y = column_of.shape[0] - 1, row_of.shape[0] - 1
+    for i in range(start, stop):
+        out[row_of[min(np.int64(y[i]), last_y)] + column_of[min(np.int64(x[i]), last_x)]] += 1
+
+
+@nb.njit(cache=True, nogil=True)
+def voters(x, y, t, x0, y0, width, height, t_first, t_last):  # noqa: ANN001, ANN201  # pragma: no cover - compiled
+    """(how many, earliest time) of the events inside the region [x0, x0 + width) x [y0, y0 + height)
+    with ``t_first <= t <= t_last``; the time is ``t_last`` when there are none."""
+    n = 0
+    earliest = t_last
+    for i in range(x.shape[0]):
+        if 0 <= np.int64(x[i]) - x0 < width and 0 <= np.int64(y[i]) - y0 < height and t_first <= t[i] <= t_last:
+            n += 1
+            if t[i] < earliest:
+                earliest = t[i]
+    return n, earliest
+
+
+@nb.njit(cache=True, nogil=True)
+def slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, t_ref, span, oldest, images, counts, age_sums):  # noqa: ANN001, ANN201, PLR0913  # pragma: no cover - compiled
+    """Count the events of [``t_first``, ``t_last``] inside the region at (``x0``, ``y0``) as wide
+    and high as the tables (``cell_tables`` from its corner) into ``images`` [slices, plane] by
+    their age (``(t_ref - t) / span``, 0 newest): slice ``int(age * (slices / oldest))``, clipped
+    to the slices; ``counts`` and ``age_sums`` per slice."""
+    width, height = column_of.shape[0], row_of.shape[0]
+    slices = images.shape[0]
+    scale = slices / oldest
+    for i in range(x.shape[0]):
+        dx = np.int64(x[i]) - x0
+        dy = np.int64(y[i]) - y0
+        if 0 <= dx < width and 0 <= dy < height and t_first <= t[i] <= t_last:
+            age = (t_ref - np.float64(t[i])) / span
+            k = min(max(np.int64(age * scale), 0), slices - 1)
+            images[k, row_of[dy] + column_of[dx]] += 1.0
+            counts[k] += 1
+            age_sums[k] += age
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) every loop now, for the fields of event records as the
+    edge passes them, so the first live window is not late (a daemon calls this before READY)."""
+    from darkread.edge.events import empty_events
+
+    events = empty_events(2)
+    x, y, t = events["x"], events["y"], events["t"]
+    columns, rows = cell_tables(2, 2, 1)
+    add_cell_counts(x, y, 0, 2, columns, rows, np.zeros(4, np.int64))
+    voters(x, y, t, 0, 0, 2, 2, 0, 1)
+    slice_counts(x, y, t, 0, 0, columns, rows, 0, 1, 1, 1.0, 1.0,
+                 np.zeros((2, 4), np.float32), np.zeros(2, np.int64), np.zeros(2, np.float64))
