@@ -69,6 +69,45 @@ def slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, t_ref, spa
             age_sums[k] += age
 
 
+@nb.njit(cache=True, nogil=True)
+def voxel_sums(x, y, p, t, x0, y0, bins, width, height, sums, marked, touched):  # noqa: ANN001, ANN201, PLR0913  # pragma: no cover - compiled
+    """Add the E2VID voxel weights of the events (all inside the window at ``x0``, ``y0``) into
+    ``sums`` (float64, ``bins * plane``, zero and unmarked in ``marked`` where untouched): polarity +-1, time scaled to [0,
+    bins - 1] and each event shared between its two neighbouring bins (one bin: its pixel). The
+    voxels first touched are written to ``touched`` (room for two per event); returns how many,
+    or -1 (nothing added) when an event lies outside the window.
+    Each voxel's sum runs over the lower shares in event order, then the upper ones, as
+    ``np.bincount`` sums the two halves of ``voxel.voxel_grid``'s concatenated weights."""
+    n = x.shape[0]
+    count = 0
+    for i in range(n):
+        if not (0 <= np.int64(x[i]) - x0 < width and 0 <= np.int64(y[i]) - y0 < height):
+            return -1
+    plane = width * height
+    scale = 0.0
+    if n and bins > 1:
+        span = np.float64(t[n - 1] - t[0])
+        scale = (bins - 1) / (span if span != 0 else 1.0)
+    for upper in range(2 if bins > 1 else 1):
+        for i in range(n):
+            pixel = (np.int64(y[i]) - y0) * width + (np.int64(x[i]) - x0)
+            polarity = 1.0 if p[i] > 0 else -1.0
+            if bins > 1:
+                t_star = np.float64(t[i] - t[0]) * scale
+                lower = min(np.int64(t_star), bins - 2)
+                frac = t_star - lower
+                voxel = (lower + upper) * plane + pixel
+                weight = polarity * frac if upper else polarity * (1.0 - frac)
+            else:
+                voxel, weight = pixel, polarity
+            if not marked[voxel]:
+                marked[voxel] = 1
+                touched[count] = voxel
+                count += 1
+            sums[voxel] += weight
+    return count
+
+
 def warm_up() -> None:
     """Compile (or load from numba's cache) every loop now, for the fields of event records as the
     edge passes them, so the first live window is not late (a daemon calls this before READY)."""
@@ -81,3 +120,4 @@ def warm_up() -> None:
     voters(x, y, t, 0, 0, 2, 2, 0, 1)
     slice_counts(x, y, t, 0, 0, columns, rows, 0, 1, 1, 1.0, 1.0,
                  np.zeros((2, 4), np.float32), np.zeros(2, np.int64), np.zeros(2, np.float64))
+    voxel_sums(x, y, events["p"], t, 0, 0, 2, 2, 2, np.zeros(8), np.zeros(8, np.uint8), np.zeros(4, np.int64))

@@ -26,6 +26,7 @@ import numpy as np
 
 from darkread.edge.binning import cell_tables, slice_counts, voters
 from darkread.edge.events import Events
+from darkread.edge.scene_motion import gaussian_transfer
 from darkread.edge.fovea import in_window
 
 
@@ -96,8 +97,10 @@ def smear_of(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int
     slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, int(t_ref_us), float(span_us), oldest, images, counts, age_sums)
     images = images.reshape(k_n, *shape)
     mean_age = age_sums / np.maximum(counts, 1)
-    sigma = cfg.blur_px / b
-    spectra = [cv2.dft(cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0 else image) for image in images]  # (real, packed)
+    spectra = [cv2.dft(image) for image in images]  # (real, packed)
+    if cfg.blur_px > 0:  # each image blurred, in the spectrum (a product there, not a pass over the image)
+        transfer = _blur_transfer(shape, cfg.blur_px / b)
+        spectra = [cv2.mulSpectrums(spectrum, transfer, 0) for spectrum in spectra]
     pairs = []  # (correlation, lag in cells) of each pair of slices
     for i in range(k_n):
         for j in range(i + 1, k_n):
@@ -129,6 +132,14 @@ def _best(pairs: list[tuple[np.ndarray, np.float32]], dx: np.ndarray, dy: np.nda
         sharpness += cv2.remap(correlation, dx * lag, dy * lag, interpolation, borderMode=cv2.BORDER_WRAP)
     k = int(sharpness.argmax())  # (a flat index: np.unravel_index costs more than the argmax)
     return (float(dx.flat[k]), float(dy.flat[k])), float(sharpness.flat[k])
+
+
+@lru_cache(maxsize=64)  # (a few sizes of count images come back every window)
+def _blur_transfer(shape: tuple[int, int], sigma: float) -> np.ndarray:
+    """The spectrum of a circular Gaussian blur of ``sigma`` cells over images of ``shape`` (read-only)."""
+    transfer = gaussian_transfer(shape, sigma)
+    transfer.flags.writeable = False
+    return transfer
 
 
 @lru_cache(maxsize=64)  # (one coarse grid per search radius, and the fine one)

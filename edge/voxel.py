@@ -2,9 +2,9 @@
 
 Polarity becomes +-1; time is scaled to [0, bins - 1] over the window (first event -> bin 0, last
 -> bin bins - 1) and each event is shared linearly between its two neighbouring bins. Normalisation
-uses non-zero voxels only, so empty pixels stay exactly 0. Accumulation uses ``np.bincount`` with
-weights over the voxels the events hit (a few thousand, not bins x height x width), several times
-faster than ``np.add.at``.
+uses non-zero voxels only, so empty pixels stay exactly 0. The weights are summed in one compiled
+pass over the events (``edge.binning.voxel_sums``) into sums kept between windows, and only the
+voxels the events hit (a few thousand, not bins x height x width) are read and reset.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from darkread.edge.binning import voxel_sums
 from darkread.edge.events import Events
 from darkread.edge.fovea import WINDOW_HEIGHT, WINDOW_WIDTH, FoveaConfig
 
@@ -53,28 +54,17 @@ def voxel_grid(
     """
     bins, height, width = cfg.bins, cfg.height, cfg.width
     plane = height * width
-    x = events["x"].astype(np.intp) - x0
-    y = events["y"].astype(np.intp) - y0
     grid = _output(out, bins * plane)
     if events.shape[0] == 0:
         return grid.reshape(bins, height, width)
-
-    polarity = np.where(events["p"] > 0, 1.0, -1.0)
-    pixel = y * width + x
-    if bins == 1:
-        touched, weights = pixel, polarity
-    else:
-        t = events["t"]
-        span = float(t[-1] - t[0]) or 1.0
-        t_star = (t - t[0]) * ((bins - 1) / span)
-        # The last event sits exactly on bins - 1: put it on the upper end of bin bins - 2's pair.
-        lower = np.minimum(t_star.astype(np.intp), bins - 2)
-        frac = t_star - lower
-        index = lower * plane + pixel
-        touched = np.concatenate([index, index + plane])
-        weights = np.concatenate([polarity * (1.0 - frac), polarity * frac])
-
-    voxels, values = _accumulate(touched, weights, bins * plane)
+    sums, marked, touched = _scratch(bins * plane, 2 * events.shape[0])
+    n = voxel_sums(events["x"], events["y"], events["p"], events["t"], x0, y0, bins, width, height, sums, marked, touched)
+    if n < 0:
+        raise ValueError(f"voxel_grid: events outside the {width}x{height} window at ({x0}, {y0})")
+    voxels = touched[:n]
+    values = sums[voxels]
+    sums[voxels] = 0.0  # (the scratch is left as it was found: zero and unmarked)
+    marked[voxels] = 0
     if cfg.normalize:
         nonzero = values != 0
         if nonzero.any():
@@ -103,30 +93,17 @@ def _output(out: np.ndarray | None, size: int) -> np.ndarray:
     return flat
 
 
-_scratch = threading.local()
+_scratch_of_thread = threading.local()
 
 
-def _scratch_slots(n: int) -> np.ndarray:
-    """A reused per-thread index buffer: a fresh 640 KB array per window costs page faults on
-    every call (hundreds of microseconds on a busy host); stale contents are never read."""
-    slots = getattr(_scratch, "slots", None)
-    if slots is None or slots.shape[0] < n:
-        slots = _scratch.slots = np.empty(n, dtype=np.intp)
-    return slots
-
-
-def _accumulate(touched: np.ndarray, weights: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Sum ``weights`` per voxel id in ``touched``: (distinct voxel ids, their sums).
-
-    Only the few thousand voxels the events hit are summed (``np.bincount`` over compact ids), so
-    nothing scans or allocates all bins x height x width voxels except the output itself. Compact
-    ids come from one scatter: whichever duplicate wins ``slot[touched] = order``, every occurrence
-    of a voxel then reads the same winner.
-    """
-    order = np.arange(touched.shape[0])
-    slot = _scratch_slots(size)
-    slot[touched] = order
-    winner_of = slot[touched]
-    sums = np.bincount(winner_of, weights=weights, minlength=touched.shape[0])
-    is_winner = winner_of == order
-    return touched[is_winner], sums[is_winner]
+def _scratch(size: int, n_touched: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-thread voxel sums and marks (``size``, all zero between calls) and room for the ids of
+    ``n_touched`` voxels: a fresh 640 KB grid of sums per window costs page faults on every call
+    (hundreds of microseconds on a busy host), and only the voxels the events hit are reset."""
+    scratch = _scratch_of_thread
+    if getattr(scratch, "size", None) != size:
+        scratch.size, scratch.sums, scratch.marked = size, np.zeros(size, np.float64), np.zeros(size, np.uint8)
+    touched = getattr(scratch, "touched", None)
+    if touched is None or touched.shape[0] < n_touched:
+        touched = scratch.touched = np.empty(max(n_touched, 4096), np.int64)
+    return scratch.sums, scratch.marked, touched
