@@ -28,7 +28,7 @@ def cell_tables(width: int, height: int, cell_px: int, pad: int = 0, row_stride:
 
 @nb.njit(cache=True, nogil=True)
 def add_cell_counts(x, y, start, stop, column_of, row_of, out):  # noqa: ANN001, ANN201  # pragma: no cover - compiled
-    """Add events ``start:stop`` of (``x``, ``y``) to ``out`` (int64, flat) at ``row_of[y] +
+    """Add events ``start:stop`` of (``x``, ``y``) to ``out`` (flat counts, any number type) at ``row_of[y] +
     column_of[x]`` (``cell_tables``); a coordinate past a table's end counts as its last entry."""
     last_x, last_y = column_of.shape[0] - 1, row_of.shape[0] - 1
     for i in range(start, stop):
@@ -116,7 +116,7 @@ def warm_up() -> None:
     events = empty_events(2)
     x, y, t = events["x"], events["y"], events["t"]
     columns, rows = cell_tables(2, 2, 1)
-    add_cell_counts(x, y, 0, 2, columns, rows, np.zeros(4, np.int64))
+    add_cell_counts(x, y, 0, 2, columns, rows, np.zeros(4, np.float32))  # (scene motion counts in float32)
     voters(x, y, t, 0, 0, 2, 2, 0, 1)
     slice_counts(x, y, t, 0, 0, columns, rows, 0, 1, 1, 1.0, 1.0,
                  np.zeros((2, 4), np.float32), np.zeros(2, np.int64), np.zeros(2, np.float64))

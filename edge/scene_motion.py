@@ -115,7 +115,7 @@ class SceneMotion:
         self._slice_end: int | None = None
         cols, rows = self.grid_wh  # (events past the grid's last column or row count in it)
         self._column_of, self._row_of = cell_tables(cols * cfg.cell_px, rows * cfg.cell_px, cfg.cell_px)
-        self._current = np.zeros(cols * rows, np.int64)  # the open slice's counts per cell (while _count > 0)
+        self._current = np.zeros(cols * rows, np.float32)  # the open slice's counts per cell (while _count > 0; whole numbers, exact in float32)
         self._count = 0
         self._reference: np.ndarray | None = None  # the reference slice's spectrum times the blur's transfer
         self._reference_offset = np.zeros(2)  # the scene's offset when the reference slice was taken

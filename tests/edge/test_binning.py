@@ -79,7 +79,7 @@ def test_warm_up_compiles_the_signatures_the_edge_uses() -> None:
     warm_up()
     events = random_events(1, 500)
     before = (len(add_cell_counts.signatures), len(voters.signatures), len(slice_counts.signatures))
-    add_cell_counts(events["x"], events["y"], 0, 500, *cell_tables(1280, 720, 8), np.zeros(160 * 90, np.int64))
+    add_cell_counts(events["x"], events["y"], 0, 500, *cell_tables(1280, 720, 8), np.zeros(160 * 90, np.float32))
     voters(events["x"], events["y"], events["t"], 0, 0, 100, 100, 0, 10_000)
     columns, rows = cell_tables(100, 100, 2, 3, row_stride=60)
     slice_counts(events["x"], events["y"], events["t"], 0, 0, columns, rows, 0, 10_000, 10_000, 10_000.0, 1.0,
