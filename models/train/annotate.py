@@ -82,6 +82,8 @@ class AnnotateConfig:
     ink_px_per_mm: float = 8.0  # page raster used for edges
     window_every_ms: float = 40.0
     max_windows: int = 400
+    deblur: bool = True  # windows cut as the edge cuts them: moved back along the head's motion ...
+    denoise: bool = True  # ... and in dim light without their isolated events, so the network is tuned on what it is given
     max_offset_ms: float = 8.0
     offset_step_ms: float = 1.0
     refine_offset: bool = True
@@ -480,12 +482,13 @@ def choose_offset(windows: Windows, track: PoseTrack, page: MarkerPage, calib: C
     ink = page.ink_at(cfg.ink_px_per_mm)
     offsets = np.arange(-cfg.max_offset_ms, cfg.max_offset_ms + 1e-9, cfg.offset_step_ms) * 1e3
     idx = np.linspace(0, len(windows.t_end_us) - 1, min(sample, len(windows.t_end_us))).astype(int)
-    counts = {int(i): window_count_image(windows.events[i], tuple(windows.origins[i])) for i in idx}
+    sensed = windows.raw if windows.raw is not None else windows.events  # (the page over the events' span, before any deblur)
+    counts = {int(i): window_count_image(sensed[i], tuple(windows.origins[i])) for i in idx}
     scores = []
     for off in offsets:
         vals = []
         for i in idx:
-            H = track.at(float(np.median(windows.events[i]["t"]) + off))  # the events show the page over their span
+            H = track.at(float(np.median(sensed[i]["t"]) + off))  # the events show the page over their span
             if H is None:
                 continue
             vals.append(ncc(edge_map(render_coverage(ink, cfg.ink_px_per_mm, H, rays[i])), counts[int(i)]))
@@ -515,7 +518,8 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
     if len(track) == 0:
         raise AnnotationError(f"{recording}: no markers of {layout.name} found in the events, nor the page itself "
                               f"({stats['detection_images']} event images; is this a recording of that page?)")
-    windows = window_stack(rec, events, (width, height), every_ms=cfg.window_every_ms, max_windows=cfg.max_windows)
+    windows = window_stack(rec, events, (width, height), every_ms=cfg.window_every_ms, max_windows=cfg.max_windows,
+                           deblur=cfg.deblur, denoise=cfg.denoise)
     if len(windows.t_end_us) == 0:
         raise AnnotationError(f"{recording}: no windows to annotate (no gaze, or too few events)")
     rays = [window_rays(calib, tuple(o)) for o in windows.origins]

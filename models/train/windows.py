@@ -21,7 +21,8 @@ class Windows:
     voxels: np.ndarray  # float32 [n, 4, 100, 200]
     origins: np.ndarray  # int [n, 2] (x0, y0)
     t_end_us: np.ndarray  # int64 [n]
-    events: list[np.ndarray]
+    events: list[np.ndarray]  # each window's events as binned (after the deblur and the denoise asked for)
+    raw: list[np.ndarray] | None = None  # ... and as the sensor gave them (the page over their span)
 
 
 def read_events(path: str | Path, *, need_text: bool = False) -> tuple[Any, np.ndarray, tuple[int, int]]:
@@ -59,14 +60,14 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
     n_events, voxel = PipelineConfig().n_events, VoxelConfig()
     times = np.arange(int(events["t"][0]) + 100_000, int(events["t"][-1]), int(every_ms * 1000))[:max_windows]
     ends = np.searchsorted(events["t"], times, side="right")
-    voxels, origins, t_end, chosen = [], [], [], []
+    voxels, origins, t_end, chosen, raw = [], [], [], [], []
     for t, end in zip(times, ends):
         gaze = mapper.at(int(t))
         if gaze is None:
             continue
         origin = window_origin(gaze.pixel, sensor_wh, voxel.fovea)
         recent = events[max(0, end - MAX_HISTORY_EVENTS) : end]
-        window = window_events(recent, origin, voxel.fovea, n_events)
+        window = sensed = window_events(recent, origin, voxel.fovea, n_events)
         if deblur:
             window, _ = deblur_window(window, recent, origin, WINDOW_HW, sensor_wh, DeblurConfig())
         if denoise:
@@ -74,7 +75,8 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
         if len(window) >= n_events // 2:
             voxels.append(voxel_grid(window, origin[0], origin[1], voxel))
             origins.append(origin)
-            t_end.append(int(window["t"][-1]))
+            t_end.append(int(sensed["t"][-1]))  # (the deblur's reference: the newest event, even if the denoise dropped it)
             chosen.append(window)
+            raw.append(sensed)
     stack = np.stack(voxels).astype(np.float32) if voxels else np.zeros((0, 4, *WINDOW_HW), np.float32)
-    return Windows(stack, np.array(origins, dtype=np.int64).reshape(-1, 2), np.array(t_end, dtype=np.int64), chosen)
+    return Windows(stack, np.array(origins, dtype=np.int64).reshape(-1, 2), np.array(t_end, dtype=np.int64), chosen, raw)

@@ -14,6 +14,7 @@ pytestmark = pytest.mark.slow  # a 0.6 s synthetic recording: ~20 s of simulatio
 
 from darkread.models.synth.marker_page import MarkerPageSpec, lay_out, load_layout, save_layout
 from darkread.models.train.data import load_shard
+from darkread.models.train.windows import read_events, window_stack
 from darkread_cli import assert_one_error_line, darkread
 
 
@@ -49,6 +50,15 @@ def test_marker_recording_is_annotated_within_a_pixel(recording, tmp_path):
     ink = shard.targets.reshape(len(shard), -1).mean(axis=1)
     assert np.median(ink) > 0.02  # the windows sit on text
     assert np.all(np.diff(shard.meta["t_end_us"]) > 0)
+
+    # the windows are cut as the edge cuts them (deblurred, denoised in dim light): tuned on what it will be given
+    config = json.loads((tmp_path / "ann" / "annotation.json").read_text())["config"]
+    assert config["deblur"] and config["denoise"]
+    rec, events, sensor = read_events(recording)
+    as_on_edge = window_stack(rec, events, sensor, every_ms=20, deblur=True, denoise=True)
+    by_time = dict(zip(as_on_edge.t_end_us.tolist(), as_on_edge.voxels))
+    for t_end, voxels in zip(shard.meta["t_end_us"].tolist(), shard.voxels):
+        np.testing.assert_allclose(voxels, by_time[t_end], atol=1e-3)
 
 
 def test_missing_layout_and_a_page_without_those_markers_fail_in_one_line(recording, tmp_path):
