@@ -2,7 +2,8 @@
 
 Two figures per input, for each model:
 
-* **ink F1** of the windows the glasses would cut (gaze -> fovea -> 1600 events -> voxel grid),
+* **ink F1** of the windows the glasses would cut (gaze -> fovea -> 1600 events -> deblur ->
+  in dim light denoise -> voxel grid),
   against the simulator's ground truth: the page's ink under its true pose (``pose_truth.npz``
   with ``page.layout.json`` for a marker page or ``page_ink.npz`` for a plain one, what
   ``synth recording`` writes). A shard directory
@@ -157,7 +158,8 @@ def compare(
         recording = is_recording(item)
         row: dict[str, Any] = {"input": item.name, "path": str(item), "kind": "recording" if recording else "shards",
                                **(recording_meta(item) if recording else {}), "group": group}
-        scored = truth_windows(item) if recording else shard_windows(item)
+        # (a recording's windows cut as the edge cuts them: deblurred, in dim light denoised)
+        scored = truth_windows(item, deblur=True, denoise=True) if recording else shard_windows(item)
         row["truth"] = scored.source
         for name, path in models.items():
             row[name] = {"ink": ink_f1(path, scored)}
