@@ -19,7 +19,7 @@ Why the edge measures it: with one fused view per fixation the cloud sees the pa
 a second, and across a return sweep the next view may overlap nothing it has; where it lands
 must then be predicted from the head's motion, which sparse views cannot measure but the
 periphery's events do. Each frame and view carries the offset at its time
-(``FrameRecord.scene_px``), and the stitcher predicts from it. Pure: numpy and OpenCV.
+(``FrameRecord.scene_px``), and the stitcher predicts from it. Pure: numpy, OpenCV and the compiled counting of ``edge.binning``.
 """
 
 from __future__ import annotations
