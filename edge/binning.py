@@ -11,8 +11,9 @@ sums its weights), which the tests check against the numpy formulation.
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
+
+from darkread.edge.compiled import compiled
 
 
 def cell_tables(width: int, height: int, cell_px: int, pad: int = 0, row_stride: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -26,7 +27,7 @@ def cell_tables(width: int, height: int, cell_px: int, pad: int = 0, row_stride:
     return columns, rows
 
 
-@nb.njit(cache=True, nogil=True)
+@compiled
 def add_cell_counts(x, y, start, stop, column_of, row_of, out):  # noqa: ANN001, ANN201  # pragma: no cover - compiled
     """Add events ``start:stop`` of (``x``, ``y``) to ``out`` (flat counts, any number type) at ``row_of[y] +
     column_of[x]`` (``cell_tables``); a coordinate past a table's end counts as its last entry."""
@@ -35,7 +36,7 @@ def add_cell_counts(x, y, start, stop, column_of, row_of, out):  # noqa: ANN001,
         out[row_of[min(np.int64(y[i]), last_y)] + column_of[min(np.int64(x[i]), last_x)]] += 1
 
 
-@nb.njit(cache=True, nogil=True)
+@compiled
 def voters(x, y, t, x0, y0, width, height, t_first, t_last):  # noqa: ANN001, ANN201  # pragma: no cover - compiled
     """(how many, earliest time) of the events inside the region [x0, x0 + width) x [y0, y0 + height)
     with ``t_first <= t <= t_last``; the time is ``t_last`` when there are none."""
@@ -49,7 +50,7 @@ def voters(x, y, t, x0, y0, width, height, t_first, t_last):  # noqa: ANN001, AN
     return n, earliest
 
 
-@nb.njit(cache=True, nogil=True)
+@compiled
 def slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, t_ref, span, oldest, images, counts, age_sums):  # noqa: ANN001, ANN201, PLR0913  # pragma: no cover - compiled
     """Count the events of [``t_first``, ``t_last``] inside the region at (``x0``, ``y0``) as wide
     and high as the tables (``cell_tables`` from its corner) into ``images`` [slices, plane] by
@@ -69,7 +70,7 @@ def slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, t_ref, spa
             age_sums[k] += age
 
 
-@nb.njit(cache=True, nogil=True)
+@compiled
 def voxel_sums(x, y, p, t, x0, y0, bins, width, height, sums, marked, touched):  # noqa: ANN001, ANN201, PLR0913  # pragma: no cover - compiled
     """Add the E2VID voxel weights of the events (all inside the window at ``x0``, ``y0``) into
     ``sums`` (float64, ``bins * plane``, zero and unmarked in ``marked`` where untouched): polarity +-1, time scaled to [0,

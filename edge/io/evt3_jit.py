@@ -9,9 +9,9 @@ same time rules, same drops, same counters. Requires numba; ``evt3.py`` falls ba
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
+from darkread.edge.compiled import compiled
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
 
 # Slots of the state vector and of the counters vector (evt3.py maps them to its dataclasses).
@@ -25,7 +25,7 @@ _POPCOUNT_12 = np.array([bin(m).count("1") for m in range(4096)], dtype=np.int64
 _TRIGGERS_PER_TYPE = np.array([0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0], dtype=np.int64)
 
 
-@nb.njit(cache=True, nogil=True)
+@compiled
 def _bounds(words: np.ndarray) -> tuple[int, int]:  # pragma: no cover - compiled
     """Upper bounds of the pixel events and triggers in ``words`` (branch-free, one pass)."""
     n_pixels = 0
@@ -36,7 +36,7 @@ def _bounds(words: np.ndarray) -> tuple[int, int]:  # pragma: no cover - compile
     return n_pixels, n_triggers
 
 
-@nb.njit(cache=True, nogil=True)
+@compiled
 def _decode(words, state, counters, width, height, ev64, tr16, tr64):  # noqa: ANN001  # pragma: no cover
     """Decode ``words`` into flat views of the records (EVENT_CD: x | y << 16 | p << 32 and t in the
     two i64 slots of each 16 bytes; TRIGGER: p, id at u16 slots 0 and 8, t at i64 slot 1 of 24 bytes);

@@ -66,6 +66,9 @@ def test_unit_file_is_notify_with_watchdog_and_hardening() -> None:
     assert directives["NoNewPrivileges"] == "yes"
     assert directives["StateDirectory"] == "darkread-edge"
     assert "edge run" in directives["ExecStart"]
+    # numba caches the compiled loops where the daemon may write (/usr is read-only to it)
+    environment = dict(line.removeprefix("Environment=").split("=", 1) for line in unit.splitlines() if line.startswith("Environment="))
+    assert environment["NUMBA_CACHE_DIR"].startswith(f"/var/cache/{directives['CacheDirectory']}/")
     rules = Path(darkread.edge.__file__).parent / "systemd" / "99-darkread-evk4.rules"
     if rules.is_file():  # the camera's group is the one the udev rule assigns
         import re
