@@ -27,7 +27,6 @@ import numpy as np
 
 from darkread.edge.binning import cell_tables, slice_counts, voters
 from darkread.edge.events import Events
-from darkread.edge.fovea import in_window
 from darkread.edge.scene_motion import gaussian_transfer
 
 
@@ -64,10 +63,7 @@ def estimate_smear(events: Events, region: tuple[int, int, int, int], t_ref_us: 
                    cfg: DeblurConfig = DeblurConfig()) -> tuple[float, float]:
     """The page's displacement (px, x right, y down) over the ``span_us`` before ``t_ref_us``, from
     ``events`` of that time in ``region`` (x0, y0, width, height); (0, 0) with too few events."""
-    if span_us <= 0:
-        return 0.0, 0.0
-    inside = in_window(events, *region)
-    return smear_of(events["x"][inside], events["y"][inside], events["t"][inside], region, t_ref_us, span_us, cfg)
+    return smear_of(events["x"], events["y"], events["t"], region, t_ref_us, span_us, cfg)  # (the region's events vote)
 
 
 def smear_of(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int, int, int], t_ref_us: int, span_us: float,

@@ -112,6 +112,26 @@ def step_ends(t_us: np.ndarray, step_us: int) -> np.ndarray:
     return ends[ends > 0]
 
 
+def clean_window(
+    window: Events,
+    nearby: Events,
+    origin: tuple[int, int],
+    shape_hw: tuple[int, int],
+    sensor_wh: tuple[int, int],
+    deblur: DeblurConfig = DeblurConfig(),
+    denoise: DenoiseConfig = DenoiseConfig(),
+) -> tuple[Events, bool, bool]:
+    """A window's events as the network is given them: moved back along the head's motion during
+    their span (``edge.deblur``, measured from them and ``nearby``, the sensor's events of that span
+    around the window), then in dim light without those that have no neighbour (``edge.denoise``);
+    and whether each step changed them. The edge and the training windows (``train.windows``) both
+    cut windows this way."""
+    cleaned, smear = deblur_window(window, nearby, origin, shape_hw, sensor_wh, deblur)
+    before = cleaned.shape[0]
+    cleaned = drop_isolated(cleaned, origin, shape_hw, denoise)
+    return cleaned, smear != (0.0, 0.0), cleaned.shape[0] < before
+
+
 def make_frame(
     window: Events,
     origin: tuple[int, int],
@@ -590,14 +610,11 @@ class Pipeline:
         if used.shape[0]:
             depth = recent.shape[0] - int(used[0])
             self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), MAX_HISTORY_EVENTS))
-        window = recent[used]
-        if self.deblur.enabled and used.shape[0]:
-            window, smear = deblur_window(window, recent[int(used[0]) :], origin, (cfg.height, cfg.width), self.sensor_wh, self.deblur)
-            if smear != (0.0, 0.0):
-                self.metrics.add("frames_deblurred")
-        if self.denoise.enabled and window.shape[0]:
-            before = window.shape[0]
-            window = drop_isolated(window, origin, (cfg.height, cfg.width), self.denoise)
-            if window.shape[0] < before:
-                self.metrics.add("frames_denoised")
+        nearby = recent[int(used[0]) :] if used.shape[0] else recent[:0]
+        window, deblurred, denoised = clean_window(recent[used], nearby, origin, (cfg.height, cfg.width), self.sensor_wh,
+                                                   self.deblur, self.denoise)
+        if deblurred:
+            self.metrics.add("frames_deblurred")
+        if denoised:
+            self.metrics.add("frames_denoised")
         return window

@@ -482,7 +482,7 @@ def choose_offset(windows: Windows, track: PoseTrack, page: MarkerPage, calib: C
     ink = page.ink_at(cfg.ink_px_per_mm)
     offsets = np.arange(-cfg.max_offset_ms, cfg.max_offset_ms + 1e-9, cfg.offset_step_ms) * 1e3
     idx = np.linspace(0, len(windows.t_end_us) - 1, min(sample, len(windows.t_end_us))).astype(int)
-    sensed = windows.raw if windows.raw is not None else windows.events  # (the page over the events' span, before any deblur)
+    sensed = windows.raw  # (the page over the events' span, before any deblur)
     counts = {int(i): window_count_image(sensed[i], tuple(windows.origins[i])) for i in idx}
     scores = []
     for off in offsets:

@@ -22,7 +22,7 @@ class Windows:
     origins: np.ndarray  # int [n, 2] (x0, y0)
     t_end_us: np.ndarray  # int64 [n]
     events: list[np.ndarray]  # each window's events as binned (after the deblur and the denoise asked for)
-    raw: list[np.ndarray] | None = None  # ... and as the sensor gave them (the page over their span)
+    raw: list[np.ndarray]  # ... and as the sensor gave them (the page over their span)
 
 
 def read_events(path: str | Path, *, need_text: bool = False) -> tuple[Any, np.ndarray, tuple[int, int]]:
@@ -49,14 +49,15 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
     voxel grid (``edge.deblur``), so a network tuned on these windows sees what it will be given;
     ``denoise``: a dim-light window's isolated events dropped as the edge drops them (``edge.denoise``)."""
     from darkread.edge.config import PipelineConfig
-    from darkread.edge.deblur import DeblurConfig, deblur_window
-    from darkread.edge.denoise import drop_isolated
+    from darkread.edge.deblur import DeblurConfig
+    from darkread.edge.denoise import DenoiseConfig
     from darkread.edge.fovea import window_events, window_origin
     from darkread.edge.gaze import GazeMapper
-    from darkread.edge.pipeline import MAX_HISTORY_EVENTS
+    from darkread.edge.pipeline import MAX_HISTORY_EVENTS, clean_window
     from darkread.edge.voxel import VoxelConfig, voxel_grid
 
     mapper = GazeMapper(rec.calibration, rec.gaze())
+    cleaning = DeblurConfig(enabled=deblur), DenoiseConfig(enabled=denoise)
     n_events, voxel = PipelineConfig().n_events, VoxelConfig()
     times = np.arange(int(events["t"][0]) + 100_000, int(events["t"][-1]), int(every_ms * 1000))[:max_windows]
     ends = np.searchsorted(events["t"], times, side="right")
@@ -67,11 +68,8 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
             continue
         origin = window_origin(gaze.pixel, sensor_wh, voxel.fovea)
         recent = events[max(0, end - MAX_HISTORY_EVENTS) : end]
-        window = sensed = window_events(recent, origin, voxel.fovea, n_events)
-        if deblur:
-            window, _ = deblur_window(window, recent, origin, WINDOW_HW, sensor_wh, DeblurConfig())
-        if denoise:
-            window = drop_isolated(window, origin, WINDOW_HW)
+        sensed = window_events(recent, origin, voxel.fovea, n_events)
+        window, _, _ = clean_window(sensed, recent, origin, WINDOW_HW, sensor_wh, cleaning[0], cleaning[1])
         if len(window) >= n_events // 2:
             voxels.append(voxel_grid(window, origin[0], origin[1], voxel))
             origins.append(origin)
