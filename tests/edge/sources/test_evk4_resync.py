@@ -42,7 +42,12 @@ def test_after_a_gap_every_event_decoded_is_exact(lost_from: int, lost_bytes: in
     after = np.concatenate(after_parts) if after_parts else EVENTS[:0]
     np.testing.assert_array_equal(before, decode(STREAM[: lost_from // 2 * 2]))
     if len(after):
-        np.testing.assert_array_equal(after, EVENTS[len(EVENTS) - len(after) :])  # an exact suffix
+        expected = EVENTS[len(EVENTS) - len(after) :].copy()  # an exact suffix ...
+        seen = np.frombuffer(STREAM[: lost_from // 2 * 2], "<u2")
+        if not np.any(seen >> 12 == 8):  # ... counting the stream's 2^24 us time loops once a TIME_HIGH came before
+            # the gap; a decoder whose first TIME_HIGH follows it starts as on a stream joined there, at loop 0
+            expected["t"] -= (int(expected["t"][0]) >> 24) << 24
+        np.testing.assert_array_equal(after, expected)
 
 
 def test_resync_finds_the_restart_point_across_tiny_chunks() -> None:
