@@ -17,10 +17,12 @@ DEFAULT_VAL = Path("runs/data/val")
 
 def _fit_config(args: argparse.Namespace):  # -> FitConfig
     from darkread.models.train.fit import FitConfig
+    from darkread.models.train.net import NetConfig
 
     return FitConfig(
         batch_size=args.batch_size, lr=args.lr, time_budget_s=args.minutes * 60, max_epochs=args.epochs,
         threads=args.threads, seed=args.seed, crop=tuple(args.crop) if args.crop[0] > 0 else None,
+        net=NetConfig(head=args.head).to_dict(),
     )
 
 
@@ -34,6 +36,9 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--crop", type=int, nargs=2, default=[64, 128], metavar=("H", "W"),
                    help="train on random HxW crops (default 64 128; 0 0 = whole windows)")
+    p.add_argument("--head", choices=("full", "shuffle"), default="full",
+                   help="the network's last stage: full (at full resolution, the shipped net) or shuffle "
+                        "(at half resolution, 2x2 sub-pixel logits by a pixel shuffle: about a third cheaper)")
 
 
 def _cmd_fit(args: argparse.Namespace) -> int:

@@ -19,6 +19,7 @@ import torch.nn.functional as F
 from torch import nn
 
 INPUT_SHAPE: tuple[int, int, int] = (4, 100, 200)
+HEADS: tuple[str, ...] = ("full", "shuffle")
 
 
 @dataclass(frozen=True)
@@ -28,6 +29,14 @@ class NetConfig:
     widths: tuple[int, int, int, int] = (8, 16, 32, 64)
     blocks: tuple[int, int, int] = (1, 2, 4)
     in_channels: int = INPUT_SHAPE[0]
+    # "full": the last decoder stage at full resolution (resize, add the stem, refine, 1x1 head);
+    # "shuffle": it stays at half resolution and a 1x1 head gives each pixel's 2x2 sub-pixel logits,
+    # put in place by a pixel shuffle (no full-resolution work after the stem: about a third less time)
+    head: str = "full"
+
+    def __post_init__(self) -> None:
+        if self.head not in HEADS:
+            raise ValueError(f"NetConfig.head must be one of {HEADS}, not {self.head!r}")
 
     def to_dict(self) -> dict[str, object]:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -37,6 +46,7 @@ class NetConfig:
         values = dict(data)
         values["widths"] = tuple(int(w) for w in values["widths"])  # type: ignore[union-attr]
         values["blocks"] = tuple(int(b) for b in values["blocks"])  # type: ignore[union-attr]
+        values.setdefault("head", "full")  # (checkpoints from before the choice)
         return cls(**values)  # type: ignore[arg-type]
 
 
@@ -101,8 +111,12 @@ class BinaryUNet(nn.Module):
         self.down3 = Down(w2, w3, blocks=b3)
         self.up2 = Up(w3, w2)
         self.up1 = Up(w2, w1)
-        self.up0 = Up(w1, w0)
-        self.head = nn.Conv2d(w0, 1, 1)
+        if self.config.head == "full":
+            self.up0 = Up(w1, w0)
+            self.head = nn.Conv2d(w0, 1, 1)
+        else:
+            self.refine = SeparableBlock(w1, w1)
+            self.head = nn.Conv2d(w1, 4, 1)  # the 2x2 sub-pixels' logits, channel = 2 * row + column
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         s0 = self.stem(x)
@@ -111,8 +125,10 @@ class BinaryUNet(nn.Module):
         s3 = self.down3(s2)
         y = self.up2(s3, s2)
         y = self.up1(y, s1)
-        y = self.up0(y, s0)
-        return self.head(y)
+        if self.config.head == "full":
+            return self.head(self.up0(y, s0))
+        h, w = x.shape[-2:]
+        return F.pixel_shuffle(self.head(self.refine(y)), 2)[..., :h, :w]
 
 
 def count_parameters(model: nn.Module) -> int:

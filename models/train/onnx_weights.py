@@ -67,10 +67,19 @@ def conv_order(model: nn.Module) -> list[tuple[nn.Conv2d, nn.BatchNorm2d | None]
     return [(conv, following.get(id(conv))) for conv in called]
 
 
-def load_onnx_weights(model: BinaryUNet, path: str | Path) -> BinaryUNet:
-    """Copy the folded weights of ``path`` into ``model`` (in place; returned in eval mode)."""
+def load_onnx_weights(model: BinaryUNet, path: str | Path, shared_only: bool = False) -> BinaryUNet:
+    """Copy the folded weights of ``path`` into ``model`` (in place; returned in eval mode).
+
+    ``shared_only``: ``model`` may end differently (another head): the leading convolutions whose
+    shapes agree are copied, the rest keep their fresh weights."""
     convs = onnx_convolutions(path)
     slots = conv_order(model)
+    if shared_only:
+        shared = next((k for k, ((_, weight, _), (conv, _)) in enumerate(zip(convs, slots))
+                       if tuple(weight.shape) != tuple(conv.weight.shape)), min(len(convs), len(slots)))
+        if shared == 0:
+            raise OnnxWeightsError(f"{path}: its first convolution does not fit the network; not this architecture")
+        convs, slots = convs[:shared], slots[:shared]
     if len(convs) != len(slots):
         raise OnnxWeightsError(f"{path}: {len(convs)} convolutions, the network has {len(slots)}; not this architecture")
     with torch.no_grad():
@@ -93,10 +102,12 @@ def load_onnx_weights(model: BinaryUNet, path: str | Path) -> BinaryUNet:
 
 
 def model_from_onnx(path: str | Path, config: NetConfig | None = None) -> BinaryUNet:
-    """A torch BinaryUNet computing what ``path`` computes."""
+    """A torch BinaryUNet computing what ``path`` computes; with a ``config`` of another head, one
+    that shares its layers up to that head (the head fresh: a start for training it)."""
     if not Path(path).is_file():
         raise FileNotFoundError(f"{path}: no such model file")
-    return load_onnx_weights(BinaryUNet(config), path)
+    model = BinaryUNet(config)
+    return load_onnx_weights(model, path, shared_only=model.config.head != "full")
 
 
 def max_output_difference(model: BinaryUNet, path: str | Path, voxels: np.ndarray) -> float:

@@ -56,3 +56,22 @@ def test_other_widths_or_a_non_onnx_file_are_refused(tmp_path: Path) -> None:
         model_from_onnx(junk)
     with pytest.raises(FileNotFoundError):
         model_from_onnx(tmp_path / "missing.onnx")
+
+
+def test_a_shuffle_head_starts_from_the_shipped_layers_it_shares() -> None:
+    if not SHIPPED.is_file():
+        pytest.skip("no shipped model")
+    full, shuffle = model_from_onnx(SHIPPED), model_from_onnx(SHIPPED, NetConfig(head="shuffle"))
+    shared = {k: v for k, v in shuffle.state_dict().items() if not k.startswith(("refine.", "head."))}
+    assert shared and all(torch.equal(v, full.state_dict()[k]) for k, v in shared.items())
+    assert shuffle.head.weight.shape == (4, 16, 1, 1)  # fresh: the shipped head has one output at full resolution
+
+
+def test_an_exported_shuffle_network_round_trips_exactly(tmp_path: Path) -> None:
+    torch.manual_seed(2)
+    original = BinaryUNet(NetConfig(head="shuffle")).eval()
+    path = export_onnx(original, tmp_path / "shuffle.onnx")
+    loaded = model_from_onnx(path, NetConfig(head="shuffle"))
+    assert max_output_difference(loaded, path, sparse_voxels(2, 3)) < 1e-4
+    with pytest.raises(OnnxWeightsError, match="not this architecture"):
+        model_from_onnx(path)  # read as the full-resolution network it is not
