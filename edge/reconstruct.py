@@ -19,6 +19,7 @@ window is not slowed by lazy allocation.
 from __future__ import annotations
 
 import logging
+import math
 import os
 from importlib import resources
 from pathlib import Path
@@ -32,9 +33,11 @@ from darkread.edge.voxel import VoxelConfig
 log = logging.getLogger(__name__)
 
 MODEL_FILENAME = "binary_unet.onnx"
-# The shipped net is over-confident (its Dice loss pushes logits apart): temperature scaling
-# sigmoid(logits / T) fitted by log-loss on 500 held-out synthetic validation windows has its
-# minimum at T = 1.5 (log-loss 0.137 against 0.143 at T = 1; models/MODEL_CARD.md)
+# The ink probability is sigmoid(logits / T). A network's T is stored in its ONNX metadata under
+# this key (models/MODEL_CARD.md: how each was chosen); a network without it is taken as the
+# full-resolution one trained on Dice alone, over-confident, with T = 1.5 (the log-loss minimum on
+# 500 held-out synthetic windows: 0.137 against 0.143 at T = 1)
+INK_TEMPERATURE_KEY = "ink_temperature"
 INK_TEMPERATURE = 1.5
 
 
@@ -72,7 +75,7 @@ class Reconstructor:
         *,
         threads: int = 1,
         warmup: int = 3,
-        temperature: float = INK_TEMPERATURE,
+        temperature: float | None = None,
     ) -> None:
         path = Path(model_path) if model_path is not None else default_model_path()
         if not path.is_file():
@@ -82,10 +85,10 @@ class Reconstructor:
             )
         if threads < 1:
             raise ValueError(f"threads must be >= 1, got {threads}")
-        if not temperature > 0:
+        if temperature is not None and not temperature > 0:
             raise ValueError(f"temperature must be positive, got {temperature}")
-        self.temperature = float(temperature)
         self._session = _load_session(path, threads)
+        self.temperature = float(temperature) if temperature is not None else model_temperature(self._session, path)
         inputs, outputs = self._session.get_inputs(), self._session.get_outputs()
         if len(inputs) != 1 or len(outputs) != 1:
             raise ModelError(f"{path}: expected one input and one output, found {len(inputs)} and {len(outputs)}")
@@ -169,6 +172,21 @@ class Reconstructor:
     def __call__(self, voxel: np.ndarray) -> np.ndarray:
         """Binary ink mask (uint8, 1 = ink) of the same leading shape as ``logits``."""
         return (self._logits_now(voxel) > 0).astype(np.uint8)
+
+
+def model_temperature(session: ort.InferenceSession, path: Path) -> float:
+    """The ink temperature a network carries in its metadata (``INK_TEMPERATURE`` when it has none)."""
+    stored = session.get_modelmeta().custom_metadata_map.get(INK_TEMPERATURE_KEY)
+    if stored is None:
+        return INK_TEMPERATURE
+    try:
+        value = float(stored)
+    except ValueError:
+        value = math.nan
+    if not value > 0 or math.isinf(value):
+        raise ModelError(f"{path}: metadata {INK_TEMPERATURE_KEY}={stored!r} is not a positive number; "
+                         "store one with `darkread train calibrate --store T`")
+    return value
 
 
 def probability_from_logits(logits: np.ndarray, temperature: float = INK_TEMPERATURE) -> np.ndarray:

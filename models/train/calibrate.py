@@ -5,8 +5,9 @@ The on-change mode averages the network's ink probability over a view's frames
 binary cross-entropy plus soft Dice, and Dice pushes logits apart (over-confidence); temperature
 scaling (Guo et al., ICML 2017), ``sigmoid(logits / T)`` with the one ``T`` that minimises the
 log-loss on held-out windows, fixes that without moving the ``logits > 0`` threshold.
-``darkread train calibrate VAL_DIR`` measures it; the edge's value is
-``darkread.edge.reconstruct.INK_TEMPERATURE``. Numpy and onnxruntime only.
+``darkread train calibrate VAL_DIR`` measures it; the edge uses
+the one a network carries in its metadata (``--store T``; ``darkread.edge.reconstruct.INK_TEMPERATURE``
+when it has none). Numpy and onnxruntime only (``--store``: onnx).
 """
 
 from __future__ import annotations
@@ -73,3 +74,22 @@ def calibrate(val_dir: str | Path, model: str | Path | None = None, limit: int |
     voxels = data.voxels[:limit] if limit else data.voxels
     logits = np.concatenate([rec.logits(voxels[i : i + 32].astype(np.float32)) for i in range(0, len(voxels), 32)])
     return fit_temperature(logits, data.targets[: len(logits)])
+
+
+def store_ink_temperature(path: str | Path, temperature: float) -> Path:
+    """Write ``temperature`` into the model's metadata (``edge.reconstruct.INK_TEMPERATURE_KEY``): the
+    edge's ink probability is sigmoid(logits / T) with the T its network carries."""
+    import onnx
+
+    from darkread.edge.reconstruct import INK_TEMPERATURE_KEY
+
+    if not 0 < float(temperature) < float("inf"):
+        raise ValueError(f"ink temperature must be a positive number, not {temperature}")
+    model = onnx.load(str(path))
+    kept = [p for p in model.metadata_props if p.key != INK_TEMPERATURE_KEY]
+    del model.metadata_props[:]
+    model.metadata_props.extend(kept)
+    entry = model.metadata_props.add()
+    entry.key, entry.value = INK_TEMPERATURE_KEY, repr(float(temperature))
+    onnx.save(model, str(path))
+    return Path(path)

@@ -22,8 +22,26 @@ def _fit_config(args: argparse.Namespace):  # -> FitConfig
     return FitConfig(
         batch_size=args.batch_size, lr=args.lr, time_budget_s=args.minutes * 60, max_epochs=args.epochs,
         threads=args.threads, seed=args.seed, crop=tuple(args.crop) if args.crop[0] > 0 else None,
-        net=NetConfig(head=args.head).to_dict(),
+        net=NetConfig(head=_head(args)).to_dict(),
+        teacher=str(args.teacher) if getattr(args, "teacher", None) else None,
     )
+
+
+def _head(args: argparse.Namespace) -> str:
+    """--head, else the head of the --init network (fine-tuning keeps it), else the default."""
+    head = getattr(args, "head", None)
+    init = getattr(args, "init", None)
+    if head is None and init is not None and Path(init).is_file():
+        if str(init).endswith(".onnx"):
+            from darkread.models.train.onnx_weights import onnx_head
+
+            return onnx_head(init)
+        from darkread.models.train.fit import load_model
+
+        return load_model(init).config.head
+    from darkread.models.train.net import NetConfig
+
+    return head or NetConfig().head
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -36,9 +54,10 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--crop", type=int, nargs=2, default=[64, 128], metavar=("H", "W"),
                    help="train on random HxW crops (default 64 128; 0 0 = whole windows)")
-    p.add_argument("--head", choices=("full", "shuffle"), default="full",
-                   help="the network's last stage: full (at full resolution, the shipped net) or shuffle "
-                        "(at half resolution, 2x2 sub-pixel logits by a pixel shuffle: about a third cheaper)")
+    p.add_argument("--head", choices=("full", "shuffle"), default=None,
+                   help="the network's last stage: shuffle (at half resolution, 2x2 sub-pixel logits by a pixel "
+                        "shuffle) or full (at full resolution: a third more time a window); default: the --init "
+                        "network's, else shuffle")
 
 
 def _cmd_fit(args: argparse.Namespace) -> int:
@@ -149,6 +168,13 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, not {text}")
+    return value
+
+
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from darkread.models.train.calibrate import calibrate
 
@@ -156,7 +182,14 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         raise FileNotFoundError(f"{args.val_dir}: no such shard directory (make one with `darkread synth dataset --split val`)")
     result = calibrate(args.val_dir, args.model, limit=args.limit)
     print(result.to_markdown())
-    print(f"\nink temperature {result.temperature:g} (the edge uses darkread.edge.reconstruct.INK_TEMPERATURE)")
+    print(f"\nink temperature {result.temperature:g} by log-loss")
+    if args.store is not None:
+        from darkread.edge.reconstruct import default_model_path
+        from darkread.models.train.calibrate import store_ink_temperature
+
+        model = args.model or default_model_path()
+        store_ink_temperature(model, args.store)
+        print(f"{model}: ink temperature {args.store:g} stored (the edge reads it from the model)")
     return 0
 
 
@@ -183,6 +216,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--init", type=Path, metavar="MODEL",
                    help="start from these weights instead of a fresh network: a checkpoint (.pt) or an exported "
                         "network (.onnx, e.g. models/binary_unet.onnx; its BatchNorms are folded, so they stay frozen)")
+    p.add_argument("--teacher", type=Path, metavar="MODEL",
+                   help="also learn this network's ink probability (distillation, 80 %% of the loss): e.g. a cheaper "
+                        "head that reads like the shipped network")
     p.set_defaults(func=_cmd_fit)
 
     p = sub.add_parser("export", help="ONNX fp32 + static int8 QDQ from a checkpoint")
@@ -289,6 +325,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("val_dir", type=Path, nargs="?", default=DEFAULT_VAL, help=f"shard directory (default {DEFAULT_VAL})")
     p.add_argument("--model", type=Path, help="ONNX model (default: the shipped one)")
     p.add_argument("--limit", type=_positive_int, default=500, help="windows to use (default 500)")
+    p.add_argument("--store", type=_positive_float, metavar="T",
+                   help="write this temperature into the model's metadata, where the edge reads it (a network "
+                        "without one is read at 1.5)")
     p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("all", help="reproduce the shipped model from scratch: synth -> fit -> export -> int8 -> evaluate -> card")

@@ -30,6 +30,7 @@ def export_onnx(model: BinaryUNet, path: str | Path) -> Path:
     model = model.eval()
     example = torch.zeros(1, *INPUT_SHAPE)
     with torch.no_grad():
+        out_shape = tuple(model(example).shape)
         torch.onnx.export(
             model,
             (example,),
@@ -43,7 +44,13 @@ def export_onnx(model: BinaryUNet, path: str | Path) -> Path:
         )
     import onnx
 
-    onnx.checker.check_model(onnx.load(str(out)))
+    graph_model = onnx.load(str(out))
+    # the exporter leaves a pixel shuffle's output sizes symbolic; the edge needs them fixed (all but the batch)
+    for dim, size in zip(list(graph_model.graph.output[0].type.tensor_type.shape.dim)[1:], out_shape[1:]):
+        dim.Clear()
+        dim.dim_value = int(size)
+    onnx.checker.check_model(graph_model)
+    onnx.save(graph_model, str(out))
     log.info("exported %s (%.0f kB)", out, out.stat().st_size / 1024)
     return out
 

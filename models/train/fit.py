@@ -53,6 +53,11 @@ class FitConfig:
     augmentation: bool = True
     crop: tuple[int, int] | None = (64, 128)  # train on random crops (validation uses whole windows)
     freeze_batchnorm: bool = False  # keep BatchNorms in eval mode (weights from an ONNX file: folded, identity BNs)
+    # distillation: a network (ONNX or checkpoint) whose ink probability the fit also learns to give,
+    # with this share of the loss (the rest: the synthetic ground truth). A cheaper network that reads
+    # like the one the edge's settings were tuned on, not only one with a good pixel score
+    teacher: str | None = None
+    teacher_weight: float = 0.8
     net: dict[str, object] = field(default_factory=lambda: NetConfig().to_dict())
 
 
@@ -151,8 +156,9 @@ def is_exported_network(path: str | Path) -> bool:
     return str(path).endswith(".onnx")
 
 
-def load_initial_weights(path: str | Path, config: NetConfig) -> BinaryUNet:
-    """Starting weights for a fit: a checkpoint (.pt) or an exported network (.onnx, e.g. the shipped one)."""
+def load_initial_weights(path: str | Path, config: NetConfig | None) -> BinaryUNet:
+    """Starting weights for a fit: a checkpoint (.pt) or an exported network (.onnx, e.g. the shipped one;
+    ``config`` None: as it is, else the layers it shares with a network of ``config``)."""
     if not Path(path).is_file():
         raise FileNotFoundError(f"--init {path}: no such file")
     if is_exported_network(path):
@@ -206,6 +212,12 @@ def fit(
             config = replace(config, freeze_batchnorm=True)  # a run that began from an exported network stays frozen
         log.info("resumed from %s at step %s, %.0f s used", last, state["step"], state["elapsed_s"])
     log.info("network: %d parameters, %s", count_parameters(model), config.net)
+    teacher = None
+    if config.teacher is not None:
+        teacher = load_initial_weights(config.teacher, None).eval()
+        for parameter in teacher.parameters():
+            parameter.requires_grad_(False)
+        log.info("distilling %s (%.0f %% of the loss)", config.teacher, 100 * config.teacher_weight)
     held_out = validation_set(paths, config.validation_samples)
     log.info("held-out validation samples: %d", len(held_out))
 
@@ -251,7 +263,12 @@ def fit(
                 group["lr"] = schedule(frac, int(state["step"]), config)  # type: ignore[call-overload]
             x = torch.from_numpy(x_np)
             y = torch.from_numpy(y_np.astype(np.float32))[:, None]
-            loss = bce_dice_loss(model(x), y, config.dice_weight)
+            logits = model(x)
+            loss = bce_dice_loss(logits, y, config.dice_weight)
+            if teacher is not None:
+                with torch.no_grad():
+                    taught = torch.sigmoid(teacher(x))
+                loss = (1.0 - config.teacher_weight) * loss + config.teacher_weight * F.binary_cross_entropy_with_logits(logits, taught)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()

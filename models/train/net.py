@@ -32,7 +32,7 @@ class NetConfig:
     # "full": the last decoder stage at full resolution (resize, add the stem, refine, 1x1 head);
     # "shuffle": it stays at half resolution and a 1x1 head gives each pixel's 2x2 sub-pixel logits,
     # put in place by a pixel shuffle (no full-resolution work after the stem: about a third less time)
-    head: str = "full"
+    head: str = "shuffle"
 
     def __post_init__(self) -> None:
         if self.head not in HEADS:
@@ -46,7 +46,7 @@ class NetConfig:
         values = dict(data)
         values["widths"] = tuple(int(w) for w in values["widths"])  # type: ignore[union-attr]
         values["blocks"] = tuple(int(b) for b in values["blocks"])  # type: ignore[union-attr]
-        values.setdefault("head", "full")  # (checkpoints from before the choice)
+        values.setdefault("head", "full")  # (checkpoints from before the choice: all full)
         return cls(**values)  # type: ignore[arg-type]
 
 
@@ -127,8 +127,10 @@ class BinaryUNet(nn.Module):
         y = self.up1(y, s1)
         if self.config.head == "full":
             return self.head(self.up0(y, s0))
-        h, w = x.shape[-2:]
-        return F.pixel_shuffle(self.head(self.refine(y)), 2)[..., :h, :w]
+        out = F.pixel_shuffle(self.head(self.refine(y)), 2)
+        if torch.onnx.is_in_onnx_export():
+            return out  # (exported at INPUT_SHAPE, even sides: no slice, so the output keeps fixed sizes)
+        return out[..., : x.shape[-2], : x.shape[-1]]  # an odd side comes back one longer
 
 
 def count_parameters(model: nn.Module) -> int:

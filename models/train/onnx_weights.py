@@ -101,13 +101,47 @@ def load_onnx_weights(model: BinaryUNet, path: str | Path, shared_only: bool = F
     return model.eval()
 
 
+def onnx_head(path: str | Path) -> str:
+    """The head ``path`` ends in (``NetConfig.head``): four sub-pixel logits ("shuffle") or one ("full")."""
+    return "shuffle" if onnx_convolutions(path)[-1][1].shape[0] == 4 else "full"
+
+
+def onnx_config(path: str | Path) -> NetConfig:
+    """The ``NetConfig`` of the network in ``path``, read from its convolutions in graph order: the
+    stem, then per encoder scale a strided convolution and its separable blocks (a depthwise 3x3
+    and a pointwise 1x1 each), then the decoder (a 1x1 projection that follows no depthwise one)."""
+    import onnx
+
+    weights = [weight.shape for _, weight, _ in onnx_convolutions(path)]  # (first: a clear error for a file that is not ONNX)
+    convs = []
+    for node in onnx.load(str(path)).graph.node:
+        if node.op_type == "Conv":
+            attributes = {a.name: onnx.helper.get_attribute_value(a) for a in node.attribute}
+            convs.append((list(attributes.get("strides", [1, 1]))[0], attributes.get("group", 1), attributes["kernel_shape"][0]))
+    widths, blocks = [int(weights[0][0])], []
+    for k in range(1, len(convs)):
+        stride, group, kernel = convs[k]
+        if stride == 2:
+            widths.append(int(weights[k][0]))  # the next scale
+            blocks.append(0)
+        elif group > 1 and blocks:
+            blocks[-1] += 1  # a separable block's depthwise convolution
+        elif kernel == 1 and convs[k - 1][1] == 1:
+            break  # a 1x1 after no depthwise one: the decoder's first projection
+    if len(widths) != 4:
+        raise OnnxWeightsError(f"{path}: {len(widths)} scales found, the network has 4; not this architecture")
+    return NetConfig(widths=tuple(widths), blocks=tuple(blocks), in_channels=int(weights[0][1]), head=onnx_head(path))  # type: ignore[arg-type]
+
+
 def model_from_onnx(path: str | Path, config: NetConfig | None = None) -> BinaryUNet:
-    """A torch BinaryUNet computing what ``path`` computes; with a ``config`` of another head, one
-    that shares its layers up to that head (the head fresh: a start for training it)."""
+    """A torch BinaryUNet computing what ``path`` computes (``onnx_config``: its widths, blocks and
+    head, unless ``config`` says otherwise); with a ``config`` of another head, one that shares its layers up to that head (the
+    head fresh: a start for training it)."""
     if not Path(path).is_file():
         raise FileNotFoundError(f"{path}: no such model file")
-    model = BinaryUNet(config)
-    return load_onnx_weights(model, path, shared_only=model.config.head != "full")
+    own = onnx_config(path)
+    model = BinaryUNet(config or own)
+    return load_onnx_weights(model, path, shared_only=model.config.head != own.head)
 
 
 def max_output_difference(model: BinaryUNet, path: str | Path, voxels: np.ndarray) -> float:
