@@ -151,3 +151,47 @@ def test_ink_probability_is_above_one_half_exactly_where_the_mask_is_ink() -> No
         np.testing.assert_array_equal((p > 0.5).astype(np.uint8), rec(voxel))
     with pytest.raises(ValueError, match="temperature"):
         Reconstructor(warmup=0, temperature=0.0)
+
+
+def test_a_network_carries_its_ink_temperature(random_model: Path, tmp_path: Path) -> None:
+    """The ink probability's T comes from the model's metadata (1.5 without one), an argument overrides it."""
+    import shutil
+
+    from darkread.edge.reconstruct import INK_TEMPERATURE
+    from darkread.models.train.calibrate import store_ink_temperature
+
+    assert Reconstructor(random_model, warmup=0).temperature == INK_TEMPERATURE == 1.5
+    tuned = store_ink_temperature(shutil.copy(random_model, tmp_path / "tuned.onnx"), 1.25)
+    rec = Reconstructor(tuned, warmup=0)
+    assert rec.temperature == 1.25
+    voxel = _voxel(7)
+    from darkread.edge.reconstruct import probability_from_logits
+
+    rec.input_window[...] = voxel
+    np.testing.assert_array_equal(rec.ink_probability(rec.input_window), probability_from_logits(rec.logits(voxel), 1.25))
+    assert Reconstructor(tuned, warmup=0, temperature=2.0).temperature == 2.0
+    store_ink_temperature(tuned, 0.75)  # stored again: replaced, not added
+    assert Reconstructor(tuned, warmup=0).temperature == 0.75
+
+
+def test_a_bad_stored_temperature_is_one_clear_error(random_model: Path, tmp_path: Path) -> None:
+    import shutil
+
+    import onnx
+    from darkread.edge.reconstruct import INK_TEMPERATURE_KEY
+
+    model = onnx.load(shutil.copy(random_model, tmp_path / "bad.onnx"))
+    entry = model.metadata_props.add()
+    entry.key, entry.value = INK_TEMPERATURE_KEY, "-1"
+    onnx.save(model, str(tmp_path / "bad.onnx"))
+    with pytest.raises(ModelError, match="ink_temperature.*calibrate --store"):
+        Reconstructor(tmp_path / "bad.onnx", warmup=0)
+
+
+@shipped
+def test_the_shipped_networks_carry_the_temperatures_they_were_read_at() -> None:
+    """The distilled half-resolution network is read at T = 1; the previous one (no metadata) at 1.5."""
+    shipped_model = default_model_path()
+    assert Reconstructor(shipped_model, warmup=0).temperature == 1.0
+    assert Reconstructor(shipped_model.with_name("binary_unet_int8.onnx"), warmup=0).temperature == 1.0
+    assert Reconstructor(shipped_model.with_name("binary_unet_full.onnx"), warmup=0).temperature == 1.5

@@ -88,3 +88,30 @@ def test_init_from_a_missing_file_is_one_clear_error(tmp_path: Path) -> None:
 
     with pytest.raises(FileNotFoundError, match="--init .*no such file"):
         load_initial_weights(tmp_path / "nope.onnx", NetConfig())
+
+
+def test_distilling_a_teacher_brings_the_student_to_its_ink_probability(fake_dataset, tmp_path: Path) -> None:
+    """--teacher: with the whole loss on the teacher, the student ends closer to what the teacher gives."""
+    import torch
+    from darkread.models.train.data import load_dataset
+    from darkread.models.train.export import export_onnx
+    from darkread.models.train.net import BinaryUNet
+
+    net = NetConfig(widths=(4, 8, 16, 16), blocks=(1, 1, 1))
+    torch.manual_seed(5)
+    teacher = BinaryUNet(net).eval()
+    teacher_path = export_onnx(teacher, tmp_path / "teacher.onnx")
+    root = fake_dataset(shards=1, per_shard=40)
+    x = torch.from_numpy(load_dataset(root).voxels[:16].astype(np.float32))
+
+    def gap(model: BinaryUNet) -> float:
+        with torch.no_grad():
+            return float((torch.sigmoid(model.eval()(x)) - torch.sigmoid(teacher(x))).abs().mean())
+
+    student_net = NetConfig(widths=(4, 8, 16, 16), blocks=(1, 1, 1), head="shuffle")
+    torch.manual_seed(6)
+    before = gap(BinaryUNet(student_net))
+    config = _tiny_config(max_epochs=6, lr=1e-2, net=student_net.to_dict(), teacher=str(teacher_path), teacher_weight=1.0)
+    torch.manual_seed(6)
+    fit(root, tmp_path / "run", config, progress=False)
+    assert gap(load_model(tmp_path / "run" / "last.pt")) < 0.5 * before

@@ -10,7 +10,7 @@ import torch
 
 from darkread.models.train.export import export_onnx
 from darkread.models.train.net import BinaryUNet, NetConfig
-from darkread.models.train.onnx_weights import OnnxWeightsError, max_output_difference, model_from_onnx
+from darkread.models.train.onnx_weights import OnnxWeightsError, max_output_difference, model_from_onnx, onnx_config
 
 SHIPPED = Path(__file__).resolve().parents[3] / "models" / "binary_unet.onnx"
 
@@ -46,10 +46,18 @@ def test_export_then_load_round_trips_folded_batchnorm(tmp_path: Path) -> None:
     assert loaded.stem[0].weight.grad is not None and float(loaded.stem[0].weight.grad.abs().sum()) > 0
 
 
+@pytest.mark.parametrize("config", [NetConfig(), NetConfig(widths=(4, 8, 16, 16), blocks=(1, 1, 1)),
+                                    NetConfig(widths=(8, 24, 32, 48), blocks=(2, 1, 3), head="shuffle")])
+def test_a_file_says_which_network_it_is(config: NetConfig, tmp_path: Path) -> None:
+    path = export_onnx(BinaryUNet(config).eval(), tmp_path / "net.onnx")
+    assert onnx_config(path) == config
+    assert model_from_onnx(path).config == config
+
+
 def test_other_widths_or_a_non_onnx_file_are_refused(tmp_path: Path) -> None:
-    small = export_onnx(BinaryUNet(NetConfig(widths=(4, 8, 8, 8))).eval(), tmp_path / "small.onnx")
+    small = export_onnx(BinaryUNet(NetConfig(widths=(4, 8, 16, 16))).eval(), tmp_path / "small.onnx")
     with pytest.raises(OnnxWeightsError, match="not this architecture"):
-        model_from_onnx(small)
+        model_from_onnx(small, NetConfig())  # read as the shipped widths it does not have
     junk = tmp_path / "junk.onnx"
     junk.write_bytes(b"not a model at all")
     with pytest.raises(OnnxWeightsError, match="not"):
@@ -71,7 +79,9 @@ def test_an_exported_shuffle_network_round_trips_exactly(tmp_path: Path) -> None
     torch.manual_seed(2)
     original = BinaryUNet(NetConfig(head="shuffle")).eval()
     path = export_onnx(original, tmp_path / "shuffle.onnx")
-    loaded = model_from_onnx(path, NetConfig(head="shuffle"))
+    loaded = model_from_onnx(path)  # the file says which head it has
+    assert loaded.config.head == "shuffle"
     assert max_output_difference(loaded, path, sparse_voxels(2, 3)) < 1e-4
-    with pytest.raises(OnnxWeightsError, match="not this architecture"):
-        model_from_onnx(path)  # read as the full-resolution network it is not
+    as_full = model_from_onnx(path, NetConfig(head="full"))  # a start for the other head: the shared layers only
+    assert torch.equal(as_full.stem[0].weight, loaded.stem[0].weight)
+    assert not torch.equal(as_full.head.weight[:, :1], loaded.head.weight[:1, :1])
