@@ -1,7 +1,9 @@
 """Reconstruction latency per 100x200 window on one core: the shipped ONNX U-Net, fp32 and static int8.
 
 Reference measured in the same run: the same network in PyTorch eager mode on one thread when
-torch is installed (the training stack), else the naive count-image baseline (numpy + OpenCV).
+torch is installed (the training stack), else the naive count-image baseline (numpy + OpenCV);
+and the previous network (``binary_unet_full.onnx``, its last stage at full resolution), alternated
+with the shipped one: ``inference_cost_ratio_vs_previous``.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 from darkread.bench import BenchContext, Figure, best_median_s
 
 INT8_FILENAME = "binary_unet_int8.onnx"
+PREVIOUS_FILENAME = "binary_unet_full.onnx"  # the network shipped before (full-resolution last stage)
 
 
 def example_voxel(seed: int = 0) -> np.ndarray:
@@ -79,4 +82,20 @@ def run(ctx: BenchContext) -> list[Figure]:
     else:
         ctx.notes.append(f"inference: no int8 model at {int8}")
     figures.append(Figure("inference_ms_reference", reference_ms, "reference (see column), 1 core (ms/window)", reference))
+    previous = fp32.with_name(PREVIOUS_FILENAME)
+    if previous.is_file():
+        # alternated, so a drift of the host's speed falls on both alike
+        shipped_ms, previous_ms = [], []
+        for _ in range(3):
+            shipped_ms.append(onnx_latency_ms(fp32, runs, repeats=1))
+            previous_ms.append(onnx_latency_ms(previous, runs, repeats=1))
+        ratio = min(shipped_ms) / min(previous_ms)
+        figures += [
+            Figure("inference_ms_previous_model", min(previous_ms), "the previous network (full-resolution last stage), fp32 ORT, 1 core (ms/window)",
+                   f"shipped network, same run, alternated: {min(shipped_ms):.2f} ms"),
+            Figure("inference_cost_ratio_vs_previous", ratio, "per-window inference cost, shipped / previous network (same run)",
+                   f"{min(shipped_ms):.2f} / {min(previous_ms):.2f} ms", "<= 1.5"),
+        ]
+    else:
+        ctx.notes.append(f"inference: no previous network at {previous}")
     return figures

@@ -106,8 +106,9 @@ Dynamic int8 quantisation is not offered: it is several times slower for conv ne
 ## Ink probability (temperature)
 
 Binary frames are `logits > 0`. Where frames are averaged on the glasses (the on-change mode's
-views) the edge uses the calibrated probability `sigmoid(logits / T)` with `T = 1.5`
-(`darkread.edge.reconstruct.INK_TEMPERATURE`): the net is over-confident (Dice loss), and 1.5 has
+views) the edge uses the probability `sigmoid(logits / T)` with the `T` the network carries in its
+ONNX metadata (`darkread train calibrate --store T`), else `T = 1.5`
+(`darkread.edge.reconstruct.INK_TEMPERATURE`): a net trained on Dice is over-confident, and 1.5 has
 the lowest log-loss on 500 held-out synthetic validation windows (0.1374 against 0.1431 at T = 1
 and 0.1445 at T = 2). Reproduce: `darkread train calibrate VAL_DIR` (log-loss per T and a
 reliability table).

@@ -51,11 +51,13 @@ STITCH = {"stitch_ms_per_frame", "stitch_ink_f1", "stitch_ink_f1_tol1px", "stitc
 
 
 def inference_keys() -> set[str]:
-    from darkread.bench.inference import INT8_FILENAME
+    from darkread.bench.inference import INT8_FILENAME, PREVIOUS_FILENAME
     from darkread.edge.reconstruct import default_model_path
 
     keys = {"inference_ms_fp32", "inference_ms_reference"}
-    return keys | ({"inference_ms_int8"} if default_model_path().with_name(INT8_FILENAME).is_file() else set())
+    keys |= {"inference_ms_int8"} if default_model_path().with_name(INT8_FILENAME).is_file() else set()
+    return keys | ({"inference_ms_previous_model", "inference_cost_ratio_vs_previous"}
+                   if default_model_path().with_name(PREVIOUS_FILENAME).is_file() else set())
 
 
 def ocr_keys() -> set[str]:
