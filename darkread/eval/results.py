@@ -23,6 +23,16 @@ def stored_mode(doc: Mapping[str, Any]) -> str:
     return str(doc.get("infer") or LEGACY_MODE)
 
 
+def why_evaluate_again(doc: Mapping[str, Any], infer: str, model: str) -> str | None:
+    """Why a stored result cannot stand for this run (None: it can): another edge mode, or weights
+    other than ``model`` (a sha256 prefix, ``provenance.model_digest``) or not recorded."""
+    if stored_mode(doc) != infer:
+        return f"holds a {stored_mode(doc)} result"
+    if doc.get("model") != model:
+        return f"was read with network {doc.get('model') or '(not recorded)'}"
+    return None
+
+
 def _number(value: Any) -> float | None:
     """A finite number, else None (missing, NaN, or not a number)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):

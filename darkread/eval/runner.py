@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from darkread.eval.results import RecordingResult, stored_mode
+from darkread.eval.results import RecordingResult, why_evaluate_again
 
 logger = logging.getLogger(__name__)
 
@@ -127,7 +127,8 @@ def evaluate_recording(
     from darkread.eval.provenance import git_commit
 
     result: dict[str, Any] = {**conditions(recording_dir), "backend": backend, "commit": git_commit(),
-                              "evaluated": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "infer": infer}
+                              "evaluated": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "infer": infer,
+                              "model": network_digest(model)}
     read: dict[str, Any] = {}
 
     def run_darkread() -> dict[str, Any]:
@@ -221,11 +222,13 @@ def evaluate_suite(
     logger.info("%d recordings; OCR comparison on the stitched page with: %s", len(folders), ", ".join(engines) or "none")
     by_name: dict[str, dict[str, Any]] = {}
     todo = []
+    network = network_digest(model)
     for folder in folders:
         stored = runs / folder.name / RESULT_NAME
         doc = json.loads(stored.read_text()) if stored.is_file() and not force else None
-        if doc is not None and stored_mode(doc) != infer:
-            logger.warning("%s holds a %s result; evaluating it again in %s mode", stored.parent, stored_mode(doc), infer)
+        reason = None if doc is None else why_evaluate_again(doc, infer, network)
+        if reason is not None:
+            logger.warning("%s %s; evaluating it again in %s mode with network %s", stored.parent, reason, infer, network)
             doc = None
         if doc is not None:
             by_name[folder.name] = doc
@@ -250,6 +253,15 @@ def evaluate_suite(
                 bar.update()
     bar.close()
     return [RecordingResult.from_dict(by_name[f.name]) for f in folders]
+
+
+def network_digest(model: str | Path | None) -> str:
+    """Which weights read a recording (``model``, else the shipped network): its sha256 prefix."""
+    from darkread.edge.reconstruct import default_model_path
+    from darkread.eval.provenance import model_digest
+
+    path = Path(model) if model is not None else default_model_path()
+    return model_digest(path) if path.is_file() else f"{path.name} (missing)"
 
 
 def load_results(work_dir: str | Path) -> list[RecordingResult]:

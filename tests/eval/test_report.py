@@ -313,3 +313,14 @@ def test_write_report_keeps_texts_and_takes_the_suite_out_of_paths_and_errors(tm
     from darkread.eval.report import relative_paths
 
     assert relative_paths(stored, suite) == stored  # results written so already stay as they are
+
+
+def test_a_stored_result_stands_only_for_the_same_mode_and_network() -> None:
+    """A model change re-reads the suite: a result read with other weights, or with none recorded, is not reused."""
+    from darkread.eval.results import why_evaluate_again
+
+    doc = {"infer": "on-change", "model": "19999b3b014b"}
+    assert why_evaluate_again(doc, "on-change", "19999b3b014b") is None
+    assert "on-change result" in why_evaluate_again(doc, "every-window", "19999b3b014b")
+    assert "4be7499df172" in why_evaluate_again({"infer": "on-change", "model": "4be7499df172"}, "on-change", "19999b3b014b")
+    assert "not recorded" in why_evaluate_again({"infer": "on-change"}, "on-change", "19999b3b014b")
