@@ -33,9 +33,9 @@ def _head(args: argparse.Namespace) -> str:
     init = getattr(args, "init", None)
     if head is None and init is not None and Path(init).is_file():
         if str(init).endswith(".onnx"):
-            from darkread.models.train.onnx_weights import onnx_head
+            from darkread.models.train.onnx_weights import onnx_config
 
-            return onnx_head(init)
+            return onnx_config(init).head
         from darkread.models.train.fit import load_model
 
         return load_model(init).config.head

@@ -156,11 +156,12 @@ def is_exported_network(path: str | Path) -> bool:
     return str(path).endswith(".onnx")
 
 
-def load_initial_weights(path: str | Path, config: NetConfig | None) -> BinaryUNet:
+def load_initial_weights(path: str | Path, config: NetConfig | None, option: str = "--init") -> BinaryUNet:
     """Starting weights for a fit: a checkpoint (.pt) or an exported network (.onnx, e.g. the shipped one;
-    ``config`` None: as it is, else the layers it shares with a network of ``config``)."""
+    ``config`` None: as it is, else the layers it shares with a network of ``config``); ``option``
+    names where the path came from in the error for a missing file."""
     if not Path(path).is_file():
-        raise FileNotFoundError(f"--init {path}: no such file")
+        raise FileNotFoundError(f"{option} {path}: no such file")
     if is_exported_network(path):
         from darkread.models.train.onnx_weights import model_from_onnx
 
@@ -214,7 +215,7 @@ def fit(
     log.info("network: %d parameters, %s", count_parameters(model), config.net)
     teacher = None
     if config.teacher is not None:
-        teacher = load_initial_weights(config.teacher, None).eval()
+        teacher = load_initial_weights(config.teacher, None, option="--teacher").eval()
         for parameter in teacher.parameters():
             parameter.requires_grad_(False)
         log.info("distilling %s (%.0f %% of the loss)", config.teacher, 100 * config.teacher_weight)

@@ -12,6 +12,7 @@ round trip on a window with ``max_output_difference``.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -26,6 +27,11 @@ class OnnxWeightsError(ValueError):
 
 def onnx_convolutions(path: str | Path) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
     """(node name, weight, bias or None) of every Conv node, in graph order."""
+    return [(node.name, weight, bias) for node, weight, bias in _conv_nodes(path)]
+
+
+def _conv_nodes(path: str | Path) -> list[tuple[Any, np.ndarray, np.ndarray | None]]:
+    """(node, weight, bias or None) of every Conv node, in graph order: the file read once."""
     import onnx
     from onnx import numpy_helper
 
@@ -43,7 +49,7 @@ def onnx_convolutions(path: str | Path) -> list[tuple[str, np.ndarray, np.ndarra
         if len(node.input) < 2 or node.input[1] not in inits:
             raise OnnxWeightsError(f"{path}: convolution {node.name} has no constant weight")
         bias = inits.get(node.input[2]) if len(node.input) > 2 else None
-        convs.append((node.name, inits[node.input[1]], bias))
+        convs.append((node, inits[node.input[1]], bias))
     return convs
 
 
@@ -101,28 +107,23 @@ def load_onnx_weights(model: BinaryUNet, path: str | Path, shared_only: bool = F
     return model.eval()
 
 
-def onnx_head(path: str | Path) -> str:
-    """The head ``path`` ends in (``NetConfig.head``): four sub-pixel logits ("shuffle") or one ("full")."""
-    return "shuffle" if onnx_convolutions(path)[-1][1].shape[0] == 4 else "full"
-
-
 def onnx_config(path: str | Path) -> NetConfig:
     """The ``NetConfig`` of the network in ``path``, read from its convolutions in graph order: the
     stem, then per encoder scale a strided convolution and its separable blocks (a depthwise 3x3
-    and a pointwise 1x1 each), then the decoder (a 1x1 projection that follows no depthwise one)."""
+    and a pointwise 1x1 each), then the decoder (a 1x1 projection that follows no depthwise one);
+    the head gives four sub-pixel logits ("shuffle") or one ("full")."""
     import onnx
 
-    weights = [weight.shape for _, weight, _ in onnx_convolutions(path)]  # (first: a clear error for a file that is not ONNX)
-    convs = []
-    for node in onnx.load(str(path)).graph.node:
-        if node.op_type == "Conv":
-            attributes = {a.name: onnx.helper.get_attribute_value(a) for a in node.attribute}
-            convs.append((list(attributes.get("strides", [1, 1]))[0], attributes.get("group", 1), attributes["kernel_shape"][0]))
-    widths, blocks = [int(weights[0][0])], []
+    nodes = _conv_nodes(path)
+    convs = []  # (stride, group, kernel, output channels)
+    for node, weight, _ in nodes:
+        attributes = {a.name: onnx.helper.get_attribute_value(a) for a in node.attribute}
+        convs.append((list(attributes.get("strides", [1, 1]))[0], attributes.get("group", 1), int(weight.shape[2]), int(weight.shape[0])))
+    widths, blocks = [convs[0][3]], []
     for k in range(1, len(convs)):
-        stride, group, kernel = convs[k]
+        stride, group, kernel, out = convs[k]
         if stride == 2:
-            widths.append(int(weights[k][0]))  # the next scale
+            widths.append(out)  # the next scale
             blocks.append(0)
         elif group > 1 and blocks:
             blocks[-1] += 1  # a separable block's depthwise convolution
@@ -130,7 +131,8 @@ def onnx_config(path: str | Path) -> NetConfig:
             break  # a 1x1 after no depthwise one: the decoder's first projection
     if len(widths) != 4:
         raise OnnxWeightsError(f"{path}: {len(widths)} scales found, the network has 4; not this architecture")
-    return NetConfig(widths=tuple(widths), blocks=tuple(blocks), in_channels=int(weights[0][1]), head=onnx_head(path))  # type: ignore[arg-type]
+    return NetConfig(widths=tuple(widths), blocks=tuple(blocks), in_channels=int(nodes[0][1].shape[1]),  # type: ignore[arg-type]
+                     head="shuffle" if convs[-1][3] == 4 else "full")
 
 
 def model_from_onnx(path: str | Path, config: NetConfig | None = None) -> BinaryUNet:

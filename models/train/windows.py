@@ -57,7 +57,7 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
     from darkread.edge.voxel import VoxelConfig, voxel_grid
 
     mapper = GazeMapper(rec.calibration, rec.gaze())
-    cleaning = DeblurConfig(enabled=deblur), DenoiseConfig(enabled=denoise)
+    deblur_cfg, denoise_cfg = DeblurConfig(enabled=deblur), DenoiseConfig(enabled=denoise)
     n_events, voxel = PipelineConfig().n_events, VoxelConfig()
     times = np.arange(int(events["t"][0]) + 100_000, int(events["t"][-1]), int(every_ms * 1000))[:max_windows]
     ends = np.searchsorted(events["t"], times, side="right")
@@ -69,7 +69,7 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
         origin = window_origin(gaze.pixel, sensor_wh, voxel.fovea)
         recent = events[max(0, end - MAX_HISTORY_EVENTS) : end]
         sensed = window_events(recent, origin, voxel.fovea, n_events)
-        window, _, _ = clean_window(sensed, recent, origin, WINDOW_HW, sensor_wh, cleaning[0], cleaning[1])
+        window, _, _ = clean_window(sensed, recent, origin, WINDOW_HW, sensor_wh, deblur_cfg, denoise_cfg)
         if len(window) >= n_events // 2:
             voxels.append(voxel_grid(window, origin[0], origin[1], voxel))
             origins.append(origin)

@@ -82,12 +82,14 @@ def test_a_fit_from_an_exported_network_starts_where_it_left_off(fake_dataset, t
     assert all(float(m.running_mean.abs().max()) == 0.0 for m in resumed.modules() if isinstance(m, torch.nn.BatchNorm2d))
 
 
-def test_init_from_a_missing_file_is_one_clear_error(tmp_path: Path) -> None:
+def test_init_from_a_missing_file_is_one_clear_error(fake_dataset, tmp_path: Path) -> None:
     import pytest
     from darkread.models.train.fit import load_initial_weights
 
     with pytest.raises(FileNotFoundError, match="--init .*no such file"):
         load_initial_weights(tmp_path / "nope.onnx", NetConfig())
+    with pytest.raises(FileNotFoundError, match="--teacher .*no such file"):  # a teacher's path is named as one
+        fit(fake_dataset(shards=1, per_shard=8), tmp_path / "run", _tiny_config(teacher=str(tmp_path / "nope.onnx")), progress=False)
 
 
 def test_distilling_a_teacher_brings_the_student_to_its_ink_probability(fake_dataset, tmp_path: Path) -> None:
