@@ -143,9 +143,16 @@ def save_checkpoint(path: Path, model: BinaryUNet, optimizer: torch.optim.Optimi
 
 
 def load_model(checkpoint: str | Path) -> BinaryUNet:
-    """The network stored in a checkpoint, in eval mode."""
-    data = torch.load(checkpoint, map_location="cpu", weights_only=False)
-    config = NetConfig.from_dict(data["fit_config"]["net"])
+    """The network stored in a checkpoint, in eval mode (ValueError naming the file when it is not one)."""
+    import pickle
+
+    try:
+        data = torch.load(checkpoint, map_location="cpu", weights_only=False)
+        net = data["fit_config"]["net"]
+    except (pickle.UnpicklingError, RuntimeError, EOFError, KeyError, TypeError) as exc:
+        raise ValueError(f"{checkpoint}: not a training checkpoint ({type(exc).__name__}); give a .pt that "
+                         "`darkread train fit` wrote, or an exported .onnx") from None
+    config = NetConfig.from_dict(net)
     model = BinaryUNet(config)
     model.load_state_dict(data["model"])
     return model.eval()

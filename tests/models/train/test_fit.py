@@ -88,8 +88,17 @@ def test_init_from_a_missing_file_is_one_clear_error(fake_dataset, tmp_path: Pat
 
     with pytest.raises(FileNotFoundError, match="--init .*no such file"):
         load_initial_weights(tmp_path / "nope.onnx", NetConfig())
+    text = tmp_path / "notes.pt"
+    text.write_text("# not a checkpoint\n")
+    truncated = tmp_path / "cut.pt"
+    data = fake_dataset(shards=1, per_shard=8)
+    fit(data, tmp_path / "whole", _tiny_config(max_epochs=1), progress=False)
+    truncated.write_bytes((tmp_path / "whole" / "last.pt").read_bytes()[:300])
+    for bad in (text, truncated):
+        with pytest.raises(ValueError, match="not a training checkpoint"):
+            load_initial_weights(bad, None)
     with pytest.raises(FileNotFoundError, match="--teacher .*no such file"):  # a teacher's path is named as one
-        fit(fake_dataset(shards=1, per_shard=8), tmp_path / "run", _tiny_config(teacher=str(tmp_path / "nope.onnx")), progress=False)
+        fit(data, tmp_path / "run", _tiny_config(teacher=str(tmp_path / "nope.onnx")), progress=False)
 
 
 def test_distilling_a_teacher_brings_the_student_to_its_ink_probability(fake_dataset, tmp_path: Path) -> None:
