@@ -95,6 +95,8 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
         raise ValueError("nothing to tune on: give --annotated DIR... (from `darkread train annotate`) or RECORDINGS...")
     if not 0.0 <= args.synthetic_share < 1.0:
         raise ValueError(f"--synthetic-share {args.synthetic_share}: must be in [0, 1)")
+    if args.anchor < 0:
+        raise ValueError(f"--anchor {args.anchor}: must be >= 0")
     for path in [*args.recordings, *args.annotated]:
         if not path.is_dir():
             raise FileNotFoundError(f"{path}: no such directory")
@@ -103,7 +105,7 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
         dirs += annotate_missing(args.recordings, args.layout, args.run_dir / "annotated", progress=not args.quiet)
     cfg = TuneConfig(lr=args.lr, steps=args.steps, minutes=args.minutes, batch_size=args.batch_size,
                      synthetic_share=args.synthetic_share if args.synthetic > 0 or args.synthetic_dir else 0.0,
-                     threads=args.threads, seed=args.seed)
+                     threads=args.threads, seed=args.seed, anchor_weight=args.anchor)
     summary = finetune(dirs, args.base, args.run_dir, args.export, cfg=cfg, synthetic=args.synthetic,
                        synthetic_dir=args.synthetic_dir, progress=not args.quiet)
     print(json.dumps(summary, indent=1, default=float))
@@ -257,6 +259,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--synthetic", type=int, default=600, help="synthetic standard-regime windows to mix in (default 600; 0 = none)")
     p.add_argument("--synthetic-dir", type=Path, help="take them from this `darkread synth dataset` directory instead of simulating")
     p.add_argument("--synthetic-share", type=float, default=0.5, help="share of every batch that is synthetic (default 0.5)")
+    p.add_argument("--anchor", type=float, default=0.0, metavar="W",
+                   help="on the synthetic windows, also pull toward the starting network's own answer, weighted W "
+                        "against the truth (learning without forgetting; default 0 = off)")
     p.add_argument("--lr", type=float, default=2e-4, help="peak learning rate (default 2e-4; training used 3e-3)")
     p.add_argument("--steps", type=int, default=1500, help="at most this many steps (default 1500)")
     p.add_argument("--minutes", type=float, default=20.0, help="wall-time budget (default 20)")

@@ -13,12 +13,17 @@ under that pose. Fine-tuning then
 * mixes **synthetic standard-regime windows** into every batch (``synthetic_share``), so what the
   network knew of the simulator, and of light levels the recordings do not cover, is not
   forgotten;
+* optionally **anchors** those synthetic windows to what the starting network itself said of them
+  (``anchor_weight``: a frozen copy's ink probability as a second target, "learning without
+  forgetting"): the truth alone lets the network drift wherever the truth and its old answer
+  differ, which on the original regime is mostly the faint, uncertain strokes of dim light;
 * runs at a low learning rate (AdamW, short warm-up, cosine decay) within a step and time budget;
 * exports ONNX that the edge loads as it is (``darkread read --model tuned.onnx``).
 """
 
 from __future__ import annotations
 
+import copy
 import json
 import logging
 import math
@@ -55,6 +60,7 @@ class TuneConfig:
     threads: int = 1
     seed: int = 0
     monitor_windows: int = 96  # per kind, scored before and after (logged; the real test is `train compare`)
+    anchor_weight: float = 0.0  # weight of the starting network's own answer on the synthetic windows (0 = off)
 
 
 def lr_at(step: int, cfg: TuneConfig, progress: float) -> float:
@@ -110,9 +116,15 @@ def _batch(pool: Shard, k: int, rng: np.random.Generator) -> tuple[np.ndarray, n
     return pool.voxels[take].astype(np.float32), labels(pool.targets[take], None if pool.ignore is None else pool.ignore[take])
 
 
-def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, progress: bool = True) -> dict[str, Any]:
-    """Train ``model`` in place on batches mixing both pools; returns the loss history and what ran."""
+def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, anchor: Any = None,
+         progress: bool = True) -> dict[str, Any]:
+    """Train ``model`` in place on batches mixing both pools; returns the loss history and what ran.
+
+    ``anchor`` (a frozen network, used when ``cfg.anchor_weight`` > 0) gives the synthetic rows a
+    second target: its own ink probability, weighted ``cfg.anchor_weight`` against the truth.
+    """
     import torch
+    import torch.nn.functional as F
     from tqdm import tqdm
 
     from darkread.models.train.fit import bce_dice_loss, training_mode
@@ -142,9 +154,15 @@ def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, pro
         if cfg.crop is not None:
             x, y = random_crop(x, y, cfg.crop, rng)
         y, valid = split_labels(y)
-        loss = bce_dice_loss(model(torch.from_numpy(np.ascontiguousarray(x))),
-                             torch.from_numpy(y.astype(np.float32))[:, None], cfg.dice_weight,
+        x_t = torch.from_numpy(np.ascontiguousarray(x))
+        logits = model(x_t)
+        loss = bce_dice_loss(logits, torch.from_numpy(y.astype(np.float32))[:, None], cfg.dice_weight,
                              torch.from_numpy(valid.astype(np.float32))[:, None])
+        if anchor is not None and cfg.anchor_weight > 0 and n_syn > 0:
+            # the batch is the annotated rows, then the synthetic ones (augment and crop keep the order)
+            with torch.no_grad():
+                said = torch.sigmoid(anchor(x_t[n_ann:]))
+            loss = loss + cfg.anchor_weight * F.binary_cross_entropy_with_logits(logits[n_ann:], said)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
@@ -210,7 +228,12 @@ def finetune(
     syn_monitor, syn_train = syn.select(np.arange(min(cfg.monitor_windows, len(syn)))), syn.select(np.arange(min(cfg.monitor_windows, len(syn)), len(syn)))
     pools = {"annotated_training_windows": annotated, "synthetic_held_out": syn_monitor}
     before = _monitor(model, pools, cfg.monitor_windows)
-    run = tune(model, annotated, syn_train, cfg, progress=progress)
+    anchor = None
+    if cfg.anchor_weight > 0:
+        anchor = copy.deepcopy(model).eval()
+        for parameter in anchor.parameters():
+            parameter.requires_grad_(False)
+    run = tune(model, annotated, syn_train, cfg, anchor=anchor, progress=progress)
     after = _monitor(model, pools, cfg.monitor_windows)
     out = Path(run_dir)
     out.mkdir(parents=True, exist_ok=True)

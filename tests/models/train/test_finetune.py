@@ -10,7 +10,8 @@ import pytest
 
 from darkread.edge.reconstruct import Reconstructor
 from darkread.models.train.export import export_onnx
-from darkread.models.train.finetune import FinetuneError, TuneConfig, finetune, lr_at
+from darkread.models.train.data import Shard
+from darkread.models.train.finetune import FinetuneError, TuneConfig, finetune, lr_at, tune
 from darkread.models.train.net import BinaryUNet
 from darkread_cli import assert_one_error_line, darkread
 
@@ -55,6 +56,35 @@ def test_no_annotated_windows_is_an_error(tmp_path, base_model) -> None:
         finetune([], base_model, tmp_path / "run", cfg=TINY, synthetic=0, progress=False)
 
 
+def test_the_anchor_keeps_the_synthetic_windows_answer_near_the_starting_network() -> None:
+    """Tuned toward random synthetic targets, the anchored network's answer on those windows moves
+    less from where it started than the unanchored one's; the annotated rows are not anchored."""
+    import copy
+
+    import torch
+
+    rng = np.random.default_rng(5)
+
+    def pool(n: int) -> Shard:
+        return Shard(rng.normal(size=(n, 4, 32, 64)).astype(np.float16), (rng.random((n, 32, 64)) < 0.5).astype(np.uint8), {})
+
+    annotated, synthetic = pool(4), pool(4)
+    torch.manual_seed(0)
+    start = BinaryUNet().eval()
+    cfg = TuneConfig(lr=5e-3, steps=15, batch_size=4, warmup_steps=1, crop=None, max_shift=0, synthetic_share=0.5, threads=1)
+    probe = torch.from_numpy(synthetic.voxels.astype(np.float32))
+    with torch.no_grad():
+        before = torch.sigmoid(start(probe))
+    moved = {}
+    for weight in (0.0, 5.0):
+        model, anchor = copy.deepcopy(start), copy.deepcopy(start).eval()
+        run = tune(model, annotated, synthetic, TuneConfig(**{**cfg.__dict__, "anchor_weight": weight}), anchor=anchor, progress=False)
+        assert run["steps"] == 15
+        with torch.no_grad():
+            moved[weight] = float((torch.sigmoid(model(probe)) - before).abs().mean())
+    assert moved[5.0] < 0.6 * moved[0.0], moved
+
+
 def test_learning_rate_warms_up_then_decays() -> None:
     cfg = TuneConfig(lr=1e-3, warmup_steps=10)
     assert lr_at(0, cfg, 0.0) == pytest.approx(1e-4)
@@ -72,4 +102,5 @@ def test_cli_finetune_runs_and_bad_inputs_fail_in_one_line(tmp_path, base_model,
     assert_one_error_line(darkread("train", "finetune"), "nothing to tune on")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(tmp_path / "nope")), "no such directory")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--synthetic-share", "1.5"), "--synthetic-share")
+    assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--anchor", "-1"), "--anchor")
     assert_one_error_line(darkread("train", "compare", str(ann), "--model", str(tmp_path / "none.onnx")), "no such model file")
