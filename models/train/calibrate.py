@@ -76,6 +76,18 @@ def calibrate(val_dir: str | Path, model: str | Path | None = None, limit: int |
     return fit_temperature(logits, data.targets[: len(logits)])
 
 
+def stored_ink_temperature(path: str | Path) -> float | None:
+    """The ink temperature a network file carries in its metadata, or None when it carries none."""
+    import onnx
+
+    from darkread.edge.reconstruct import INK_TEMPERATURE_KEY
+
+    for entry in onnx.load(str(path), load_external_data=False).metadata_props:
+        if entry.key == INK_TEMPERATURE_KEY:
+            return float(entry.value)
+    return None
+
+
 def store_ink_temperature(path: str | Path, temperature: float) -> Path:
     """Write ``temperature`` into the model's metadata (``edge.reconstruct.INK_TEMPERATURE_KEY``): the
     edge's ink probability is sigmoid(logits / T) with the T its network carries."""

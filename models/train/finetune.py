@@ -18,7 +18,10 @@ under that pose. Fine-tuning then
   forgetting"): the truth alone lets the network drift wherever the truth and its old answer
   differ, which on the original regime is mostly the faint, uncertain strokes of dim light;
 * runs at a low learning rate (AdamW, short warm-up, cosine decay) within a step and time budget;
-* exports ONNX that the edge loads as it is (``darkread read --model tuned.onnx``).
+* exports ONNX that the edge loads as it is (``darkread read --model tuned.onnx``), carrying the
+  starting network's ink temperature (without it the edge would read the tuned network at the
+  default 1.5 instead of the shipped 1.0 and keep twice as many frames: a different edge, not a
+  different network; ``darkread train calibrate --store`` sets another).
 """
 
 from __future__ import annotations
@@ -214,6 +217,7 @@ def finetune(
     """Fine-tune ``base_model`` (ONNX) on the annotated windows plus synthetic ones; export ONNX."""
     import torch
 
+    from darkread.models.train.calibrate import store_ink_temperature, stored_ink_temperature
     from darkread.models.train.export import export_onnx
     from darkread.models.train.onnx_weights import max_output_difference, model_from_onnx
 
@@ -239,6 +243,9 @@ def finetune(
     out.mkdir(parents=True, exist_ok=True)
     onnx_path = Path(export_to) if export_to is not None else out / "tuned.onnx"
     export_onnx(model, onnx_path)
+    temperature = stored_ink_temperature(base_model)
+    if temperature is not None:
+        store_ink_temperature(onnx_path, temperature)
     exported = max_output_difference(model, onnx_path, probe)
     summary = {
         "base_model": str(base_model),
@@ -248,6 +255,7 @@ def finetune(
         "annotated_ignored_pixel_share": round(float(annotated.ignore.mean()), 4) if annotated.ignore is not None else 0.0,
         "synthetic_windows": len(syn_train),
         "synthetic_source": str(synthetic_dir) if synthetic_dir else "simulated (standard regime, training texts)",
+        "ink_temperature": temperature,  # the starting network's, carried over (None: the edge's default)
         "round_trip_max_logit_difference": {"shipped_onnx_to_torch": round_trip, "torch_to_exported_onnx": exported},
         "monitor_f1_before": before,
         "monitor_f1_after": after,

@@ -51,6 +51,23 @@ def test_finetune_on_a_tiny_annotated_shard_exports_a_loadable_onnx(tmp_path, ba
     assert saved["exported"] == str(tmp_path / "tuned.onnx") and (tmp_path / "run" / "tuned.pt").is_file()
 
 
+def test_the_tuned_network_carries_its_base_networks_ink_temperature(tmp_path, base_model, shard_writer) -> None:
+    """The edge reads a network without a stored temperature at the default; a tuned copy of the
+    shipped network must be read as the shipped one is, or the comparison measures the edge."""
+    import shutil
+
+    from darkread.models.train.calibrate import store_ink_temperature
+
+    ann = annotated_dir(tmp_path, "ann", 4, 4, shard_writer)
+    unmarked = finetune([ann], base_model, tmp_path / "run0", tmp_path / "plain.onnx", cfg=TINY, synthetic=0, progress=False)
+    assert unmarked["ink_temperature"] is None
+    assert Reconstructor(tmp_path / "plain.onnx", warmup=0).temperature == Reconstructor(base_model, warmup=0).temperature
+    marked = store_ink_temperature(shutil.copy(base_model, tmp_path / "base_t.onnx"), 0.8)
+    summary = finetune([ann], marked, tmp_path / "run1", tmp_path / "tuned.onnx", cfg=TINY, synthetic=0, progress=False)
+    assert summary["ink_temperature"] == 0.8
+    assert Reconstructor(tmp_path / "tuned.onnx", warmup=0).temperature == 0.8
+
+
 def test_no_annotated_windows_is_an_error(tmp_path, base_model) -> None:
     with pytest.raises(FinetuneError, match="no annotated windows"):
         finetune([], base_model, tmp_path / "run", cfg=TINY, synthetic=0, progress=False)
