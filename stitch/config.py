@@ -51,6 +51,10 @@ class StitchConfig:
                             ``weak_match_drop`` below the recent matches' median, is searched again
                             this far around the prediction (the head moved more than predicted, and
                             the usual search found the neighbouring line); 0 turns it off.
+      wide_min_known        ... and its peak is taken only where this share of the frame lies on
+                            seen content: 40 px from the prediction a frame can sit on a sliver of
+                            the page, where a few strokes correlate perfectly (score ~1) with
+                            anything; such a frame goes to the anchor search instead.
       ambiguity_rows        ... where matches at least this many rows from the peak are the
                             neighbouring lines' (text lines look alike to a correlation) ...
       ambiguity_margin      ... which the peak must beat by this much; otherwise the frame is dropped
@@ -132,6 +136,7 @@ class StitchConfig:
     scene_gap_ms: float = 50.0
     wide_search_px: int = 40
     weak_match_drop: float = 0.2
+    wide_min_known: float = 0.3
     anchor_search_px: int = 200
     anchor_trigger_score: float = 0.5
     anchor_min_score: float = 0.5

@@ -8,7 +8,7 @@ content takes part, so fresh text entering on the right does not pull the match.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import cv2
@@ -33,6 +33,10 @@ class Registration:
     # how much the peak beats the best match at least ``separation_px`` rows above or below it:
     # text lines look alike, so a small margin means the vertical offset is ambiguous
     vertical_margin: float = 2.0
+    # share of the frame that lies on known content where the peak puts it (``overlap`` is at the
+    # prediction): a peak far from the prediction can sit on a sliver of the page, where a few
+    # strokes correlate perfectly with anything
+    overlap_at_peak: float = 1.0
 
 
 def parabola_vertex(left: float, centre: float, right: float) -> float:
@@ -148,7 +152,8 @@ def register_frame(
         step = (angles_deg[best + 1] - angles_deg[best - 1]) / 2.0
         angle += step * parabola_vertex(peaks[best - 1][0], peaks[best][0], peaks[best + 1][0])
     by, bx = divmod(int(scores.argmax()), scores.shape[1])
-    return _registration_at(scores, by, bx, radius, separation_px, overlap, angle)
+    reg = _registration_at(scores, by, bx, radius, separation_px, overlap, angle)
+    return replace(reg, overlap_at_peak=float(known[by : by + h, bx : bx + w].mean()))
 
 
 def _registration_at(

@@ -333,7 +333,8 @@ class PageStitcher:
         """Registration over ``wide_search_px`` around the prediction for a frame whose best match lay
         on the rim of the usual search or was weak (the head moved more than predicted); None, and
         the frame is dropped, unless the peak is a true maximum that beats every match a line above or below
-        it by ``ambiguity_margin`` (a wide search reaches the neighbouring lines)."""
+        it by ``ambiguity_margin`` (a wide search reaches the neighbouring lines) and lies on at least
+        ``wide_min_known`` of seen page."""
         cfg = self.cfg
         h, w = frame.mask.shape
         wide = cfg.wide_search_px
@@ -343,6 +344,10 @@ class PageStitcher:
         )
         if reg is None or reg.on_rim or reg.vertical_margin < cfg.ambiguity_margin:
             log.debug("frame %d dropped: no unambiguous match within %d px", frame.frame_id, wide)
+            return None
+        if reg.overlap_at_peak < cfg.wide_min_known:
+            log.debug("frame %d: its best match within %d px lies %.0f %% on seen page, too little to trust",
+                      frame.frame_id, wide, 100 * reg.overlap_at_peak)
             return None
         return reg
 

@@ -33,6 +33,9 @@ def test_only_the_part_overlapping_known_content_is_matched(rendered_page) -> No
     reg = register_frame(reference, known, frame, r)
     assert reg is not None and reg.shift_xy == (3, -2)
     assert 0.4 < reg.overlap < 0.6
+    # where the peak puts the frame: its footprint on the known half (97 of its 200 columns)
+    assert reg.overlap_at_peak == pytest.approx(known[8:108, 13:213].mean(), abs=1e-6)
+    assert reg.overlap_at_peak == pytest.approx(97 / 200, abs=1e-6)
 
 
 def test_no_registration_without_overlap_or_ink(rendered_page) -> None:

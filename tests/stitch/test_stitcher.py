@@ -350,3 +350,22 @@ def test_sparse_frames_under_a_large_head_motion_land_by_the_scene_motion() -> N
     assert blind.frames_dropped > 5 and f1_blind < 0.9  # what the scene's motion is for
     off = stitch_page(with_scene, StitchConfig(scene_anchor_frames=0))
     assert off.frames_dropped == blind.frames_dropped  # 0 turns it off
+
+
+@pytest.mark.parametrize("known_at_peak, taken", [(0.14, False), (0.6, True)])
+def test_a_wide_search_peak_on_a_sliver_of_the_page_is_not_taken(rendered_page, monkeypatch, known_at_peak: float,
+                                                                  taken: bool) -> None:
+    # measured on a walking 30-lux page: a frame 35 px from its prediction matched with score 1.00
+    # where 14 % of it lay on seen page, and began a second copy of the three lines above the first;
+    # refused, the anchor search put it where the lines are
+    import darkread.stitch.stitcher as stitcher_module
+    from darkread.stitch.register import Registration
+
+    stitcher = PageStitcher()
+    window = rendered_page.mask[130:230, 200:400]
+    stitcher.add(FrameRecord(0, 0, window, (200, 130), (300.0, 180.0)))
+    stitcher.flush()
+    found = Registration((2, -35), 1.0, 0.18, vertical_margin=0.58, overlap_at_peak=known_at_peak)
+    monkeypatch.setattr(stitcher_module, "register_frame", lambda *args, **kwargs: found)
+    frame = FrameRecord(1, 200_000, window, (240, 160), (340.0, 210.0))
+    assert (stitcher._search_wide(frame, 240, 160, 0.0) is found) == taken
