@@ -181,12 +181,24 @@ def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, anc
             "loss_last_25": float(np.mean(losses[-25:])) if losses else None}
 
 
+def spread_indices(total: int, n: int) -> np.ndarray:
+    """``n`` indices spread evenly over ``range(total)`` (all of them when ``total`` <= ``n``): the
+    annotated windows come recording after recording, so the first ``n`` would all be one recording's."""
+    if total <= n:
+        return np.arange(total)
+    return np.unique(np.linspace(0, total - 1, n).round().astype(np.int64))
+
+
 def _monitor(model: Any, pools: dict[str, Shard], n: int) -> dict[str, float]:
     from darkread.models.train.fit import evaluate_model
 
-    return {name: round(evaluate_model(model, pool.voxels[:n], pool.targets[:n],
-                                       ignore=None if pool.ignore is None else pool.ignore[:n])["f1"], 4)
-            for name, pool in pools.items() if len(pool)}
+    scores = {}
+    for name, pool in pools.items():
+        if len(pool):
+            take = spread_indices(len(pool), n)
+            scores[name] = round(evaluate_model(model, pool.voxels[take], pool.targets[take],
+                                                ignore=None if pool.ignore is None else pool.ignore[take])["f1"], 4)
+    return scores
 
 
 def annotate_missing(recordings: Sequence[str | Path], layout: str | Path | None, root: Path, progress: bool) -> list[Path]:

@@ -11,7 +11,7 @@ import pytest
 from darkread.edge.reconstruct import Reconstructor
 from darkread.models.train.export import export_onnx
 from darkread.models.train.data import Shard
-from darkread.models.train.finetune import FinetuneError, TuneConfig, finetune, lr_at, tune
+from darkread.models.train.finetune import FinetuneError, TuneConfig, finetune, lr_at, spread_indices, tune
 from darkread.models.train.net import BinaryUNet
 from darkread_cli import assert_one_error_line, darkread
 
@@ -121,3 +121,11 @@ def test_cli_finetune_runs_and_bad_inputs_fail_in_one_line(tmp_path, base_model,
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--synthetic-share", "1.5"), "--synthetic-share")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--anchor", "-1"), "--anchor")
     assert_one_error_line(darkread("train", "compare", str(ann), "--model", str(tmp_path / "none.onnx")), "no such model file")
+
+
+def test_the_monitored_windows_come_from_every_recording_not_the_first() -> None:
+    """Annotated windows come recording after recording: the monitor spreads its pick over all of them."""
+    picked = spread_indices(2072, 96)
+    assert len(picked) == 96 and picked[0] == 0 and picked[-1] == 2071
+    assert np.all(np.diff(picked) >= 21)  # every ~22nd window, not windows 0..95
+    assert spread_indices(5, 96).tolist() == [0, 1, 2, 3, 4]
