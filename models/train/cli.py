@@ -130,6 +130,19 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_placebo(args: argparse.Namespace) -> int:
+    from darkread.models.train.placebo import write_placebo
+
+    if not args.base.is_file():
+        raise FileNotFoundError(f"--base {args.base}: no such model file")
+    if args.count < 1:
+        raise ValueError(f"--count {args.count}: must be at least 1")
+    written = [write_placebo(args.base, args.out.parent / f"{args.out.stem}{i}{args.out.suffix}" if args.count > 1 else args.out,
+                             seed=args.seed + i, scale=args.scale) for i in range(args.count)]
+    print("\n".join(str(p) for p in written))
+    return 0
+
+
 def _cmd_target(args: argparse.Namespace) -> int:
     from darkread.models.synth.marker_page import MarkerPageSpec, lay_out, text_lines, write_target
 
@@ -289,6 +302,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--group", help="one group name for all inputs in the summary (default: by regime and lux)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_compare)
+
+    p = sub.add_parser("placebo", help="networks that learned nothing (the base's weights slightly perturbed): the chance spread of a before/after",
+                       description="Write copies of the base network whose weights are each scaled by (1 + SCALE x N(0,1)): "
+                                   "networks that learned nothing. `darkread train compare --model PLACEBO` on the same "
+                                   "recordings shows how far end-to-end CER moves by chance (a frame kept or fused a little "
+                                   "differently can flip a page); a tuned network's change means something where it leaves "
+                                   "that spread. With --count N: OUT's name gets 0..N-1 (seeds SEED..SEED+N-1).")
+    p.add_argument("--out", type=Path, required=True, help="the placebo ONNX to write (with --count: the name numbered)")
+    p.add_argument("--base", type=Path, default=MODELS_DIR / "binary_unet.onnx", help="the network to perturb (default: the shipped one)")
+    p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    p.add_argument("--scale", type=float, default=0.005, help="relative size of the perturbation (default 0.005)")
+    p.add_argument("--count", type=int, default=1, help="how many placebos (default 1)")
+    p.set_defaults(func=_cmd_placebo)
 
     p = sub.add_parser("target", help="a printable page: the text with ArUco markers around it, and its layout",
                        description="Lay out a text file with ArUco markers around it (the synthesiser's page renderer, the "
