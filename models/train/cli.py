@@ -105,7 +105,8 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
         dirs += annotate_missing(args.recordings, args.layout, args.run_dir / "annotated", progress=not args.quiet)
     cfg = TuneConfig(lr=args.lr, steps=args.steps, minutes=args.minutes, batch_size=args.batch_size,
                      synthetic_share=args.synthetic_share if args.synthetic > 0 or args.synthetic_dir else 0.0,
-                     threads=args.threads, seed=args.seed, anchor_weight=args.anchor)
+                     threads=args.threads, seed=args.seed, anchor_weight=args.anchor,
+                     train_only=tuple(part for part in (args.train_only or "").split(",") if part))
     summary = finetune(dirs, args.base, args.run_dir, args.export, cfg=cfg, synthetic=args.synthetic,
                        synthetic_dir=args.synthetic_dir, progress=not args.quiet)
     print(json.dumps(summary, indent=1, default=float))
@@ -272,6 +273,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--synthetic", type=int, default=600, help="synthetic standard-regime windows to mix in (default 600; 0 = none)")
     p.add_argument("--synthetic-dir", type=Path, help="take them from this `darkread synth dataset` directory instead of simulating")
     p.add_argument("--synthetic-share", type=float, default=0.5, help="share of every batch that is synthetic (default 0.5)")
+    p.add_argument("--train-only", metavar="PARTS",
+                   help="tune only these top-level parts of the network, comma-separated (e.g. stem,down1: where a "
+                        "sensor's difference enters); the rest stay as they were (default: all)")
     p.add_argument("--anchor", type=float, default=0.0, metavar="W",
                    help="on the synthetic windows, also pull toward the starting network's own answer, weighted W "
                         "against the truth (learning without forgetting; default 0 = off)")

@@ -64,6 +64,25 @@ class TuneConfig:
     seed: int = 0
     monitor_windows: int = 96  # per kind, scored before and after (logged; the real test is `train compare`)
     anchor_weight: float = 0.0  # weight of the starting network's own answer on the synthetic windows (0 = off)
+    train_only: tuple[str, ...] = ()  # top-level modules to tune (e.g. ("stem", "down1")); empty = all
+
+
+def trainable_parameters(model: Any, train_only: Sequence[str]) -> list[Any]:
+    """The parameters of the named top-level modules (all of them when none are named); the rest are
+    frozen, so a sensor's low-level difference can be learned where it enters and nowhere else."""
+    if not train_only:
+        return list(model.parameters())
+    known = {name for name, _ in model.named_children()}
+    unknown = sorted(set(train_only) - known)
+    if unknown:
+        raise ValueError(f"--train-only {','.join(unknown)}: no such part of the network (it has {', '.join(sorted(known))})")
+    chosen = []
+    for name, parameter in model.named_parameters():
+        keep = name.split(".", 1)[0] in train_only
+        parameter.requires_grad_(keep)
+        if keep:
+            chosen.append(parameter)
+    return chosen
 
 
 def lr_at(step: int, cfg: TuneConfig, progress: float) -> float:
@@ -139,7 +158,7 @@ def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, anc
     rng = np.random.default_rng(cfg.seed)
     n_syn = int(round(cfg.batch_size * cfg.synthetic_share)) if len(synthetic) else 0
     n_ann = cfg.batch_size - n_syn
-    optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=0.0)
+    optimizer = torch.optim.AdamW(trainable_parameters(model, cfg.train_only), lr=cfg.lr, weight_decay=0.0)
     training_mode(model, freeze_batchnorm=True)
     budget_s, started = cfg.minutes * 60.0, time.perf_counter()
     losses: list[float] = []

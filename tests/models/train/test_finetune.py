@@ -11,7 +11,8 @@ import pytest
 from darkread.edge.reconstruct import Reconstructor
 from darkread.models.train.export import export_onnx
 from darkread.models.train.data import Shard
-from darkread.models.train.finetune import FinetuneError, TuneConfig, finetune, lr_at, spread_indices, tune
+from darkread.models.train.finetune import (FinetuneError, TuneConfig, finetune, lr_at, spread_indices, trainable_parameters,
+                                            tune)
 from darkread.models.train.net import BinaryUNet
 from darkread_cli import assert_one_error_line, darkread
 
@@ -120,6 +121,9 @@ def test_cli_finetune_runs_and_bad_inputs_fail_in_one_line(tmp_path, base_model,
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(tmp_path / "nope")), "no such directory")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--synthetic-share", "1.5"), "--synthetic-share")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--anchor", "-1"), "--anchor")
+    assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--base", str(base_model), "--synthetic", "0",
+                                   "--steps", "1", "--batch-size", "2", "--run-dir", str(tmp_path / "run2"),
+                                   "--train-only", "stem,decoder", "--quiet"), "--train-only decoder")
     assert_one_error_line(darkread("train", "compare", str(ann), "--model", str(tmp_path / "none.onnx")), "no such model file")
 
 
@@ -129,3 +133,24 @@ def test_the_monitored_windows_come_from_every_recording_not_the_first() -> None
     assert len(picked) == 96 and picked[0] == 0 and picked[-1] == 2071
     assert np.all(np.diff(picked) >= 21)  # every ~22nd window, not windows 0..95
     assert spread_indices(5, 96).tolist() == [0, 1, 2, 3, 4]
+
+
+def test_train_only_tunes_the_named_parts_and_leaves_the_rest_as_they_were(shard_writer, tmp_path) -> None:
+    import torch
+
+    from darkread.models.train.data import load_shard
+
+    torch.manual_seed(0)
+    model = BinaryUNet()
+    before = {k: v.clone() for k, v in model.state_dict().items()}
+    shard_writer(tmp_path / "shard-00000.npz", 8, 0)
+    pool = load_shard(tmp_path / "shard-00000.npz")
+    cfg = TuneConfig(steps=3, batch_size=4, warmup_steps=1, crop=(32, 64), monitor_windows=4, threads=1, lr=1e-2,
+                     train_only=("stem", "down1"))
+    tune(model, pool, pool, cfg)
+    after = model.state_dict()
+    moved = {k.split(".")[0] for k in before if not torch.equal(before[k], after[k])}
+    assert moved and moved <= {"stem", "down1"}, moved
+    assert len(trainable_parameters(BinaryUNet(), ())) == len(list(BinaryUNet().parameters()))
+    with pytest.raises(ValueError, match="--train-only decoder: no such part"):
+        trainable_parameters(BinaryUNet(), ("stem", "decoder"))
