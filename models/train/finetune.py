@@ -250,6 +250,7 @@ def finetune(
 
     from darkread.models.train.calibrate import store_ink_temperature, stored_ink_temperature
     from darkread.models.train.export import export_onnx
+    from darkread.models.train.fit import frozen
     from darkread.models.train.onnx_weights import max_output_difference, model_from_onnx
 
     annotated, counts = load_annotated(annotated_dirs)
@@ -263,11 +264,7 @@ def finetune(
     syn_monitor, syn_train = syn.select(np.arange(min(cfg.monitor_windows, len(syn)))), syn.select(np.arange(min(cfg.monitor_windows, len(syn)), len(syn)))
     pools = {"annotated_training_windows": annotated, "synthetic_held_out": syn_monitor}
     before = _monitor(model, pools, cfg.monitor_windows)
-    anchor = None
-    if cfg.anchor_weight > 0:
-        anchor = copy.deepcopy(model).eval()
-        for parameter in anchor.parameters():
-            parameter.requires_grad_(False)
+    anchor = frozen(copy.deepcopy(model)) if cfg.anchor_weight > 0 else None
     run = tune(model, annotated, syn_train, cfg, anchor=anchor, progress=progress)
     after = _monitor(model, pools, cfg.monitor_windows)
     out = Path(run_dir)

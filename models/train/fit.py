@@ -126,6 +126,14 @@ def evaluate_model(model: BinaryUNet, voxels: np.ndarray, targets: np.ndarray, b
     return {"bce": sum(losses) / max(1, len(voxels)), "f1": float(scores["f1"]), "iou": float(scores["iou"])}
 
 
+def frozen(model: torch.nn.Module) -> torch.nn.Module:
+    """``model`` in eval mode with no parameter learning: a teacher or an anchor whose answers are
+    targets, never trained."""
+    for parameter in model.parameters():
+        parameter.requires_grad_(False)
+    return model.eval()
+
+
 def training_mode(model: torch.nn.Module, *, freeze_batchnorm: bool) -> None:
     """``model.train()``, the BatchNorms left in eval mode when frozen: an exported network's
     BatchNorms are folded into its convolutions, so batch statistics would undo what it learned."""
@@ -222,9 +230,7 @@ def fit(
     log.info("network: %d parameters, %s", count_parameters(model), config.net)
     teacher = None
     if config.teacher is not None:
-        teacher = load_initial_weights(config.teacher, None, option="--teacher").eval()
-        for parameter in teacher.parameters():
-            parameter.requires_grad_(False)
+        teacher = frozen(load_initial_weights(config.teacher, None, option="--teacher"))
         log.info("distilling %s (%.0f %% of the loss)", config.teacher, 100 * config.teacher_weight)
     held_out = validation_set(paths, config.validation_samples)
     log.info("held-out validation samples: %d", len(held_out))
