@@ -30,17 +30,24 @@ def onnx_convolutions(path: str | Path) -> list[tuple[str, np.ndarray, np.ndarra
     return [(node.name, weight, bias) for node, weight, bias in _conv_nodes(path)]
 
 
-def _conv_nodes(path: str | Path) -> list[tuple[Any, np.ndarray, np.ndarray | None]]:
-    """(node, weight, bias or None) of every Conv node, in graph order: the file read once."""
+def load_onnx_model(path: str | Path) -> Any:
+    """The ``onnx.ModelProto`` in ``path``; OnnxWeightsError naming the file when it is missing,
+    truncated or not ONNX at all."""
     import onnx
-    from onnx import numpy_helper
 
     try:
-        graph = onnx.load(str(path)).graph
+        return onnx.load(str(path))
     except (OSError, onnx.onnx_cpp2py_export.checker.ValidationError) as exc:  # type: ignore[attr-defined]
         raise OnnxWeightsError(f"{path}: not a readable ONNX model ({exc})") from None
     except Exception as exc:  # protobuf DecodeError and friends: a file that is not ONNX at all
         raise OnnxWeightsError(f"{path}: not an ONNX model ({type(exc).__name__})") from None
+
+
+def _conv_nodes(path: str | Path) -> list[tuple[Any, np.ndarray, np.ndarray | None]]:
+    """(node, weight, bias or None) of every Conv node, in graph order: the file read once."""
+    from onnx import numpy_helper
+
+    graph = load_onnx_model(path).graph
     inits = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
     convs = []
     for node in graph.node:

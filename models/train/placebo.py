@@ -25,9 +25,11 @@ def write_placebo(base: str | Path, out: str | Path, *, seed: int, scale: float 
     import onnx
     from onnx import numpy_helper
 
+    from darkread.models.train.onnx_weights import load_onnx_model
+
     if not 0 < scale < 1:
         raise ValueError(f"--scale {scale}: must be between 0 and 1 (a relative perturbation, e.g. 0.005)")
-    model = onnx.load(str(base))
+    model = load_onnx_model(base)
     rng = np.random.default_rng(seed)
     for tensor in model.graph.initializer:
         weights = numpy_helper.to_array(tensor)

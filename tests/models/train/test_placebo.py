@@ -62,5 +62,9 @@ def test_cli_placebo_writes_numbered_copies_and_bad_inputs_fail_in_one_line(tmp_
                           "no such model file")
     assert_one_error_line(darkread("train", "placebo", "--base", str(base_model), "--out", str(tmp_path / "x.onnx"),
                                    "--scale", "2"), "--scale")
+    truncated = tmp_path / "truncated.onnx"
+    truncated.write_bytes(base_model.read_bytes()[:3000])
+    assert_one_error_line(darkread("train", "placebo", "--base", str(truncated), "--out", str(tmp_path / "x.onnx")),
+                          "truncated.onnx: not an ONNX model")
     assert_one_error_line(darkread("train", "placebo", "--base", str(base_model), "--out", str(tmp_path / "x.onnx"),
                                    "--count", "0"), "--count")
