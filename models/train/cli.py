@@ -89,7 +89,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_finetune(args: argparse.Namespace) -> int:
-    from darkread.models.train.finetune import TuneConfig, annotate_missing, finetune
+    from darkread.models.train.finetune import TuneConfig, annotate_missing, check_parts, finetune
+    from darkread.models.train.onnx_weights import model_from_onnx
 
     if not args.recordings and not args.annotated:
         raise ValueError("nothing to tune on: give --annotated DIR... (from `darkread train annotate`) or RECORDINGS...")
@@ -100,13 +101,16 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
     for path in [*args.recordings, *args.annotated]:
         if not path.is_dir():
             raise FileNotFoundError(f"{path}: no such directory")
+    train_only = tuple(part for part in (args.train_only or "").split(",") if part)
+    if train_only:  # before minutes of annotating and loading, not after
+        check_parts(model_from_onnx(args.base), train_only)
     dirs = list(args.annotated)
     if args.recordings:
         dirs += annotate_missing(args.recordings, args.layout, args.run_dir / "annotated", progress=not args.quiet)
     cfg = TuneConfig(lr=args.lr, steps=args.steps, minutes=args.minutes, batch_size=args.batch_size,
                      synthetic_share=args.synthetic_share if args.synthetic > 0 or args.synthetic_dir else 0.0,
                      threads=args.threads, seed=args.seed, anchor_weight=args.anchor,
-                     train_only=tuple(part for part in (args.train_only or "").split(",") if part))
+                     train_only=train_only)
     summary = finetune(dirs, args.base, args.run_dir, args.export, cfg=cfg, synthetic=args.synthetic,
                        synthetic_dir=args.synthetic_dir, progress=not args.quiet)
     print(json.dumps(summary, indent=1, default=float))

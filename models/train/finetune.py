@@ -67,15 +67,20 @@ class TuneConfig:
     train_only: tuple[str, ...] = ()  # top-level modules to tune (e.g. ("stem", "down1")); empty = all
 
 
+def check_parts(model: Any, train_only: Sequence[str]) -> None:
+    """Refuse a ``--train-only`` part the network does not have, naming the parts it has."""
+    known = {name for name, _ in model.named_children()}
+    unknown = sorted(set(train_only) - known)
+    if unknown:
+        raise ValueError(f"--train-only {','.join(unknown)}: no such part of the network (it has {', '.join(sorted(known))})")
+
+
 def trainable_parameters(model: Any, train_only: Sequence[str]) -> list[Any]:
     """The parameters of the named top-level modules (all of them when none are named); the rest are
     frozen, so a sensor's low-level difference can be learned where it enters and nowhere else."""
     if not train_only:
         return list(model.parameters())
-    known = {name for name, _ in model.named_children()}
-    unknown = sorted(set(train_only) - known)
-    if unknown:
-        raise ValueError(f"--train-only {','.join(unknown)}: no such part of the network (it has {', '.join(sorted(known))})")
+    check_parts(model, train_only)
     chosen = []
     for name, parameter in model.named_parameters():
         keep = name.split(".", 1)[0] in train_only

@@ -124,6 +124,9 @@ def test_cli_finetune_runs_and_bad_inputs_fail_in_one_line(tmp_path, base_model,
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--base", str(base_model), "--synthetic", "0",
                                    "--steps", "1", "--batch-size", "2", "--run-dir", str(tmp_path / "run2"),
                                    "--train-only", "stem,decoder", "--quiet"), "--train-only decoder")
+    (tmp_path / "empty").mkdir()  # refused before the windows are loaded: an empty directory is not what it names
+    assert_one_error_line(darkread("train", "finetune", "--annotated", str(tmp_path / "empty"), "--base", str(base_model),
+                                   "--train-only", "decoder", "--quiet"), "--train-only decoder")
     assert_one_error_line(darkread("train", "compare", str(ann), "--model", str(tmp_path / "none.onnx")), "no such model file")
 
 
