@@ -119,6 +119,7 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     from darkread.models.train.compare import compare
+    from darkread.models.train.placebo import write_placebo
 
     models = {"shipped" if args.base == MODELS_DIR / "binary_unet.onnx" else "base": args.base, args.name: args.model}
     if len(set(models)) < 2:
@@ -129,8 +130,15 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     for path in args.inputs:
         if not path.is_dir():
             raise FileNotFoundError(f"{path}: no such recording or shard directory")
+    if args.placebos < 0:
+        raise ValueError(f"--placebos {args.placebos}: must be >= 0")
+    chance = [f"placebo{i}" for i in range(1, args.placebos + 1)]
+    if args.name in chance:
+        raise ValueError(f"--name {args.name}: taken by a placebo; choose another name")
+    for i, name in enumerate(chance, start=1):  # seeds 1..N: the same placebos, and their cached reads, on every rerun
+        models[name] = write_placebo(args.base, args.out / "placebos" / f"{name}.onnx", seed=i, scale=args.placebo_scale)
     compare(args.inputs, models, args.out, read=not args.no_read, backend=args.backend, group=args.group,
-                     progress=not args.quiet)
+            chance=chance, progress=not args.quiet)
     print((args.out / "compare.md").read_text(encoding="utf-8"))
     return 0
 
@@ -308,6 +316,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-read", action="store_true", help="ink F1 only, no end-to-end reads")
     p.add_argument("--backend", default="local", help="OCR backend of the reads (default local)")
     p.add_argument("--group", help="one group name for all inputs in the summary (default: by regime and lux)")
+    p.add_argument("--placebos", type=int, default=0, metavar="N",
+                   help="also read N placebos of the base (`darkread train placebo`, seeds 1..N, into OUT/placebos) and give "
+                        "their range beside the tuned model's figures and whether it falls below, inside or above it "
+                        "(default 0; each costs as much as reading the tuned model)")
+    p.add_argument("--placebo-scale", type=float, default=0.005, help="the placebos' relative weight perturbation (default 0.005)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_compare)
 

@@ -11,6 +11,9 @@ Two figures per input, for each model:
 * **end-to-end CER**: the recording read exactly as ``darkread read --model`` reads it (a real edge
   and cloud on loopback, the page stitched and read by OCR) against its ``text.txt``.
 
+With placebos (``--placebos N``: the base's weights perturbed, nothing learned) the report gives
+the range chance alone moves each figure over, and where the tuned model falls against it.
+
 Predictions run on onnxruntime (what ships). Every read is cached under ``OUT/cache/<model
 digest>/`` so an interrupted comparison resumes, and the shipped model's reads are shared between
 comparisons of several tuned models.
@@ -146,9 +149,14 @@ def compare(
     read: bool = True,
     backend: str = "local",
     group: str | None = None,
+    chance: Sequence[str] = (),
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Score every input with every model (name -> ONNX); writes OUT/compare.json, .md and .png."""
+    """Score every input with every model (name -> ONNX); writes OUT/compare.json, .md and .png.
+
+    ``chance`` names the models among ``models`` that are placebos (``placebo.write_placebo``): the
+    report gives their spread beside the other two, and says where the tuned model falls against it.
+    """
     from tqdm import tqdm
 
     out = Path(out)
@@ -167,8 +175,9 @@ def compare(
                 row[name]["read"] = read_cer(path, item, backend, out / "cache" / digests[name])
         rows.append(row)
         log.info("%s: %s", item.name, {n: (row[n]["ink"] or {}).get("f1") for n in models})
+    names = [n for n in models if n not in chance]
     report = {"models": {n: {"path": str(p), "sha256_12": digests[n]} for n, p in models.items()},
-              "backend": backend, "rows": rows, "summary": summarise(rows, list(models))}
+              "chance": list(chance), "backend": backend, "rows": rows, "summary": summarise(rows, names, list(chance))}
     out.mkdir(parents=True, exist_ok=True)
     (out / RESULTS_NAME).write_text(json.dumps(report, indent=1, default=float) + "\n", encoding="utf-8")
     (out / REPORT_NAME).write_text(markdown(report), encoding="utf-8")
@@ -185,15 +194,16 @@ def group_key(row: dict[str, Any]) -> str:
     return f"{row.get('regime') or 'recordings'} {lux:g} lux" if lux is not None else str(row.get("regime") or "recordings")
 
 
-def summarise(rows: list[dict[str, Any]], names: list[str]) -> list[dict[str, Any]]:
-    """Per group: pooled ink F1 and mean CER of each model, and how many recordings each improved."""
+def summarise(rows: list[dict[str, Any]], names: list[str], chance: Sequence[str] = ()) -> list[dict[str, Any]]:
+    """Per group: pooled ink F1 and mean CER of each model, how many recordings the second of ``names``
+    improved, and with placebos (``chance``) their range and where the second model falls against it."""
     groups: dict[str, list[dict[str, Any]]] = {}
     for row in rows:
         groups.setdefault(group_key(row), []).append(row)
     summary = []
     for key, members in groups.items():
         entry: dict[str, Any] = {"group": key, "n": len(members)}
-        for name in names:
+        for name in [*names, *chance]:
             inks = [m[name]["ink"] for m in members if m[name].get("ink")]
             if inks:
                 tp, fp, fn = (sum(i[k] for i in inks) for k in ("tp", "fp", "fn"))
@@ -209,8 +219,21 @@ def summarise(rows: list[dict[str, Any]], names: list[str]) -> list[dict[str, An
             if pairs:
                 entry["cer_lower"] = sum(y < x for x, y in pairs)
                 entry["cer_higher"] = sum(y > x for x, y in pairs)
+        for key_ in ("ink_f1", "cer"):
+            spread = [entry[f"{c}_{key_}"] for c in chance if f"{c}_{key_}" in entry]
+            if spread:
+                entry[f"chance_{key_}"] = [min(spread), max(spread)]
+                if len(names) == 2 and f"{names[1]}_{key_}" in entry:
+                    entry[f"{names[1]}_{key_}_against_chance"] = against_chance(entry[f"{names[1]}_{key_}"], spread)
         summary.append(entry)
     return summary
+
+
+def against_chance(value: float, spread: Sequence[float]) -> str:
+    """Where ``value`` lies against the placebos' values: "below" the lowest, "above" the highest, or "inside"."""
+    if value < min(spread):
+        return "below"
+    return "above" if value > max(spread) else "inside"
 
 
 def _fmt(value: Any, pct: bool = False) -> str:
@@ -219,26 +242,43 @@ def _fmt(value: Any, pct: bool = False) -> str:
     return f"{100 * value:.1f} %" if pct else f"{value:.3f}"
 
 
+def _fmt_range(spread: Sequence[float] | None, pct: bool = False) -> str:
+    return "-" if not spread else f"{_fmt(spread[0], pct)} – {_fmt(spread[1], pct)}"
+
+
 def markdown(report: dict[str, Any]) -> str:
-    names = list(report["models"])
+    chance = list(report.get("chance", []))
+    names = [n for n in report["models"] if n not in chance]
     lines = ["# Before/after (`darkread train compare`)", ""]
-    lines += [f"* `{n}`: `{m['path']}` (sha256 {m['sha256_12']})" for n, m in report["models"].items()]
+    lines += [f"* `{n}`: `{m['path']}` (sha256 {m['sha256_12']})" for n, m in report["models"].items() if n not in chance]
+    if chance:
+        lines.append(f"* {len(chance)} placebos (`darkread train placebo`: the base's weights perturbed, nothing learned) give "
+                     "the spread chance alone moves the figures over; a change means something only outside it")
     lines += [f"* OCR backend: {report['backend']}; ink F1 pooled over the windows of a group, CER averaged over its recordings", ""]
-    head = ["group", "n", "windows", *[f"ink F1 {n}" for n in names], *[f"CER {n}" for n in names]]
+    spread_head = [f"ink F1 {len(chance)} placebos"] if chance else []
+    head = ["group", "n", "windows", *[f"ink F1 {n}" for n in names], *spread_head, *[f"CER {n}" for n in names],
+            *([f"CER {len(chance)} placebos", f"{names[-1]} against them"] if chance else [])]
     if len(names) == 2:
         head.append(f"CER lower / higher with {names[1]}")
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for s in report["summary"]:
-        cells = [s["group"], str(s["n"]), str(s.get("windows", "-")), *[_fmt(s.get(f"{n}_ink_f1")) for n in names],
-                 *[_fmt(s.get(f"{n}_cer"), pct=True) for n in names]]
+        cells = [s["group"], str(s["n"]), str(s.get("windows", "-")), *[_fmt(s.get(f"{n}_ink_f1")) for n in names]]
+        if chance:
+            cells.append(_fmt_range(s.get("chance_ink_f1")))
+        cells += [_fmt(s.get(f"{n}_cer"), pct=True) for n in names]
+        if chance:
+            cells += [_fmt_range(s.get("chance_cer"), pct=True), s.get(f"{names[-1]}_cer_against_chance", "-")]
         if len(names) == 2:
             cells.append(f"{s['cer_lower']} / {s['cer_higher']}" if "cer_lower" in s else "-")
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Per input:", "", "| input | " + " | ".join([*[f"ink F1 {n}" for n in names], *[f"CER {n}" for n in names]]) + " |",
-              "|---|" + "---|" * (2 * len(names))]
+    per_input = [*[f"ink F1 {n}" for n in names], *[f"CER {n}" for n in names], *([f"CER {len(chance)} placebos"] if chance else [])]
+    lines += ["", "Per input:", "", "| input | " + " | ".join(per_input) + " |", "|---|" + "---|" * len(per_input)]
     for r in report["rows"]:
         f1 = [_fmt((r[n]["ink"] or {}).get("f1")) for n in names]
         cer = [_fmt((r[n].get("read") or {}).get("cer"), pct=True) for n in names]
+        if chance:
+            reads = [r[c]["read"]["cer"] for c in chance if (r[c].get("read") or {}).get("cer") is not None]
+            cer.append(_fmt_range([min(reads), max(reads)] if reads else None, pct=True))
         lines.append(f"| {r['input']} | " + " | ".join(f1 + cer) + " |")
     return "\n".join(lines) + "\n"
 
@@ -250,7 +290,8 @@ def plot(report: dict[str, Any], path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    names = list(report["models"])
+    chance = list(report.get("chance", []))
+    names = [n for n in report["models"] if n not in chance]
     summary = report["summary"]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
     x = np.arange(len(summary))
@@ -259,6 +300,11 @@ def plot(report: dict[str, Any], path: Path) -> Path:
         for k, name in enumerate(names):
             values = [s.get(f"{name}_{key}") for s in summary]
             ax.bar(x + (k - (len(names) - 1) / 2) * width, [v if v is not None else 0 for v in values], width, label=name)
+        spans = [(i, s[f"chance_{key}"]) for i, s in enumerate(summary) if s.get(f"chance_{key}")]
+        if spans:  # the placebos' range across the group's bars: what chance alone gives
+            for i, (low, high) in spans:
+                ax.fill_between([i - 0.45, i + 0.45], low, high, color="0.3", alpha=0.35, lw=0,
+                                label=f"{len(chance)} placebos" if i == spans[0][0] else None)
         ax.set_xticks(x, [s["group"] for s in summary], rotation=20, fontsize=8, ha="right")
         ax.set_title(title, fontsize=9)
     axes[0].legend(fontsize=8)

@@ -84,3 +84,42 @@ def test_a_plain_synthetic_page_is_scored_against_the_simulators_own_ink(tmp_pat
         truth_windows(rec)
     (rec / "page_ink.npz").unlink()
     assert truth_windows(rec).targets is None  # the pose alone is not a truth
+
+
+def _row(name: str, cers: dict[str, float]) -> dict:
+    return {"input": name, "kind": "recording", "lux": 10.0, "regime": "standard", "group": None,
+            **{m: {"ink": {"tp": 8, "fp": 2, "fn": 2, "windows": 5, "f1": 0.8}, "read": {"cer": c}} for m, c in cers.items()}}
+
+
+def test_placebos_give_the_chance_range_and_where_the_tuned_model_falls() -> None:
+    from darkread.models.train.compare import against_chance, markdown, summarise
+
+    rows = [_row("a", {"shipped": 0.20, "tuned": 0.30, "placebo1": 0.21, "placebo2": 0.19}),
+            _row("b", {"shipped": 0.10, "tuned": 0.12, "placebo1": 0.10, "placebo2": 0.13})]
+    (entry,) = summarise(rows, ["shipped", "tuned"], ["placebo1", "placebo2"])
+    assert entry["chance_cer"] == [pytest.approx(0.155), pytest.approx(0.16)]
+    assert entry["tuned_cer"] == pytest.approx(0.21) and entry["tuned_cer_against_chance"] == "above"
+    assert entry["cer_lower"] == 0 and entry["cer_higher"] == 2  # tuned against the base only, not the placebos
+    assert [against_chance(v, [0.1, 0.2]) for v in (0.05, 0.1, 0.2, 0.25)] == ["below", "inside", "inside", "above"]
+    report = {"models": {m: {"path": f"{m}.onnx", "sha256_12": m} for m in ("shipped", "tuned", "placebo1", "placebo2")},
+              "chance": ["placebo1", "placebo2"], "backend": "local", "rows": rows, "summary": [entry]}
+    table = markdown(report)
+    assert "CER 2 placebos" in table and "15.5 % – 16.0 %" in table and "| above |" in table
+    assert "placebo1.onnx" not in table  # the placebos are one column, not four
+    assert "| a | 0.800 | 0.800 | 20.0 % | 30.0 % | 19.0 % – 21.0 % |" in table
+
+
+def test_compare_with_placebos_on_a_shard_directory(tmp_path, two_models, shard_writer) -> None:
+    from darkread.models.train.placebo import write_placebo
+
+    data = tmp_path / "val"
+    data.mkdir()
+    shard_writer(data / "shard-00000.npz", 6, 0)
+    models = {**two_models, **{f"placebo{i}": write_placebo(two_models["shipped"], tmp_path / f"p{i}.onnx", seed=i) for i in (1, 2)}}
+    report = compare([data], models, tmp_path / "out", read=False, chance=["placebo1", "placebo2"], progress=False)
+    (entry,) = report["summary"]
+    low, high = entry["chance_ink_f1"]
+    assert low <= high and abs(low - entry["shipped_ink_f1"]) < 0.05  # a placebo reads almost as its base
+    assert entry["tuned_ink_f1_against_chance"] in {"below", "inside", "above"}
+    assert "ink F1 2 placebos" in (tmp_path / "out" / "compare.md").read_text()
+    assert (tmp_path / "out" / "compare.png").stat().st_size > 1000

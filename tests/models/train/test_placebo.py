@@ -68,3 +68,23 @@ def test_cli_placebo_writes_numbered_copies_and_bad_inputs_fail_in_one_line(tmp_
                           "truncated.onnx: not an ONNX model")
     assert_one_error_line(darkread("train", "placebo", "--base", str(base_model), "--out", str(tmp_path / "x.onnx"),
                                    "--count", "0"), "--count")
+
+
+def test_cli_compare_reads_placebos_beside_the_tuned_model(tmp_path, base_model, shard_writer) -> None:
+    from darkread.models.train.placebo import write_placebo
+
+    data = tmp_path / "val"
+    data.mkdir()
+    shard_writer(data / "shard-00000.npz", 4, 0)
+    tuned = write_placebo(base_model, tmp_path / "tuned.onnx", seed=99, scale=0.05)  # any other network
+    out = tmp_path / "cmp"
+    done = darkread("train", "compare", str(data), "--base", str(base_model), "--model", str(tuned), "--out", str(out),
+                    "--no-read", "--placebos", "2", "--quiet")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "ink F1 2 placebos" in done.stdout and (out / "placebos" / "placebo2.onnx").is_file()
+    first = (out / "placebos" / "placebo1.onnx").read_bytes()
+    assert first == write_placebo(base_model, tmp_path / "again.onnx", seed=1).read_bytes()  # seeds 1..N, as `train placebo`
+    assert_one_error_line(darkread("train", "compare", str(data), "--base", str(base_model), "--model", str(tuned),
+                                   "--out", str(out), "--placebos", "-1"), "--placebos")
+    assert_one_error_line(darkread("train", "compare", str(data), "--base", str(base_model), "--model", str(tuned),
+                                   "--out", str(out), "--placebos", "2", "--name", "placebo2"), "--name placebo2")
