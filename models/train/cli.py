@@ -98,7 +98,7 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
         raise ValueError(f"--synthetic-share {args.synthetic_share}: must be in [0, 1)")
     if args.anchor < 0:
         raise ValueError(f"--anchor {args.anchor}: must be >= 0")
-    for path in [*args.recordings, *args.annotated]:
+    for path in [*args.recordings, *args.annotated, *(args.synthetic_dir or ())]:
         if not path.is_dir():
             raise FileNotFoundError(f"{path}: no such directory")
     train_only = tuple(part for part in (args.train_only or "").split(",") if part)
@@ -108,11 +108,11 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
     if args.recordings:
         dirs += annotate_missing(args.recordings, args.layout, args.run_dir / "annotated", progress=not args.quiet)
     cfg = TuneConfig(lr=args.lr, steps=args.steps, minutes=args.minutes, batch_size=args.batch_size,
-                     synthetic_share=args.synthetic_share if args.synthetic > 0 or args.synthetic_dir else 0.0,
+                     synthetic_share=args.synthetic_share if args.synthetic > 0 else 0.0,
                      threads=args.threads, seed=args.seed, anchor_weight=args.anchor,
                      train_only=train_only)
     summary = finetune(dirs, args.base, args.run_dir, args.export, cfg=cfg, synthetic=args.synthetic,
-                       synthetic_dir=args.synthetic_dir, progress=not args.quiet)
+                       synthetic_dirs=args.synthetic_dir or (), progress=not args.quiet)
     print(json.dumps(summary, indent=1, default=float))
     return 0
 
@@ -283,7 +283,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--export", type=Path, help="the tuned network as ONNX (default RUN_DIR/tuned.onnx)")
     p.add_argument("--run-dir", type=Path, default=Path("runs/finetune"))
     p.add_argument("--synthetic", type=int, default=600, help="synthetic standard-regime windows to mix in (default 600; 0 = none)")
-    p.add_argument("--synthetic-dir", type=Path, help="take them from this `darkread synth dataset` directory instead of simulating")
+    p.add_argument("--synthetic-dir", type=Path, nargs="+", metavar="DIR",
+                   help="take them from these directories, in turn, instead of simulating: `darkread synth dataset` (random "
+                        "crops) and `darkread train annotate --truth` of simulated standard-regime reading (the windows the "
+                        "glasses cut); set --synthetic to how many to use")
     p.add_argument("--synthetic-share", type=float, default=0.5, help="share of every batch that is synthetic (default 0.5)")
     p.add_argument("--train-only", metavar="PARTS",
                    help="tune only these top-level parts of the network, comma-separated (e.g. stem,down1: where a "

@@ -111,13 +111,20 @@ def load_annotated(dirs: Sequence[str | Path]) -> tuple[Shard, dict[str, int]]:
     return concat_shards(parts), counts
 
 
-def synthetic_windows(n: int, source: str | Path | None = None, seed: int = 0, progress: bool = True) -> Shard:
-    """``n`` standard-regime windows: from a shard directory (``darkread synth dataset``), or simulated now."""
+def synthetic_windows(n: int, sources: Sequence[str | Path] = (), seed: int = 0, progress: bool = True) -> Shard:
+    """``n`` standard-regime windows: from shard directories taken in turn until ``n`` are loaded
+    (``darkread synth dataset``'s random crops; ``darkread train annotate --truth``'s windows of
+    simulated reading, which are what the glasses cut), or simulated now."""
     if n <= 0:
         return Shard(np.zeros((0, 4, 100, 200), np.float16), np.zeros((0, 100, 200), np.uint8), {})
-    if source is not None:
-        shard = load_dataset(source, limit=n)
-        return Shard(shard.voxels, shard.targets, {})
+    if sources:
+        parts = []
+        for source in sources:
+            left = n - sum(len(p) for p in parts)
+            if left <= 0:
+                break
+            parts.append(load_dataset(source, limit=left))
+        return Shard(np.concatenate([p.voxels for p in parts]), np.concatenate([p.targets for p in parts]), {})
     from tqdm import tqdm
 
     from darkread.models.synth.shards import SAMPLES_PER_PAGE, make_samples, shard_seed
@@ -247,7 +254,7 @@ def finetune(
     *,
     cfg: TuneConfig = TuneConfig(),
     synthetic: int = 600,
-    synthetic_dir: str | Path | None = None,
+    synthetic_dirs: Sequence[str | Path] = (),
     progress: bool = True,
 ) -> dict[str, Any]:
     """Fine-tune ``base_model`` (ONNX) on the annotated windows plus synthetic ones; export ONNX."""
@@ -265,7 +272,7 @@ def finetune(
     round_trip = max_output_difference(model, base_model, probe)
     if round_trip > ROUND_TRIP_TOLERANCE:
         raise FinetuneError(f"{base_model}: torch and onnxruntime logits differ by {round_trip:.3g} after loading")
-    syn = synthetic_windows(synthetic + cfg.monitor_windows, synthetic_dir, seed=cfg.seed + 1, progress=progress)
+    syn = synthetic_windows(synthetic + cfg.monitor_windows, synthetic_dirs, seed=cfg.seed + 1, progress=progress)
     syn_monitor, syn_train = syn.select(np.arange(min(cfg.monitor_windows, len(syn)))), syn.select(np.arange(min(cfg.monitor_windows, len(syn)), len(syn)))
     pools = {"annotated_training_windows": annotated, "synthetic_held_out": syn_monitor}
     before = _monitor(model, pools, cfg.monitor_windows)
@@ -287,7 +294,7 @@ def finetune(
         "annotated_windows": len(annotated),
         "annotated_ignored_pixel_share": round(float(annotated.ignore.mean()), 4) if annotated.ignore is not None else 0.0,
         "synthetic_windows": len(syn_train),
-        "synthetic_source": str(synthetic_dir) if synthetic_dir else "simulated (standard regime, training texts)",
+        "synthetic_source": ", ".join(map(str, synthetic_dirs)) if synthetic_dirs else "simulated (standard regime, training texts)",
         "ink_temperature": temperature,  # the starting network's, carried over (None: the edge's default)
         "round_trip_max_logit_difference": {"shipped_onnx_to_torch": round_trip, "torch_to_exported_onnx": exported},
         "monitor_f1_before": before,

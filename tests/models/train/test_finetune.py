@@ -38,7 +38,7 @@ def annotated_dir(root: Path, name: str, n: int, seed: int, shard_writer) -> Pat
 def test_finetune_on_a_tiny_annotated_shard_exports_a_loadable_onnx(tmp_path, base_model, shard_writer) -> None:
     ann = annotated_dir(tmp_path, "rec_annotated", 6, 0, shard_writer)
     syn = annotated_dir(tmp_path, "synthetic", 10, 1, shard_writer)
-    summary = finetune([ann], base_model, tmp_path / "run", tmp_path / "tuned.onnx", cfg=TINY, synthetic=6, synthetic_dir=syn,
+    summary = finetune([ann], base_model, tmp_path / "run", tmp_path / "tuned.onnx", cfg=TINY, synthetic=6, synthetic_dirs=[syn],
                        progress=False)
     assert summary["steps"] == 3 and summary["annotated_windows"] == 6 and summary["synthetic_windows"] == 6
     assert summary["batch"] == {"annotated": 2, "synthetic": 2}
@@ -120,6 +120,8 @@ def test_cli_finetune_runs_and_bad_inputs_fail_in_one_line(tmp_path, base_model,
     assert_one_error_line(darkread("train", "finetune"), "nothing to tune on")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(tmp_path / "nope")), "no such directory")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--synthetic-share", "1.5"), "--synthetic-share")
+    assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--synthetic-dir", str(ann), str(tmp_path / "gone")),
+                          "gone: no such directory")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--anchor", "-1"), "--anchor")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--base", str(base_model), "--synthetic", "0",
                                    "--steps", "1", "--batch-size", "2", "--run-dir", str(tmp_path / "run2"),
@@ -157,3 +159,18 @@ def test_train_only_tunes_the_named_parts_and_leaves_the_rest_as_they_were(shard
     assert len(trainable_parameters(BinaryUNet(), ())) == len(list(BinaryUNet().parameters()))
     with pytest.raises(ValueError, match="--train-only decoder: no such part"):
         trainable_parameters(BinaryUNet(), ("stem", "decoder"))
+
+
+def test_synthetic_windows_come_from_several_directories_in_turn(tmp_path, shard_writer) -> None:
+    """Random crops first, then windows of simulated reading, until as many as asked are loaded."""
+    from darkread.models.train.data import load_dataset
+    from darkread.models.train.finetune import synthetic_windows
+
+    crops = annotated_dir(tmp_path, "crops", 5, 1, shard_writer)
+    reading = annotated_dir(tmp_path, "reading", 6, 2, shard_writer)
+    both = synthetic_windows(8, [crops, reading], progress=False)
+    assert len(both) == 8
+    np.testing.assert_array_equal(both.targets[:5], load_dataset(crops).targets)
+    np.testing.assert_array_equal(both.targets[5:], load_dataset(reading).targets[:3])
+    assert len(synthetic_windows(4, [crops, reading], progress=False)) == 4  # the first directory alone suffices
+    assert len(synthetic_windows(50, [crops, reading], progress=False)) == 11  # all there are
