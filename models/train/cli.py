@@ -143,6 +143,15 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_rehearsal(args: argparse.Namespace) -> int:
+    from darkread.models.train.rehearsal import describe, make_rehearsal
+
+    summary = make_rehearsal(args.out, count=args.recordings, seed=args.seed, every_ms=args.every_ms, seconds=args.seconds,
+                             jobs=args.jobs, progress=not args.quiet)
+    print(f"{args.out}: {describe(summary)}")
+    return 0
+
+
 def _cmd_placebo(args: argparse.Namespace) -> int:
     from darkread.models.train.placebo import write_placebo
 
@@ -339,6 +348,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scale", type=float, default=0.005, help="relative size of the perturbation (default 0.005)")
     p.add_argument("--count", type=int, default=1, help="how many placebos (default 1)")
     p.set_defaults(func=_cmd_placebo)
+
+    p = sub.add_parser("rehearsal", help="windows of simulated reading in the shipped network's own sensor regime, for a fine-tune to rehearse",
+                       description="Simulate reading sessions in the standard sensor regime (the one the shipped network was "
+                                   "trained on: three lines of training text at 5-50 lux, still, normal and walking head "
+                                   "motion), cut every session's windows as the glasses do, label them from the simulator's "
+                                   "own pose and ink (`train annotate --truth`), and write them as one shard directory for "
+                                   "`darkread train finetune --synthetic-dir`. Mixed into a fine-tune they keep the network "
+                                   "reading the old regime as it did (docs/finetune.md). An interrupted run resumes.")
+    p.add_argument("out", type=Path, help="output shard directory")
+    p.add_argument("--recordings", type=_positive_int, default=18, help="reading sessions (default 18: 6 lux levels x 3 motions)")
+    p.add_argument("--seed", type=int, default=601, help="the first session's seed (default 601)")
+    p.add_argument("--seconds", type=_positive_float, default=2.5, help="length of a session (default 2.5)")
+    p.add_argument("--every-ms", type=_positive_float, default=10.0, help="one window per this interval (default 10)")
+    p.add_argument("--jobs", type=_positive_int, default=1, help="sessions simulated at once (default 1)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_rehearsal)
 
     p = sub.add_parser("target", help="a printable page: the text with ArUco markers around it, and its layout",
                        description="Lay out a text file with ArUco markers around it (the synthesiser's page renderer, the "
