@@ -108,7 +108,7 @@ def _cmd_finetune(args: argparse.Namespace) -> int:
     if args.recordings:
         dirs += annotate_missing(args.recordings, args.layout, args.run_dir / "annotated", progress=not args.quiet)
     cfg = TuneConfig(lr=args.lr, steps=args.steps, minutes=args.minutes, batch_size=args.batch_size,
-                     synthetic_share=args.synthetic_share if args.synthetic > 0 else 0.0,
+                     synthetic_share=args.synthetic_share if args.synthetic is None or args.synthetic > 0 else 0.0,
                      threads=args.threads, seed=args.seed, anchor_weight=args.anchor,
                      train_only=train_only)
     summary = finetune(dirs, args.base, args.run_dir, args.export, cfg=cfg, synthetic=args.synthetic,
@@ -205,6 +205,19 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _synthetic_count(text: str) -> int | None:
+    """A window count >= 0, or "all" (None)."""
+    if text == "all":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a count or 'all', not {text}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0 or 'all', not {text}")
+    return value
+
+
 def _positive_float(text: str) -> float:
     value = float(text)
     if not 0 < value < float("inf"):
@@ -291,7 +304,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--base", type=Path, default=MODELS_DIR / "binary_unet.onnx", help="starting weights (default: the shipped model)")
     p.add_argument("--export", type=Path, help="the tuned network as ONNX (default RUN_DIR/tuned.onnx)")
     p.add_argument("--run-dir", type=Path, default=Path("runs/finetune"))
-    p.add_argument("--synthetic", type=int, default=600, help="synthetic standard-regime windows to mix in (default 600; 0 = none)")
+    p.add_argument("--synthetic", type=_synthetic_count, default=600, metavar="N|all",
+                   help="synthetic standard-regime windows to mix in (default 600; 0 = none; all = every window of --synthetic-dir)")
     p.add_argument("--synthetic-dir", type=Path, nargs="+", metavar="DIR",
                    help="take them from these directories, in turn, instead of simulating: `darkread synth dataset` (random "
                         "crops) and `darkread train annotate --truth` of simulated standard-regime reading (the windows the "

@@ -97,6 +97,14 @@ def shard_paths(root: str | Path | Sequence[str | Path]) -> list[Path]:
     return paths
 
 
+SHARD_READ_ERRORS = (zipfile.BadZipFile, EOFError, KeyError, ValueError)  # what a truncated or foreign shard raises
+
+
+def unreadable_shard(path: str | Path, exc: Exception) -> ValueError:
+    return ValueError(f"{path}: not a readable training shard ({exc}); make it again with `darkread synth dataset` "
+                      "or `darkread train annotate`")
+
+
 def load_shard(path: str | Path) -> Shard:
     """One shard file; a truncated or foreign file is a ``ValueError`` naming it (one line for the CLI)."""
     try:
@@ -107,10 +115,21 @@ def load_shard(path: str | Path) -> Shard:
             targets = unpack_rows(packed, target_shape[-1]) if packed.shape[-1] != target_shape[-1] else packed
             meta = {key: data[key] for key in METADATA_KEYS if key in data}
             ignore = unpack_rows(data["ignore"], target_shape[-1]) if "ignore" in data else None
-    except (zipfile.BadZipFile, EOFError, KeyError, ValueError) as exc:
-        raise ValueError(f"{path}: not a readable training shard ({exc}); make it again with `darkread synth dataset` "
-                         "or `darkread train annotate`") from exc
+    except SHARD_READ_ERRORS as exc:
+        raise unreadable_shard(path, exc) from exc
     return Shard(voxels=voxels, targets=targets.astype(np.uint8), meta=meta, ignore=ignore)
+
+
+def count_samples(root: str | Path) -> int:
+    """How many samples a dataset holds, from each shard's small packed targets (the voxels stay unread)."""
+    total = 0
+    for path in shard_paths(root):
+        try:
+            with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
+                total += int(data["targets"].shape[0])
+        except SHARD_READ_ERRORS as exc:
+            raise unreadable_shard(path, exc) from exc
+    return total
 
 
 def iter_shards(root: str | Path) -> Iterator[Shard]:

@@ -38,7 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from darkread.models.train.data import Shard, augment, concat_shards, labels, load_dataset, random_crop, split_labels
+from darkread.models.train.data import (Shard, augment, concat_shards, count_samples, labels, load_dataset, random_crop,
+                                        split_labels)
 
 log = logging.getLogger(__name__)
 
@@ -253,7 +254,7 @@ def finetune(
     export_to: str | Path | None = None,
     *,
     cfg: TuneConfig = TuneConfig(),
-    synthetic: int = 600,
+    synthetic: int | None = 600,
     synthetic_dirs: Sequence[str | Path] = (),
     progress: bool = True,
 ) -> dict[str, Any]:
@@ -272,7 +273,10 @@ def finetune(
     round_trip = max_output_difference(model, base_model, probe)
     if round_trip > ROUND_TRIP_TOLERANCE:
         raise FinetuneError(f"{base_model}: torch and onnxruntime logits differ by {round_trip:.3g} after loading")
-    syn = synthetic_windows(synthetic + cfg.monitor_windows, synthetic_dirs, seed=cfg.seed + 1, progress=progress)
+    if synthetic is None and not synthetic_dirs:
+        raise FinetuneError("--synthetic all takes every window of --synthetic-dir: give the directories")
+    wanted = sum(count_samples(d) for d in synthetic_dirs) if synthetic is None else synthetic + cfg.monitor_windows
+    syn = synthetic_windows(wanted, synthetic_dirs, seed=cfg.seed + 1, progress=progress)
     syn_monitor, syn_train = syn.select(np.arange(min(cfg.monitor_windows, len(syn)))), syn.select(np.arange(min(cfg.monitor_windows, len(syn)), len(syn)))
     pools = {"annotated_training_windows": annotated, "synthetic_held_out": syn_monitor}
     before = _monitor(model, pools, cfg.monitor_windows)

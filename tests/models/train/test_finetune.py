@@ -122,6 +122,8 @@ def test_cli_finetune_runs_and_bad_inputs_fail_in_one_line(tmp_path, base_model,
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--synthetic-share", "1.5"), "--synthetic-share")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--synthetic-dir", str(ann), str(tmp_path / "gone")),
                           "gone: no such directory")
+    usage = darkread("train", "finetune", "--annotated", str(ann), "--synthetic", "most")
+    assert usage.returncode == 2 and "a count or 'all'" in usage.stderr and "Traceback" not in usage.stderr
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--anchor", "-1"), "--anchor")
     assert_one_error_line(darkread("train", "finetune", "--annotated", str(ann), "--base", str(base_model), "--synthetic", "0",
                                    "--steps", "1", "--batch-size", "2", "--run-dir", str(tmp_path / "run2"),
@@ -174,3 +176,20 @@ def test_synthetic_windows_come_from_several_directories_in_turn(tmp_path, shard
     np.testing.assert_array_equal(both.targets[5:], load_dataset(reading).targets[:3])
     assert len(synthetic_windows(4, [crops, reading], progress=False)) == 4  # the first directory alone suffices
     assert len(synthetic_windows(50, [crops, reading], progress=False)) == 11  # all there are
+
+
+def test_synthetic_all_takes_every_window_of_the_directories(tmp_path, base_model, shard_writer) -> None:
+    from darkread.models.train.data import count_samples
+
+    ann = annotated_dir(tmp_path, "ann", 4, 0, shard_writer)
+    crops = annotated_dir(tmp_path, "crops", 7, 1, shard_writer)
+    reading = annotated_dir(tmp_path, "reading", 5, 2, shard_writer)
+    assert count_samples(crops) + count_samples(reading) == 12
+    summary = finetune([ann], base_model, tmp_path / "run", cfg=TINY, synthetic=None, synthetic_dirs=[crops, reading],
+                       progress=False)
+    assert summary["synthetic_windows"] == 12 - TINY.monitor_windows  # all of them, the monitor's first
+    with pytest.raises(FinetuneError, match="--synthetic all"):
+        finetune([ann], base_model, tmp_path / "run2", cfg=TINY, synthetic=None, progress=False)
+    (crops / "shard-00001.npz").write_bytes(b"PK\x03\x04 truncated")
+    with pytest.raises(ValueError, match="shard-00001.npz: not a readable training shard"):
+        count_samples(crops)
