@@ -308,8 +308,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="synthetic standard-regime windows to mix in (default 600; 0 = none; all = every window of --synthetic-dir)")
     p.add_argument("--synthetic-dir", type=Path, nargs="+", metavar="DIR",
                    help="take them from these directories, in turn, instead of simulating: `darkread synth dataset` (random "
-                        "crops) and `darkread train annotate --truth` of simulated standard-regime reading (the windows the "
-                        "glasses cut); set --synthetic to how many to use")
+                        "page crops) and `darkread train rehearsal` (windows of simulated standard-regime reading, what the "
+                        "glasses cut); --synthetic all uses every window of them")
     p.add_argument("--synthetic-share", type=float, default=0.5, help="share of every batch that is synthetic (default 0.5)")
     p.add_argument("--train-only", metavar="PARTS",
                    help="tune only these top-level parts of the network, comma-separated (e.g. stem,down1: where a "
