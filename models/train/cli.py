@@ -138,7 +138,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     for i, name in enumerate(chance, start=1):  # seeds 1..N: the same placebos, and their cached reads, on every rerun
         models[name] = write_placebo(args.base, args.out / "placebos" / f"{name}.onnx", seed=i, scale=args.placebo_scale)
     compare(args.inputs, models, args.out, read=not args.no_read, backend=args.backend, group=args.group,
-            chance=chance, progress=not args.quiet)
+            chance=chance, jobs=args.jobs, progress=not args.quiet)
     print((args.out / "compare.md").read_text(encoding="utf-8"))
     return 0
 
@@ -347,6 +347,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "their range beside the tuned model's figures and whether it falls below, inside or above it "
                         "(default 0; each costs as much as reading the tuned model)")
     p.add_argument("--placebo-scale", type=float, default=0.005, help="the placebos' relative weight perturbation (default 0.005)")
+    p.add_argument("--jobs", type=_positive_int, default=1, help="inputs scored at once, each in its own process (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_compare)
 

@@ -150,31 +150,38 @@ def compare(
     backend: str = "local",
     group: str | None = None,
     chance: Sequence[str] = (),
+    jobs: int = 1,
     progress: bool = True,
 ) -> dict[str, Any]:
     """Score every input with every model (name -> ONNX); writes OUT/compare.json, .md and .png.
 
     ``chance`` names the models among ``models`` that are placebos (``placebo.write_placebo``): the
     report gives their spread beside the other two, and says where the tuned model falls against it.
+    ``jobs`` inputs are scored at once, each in its own process; the rows keep the inputs' order.
     """
     from tqdm import tqdm
 
     out = Path(out)
     digests = {name: model_digest(path) for name, path in models.items()}
-    rows = []
-    for item in tqdm([Path(p) for p in inputs], desc="comparing", unit="input", disable=not progress):
-        recording = is_recording(item)
-        row: dict[str, Any] = {"input": item.name, "path": str(item), "kind": "recording" if recording else "shards",
-                               **(recording_meta(item) if recording else {}), "group": group}
-        # (a recording's windows cut as the edge cuts them: deblurred, in dim light denoised)
-        scored = truth_windows(item, deblur=True, denoise=True) if recording else shard_windows(item)
-        row["truth"] = scored.source
-        for name, path in models.items():
-            row[name] = {"ink": ink_f1(path, scored)}
-            if recording and read:
-                row[name]["read"] = read_cer(path, item, backend, out / "cache" / digests[name])
-        rows.append(row)
-        log.info("%s: %s", item.name, {n: (row[n]["ink"] or {}).get("f1") for n in models})
+    items = [Path(p) for p in inputs]
+    bar = tqdm(total=len(items), desc="comparing", unit="input", disable=not progress)
+    if jobs <= 1:
+        rows = []
+        for item in items:
+            rows.append(score_input(item, models, digests, out, read=read, backend=backend, group=group))
+            bar.update()
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        by_item: dict[int, dict[str, Any]] = {}
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = {pool.submit(score_input, item, models, digests, out, read=read, backend=backend, group=group): k
+                       for k, item in enumerate(items)}
+            for future in as_completed(futures):
+                by_item[futures[future]] = future.result()  # a failed input stops the run with its error
+                bar.update()
+        rows = [by_item[k] for k in range(len(items))]
+    bar.close()
     names = [n for n in models if n not in chance]
     report = {"models": {n: {"path": str(p), "sha256_12": digests[n]} for n, p in models.items()},
               "chance": list(chance), "backend": backend, "rows": rows, "summary": summarise(rows, names, list(chance))}
@@ -183,6 +190,23 @@ def compare(
     (out / REPORT_NAME).write_text(markdown(report), encoding="utf-8")
     plot(report, out / PLOT_NAME)
     return report
+
+
+def score_input(item: Path, models: dict[str, Path], digests: dict[str, str], out: Path, *, read: bool, backend: str,
+                group: str | None) -> dict[str, Any]:
+    """One input's row: ink F1 of every model and, for a recording, every model's end-to-end read."""
+    recording = is_recording(item)
+    row: dict[str, Any] = {"input": item.name, "path": str(item), "kind": "recording" if recording else "shards",
+                           **(recording_meta(item) if recording else {}), "group": group}
+    # (a recording's windows cut as the edge cuts them: deblurred, in dim light denoised)
+    scored = truth_windows(item, deblur=True, denoise=True) if recording else shard_windows(item)
+    row["truth"] = scored.source
+    for name, path in models.items():
+        row[name] = {"ink": ink_f1(path, scored)}
+        if recording and read:
+            row[name]["read"] = read_cer(path, item, backend, out / "cache" / digests[name])
+    log.info("%s: %s", item.name, {n: (row[n]["ink"] or {}).get("f1") for n in models})
+    return row
 
 
 def group_key(row: dict[str, Any]) -> str:

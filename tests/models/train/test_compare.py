@@ -123,3 +123,17 @@ def test_compare_with_placebos_on_a_shard_directory(tmp_path, two_models, shard_
     assert entry["tuned_ink_f1_against_chance"] in {"below", "inside", "above"}
     assert "ink F1 2 placebos" in (tmp_path / "out" / "compare.md").read_text()
     assert (tmp_path / "out" / "compare.png").stat().st_size > 1000
+
+
+def test_compare_in_parallel_gives_the_same_rows_in_input_order(tmp_path, two_models, shard_writer) -> None:
+    dirs = []
+    for k, n in enumerate((3, 5, 4)):
+        d = tmp_path / f"val{k}"
+        d.mkdir()
+        shard_writer(d / "shard-00000.npz", n, k)
+        dirs.append(d)
+    alone = compare(dirs, two_models, tmp_path / "one", read=False, progress=False)
+    together = compare(dirs, two_models, tmp_path / "two", read=False, jobs=2, progress=False)
+    assert [r["input"] for r in together["rows"]] == ["val0", "val1", "val2"]
+    assert [r["tuned"]["ink"] for r in together["rows"]] == [r["tuned"]["ink"] for r in alone["rows"]]
+    assert together["summary"] == alone["summary"]
