@@ -114,8 +114,8 @@ def load_annotated(dirs: Sequence[str | Path]) -> tuple[Shard, dict[str, int]]:
 
 def synthetic_windows(n: int, sources: Sequence[str | Path] = (), seed: int = 0, progress: bool = True) -> Shard:
     """``n`` standard-regime windows: from shard directories taken in turn until ``n`` are loaded
-    (``darkread synth dataset``'s random crops; ``darkread train annotate --truth``'s windows of
-    simulated reading, which are what the glasses cut), or simulated now."""
+    (``darkread synth dataset``'s random crops; ``darkread train rehearsal``'s windows of simulated
+    reading, which are what the glasses cut), or simulated now."""
     if n <= 0:
         return Shard(np.zeros((0, 4, 100, 200), np.float16), np.zeros((0, 100, 200), np.uint8), {})
     if sources:

@@ -97,10 +97,9 @@ def make_rehearsal(out: str | Path, count: int = 18, seed: int = 601, every_ms: 
 
 def _found(shard: Path, spec: RecordingSpec) -> dict[str, Any]:
     """A session an interrupted run finished but did not get to record: counted from its shard."""
-    import numpy as np
+    from darkread.models.train.data import count_samples
 
-    with np.load(shard) as data:
-        return {"lux": spec.lux, "motion": spec.motion, "windows": int(len(data["targets"])), "seed": spec.seed}
+    return {"lux": spec.lux, "motion": spec.motion, "windows": count_samples(shard), "seed": spec.seed}
 
 
 def _previous(out: Path) -> dict[str, Any]:

@@ -34,6 +34,10 @@ def test_a_rehearsal_set_is_a_shard_directory_that_resumes_and_guards_its_settin
     stamp = shard.stat().st_mtime_ns
     again = make_rehearsal(out, count=1, seed=7, every_ms=40.0, seconds=0.5, progress=False)
     assert shard.stat().st_mtime_ns == stamp and again["windows"] == n  # nothing made twice
+    interrupted = {**json.loads((out / "rehearsal.json").read_text()), "sessions": []}  # stopped before the summary
+    (out / "rehearsal.json").write_text(json.dumps(interrupted))
+    resumed = make_rehearsal(out, count=1, seed=7, every_ms=40.0, seconds=0.5, progress=False)
+    assert shard.stat().st_mtime_ns == stamp and resumed["windows"] == n  # counted from the shard it left
     with pytest.raises(ValueError, match="other settings"):
         make_rehearsal(out, count=1, seed=8, every_ms=40.0, seconds=0.5, progress=False)
     assert json.loads((out / "rehearsal.json").read_text())["first_seed"] == 7  # the refused run changed nothing
