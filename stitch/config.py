@@ -121,6 +121,11 @@ class StitchConfig:
       grey_saturation       the grey page (what OCR reads) is black where the ink probability reaches
                             this, and shades below it: averaged strokes keep their sub-pixel shape,
                             which a hard threshold of bold U-Net strokes loses (e/o, a/o, i/l).
+      ink_percentile        ... or where it reaches this percentile of the page's probability above
+      faint_ink             this, when that is lower (dim light: frames that each find half the strokes
+      min_ink_level         average to grey), but not below this; the ink threshold scales alike.
+                            The suite (on-change): 5 lux 56.4 -> 53.3 % CER, 10 lux 34.6 -> 34.9 %,
+                            30-1000 lux unchanged in the mean.
     """
 
     sweep_min_px: float = 140.0
@@ -170,6 +175,9 @@ class StitchConfig:
     deskew_min_deg: float = 0.5
     line_gap_px: int = 30
     grey_saturation: float = 0.8
+    ink_percentile: float = 99.0
+    faint_ink: float = 0.05
+    min_ink_level: float = 0.2
 
     def __post_init__(self) -> None:
         if self.sweep_confirm_frames < 0 or self.sweep_context_frames < 1 or self.min_line_frames < 1:
@@ -188,3 +196,7 @@ class StitchConfig:
             raise ValueError("alpha must be in [0, 1] and ink_threshold in (0, 1)")
         if not 0.0 < self.grey_saturation <= 1.0:
             raise ValueError(f"grey_saturation must be in (0, 1], got {self.grey_saturation}")
+        if not 0.0 <= self.ink_percentile <= 100.0 or not 0.0 <= self.faint_ink < 1.0:
+            raise ValueError("ink_percentile must be in [0, 100] and faint_ink in [0, 1)")
+        if not 0.0 < self.min_ink_level <= self.grey_saturation:
+            raise ValueError(f"min_ink_level must be in (0, grey_saturation], got {self.min_ink_level}")

@@ -58,10 +58,27 @@ def union_box(boxes: Sequence[tuple[int, int, int, int]]) -> tuple[int, int, int
     return min(b[0] for b in boxes), min(b[1] for b in boxes), max(b[2] for b in boxes), max(b[3] for b in boxes)
 
 
-def binarize(avg: np.ndarray, cfg: StitchConfig, views: np.ndarray | None = None) -> np.ndarray:
-    """Threshold the alpha-averaged ink probability; drop specks below ``min_component_px`` and,
-    given ``views``, ink that fewer than ``min_views`` frames saw (one noisy frame is no evidence)."""
-    ink = (avg > cfg.ink_threshold).astype(np.uint8)
+def ink_level(avg: np.ndarray, cfg: StitchConfig, views: np.ndarray | None = None) -> float:
+    """The page's full ink: the ``grey_saturation`` probability, or less on a page whose frames
+    never agree that much (dim light: each frame finds a different 40-60 % of the strokes, and
+    their average stays grey). The ``ink_percentile``-th percentile of the probability where it
+    is above ``faint_ink``, bounded by ``min_ink_level`` (a page of noise is not stretched to ink)."""
+    seen = avg > cfg.faint_ink
+    if views is not None:
+        seen &= views >= cfg.min_views
+    if not seen.any():
+        return cfg.grey_saturation
+    level = float(np.percentile(avg[seen], cfg.ink_percentile))
+    return float(np.clip(level, cfg.min_ink_level, cfg.grey_saturation))
+
+
+def binarize(avg: np.ndarray, cfg: StitchConfig, views: np.ndarray | None = None, level: float | None = None) -> np.ndarray:
+    """Threshold the alpha-averaged ink probability at ``ink_threshold`` of the page's full ink
+    (``level``, default ``grey_saturation``: the threshold as configured); drop specks below
+    ``min_component_px`` and, given ``views``, ink that fewer than ``min_views`` frames saw (one
+    noisy frame is no evidence)."""
+    scale = 1.0 if level is None else level / cfg.grey_saturation
+    ink = (avg > cfg.ink_threshold * scale).astype(np.uint8)
     if views is not None and cfg.min_views > 1:
         ink[views < cfg.min_views] = 0
     if cfg.min_component_px > 1 and ink.any():

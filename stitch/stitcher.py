@@ -27,6 +27,7 @@ from darkread.stitch.page import (
     binarize,
     covered_box,
     estimate_skew,
+    ink_level,
     main_column_span,
     rotation_to_fit,
     text_bands,
@@ -370,7 +371,8 @@ class PageStitcher:
         cx0, cy0, cx1, cy1 = cover
         avg, views = avg[cy0:cy1, cx0:cx1], views[cy0:cy1, cx0:cx1]
         to_image = np.array([[1.0, 0.0, -(box[0] + cx0)], [0.0, 1.0, -(box[1] + cy0)]])  # page -> image
-        image = binarize(avg, cfg, views)
+        level = ink_level(avg, cfg, views)
+        image = binarize(avg, cfg, views, level)
         skew = estimate_skew(image, cfg.deskew_max_deg)
         if abs(skew) >= cfg.deskew_min_deg:
             turn, size = rotation_to_fit(image.shape, skew)
@@ -380,7 +382,7 @@ class PageStitcher:
             avg, views = avg[y0:y1, x0:x1], views[y0:y1, x0:x1]
             turn[:, 2] -= (x0, y0)
             to_image = turn @ np.vstack([to_image, [0.0, 0.0, 1.0]])
-            image = binarize(avg, cfg, views)
+            image = binarize(avg, cfg, views, level)
         boxes, images = self._line_boxes(lines, image, to_image)
         return StitchedPage(
             image,
@@ -391,7 +393,7 @@ class PageStitcher:
             _apply_all(to_image, self._positions) if positions else {},
             skew_deg=skew if abs(skew) >= cfg.deskew_min_deg else 0.0,
             ink_probability=np.where(views >= cfg.min_views, avg, 0.0).astype(np.float32),
-            grey_saturation=cfg.grey_saturation,
+            grey_saturation=level,
         )
 
     def _line_boxes(

@@ -8,6 +8,7 @@ from darkread.stitch.page import (
     assign_lines,
     binarize,
     estimate_skew,
+    ink_level,
     main_column_span,
     rotation_to_fit,
     text_bands,
@@ -44,6 +45,58 @@ def test_binarize_thresholds_and_removes_single_pixel_specks() -> None:
     avg[2, 2:5] = 0.3  # below threshold
     ink = binarize(avg, StitchConfig(ink_threshold=0.45, min_component_px=2))
     assert ink.sum() == 9 and ink[15, 15] == 0
+
+
+def _strokes(peak: float) -> np.ndarray:
+    """A page of 40 horizontal strokes whose averaged ink probability reaches ``peak``, on paper
+    with a little faint noise."""
+    rng = np.random.default_rng(0)
+    avg = rng.uniform(0.0, 0.04, (80, 200)).astype(np.float32)
+    for row in range(5, 75, 7):
+        avg[row : row + 2, 10:190] = peak * rng.uniform(0.9, 1.0, (2, 180))
+    return avg
+
+
+def test_ink_level_is_the_saturation_on_a_page_whose_frames_agree() -> None:
+    cfg = StitchConfig()
+    assert ink_level(_strokes(0.95), cfg) == cfg.grey_saturation
+    assert ink_level(np.zeros((10, 10), np.float32), cfg) == cfg.grey_saturation  # nothing seen
+
+
+def test_a_faint_page_is_stretched_to_ink_and_thresholded_at_its_own_level() -> None:
+    cfg = StitchConfig()
+    faint = _strokes(0.35)  # dim light: every frame finds a different part of the strokes
+    level = ink_level(faint, cfg)
+    assert 0.3 < level <= 0.35
+    assert binarize(faint, cfg).sum() == 0  # the configured threshold (0.4) loses the whole page
+    ink = binarize(faint, cfg, level=level)
+    assert ink[5:7, 10:190].all() and ink.sum() == 10 * 2 * 180
+    assert StitchedPage(ink, [], [], ink_probability=faint, grey_saturation=level).to_grey()[5, 100] < 30
+
+
+def test_a_page_of_faint_noise_is_not_stretched_into_ink() -> None:
+    cfg = StitchConfig()
+    noise = np.random.default_rng(1).uniform(0.0, 0.09, (80, 200)).astype(np.float32)
+    level = ink_level(noise, cfg)
+    assert level == cfg.min_ink_level
+    assert binarize(noise, cfg, level=level).sum() == 0
+
+
+def test_views_below_min_views_do_not_set_the_level() -> None:
+    cfg = StitchConfig()
+    avg = _strokes(0.3)
+    avg[0:3, :] = 0.9  # a window border seen once
+    views = np.full(avg.shape, 3, np.int32)
+    views[0:3, :] = 1
+    assert ink_level(avg, cfg, views) < 0.35
+    assert ink_level(avg, cfg) == cfg.grey_saturation
+
+
+def test_ink_level_settings_are_checked() -> None:
+    with pytest.raises(ValueError, match="min_ink_level"):
+        StitchConfig(min_ink_level=0.9)
+    with pytest.raises(ValueError, match="ink_percentile"):
+        StitchConfig(ink_percentile=120.0)
 
 
 def test_main_column_span_skips_stray_ink() -> None:

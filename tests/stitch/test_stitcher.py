@@ -369,3 +369,17 @@ def test_a_wide_search_peak_on_a_sliver_of_the_page_is_not_taken(rendered_page, 
     monkeypatch.setattr(stitcher_module, "register_frame", lambda *args, **kwargs: found)
     frame = FrameRecord(1, 200_000, window, (240, 160), (340.0, 210.0))
     assert (stitcher._search_wide(frame, 240, 160, 0.0) is found) == taken
+
+
+def test_a_reading_whose_views_are_all_faint_still_gives_the_page(rendered_page, reading) -> None:
+    """Dim light: every view holds its strokes at a third of full ink (its frames disagreed). The
+    configured threshold (0.4) would find no ink at all; the page is thresholded at its own level."""
+    faint = [
+        dataclasses.replace(f, levels=f.mask * np.uint8(2), n_levels=7)  # ink at 2/6 = 0.33
+        for f in reading.frames
+    ]
+    page = stitch_page(faint)
+    assert 0.25 < page.grey_saturation < 0.4
+    tolerant, _ = ink_f1_aligned(page.image, rendered_page.mask, tolerance_px=1)
+    assert tolerant > 0.95
+    assert (page.to_grey() < 64).sum() > 0.5 * page.image.sum()  # the grey page OCR reads shows it black
