@@ -83,11 +83,14 @@ def read_recording(
     lexicon: bool = True,
     infer: str | None = None,
     speech: bool = False,
+    true_motion: bool = False,
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says.
 
     With ``speech`` the answer is also asked for as speech (``Accept: audio/wav``) and written
-    to ``answer.wav`` in the output directory.
+    to ``answer.wav`` in the output directory. With ``true_motion`` (synthetic recordings) the edge
+    takes the head's motion from the simulator's truth instead of measuring it from the events
+    (``eval.true_motion``); ValueError for a recording without truth.
     """
     import httpx
     from pydantic import SecretStr
@@ -107,11 +110,16 @@ def read_recording(
     if out_dir is None:  # a scratch directory that does not outlive the read
         with tempfile.TemporaryDirectory(prefix="darkread-read-", ignore_cleanup_errors=True) as scratch:
             result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
-                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer)
+                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer, true_motion=true_motion)
         result.page_png = ""
         return result
     started = time.perf_counter()
     recording = open_recording(path)  # fails early, naming any missing file
+    known_motion = None
+    if true_motion:
+        from darkread.eval.true_motion import TrueHeadMotion
+
+        known_motion = TrueHeadMotion.from_recording(recording.path if recording.path.is_dir() else Path(path))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     api_key = secrets.token_urlsafe(16)
@@ -129,7 +137,7 @@ def read_recording(
             "metrics": {"log_every_s": 3600.0},
         }
         t0 = time.perf_counter()
-        edge = build_edge(load_config(None, environ={}, overrides=overrides))
+        edge = build_edge(load_config(None, environ={}, overrides=overrides), known_motion=known_motion)
         daemon = Daemon(edge, Notifier(environ={}), tick_s=0.02, shutdown_timeout_s=drain_timeout_s, handle_signals=False)
         drained = daemon.run() == 0
         stages["edge"] = time.perf_counter() - t0
@@ -210,6 +218,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
     parser.add_argument("--out", metavar="DIR", help="keep the page image, spool and cloud data here (default: a temp dir)")
     parser.add_argument("--json", action="store_true", help="print one JSON object with the text and per-stage figures")
+    parser.add_argument("--true-motion", action="store_true",
+                        help="synthetic recordings: take the head's motion from the simulator's truth (pose_truth.npz) "
+                             "instead of measuring it from the events, as an exact inertial sensor would give it; "
+                             "what is left of the errors is the frames' own (darkread eval attribute reports both)")
     parser.add_argument("--say", action="store_true",
                         help="speak the answer (espeak-ng in the cloud; played with paplay/aplay, else the WAV's path is printed)")
     parser.add_argument("--say-out", metavar="FILE.wav", type=Path,
@@ -230,7 +242,7 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError(f"--say-out {args.say_out}: give a .wav file name")
     speech = args.say or args.say_out is not None
     result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out,
-                           lexicon=args.lexicon, infer=args.infer, speech=speech)
+                           lexicon=args.lexicon, infer=args.infer, speech=speech, true_motion=args.true_motion)
     if result.speech_wav is not None and args.say_out is not None:
         args.say_out.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(result.speech_wav, args.say_out)

@@ -20,6 +20,7 @@ from typing import Any
 from darkread.edge.config import EdgeConfig, GazeConfig, SourceConfig
 from darkread.edge.errors import RunError
 from darkread.edge.gaze import GazeLookup
+from darkread.edge.head_motion import KnownHeadMotion
 from darkread.edge.io.calibration import Calibration
 from darkread.edge.pipeline import FrameHandler, FrameResult, Pipeline
 from darkread.edge.reconstruct import Reconstructor
@@ -141,11 +142,14 @@ def build_edge(
     *,
     watchdog: Callable[[], object] | None = None,
     on_frame: FrameHandler | None = None,
+    known_motion: KnownHeadMotion | None = None,
 ) -> Edge:
     """Wire the edge described by ``config``; nothing runs until ``Edge.startup()``.
 
     ``watchdog`` is called from the processing loop while events flow (systemd's watchdog ping);
-    ``on_frame``, when given, receives the frames instead of an uplink (the bench's encode-only run).
+    ``on_frame``, when given, receives the frames instead of an uplink (the bench's encode-only run);
+    ``known_motion``, the head's motion from elsewhere instead of measured from the events
+    (``edge.head_motion``).
     """
     from darkread.edge.binning import warm_up as warm_up_binning
     from darkread.edge.io.evt3 import warm_up as warm_up_decoder
@@ -178,7 +182,8 @@ def build_edge(
         settings = config.pipeline
         if config.source.kind == "replay" and config.source.speed == 0:
             settings = dataclasses.replace(settings, lossless=True)  # no clock to keep up with: make every window
-        pipeline = Pipeline(source, gaze, reconstructor, on_frame, settings, voxel, metrics, watchdog=watchdog)
+        pipeline = Pipeline(source, gaze, reconstructor, on_frame, settings, voxel, metrics, watchdog=watchdog,
+                            known_motion=known_motion)
         undo.pop_all()
     return Edge(config, source, pipeline, reconstructor, metrics, uplink=uplink, pages=pages, feeds=feeds)
 

@@ -41,6 +41,7 @@ from darkread.edge.denoise import DenoiseConfig, drop_isolated
 from darkread.edge.events import Events
 from darkread.edge.fovea import FoveaConfig, in_window, window_origin
 from darkread.edge.gaze import GazeLookup, GazeSample
+from darkread.edge.head_motion import KnownHeadMotion
 from darkread.edge.ring import EventRing
 from darkread.edge.scene_motion import SceneMotion
 from darkread.edge.sources.base import EventSource
@@ -120,16 +121,21 @@ def clean_window(
     sensor_wh: tuple[int, int],
     deblur: DeblurConfig = DeblurConfig(),
     denoise: DenoiseConfig = DenoiseConfig(),
+    known_motion: KnownHeadMotion | None = None,
 ) -> tuple[Events, bool, bool]:
     """A window's events as the network is given them: moved back along the head's motion during
     their span (``edge.deblur``, measured from them and ``nearby``, the sensor's events of that span
-    around the window), then in dim light without those that have no neighbour (``edge.denoise``);
-    and whether each step changed them. The edge and the training windows (``train.windows``) both
-    cut windows this way."""
-    cleaned, smear = deblur_window(window, nearby, origin, shape_hw, sensor_wh, deblur)
+    around the window; or by ``known_motion`` when given: ``edge.head_motion``), then in dim light
+    without those that have no neighbour (``edge.denoise``); and whether each step changed them.
+    The edge and the training windows (``train.windows``) both cut windows this way."""
+    if known_motion is not None:
+        cleaned, moved = known_motion.warp(window, origin, shape_hw), window.shape[0] > 0
+    else:
+        cleaned, smear = deblur_window(window, nearby, origin, shape_hw, sensor_wh, deblur)
+        moved = smear != (0.0, 0.0)
     before = cleaned.shape[0]
     cleaned = drop_isolated(cleaned, origin, shape_hw, denoise)
-    return cleaned, smear != (0.0, 0.0), cleaned.shape[0] < before
+    return cleaned, moved, cleaned.shape[0] < before
 
 
 def make_frame(
@@ -194,6 +200,7 @@ class Pipeline:
         voxel: VoxelConfig = VoxelConfig(),
         metrics: EdgeMetrics | None = None,
         watchdog: Callable[[], object] | None = None,
+        known_motion: KnownHeadMotion | None = None,
     ) -> None:
         self.source = source
         self.gaze = gaze
@@ -223,8 +230,10 @@ class Pipeline:
         self._source_done = threading.Event()
         self._thread: threading.Thread | None = None
         self._last_t: int | None = None
-        # the head's motion from all events (the reader thread pushes, the processing thread asks)
-        measure_scene = settings.scene_motion and not settings.sensor_roi
+        # the head's motion from all events (the reader thread pushes, the processing thread asks),
+        # unless it is known from elsewhere (``edge.head_motion``: then it is neither measured nor searched)
+        self.known_motion = known_motion
+        measure_scene = settings.scene_motion and not settings.sensor_roi and known_motion is None
         self.scene = SceneMotion(self.sensor_wh) if measure_scene else None
         self._scene_lock = threading.Lock()
         self.on_change = settings.infer == "on-change"
@@ -580,6 +589,8 @@ class Pipeline:
 
     def _scene_at(self, t_us: int) -> tuple[float, float] | None:
         """The scene's motion at ``t_us`` (None when not measured)."""
+        if self.known_motion is not None:
+            return self.known_motion.scene_px(t_us)
         if self.scene is None:
             return None
         with self._scene_lock:
@@ -612,7 +623,7 @@ class Pipeline:
             self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), MAX_HISTORY_EVENTS))
         nearby = recent[int(used[0]) :] if used.shape[0] else recent[:0]
         window, deblurred, denoised = clean_window(recent[used], nearby, origin, (cfg.height, cfg.width), self.sensor_wh,
-                                                   self.deblur, self.denoise)
+                                                   self.deblur, self.denoise, self.known_motion)
         if deblurred:
             self.metrics.add("frames_deblurred")
         if denoised:

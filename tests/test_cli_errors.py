@@ -59,6 +59,10 @@ def test_read_a_recording_whose_gaze_csv_is_not_text(tmp_path: Path) -> None:
     _assert_one_line(_darkread("read", str(recording)), mentions="general_eye_gaze.csv")
 
 
+def test_read_a_real_recording_with_the_true_motion() -> None:
+    _assert_one_line(_darkread("read", "--demo", "--true-motion"), mentions="synthetic recordings only")
+
+
 def test_synth_into_a_path_under_a_regular_file(tmp_path: Path) -> None:
     """An OSError other than FileNotFoundError (here NotADirectoryError) is bad input too."""
     (tmp_path / "afile").write_text("")

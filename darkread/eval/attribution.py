@@ -7,6 +7,11 @@ two more pages are read by the same OCR, both on the page's own raster:
 * ``placed``: the same frames, each placed where the true pose puts it (perfect stitching);
 * ``ideal``: the true ink of each frame's window, placed the same way (perfect frames and stitching).
 
+And the recording is read once more end to end with the head's motion known exactly
+(``darkread read --true-motion``: each window deblurred and each view predicted from the
+simulator's pose, ``eval.true_motion``), which tells the errors the head's motion causes in the
+dark (what an inertial sensor could remove) from the frames' own.
+
 ``stitched`` close to ``placed`` means the stitcher is not what fails; ``placed`` far above
 ``ideal`` means the frames are. Each frame is also scored against its window's true ink (recall: the
 share of true ink with a predicted pixel within 1 px; precision: the converse), which tells missing
@@ -20,7 +25,7 @@ import json
 import logging
 from collections import defaultdict
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +37,7 @@ log = logging.getLogger(__name__)
 ATTRIBUTION_NAME = "attribution.md"
 CACHE_NAME = "attribution.json"  # per recording, beside its result.json: a rerun (or a larger suite) reuses it
 TOLERANCE_PX = 1  # ink within this many pixels counts as found (strokes are ~2 px wide)
+TRUE_MOTION_DIR = "true_motion"  # beside a recording's read: its read with the head's motion known exactly
 PAGE_GAIN = 2.0  # placed pages: mean ink share x this, clipped (a stroke seen in half the frames is black)
 
 
@@ -58,6 +64,7 @@ class Attribution:
     cer_ideal: float
     frame_recall: float
     frame_precision: float
+    cer_true_motion: float | None = None  # read again with the head's motion known exactly
 
 
 def load_truth(recording: Path) -> PageTruth | None:
@@ -202,15 +209,18 @@ def attribution_table(rows: Sequence[Attribution]) -> str:
         groups[(row.lux, "all")].append(row)
     order = {"still": 0, "normal": 1, "walking": 2, "all": 3}
     lines = [
-        "| lux | motion | n | CER stitched | CER frames placed by the true pose | CER true ink placed so | frame ink recall | frame ink precision |",
-        "|---:|---|---:|---:|---:|---:|---:|---:|",
+        "| lux | motion | n | CER stitched | CER, head motion known exactly | CER frames placed by the true pose "
+        "| CER true ink placed so | frame ink recall | frame ink precision |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for (lux, motion), members in sorted(groups.items(), key=lambda kv: (-kv[0][0], order.get(kv[0][1], 9))):
         def mean(key: str) -> float:
             return float(np.mean([getattr(m, key) for m in members]))
 
         label = f"**{motion}**" if motion == "all" else motion
-        lines.append(f"| {lux:g} | {label} | {len(members)} | {100 * mean('cer_stitched'):.1f}% | {100 * mean('cer_placed'):.1f}% | "
+        known = [m.cer_true_motion for m in members if m.cer_true_motion is not None]
+        true_motion = f"{100 * float(np.mean(known)):.1f}%" if len(known) == len(members) else "–"
+        lines.append(f"| {lux:g} | {label} | {len(members)} | {100 * mean('cer_stitched'):.1f}% | {true_motion} | {100 * mean('cer_placed'):.1f}% | "
                      f"{100 * mean('cer_ideal'):.1f}% | {100 * mean('frame_recall'):.0f}% | {100 * mean('frame_precision'):.0f}% |")
     return "\n".join(lines)
 
@@ -232,12 +242,28 @@ def cached_attribution(run_dir: Path, backend: str) -> Attribution | None:
         return None
 
 
+def true_motion_cer(recording: Path, run_dir: Path, backend: str, model: str | None = None) -> float:
+    """CER of ``recording`` read again end to end, in the mode it was evaluated in, with the head's
+    motion known exactly (``darkread read --true-motion``; kept in ``run_dir/true_motion``). ValueError
+    when ``model`` is not the network the recording was evaluated with."""
+    from darkread.eval.runner import RESULT_NAME, network_digest
+    from darkread.read import read_recording
+
+    result = json.loads((run_dir / RESULT_NAME).read_text(encoding="utf-8"))
+    if result.get("model") not in (None, network_digest(model)):
+        raise ValueError(f"{run_dir.name} was evaluated with network {result['model']}, not {network_digest(model)}: "
+                         "pass the same --model")
+    read = read_recording(recording, backend=backend, model=model, out_dir=run_dir / TRUE_MOTION_DIR,
+                          infer=result.get("infer"), true_motion=True)
+    return min(1.0, float(read.cer if read.cer is not None else 1.0))
+
+
 def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "local", progress: bool = True,
-                      notes: Sequence[str] = ()) -> Path:
-    """Attribute every evaluated recording of ``suite`` (results in ``work``); a markdown report at ``out``
-    (``notes``: lines under its first paragraph) and the per-recording figures beside it (``.json``).
-    Each recording's figures are also kept beside its result (``attribution.json``), so a rerun only
-    attributes what is new or was evaluated again."""
+                      notes: Sequence[str] = (), model: str | None = None) -> Path:
+    """Attribute every evaluated recording of ``suite`` (results in ``work``, read by ``model``, default
+    the shipped network); a markdown report at ``out`` (``notes``: lines under its first paragraph) and
+    the per-recording figures beside it (``.json``). Each recording's figures are also kept beside its
+    result (``attribution.json``), so a rerun only attributes what is new or was evaluated again."""
     from tqdm import tqdm
 
     from darkread.eval.runner import make_ocr_backend
@@ -254,8 +280,9 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
         row = cached_attribution(run_dir, backend)
         if row is None:
             row = attribute_recording(recording, run_dir / "read", lambda page: engine.read(page).text)
-            if row is not None:
-                (run_dir / CACHE_NAME).write_text(json.dumps({"backend": backend, **asdict(row)}), encoding="utf-8")
+        if row is not None and row.cer_true_motion is None:
+            row = replace(row, cer_true_motion=true_motion_cer(recording, run_dir, backend, model))
+            (run_dir / CACHE_NAME).write_text(json.dumps({"backend": backend, **asdict(row)}), encoding="utf-8")
         if row is not None:
             rows.append(row)
     if not rows:
@@ -264,8 +291,10 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
     text = "\n".join([
         "# Where the reading errors come from",
         "",
-        f"`darkread eval attribute {suite.name}`: {len(rows)} evaluated recordings, OCR `{backend}`. Each page is read three "
-        "times: as the cloud stitched it; with the same frames placed by the simulator's true pose (perfect stitching); "
+        f"`darkread eval attribute {suite.name}`: {len(rows)} evaluated recordings, OCR `{backend}`. Each page is read four "
+        "times: as the cloud stitched it; end to end again with the head's motion known exactly (`darkread read "
+        "--true-motion`: every window deblurred and every view predicted from the simulator's pose, what an exact inertial "
+        "sensor would give); with the same frames placed by the simulator's true pose (perfect stitching); "
         "and with each frame replaced by its window's true ink, placed the same way (perfect frames). Frame ink "
         f"recall and precision: ink within {TOLERANCE_PX} px of the window's true ink, pooled over the frames.",
         *([""] + [f"- {note}" for note in notes] if notes else []),

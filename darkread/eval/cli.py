@@ -43,12 +43,14 @@ Four forms:
       which the report of docs/eval then shows as its "Second simulator" section). `make eval-hesim`
       runs it all.
 
-  darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md] [--infer MODE]
-      where an evaluated suite's errors come from: each page read again with its frames placed by
-      the simulator's true pose (perfect stitching) and with every frame replaced by its window's
-      true ink (perfect frames), and each frame's ink recall and precision against that truth;
-      mean CER of the three by lux and motion, printed and written to --out (a .md file, or a
-      folder: FOLDER/attribution.md) with the per-recording figures beside it (.json).
+  darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md] [--infer MODE] [--model ONNX]
+      where an evaluated suite's errors come from: each recording read again end to end with the
+      head's motion known exactly (darkread read --true-motion: what an exact inertial sensor would
+      give), each page read again with its frames placed by the simulator's true pose (perfect
+      stitching) and with every frame replaced by its window's true ink (perfect frames), and each
+      frame's ink recall and precision against that truth; mean CER of the four by lux and motion,
+      printed and written to --out (a .md file, or a folder: FOLDER/attribution.md) with the
+      per-recording figures beside it (.json). --model: the network the suite was evaluated with.
 
   Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
   PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
@@ -161,7 +163,7 @@ def _attribute(args: argparse.Namespace) -> int:
     work = Path(args.work) if args.work else suite / "eval_runs" / _first_mode(args)
     out = Path(args.out)
     out = out / ATTRIBUTION_NAME if out.suffix != ".md" else out
-    path = write_attribution(suite, work, out, backend=args.backend, notes=args.note)
+    path = write_attribution(suite, work, out, backend=args.backend, notes=args.note, model=args.model)
     print(path.read_text())
     return 0
 

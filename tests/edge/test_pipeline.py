@@ -184,14 +184,16 @@ def chunked(events: Events, size: int) -> list[Events]:
     return [events[i : i + size] for i in range(0, events.shape[0], size)]
 
 
-def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, infer=ink_where_events):
+def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, infer=ink_where_events, known_motion=None):
     frames: list[tuple[FrameResult, float]] = []
     metrics = EdgeMetrics()
     pings = []
     pipeline = Pipeline(
         source, gaze, infer, lambda f, t: frames.append((f, t)), dataclasses.replace(settings, ring_capacity=1 << 16),
-        metrics=metrics, watchdog=lambda: pings.append(1),
+        metrics=metrics, watchdog=lambda: pings.append(1), known_motion=known_motion,
     )
+    if known_motion is not None:
+        assert pipeline.scene is None  # the head's motion is not measured from the events then
     assert isinstance(source, EventSource)
     pipeline.start()
     assert source.done.wait(5)
@@ -367,6 +369,34 @@ def test_windows_of_a_moving_page_are_deblurred_and_counted(deblur: bool) -> Non
     assert (metrics.totals["frames_deblurred"] > 0) is deblur
     if deblur:  # a moved event that would leave the window is dropped, so some frames bin fewer
         assert min(frame.events_used for frame, _ in frames) < 1600
+
+
+class ShiftRight:
+    """A known head motion: the scene moves 1 px right per millisecond; ``warp`` moves every event
+    one pixel left and notes each window it was given."""
+
+    def __init__(self) -> None:
+        self.windows: list[int] = []
+
+    def scene_px(self, t_us: int) -> tuple[float, float] | None:
+        return (t_us / 1000.0, 0.0)
+
+    def warp(self, window: Events, origin: tuple[int, int], shape_hw: tuple[int, int]) -> Events:
+        self.windows.append(len(window))
+        moved = window[window["x"] > origin[0]]
+        moved["x"] -= 1
+        return moved
+
+
+def test_a_known_head_motion_replaces_the_measured_one() -> None:
+    """(Both modes cut their windows and look up the scene offset through the same two methods.)"""
+    ev = moving_strokes((300.0, 100.0), span_ms=60.0)
+    known = ShiftRight()
+    settings = every_window(lossless=True, denoise=False)
+    frames, metrics, _ = run_pipeline(ListSource(chunked(ev, 2000)), FixedGaze(), settings, known_motion=known)
+    assert frames and known.windows  # every window went through the known motion's warp, none through the search
+    assert metrics.totals["frames_deblurred"] == len(known.windows)
+    assert all(f.scene_px == (f.t_us / 1000.0, 0.0) for f, _ in frames)  # the scene offset is the known one
 
 
 @pytest.mark.parametrize("denoise", [True, False])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from darkread.edge.io.calibration import Calibration
 from darkread.eval.attribution import (Attribution, PageTruth, attribution_table, compose, ink_found, place_window,
@@ -50,5 +52,8 @@ def test_table_groups_by_lux_and_motion() -> None:
     rows = [Attribution("a", 10.0, "still", 5, 0.1, 0.1, 0.0, 0.9, 0.9),
             Attribution("b", 10.0, "walking", 5, 1.0, 0.9, 0.05, 0.3, 0.5)]
     table = attribution_table(rows)
-    assert "| 10 | still | 1 | 10.0% | 10.0% | 0.0% | 90% | 90% |" in table
-    assert "| 10 | **all** | 2 | 55.0% | 50.0% | 2.5% | 60% | 70% |" in table
+    assert "| 10 | still | 1 | 10.0% | – | 10.0% | 0.0% | 90% | 90% |" in table  # not read with the true motion
+    assert "| 10 | **all** | 2 | 55.0% | – | 50.0% | 2.5% | 60% | 70% |" in table
+    known = [dataclasses.replace(rows[0], cer_true_motion=0.05), dataclasses.replace(rows[1], cer_true_motion=0.4)]
+    assert "| 10 | **all** | 2 | 55.0% | 22.5% | 50.0% | 2.5% | 60% | 70% |" in attribution_table(known)
+    assert "| 10 | **all** | 2 | 55.0% | – |" in attribution_table([known[0], rows[1]])  # a mean of all or none

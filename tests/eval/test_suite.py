@@ -112,6 +112,8 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     assert row["name"] == folder.name and row["frames"] == result["darkread"]["frames"]
     assert row["cer_stitched"] == min(1.0, result["darkread"]["cer"])
     assert 0.0 <= row["cer_ideal"] <= 1.0 and 0.0 <= row["cer_placed"] <= 1.0
+    assert 0.0 <= row["cer_true_motion"] <= 1.0  # read again end to end with the simulator's motion
+    assert (work / folder.name / "true_motion" / "page.png").is_file()
     assert 0.0 < row["frame_recall"] <= 1.0 and 0.0 < row["frame_precision"] <= 1.0
     assert f"| {short.lux:g} | **all** | 1 |" in report.read_text()
     kept = (work / folder.name / "attribution.json").stat().st_mtime_ns  # a rerun reuses the stored figures
