@@ -18,7 +18,7 @@ BOTH = "both"
 EVAL_HELP = """\
 Four forms:
 
-  darkread eval make-suite OUT [--small | --subset simulator-check] [--simulator darkread|hesim] [--jobs N]
+  darkread eval make-suite OUT [--small | --subset simulator-check] [--simulator darkread|hesim] [--font FAMILY] [--jobs N]
       write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
       text kinds, three font families incl. one held out of training, x-heights 7-12, motion
       still/normal/walking, and nine 30-lux paragraphs). Each recording ends when the page has been
@@ -27,7 +27,9 @@ Four forms:
       17 short recordings, one axis varied at a time (CI-sized). --match PATTERN: only those
       recordings (e.g. --match '*lux30_*_human'). --simulator hesim: the same scenes, gaze and
       texts turned into events by a second, independent simulator (hesim-3d); --subset
-      simulator-check: the 18 recordings `make eval-hesim` compares on both simulators.
+      simulator-check: the 18 recordings `make eval-hesim` compares on both simulators. --font
+      FAMILY: the selected recordings made again in another font family, all else alike (names end
+      in _as_<their own family>), to tell what a font costs from what a scene does.
 
   darkread eval SUITE_DIR [--out docs/eval] [--backend local] [--infer MODE|both] [--beside DIR] [--jobs N]
       read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
@@ -96,6 +98,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--simulator", choices=["darkread", "hesim"], default="darkread",
                         help="make-suite: what turns the rendered scenes into events: darkread (our sensor model, "
                              "default) or hesim (hesim-3d's H-ESIM, IMX636 preset; `make hesim` installs it)")
+    parser.add_argument("--font", metavar="FAMILY",
+                        help="make-suite: every selected recording not already in this font family made again in it "
+                             "(same seed, light, motion, text kind and x-height; named <name-in-FAMILY>_as_<old family>), "
+                             "e.g. --font 'DejaVu Sans' --match '*_lux5_*roboto*': what the held-out font costs")
     parser.add_argument("--infer", default=None, choices=[*INFER_MODES, BOTH],
                         help="the edge's mode (default: the edge's default, PipelineConfig().infer; every-window: every frame; "
                              "on-change: one fused view per fixation; both: the default and the other beside it)")
@@ -130,7 +136,7 @@ def _make_suite(args: argparse.Namespace) -> int:
     if not args.make_suite_out:
         raise ValueError("give the output folder: darkread eval make-suite OUT [--small]")
     entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
-                         subset=args.subset, simulator=args.simulator)
+                         subset=args.subset, simulator=args.simulator, font=args.font)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
     return 0
 

@@ -145,17 +145,54 @@ def _write_entry(out: Path, entry: SuiteEntry) -> None:
     spec_path.write_text(json.dumps(spec_doc, indent=1))  # last: marks the recording complete
 
 
+def in_font(entry: SuiteEntry, family: str) -> SuiteEntry:
+    """The same recording (seed, light, motion, text kind, x-height) set in another font family;
+    its name says the new family and ends in ``_as_<old family>``, so it pairs with the original."""
+    old, new = _slug(entry.font), _slug(family)
+    stem, _, tail = entry.name.partition(f"_{old}_")
+    return replace(entry, font=family, name=f"{stem}_{new}_{tail}_as_{old}")
+
+
+def _slug(family: str) -> str:
+    return family.lower().replace(" ", "")
+
+
+def select_entries(*, small: bool = False, match: str | Sequence[str] | None = None, subset: str | None = None,
+                   simulator: str = "darkread", font: str | None = None) -> list[SuiteEntry]:
+    """The recordings ``make_suite`` writes, in order (its arguments, checked there)."""
+    entries = simulator_check_entries() if subset == "simulator-check" else suite_entries(small=small)
+    entries = [replace(e, simulator=simulator) for e in entries]
+    if match:
+        from fnmatch import fnmatch
+
+        patterns = [match] if isinstance(match, str) else list(match)
+        entries = [e for e in entries if any(fnmatch(e.name, m) or m in e.name for m in patterns)]
+        if not entries:
+            raise ValueError(f"--match {' '.join(patterns)}: no recording of the suite has such a name")
+    if font is not None:
+        entries = [in_font(e, font) for e in entries if e.font != font]
+    return entries
+
+
 def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
     match: str | Sequence[str] | None = None, subset: str | None = None, simulator: str = "darkread",
+    font: str | None = None,
 ) -> list[SuiteEntry]:
     """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
     ``spec.json`` matches) are kept, so an interrupted run resumes. ``match``: only the recordings
     whose name matches this shell pattern (e.g. ``*lux30_*_human``), or any of several; ``subset``: a named part of the
-    full suite (``simulator-check``); ``simulator``: what turns the scenes into events."""
+    full suite (``simulator-check``); ``simulator``: what turns the scenes into events; ``font``: every
+    selected recording not already in this family made again in it (``in_font``), to tell what a
+    font costs from what a scene does."""
     from tqdm import tqdm
 
+    from darkread.models.synth.fonts import FACES
     from darkread.models.synth.recording import SIMULATORS
+
+    families = sorted({face.family for face in FACES})
+    if font is not None and font not in families:
+        raise ValueError(f"--font {font!r}: use one of {', '.join(families)}")
 
     if simulator not in SIMULATORS:
         raise ValueError(f"--simulator {simulator!r}: use one of {', '.join(SIMULATORS)}")
@@ -170,18 +207,10 @@ def make_suite(
             raise ValueError(f"--simulator hesim: {reason}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    entries = simulator_check_entries() if subset == "simulator-check" else suite_entries(small=small)
-    entries = [replace(e, simulator=simulator) for e in entries]
-    if match:
-        from fnmatch import fnmatch
-
-        patterns = [match] if isinstance(match, str) else list(match)
-        entries = [e for e in entries if any(fnmatch(e.name, m) or m in e.name for m in patterns)]
-        if not entries:
-            raise ValueError(f"--match {' '.join(patterns)}: no recording of the suite has such a name")
+    entries = select_entries(small=small, match=match, subset=subset, simulator=simulator, font=font)
     entries = entries[:only]
     (out / SUITE_NAME).write_text(
-        json.dumps({"small": small, "subset": subset, "simulator": simulator, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        json.dumps({"small": small, "subset": subset, "simulator": simulator, "font": font, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )
     bar = tqdm(total=len(entries), desc="recordings", unit="rec", disable=not progress)

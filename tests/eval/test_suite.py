@@ -177,3 +177,37 @@ def test_make_suite_refuses_an_unknown_simulator_or_subset(tmp_path: Path) -> No
         make_suite(tmp_path, subset="most", progress=False)
     with pytest.raises(ValueError, match="leave out --small"):
         make_suite(tmp_path, subset="simulator-check", small=True, progress=False)
+
+
+def test_a_recording_in_another_font_is_the_same_scene_named_after_both_fonts() -> None:
+    from darkread.eval.suite import in_font
+
+    entry = next(e for e in suite_entries() if e.font == "Roboto")
+    swapped = in_font(entry, "DejaVu Sans")
+    assert swapped.font == "DejaVu Sans" and "roboto" not in swapped.name.removesuffix("_as_roboto")
+    assert swapped.name.endswith("_as_roboto") and "_dejavusans_xh" in swapped.name
+    assert swapped.name[:3] == entry.name[:3]
+    assert (swapped.seed, swapped.lux, swapped.motion, swapped.kind, swapped.xheight_px) == (
+        entry.seed, entry.lux, entry.motion, entry.kind, entry.xheight_px)
+
+
+def test_make_suite_font_selects_what_it_swaps_and_refuses_an_unknown_family(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="--font 'Comic Sans'"):
+        make_suite(tmp_path, font="Comic Sans", progress=False)
+    from darkread.eval.suite import select_entries
+
+    dim = select_entries(match="*_lux5_*")
+    swapped = select_entries(match="*_lux5_*", font="Roboto")
+    assert len(dim) == 12 and len(swapped) == 8  # the four already in Roboto are left out
+    assert all(e.font == "Roboto" and e.name.endswith(("_as_dejavusans", "_as_stixgeneral")) for e in swapped)
+    assert make_suite(tmp_path, match="*_lux5_*", font="Roboto", only=0, progress=False) == []  # (--limit 0: nothing written)
+    suite = json.loads((tmp_path / "suite.json").read_text())
+    assert suite["font"] == "Roboto"
+
+
+def test_cli_make_suite_with_a_font(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from darkread.cli import main
+
+    assert main(["eval", "make-suite", str(tmp_path / "s"), "--match", "*_lux5_*", "--font", "DejaVu Sans",
+                 "--limit", "0"]) == 0
+    assert "0 recordings" in capsys.readouterr().out
