@@ -74,7 +74,7 @@ bench: $(STAMP) postgres-deps  ## benchmarks; prints a table and writes bench.js
 demo: $(STAMP) speech-deps  ## read the shipped sample recording aloud and compare with its printed text
 	$(VENV)/bin/darkread read --demo --say
 
-eval: $(STAMP)  ## the full suite (87 recordings) in both edge modes (~1 h on 2 cores): report in docs/eval, the default mode first
+eval: $(STAMP)  ## the full suite (93 recordings) in both edge modes (~30 min on 2 cores, half of it making the suite): report in docs/eval, the default mode first
 	$(VENV)/bin/darkread eval make-suite runs/eval_suite --jobs 2
 	$(VENV)/bin/darkread eval runs/eval_suite --out docs/eval --infer both --jobs 2
 
