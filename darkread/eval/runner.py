@@ -14,6 +14,7 @@ import shutil
 import time
 import traceback
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -215,6 +216,7 @@ def evaluate_suite(
     from tqdm import tqdm
 
     from darkread.eval.suite import load_suite
+    from darkread.jobs import run_jobs
 
     folders = load_suite(suite_dir)
     runs = Path(work_dir) if work_dir is not None else Path(suite_dir) / "eval_runs"
@@ -235,24 +237,18 @@ def evaluate_suite(
         else:
             todo.append(folder)
     bar = tqdm(total=len(folders), initial=len(by_name), desc=f"evaluating ({infer})", unit="rec", disable=not progress)
-    if jobs <= 1:
-        cache: dict[str, Any] = {}
-        for folder in todo:
-            by_name[folder.name] = evaluate_recording(folder, runs / folder.name, backend=backend, compare=engines,
-                                                      model=model, ocr_cache=cache, infer=infer, rgb=rgb)
-            bar.update()
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(evaluate_recording, f, runs / f.name, backend=backend, compare=engines, model=model,
-                                   infer=infer, rgb=rgb): f
-                       for f in todo}  # each worker makes its own OCR engines
-            for future in as_completed(futures):
-                by_name[futures[future].name] = future.result()
-                bar.update()
+    # one process reads in turn with one set of OCR engines; each worker process makes its own
+    task = partial(_evaluate_in, runs=runs, backend=backend, compare=engines, model=model,
+                   ocr_cache={} if jobs <= 1 else None, infer=infer, rgb=rgb)
+    for folder, doc in zip(todo, run_jobs(task, todo, jobs, bar.update), strict=True):
+        by_name[folder.name] = doc
     bar.close()
     return [RecordingResult.from_dict(by_name[f.name]) for f in folders]
+
+
+def _evaluate_in(folder: Path, runs: Path, **options: Any) -> dict[str, Any]:
+    """``evaluate_recording`` of one suite folder into its run folder under ``runs`` (a process task)."""
+    return evaluate_recording(folder, runs / folder.name, **options)
 
 
 def network_digest(model: str | Path | None) -> str:

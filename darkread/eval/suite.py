@@ -23,6 +23,7 @@ import logging
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
+from functools import partial
 from pathlib import Path
 
 from darkread.models.synth.rgb_camera import SPEC_NAME
@@ -187,6 +188,7 @@ def make_suite(
     font costs from what a scene does."""
     from tqdm import tqdm
 
+    from darkread.jobs import run_jobs
     from darkread.models.synth.fonts import FACES
     from darkread.models.synth.recording import SIMULATORS
 
@@ -214,17 +216,7 @@ def make_suite(
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )
     bar = tqdm(total=len(entries), desc="recordings", unit="rec", disable=not progress)
-    if jobs <= 1:
-        for entry in entries:
-            _write_entry(out, entry)
-            bar.update()
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            for future in as_completed([pool.submit(_write_entry, out, e) for e in entries]):
-                future.result()  # a failed recording stops the run with its error
-                bar.update()
+    run_jobs(partial(_write_entry, out), entries, jobs, bar.update)
     bar.close()
     return entries
 

@@ -25,6 +25,7 @@ import json
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -164,23 +165,11 @@ def compare(
     out = Path(out)
     digests = {name: model_digest(path) for name, path in models.items()}
     items = [Path(p) for p in inputs]
-    bar = tqdm(total=len(items), desc="comparing", unit="input", disable=not progress)
-    if jobs <= 1:
-        rows = []
-        for item in items:
-            rows.append(score_input(item, models, digests, out, read=read, backend=backend, group=group))
-            bar.update()
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+    from darkread.jobs import run_jobs
 
-        by_item: dict[int, dict[str, Any]] = {}
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(score_input, item, models, digests, out, read=read, backend=backend, group=group): k
-                       for k, item in enumerate(items)}
-            for future in as_completed(futures):
-                by_item[futures[future]] = future.result()  # a failed input stops the run with its error
-                bar.update()
-        rows = [by_item[k] for k in range(len(items))]
+    bar = tqdm(total=len(items), desc="comparing", unit="input", disable=not progress)
+    task = partial(score_input, models=models, digests=digests, out=out, read=read, backend=backend, group=group)
+    rows = run_jobs(task, items, jobs, bar.update)
     bar.close()
     names = [n for n in models if n not in chance]
     report = {"models": {n: {"path": str(p), "sha256_12": digests[n]} for n, p in models.items()},

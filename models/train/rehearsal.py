@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import shutil
 from dataclasses import asdict
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -36,8 +37,10 @@ def rehearsal_specs(count: int, seed: int, seconds: float = 2.5) -> list[Recordi
             for i in range(count)]
 
 
-def _one(spec: RecordingSpec, work: Path, out: Path, index: int, every_ms: float) -> dict[str, Any]:
-    """Simulate one session, label its windows from the truth, keep only the shard (a process task)."""
+def _one(indexed: tuple[int, RecordingSpec], work: Path, out: Path, every_ms: float) -> dict[str, Any]:
+    """Simulate session ``index`` (``indexed``: index and spec), label its windows from the truth,
+    keep only the shard (a process task)."""
+    index, spec = indexed
     from darkread.models.synth.recording import write_recording
     from darkread.models.train.annotate import SHARD_NAME, annotate_from_truth
 
@@ -56,6 +59,8 @@ def make_rehearsal(out: str | Path, count: int = 18, seed: int = 601, every_ms: 
     already there is kept, so an interrupted run resumes."""
     from tqdm import tqdm
 
+    from darkread.jobs import run_jobs
+
     if every_ms <= 0:
         raise ValueError(f"--every-ms {every_ms}: must be positive")
     out = Path(out)
@@ -72,20 +77,9 @@ def make_rehearsal(out: str | Path, count: int = 18, seed: int = 601, every_ms: 
     work = out / ".work"
     work.mkdir(exist_ok=True)
     todo = [(i, s) for i, s in enumerate(specs) if not (out / f"shard-{i:05d}.npz").is_file()]
-    done: dict[int, dict[str, Any]] = {}
     bar = tqdm(total=len(specs), initial=len(specs) - len(todo), desc="reading sessions", unit="session", disable=not progress)
-    if jobs <= 1:
-        for i, spec in todo:
-            done[i] = _one(spec, work, out, i, every_ms)
-            bar.update()
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_one, spec, work, out, i, every_ms): i for i, spec in todo}
-            for future in as_completed(futures):
-                done[futures[future]] = future.result()  # a failed session stops the run with its error
-                bar.update()
+    task = partial(_one, work=work, out=out, every_ms=every_ms)
+    done = dict(zip([i for i, _ in todo], run_jobs(task, todo, jobs, bar.update), strict=True))
     bar.close()
     shutil.rmtree(work, ignore_errors=True)
     before = dict(enumerate(previous.get("sessions", [])))
