@@ -154,8 +154,13 @@ def deblur(window: Events, smear: tuple[float, float], t_ref_us: int, span_us: f
     if smear == (0.0, 0.0) or window.shape[0] == 0 or span_us <= 0:
         return window
     ahead = (t_ref_us - window["t"].astype(np.float64)) / span_us
-    x = np.rint(window["x"] + smear[0] * ahead)
-    y = np.rint(window["y"] + smear[1] * ahead)
+    return moved_to(window, window["x"] + smear[0] * ahead, window["y"] + smear[1] * ahead, origin, shape_hw)
+
+
+def moved_to(window: Events, x: np.ndarray, y: np.ndarray, origin: tuple[int, int], shape_hw: tuple[int, int]) -> Events:
+    """A copy of ``window`` with its events at the pixels nearest to ``x``, ``y`` (sensor px, one per
+    event); those that land outside the window at ``origin`` (``shape_hw``) or nowhere (NaN) are dropped."""
+    x, y = np.rint(x), np.rint(y)
     keep = (x >= origin[0]) & (x < origin[0] + shape_hw[1]) & (y >= origin[1]) & (y < origin[1] + shape_hw[0])
     moved = window[keep]  # (a copy: the caller's events stay as they were)
     moved["x"] = x[keep].astype(np.uint16)

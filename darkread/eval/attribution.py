@@ -69,6 +69,12 @@ class Attribution:
 
 def load_truth(recording: Path) -> PageTruth | None:
     """The recording's truth files, or None when it has none (a real recording)."""
+    loaded = load_truth_and_pose(recording)
+    return None if loaded is None else loaded[0]
+
+
+def load_truth_and_pose(recording: Path) -> tuple[PageTruth, Any] | None:
+    """``load_truth`` and the per-millisecond pose behind its ``pose_at`` (``annotate.PoseTruth``)."""
     from darkread.edge.io.calibration import load_calibration
     from darkread.models.train.annotate import load_pose_truth
 
@@ -78,7 +84,7 @@ def load_truth(recording: Path) -> PageTruth | None:
         return None
     with np.load(ink_path) as z:
         ink, px_per_mm = z["ink"].astype(np.float32), float(z["px_per_mm"])
-    return PageTruth(ink, px_per_mm, pose.at, load_calibration(recording / "calibration.json"))
+    return PageTruth(ink, px_per_mm, pose.at, load_calibration(recording / "calibration.json")), pose
 
 
 def stored_frames(cloud_dir: Path) -> list[Any]:

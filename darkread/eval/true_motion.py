@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from darkread.edge.deblur import moved_to
 from darkread.edge.events import Events
-from darkread.eval.attribution import PageTruth, load_truth
+from darkread.eval.attribution import PageTruth, load_truth_and_pose
 
 
 class NoTruthError(ValueError):
@@ -35,13 +36,12 @@ class TrueHeadMotion:
 
     @classmethod
     def from_recording(cls, recording: str | Path) -> TrueHeadMotion:
-        from darkread.models.train.annotate import load_pose_truth
-
         recording = Path(recording)
-        truth, pose = load_truth(recording), load_pose_truth(recording)
-        if truth is None or pose is None:
+        loaded = load_truth_and_pose(recording)
+        if loaded is None:
             raise NoTruthError(f"{recording}: no simulator truth (pose_truth.npz, page_ink.npz); "
                                "--true-motion reads synthetic recordings only")
+        truth, pose = loaded
         return cls(truth, pose.t_us, pose.H)
 
     def _centre_px(self, t_us: float) -> np.ndarray:
@@ -64,10 +64,4 @@ class TrueHeadMotion:
         page_mm = on_page[:, :2] / on_page[:, 2:3]
         camera = np.c_[page_mm, np.ones(len(page_mm))] @ self.truth.pose_at(float(t[-1])).T
         uv = calib.project(camera / camera[:, 2:3])
-        x, y = np.rint(uv[:, 0]), np.rint(uv[:, 1])
-        keep = np.isfinite(x) & np.isfinite(y)
-        keep &= (x >= origin[0]) & (x < origin[0] + shape_hw[1]) & (y >= origin[1]) & (y < origin[1] + shape_hw[0])
-        moved = window[keep]
-        moved["x"] = x[keep].astype(np.uint16)
-        moved["y"] = y[keep].astype(np.uint16)
-        return moved
+        return moved_to(window, uv[:, 0], uv[:, 1], origin, shape_hw)
