@@ -22,26 +22,34 @@ def _fit_config(args: argparse.Namespace):  # -> FitConfig
     return FitConfig(
         batch_size=args.batch_size, lr=args.lr, time_budget_s=args.minutes * 60, max_epochs=args.epochs,
         threads=args.threads, seed=args.seed, crop=tuple(args.crop) if args.crop[0] > 0 else None,
-        net=NetConfig(head=_head(args)).to_dict(),
+        net=_net_config(args).to_dict(),
         teacher=str(args.teacher) if getattr(args, "teacher", None) else None,
     )
 
 
-def _head(args: argparse.Namespace) -> str:
-    """--head, else the head of the --init network (fine-tuning keeps it), else the default."""
-    head = getattr(args, "head", None)
+def _init_config(args: argparse.Namespace):  # -> NetConfig | None
+    """The shape of the --init network (fine-tuning keeps it), if there is one."""
     init = getattr(args, "init", None)
-    if head is None and init is not None and Path(init).is_file():
-        if str(init).endswith(".onnx"):
-            from darkread.models.train.onnx_weights import onnx_config
+    if init is None or not Path(init).is_file():
+        return None
+    if str(init).endswith(".onnx"):
+        from darkread.models.train.onnx_weights import onnx_config
 
-            return onnx_config(init).head
-        from darkread.models.train.fit import load_model
+        return onnx_config(init)
+    from darkread.models.train.fit import load_model
 
-        return load_model(init).config.head
+    return load_model(init).config
+
+
+def _net_config(args: argparse.Namespace):  # -> NetConfig
+    """--head, --widths and --blocks, each else the --init network's, else the default."""
     from darkread.models.train.net import NetConfig
 
-    return head or NetConfig().head
+    base = _init_config(args) or NetConfig()
+    head = getattr(args, "head", None) or base.head
+    widths = tuple(getattr(args, "widths", None) or base.widths)
+    blocks = tuple(getattr(args, "blocks", None) or base.blocks)
+    return NetConfig(widths=widths, blocks=blocks, head=head)  # type: ignore[arg-type]
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -58,6 +66,11 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
                    help="the network's last stage: shuffle (at half resolution, 2x2 sub-pixel logits by a pixel "
                         "shuffle) or full (at full resolution: a third more time a window); default: the --init "
                         "network's, else shuffle")
+    p.add_argument("--widths", type=_positive_int, nargs=4, default=None, metavar=("FULL", "HALF", "QUARTER", "EIGHTH"),
+                   help="channels at the four scales (default: the --init network's, else 8 16 32 64)")
+    p.add_argument("--blocks", type=_positive_int, nargs=3, default=None, metavar=("HALF", "QUARTER", "EIGHTH"),
+                   help="separable blocks at the three encoder scales (default: the --init network's, else 1 2 4); "
+                        "blocks at 1/8 scale widen the view at little cost a window")
 
 
 def _cmd_fit(args: argparse.Namespace) -> int:

@@ -68,3 +68,20 @@ def test_reproduce_synthesises_missing_sets_then_fits_and_writes_the_card(shard_
     assert made == ["train", "val"]
     assert set(info["timings_s"]) >= {"synthesise train (24 windows)", "synthesise val (6 windows)", "fit", "evaluate"}
     assert (models / "MODEL_CARD.md").is_file() and (models / "binary_unet.onnx").is_file()
+
+
+def test_the_network_shape_comes_from_the_options_else_the_init_network_else_the_default(tmp_path: Path) -> None:
+    from darkread.cli import build_parser
+    from darkread.models.train.cli import _net_config
+    from darkread.models.train.export import export_onnx
+    from darkread.models.train.net import BinaryUNet
+
+    parser = build_parser()
+    assert _net_config(parser.parse_args(["train", "fit"])) == NetConfig()
+    wide = _net_config(parser.parse_args(["train", "fit", "--widths", "8", "16", "32", "96", "--blocks", "1", "2", "8"]))
+    assert wide.widths == (8, 16, 32, 96) and wide.blocks == (1, 2, 8) and wide.head == "shuffle"
+    exported = export_onnx(BinaryUNet(wide).eval(), tmp_path / "wide.onnx")
+    assert _net_config(parser.parse_args(["train", "fit", "--init", str(exported)])) == wide
+    assert _net_config(parser.parse_args(["train", "fit", "--init", str(exported), "--head", "full"])).head == "full"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["train", "fit", "--widths", "8", "16", "0", "64"])
