@@ -76,6 +76,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ds.add_argument("--split", choices=("train", "val"), default="train",
                     help="train: training fonts and texts; val: validation texts, all fonts incl. held-out")
     ds.add_argument("--held-out", action="store_true", help="only the held-out font families")
+    ds.add_argument("--more-fonts", action="store_true",
+                    help="a training set drawn from two more families too (Computer Modern Sans and Roman, "
+                         "matplotlib's): more letter shapes than the three training families")
     ds.add_argument("--shard-size", type=int, default=250, help="samples per shard")
     ds.add_argument("--lux", type=float, nargs=2, metavar=("LOW", "HIGH"),
                     help="light at the page, log-uniform between LOW and HIGH lux (default: the training range, "
@@ -98,6 +101,7 @@ def _dataset(args: argparse.Namespace) -> int:
         held_out=args.held_out,
         shard_size=args.shard_size,
         target_time=args.target_time,
+        more_fonts=args.more_fonts,
         **({"lux_range": (args.lux[0], args.lux[1])} if args.lux else {}),
     )
     print(f"{manifest['samples']} samples in {len(manifest['shards'])} shards -> {args.out} "

@@ -43,6 +43,7 @@ class SessionSpec:
     scanpath_file: str | None = None  # a human scanpath file (default: the shipped oz reader)
     regime: str = "standard"  # "shifted": a sensor and a font training never saw (sensor.REGIMES)
     markers: bool = False  # print the text as a marker page (marker_page.py) instead of a plain page
+    more_fonts: bool = False  # split "train": draw from fonts.MORE_TRAIN_FAMILIES too
 
 
 SCANPATHS = ("model", "human")
@@ -83,7 +84,7 @@ def random_lux(rng: np.random.Generator, lo: float = LUX_RANGE[0], hi: float = L
 def _pick_face(spec: SessionSpec, rng: np.random.Generator) -> FontFace:
     if spec.font is not None:
         return face_by_name(spec.font)
-    split = "held_out" if spec.held_out else ("all" if spec.split == "val" else "train")
+    split = "held_out" if spec.held_out else ("all" if spec.split == "val" else ("train_more" if spec.more_fonts else "train"))
     split = "shifted" if spec.regime == "shifted" else split
     faces = faces_for(split)
     return faces[int(rng.integers(len(faces)))]

@@ -22,7 +22,7 @@ from darkread.edge.fovea import FoveaConfig, window_origin
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 from darkread.mask_bits import pack_rows
 from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
-from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
+from darkread.models.synth.fonts import HELD_OUT_FAMILIES, MORE_TRAIN_FAMILIES, TRAIN_FAMILIES
 from darkread.models.synth.scene import Region, Scene
 from darkread.models.synth.sensor import EventSensor, SensorParams, concat_events
 from darkread.models.synth.session import LUX_RANGE, Session, SessionSpec, choose_dt_us, make_session, random_lux
@@ -234,11 +234,11 @@ def shard_seed(base_seed: int, split: str, held_out: bool, shard_index: int, pag
     return int(ss.generate_state(1, dtype=np.uint32)[0])
 
 
-def build_shard(args: tuple[Path, int, int, int, str, bool, tuple[float, float], str]) -> dict:
+def build_shard(args: tuple[Path, int, int, int, str, bool, tuple[float, float], str, bool]) -> dict:
     """Make shard ``index`` with ``count`` samples (a multiprocessing task)."""
-    out_dir, index, count, base_seed, split, held_out, lux_range, target_time = args
+    out_dir, index, count, base_seed, split, held_out, lux_range, target_time, more_fonts = args
     t0 = time.perf_counter()
-    spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0)
+    spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0, more_fonts=more_fonts)
     parts_v, parts_t, metas = [], [], []
     page = 0
     while len(metas) < count:
@@ -288,10 +288,12 @@ def build_dataset(
     progress: bool = True,
     lux_range: tuple[float, float] = LUX_RANGE,
     target_time: str = "end",
+    more_fonts: bool = False,
 ) -> dict:
     """Write ``samples`` samples as shards plus ``dataset.json``; deterministic for ``seed`` (any worker count).
     ``lux_range``: the light, log-uniform between the two (a low-light set for the dark end, say 4..40);
-    ``target_time``: when each target shows the page (``TARGET_TIMES``)."""
+    ``target_time``: when each target shows the page (``TARGET_TIMES``); ``more_fonts``: a training set
+    drawn from ``MORE_TRAIN_FAMILIES`` too."""
     if target_time not in TARGET_TIMES:
         raise ValueError(f"--target-time {target_time!r}: use one of {', '.join(TARGET_TIMES)}")
     if samples < 1:
@@ -301,11 +303,14 @@ def build_dataset(
         raise ValueError(f"--lux {lo:g} {hi:g}: give two light levels, 0 < LOW <= HIGH")
     if split not in ("train", "val"):
         raise ValueError(f"unknown split {split!r}; use 'train' or 'val'")
+    if more_fonts and (split != "train" or held_out):
+        raise ValueError("--more-fonts is for training sets: not with --split val or --held-out")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n_shards = math.ceil(samples / shard_size)
     tasks = [
-        (out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out), (lo, hi), target_time)
+        (out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out), (lo, hi), target_time,
+         bool(more_fonts))
         for i in range(n_shards)
     ]
     todo = [t for t in tasks if not (out / f"shard-{t[1]:05d}.npz").exists()]
@@ -332,7 +337,8 @@ def build_dataset(
         "held_out_families": list(HELD_OUT_FAMILIES),
         "families_in_this_set": list(HELD_OUT_FAMILIES)
         if held_out
-        else (list(TRAIN_FAMILIES + HELD_OUT_FAMILIES) if split == "val" else list(TRAIN_FAMILIES)),
+        else (list(TRAIN_FAMILIES + HELD_OUT_FAMILIES) if split == "val"
+              else list(TRAIN_FAMILIES + MORE_TRAIN_FAMILIES) if more_fonts else list(TRAIN_FAMILIES)),
     }
     manifest = {
         "format_version": SHARD_FORMAT_VERSION,

@@ -92,3 +92,19 @@ def test_a_reversed_lux_range_is_refused(tmp_path):
 
     with pytest.raises(ValueError, match="0 < LOW <= HIGH"):
         build_dataset(tmp_path, 4, workers=1, seed=5, progress=False, lux_range=(40.0, 4.0))
+
+
+def test_more_fonts_adds_the_computer_modern_families_to_training_sets_only(tmp_path):
+    import pytest
+    from darkread.models.synth.fonts import MORE_TRAIN_FAMILIES
+
+    more = faces_for("train_more")
+    assert more[: len(faces_for("train"))] == faces_for("train")  # the usual faces first: a set's draws stay put
+    assert {f.family for f in more} == set(TRAIN_FAMILIES + MORE_TRAIN_FAMILIES)
+    assert all(f.path.is_file() for f in more)
+    assert not {f.family for f in faces_for("all")} & set(MORE_TRAIN_FAMILIES)  # validation sets unchanged
+    manifest = build_dataset(tmp_path, 16, workers=1, seed=71, shard_size=16, progress=False, more_fonts=True)
+    assert manifest["fonts"]["families_in_this_set"] == list(TRAIN_FAMILIES + MORE_TRAIN_FAMILIES)
+    assert set(load_dataset(tmp_path).meta["font"]) <= {f.name for f in more}
+    with pytest.raises(ValueError, match="--more-fonts is for training sets"):
+        build_dataset(tmp_path / "val", 4, workers=1, split="val", progress=False, more_fonts=True)
