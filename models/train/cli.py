@@ -67,9 +67,9 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
                         "shuffle) or full (at full resolution: a third more time a window); default: the --init "
                         "network's, else shuffle")
     p.add_argument("--widths", type=_positive_int, nargs=4, default=None, metavar=("FULL", "HALF", "QUARTER", "EIGHTH"),
-                   help="channels at the four scales (default: the --init network's, else 8 16 32 64)")
+                   help="channels at the four scales (default: the --init network's, else the shipped one's, 8 16 32 96)")
     p.add_argument("--blocks", type=_positive_int, nargs=3, default=None, metavar=("HALF", "QUARTER", "EIGHTH"),
-                   help="separable blocks at the three encoder scales (default: the --init network's, else 1 2 4); "
+                   help="separable blocks at the three encoder scales (default: the --init network's, else the shipped one's, 1 2 8); "
                         "blocks at 1/8 scale widen the view at little cost a window")
 
 
@@ -444,4 +444,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--train-samples", type=int, default=30000)
     p.add_argument("--val-samples", type=int, default=2000)
     _add_fit_options(p)
-    p.set_defaults(func=_cmd_all)
+    p.set_defaults(func=_cmd_all, minutes=90.0)  # the shipped network's budget

@@ -26,8 +26,10 @@ HEADS: tuple[str, ...] = ("full", "shuffle")
 class NetConfig:
     """Widths of the four scales (full, 1/2, 1/4, 1/8) and separable blocks per encoder scale (1/2, 1/4, 1/8)."""
 
-    widths: tuple[int, int, int, int] = (8, 16, 32, 64)
-    blocks: tuple[int, int, int] = (1, 2, 4)
+    # the shipped network's: the 1/8 scale (13x25 at 100x200) is where width and depth cost least a
+    # window, and its eight blocks see across a word (the network before had 64 wide, four blocks)
+    widths: tuple[int, int, int, int] = (8, 16, 32, 96)
+    blocks: tuple[int, int, int] = (1, 2, 8)
     in_channels: int = INPUT_SHAPE[0]
     # "full": the last decoder stage at full resolution (resize, add the stem, refine, 1x1 head);
     # "shuffle": it stays at half resolution and a 1x1 head gives each pixel's 2x2 sub-pixel logits,

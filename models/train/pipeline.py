@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -140,36 +140,72 @@ def evaluate_and_card(
     return info
 
 
+@dataclass(frozen=True)
+class SetRecipe:
+    """One synthetic set of the shipped network's recipe: ``darkread synth dataset`` with these options."""
+
+    folder: str  # beside the training set's folder (the first set is the training set's folder itself)
+    samples: int
+    seed: int
+    split: str = "train"
+    lux: tuple[float, float] | None = None  # None: the training range, 4-1200 lux
+    more_fonts: bool = False
+
+    def scaled(self, samples: int) -> SetRecipe:
+        return replace(self, samples=max(1, samples))
+
+
+# the shipped network's training sets: the whole light range, then two dim sets of the same scenes,
+# one in the three training families and one in five (`synth dataset --more-fonts`)
+TRAINING_RECIPE: tuple[SetRecipe, ...] = (
+    SetRecipe("train", 30000, 61),
+    SetRecipe("dim", 5000, 71, lux=(4.0, 40.0)),
+    SetRecipe("dim_more_fonts", 5000, 71, lux=(4.0, 40.0), more_fonts=True),
+)
+VALIDATION_RECIPE = SetRecipe("val", 2000, 2, split="val")
+
+
+def training_sets(train_dir: str | Path, train_samples: int = TRAINING_RECIPE[0].samples) -> list[tuple[Path, SetRecipe]]:
+    """Where each set of the recipe lives and how many windows it has: the first in ``train_dir``, the
+    others beside it; ``train_samples`` scales them all alike (a smaller reproduction keeps the mix)."""
+    first = Path(train_dir)
+    scale = train_samples / TRAINING_RECIPE[0].samples
+    return [(first if i == 0 else first.parent / r.folder, r.scaled(round(r.samples * scale)))
+            for i, r in enumerate(TRAINING_RECIPE)]
+
+
 def reproduce(
     train_dir: str | Path, val_dir: str | Path, run_dir: str | Path = DEFAULT_RUN_DIR, *,
-    config: FitConfig | None = None, train_samples: int = 30000, val_samples: int = 2000, workers: int = 2,
+    config: FitConfig | None = None, train_samples: int = TRAINING_RECIPE[0].samples,
+    val_samples: int = VALIDATION_RECIPE.samples, workers: int = 2,
     models_dir: str | Path = MODELS_DIR, figure: str | Path | None = FIGURE_PATH,
 ) -> dict[str, Any]:
-    """Synthetic dataset (if absent) -> fit -> export -> int8 -> evaluate -> model card."""
+    """The recipe's synthetic sets (those absent) -> fit on their mix -> export -> int8 -> evaluate -> model card."""
     from darkread.models.train.data import shard_paths
 
     timings: dict[str, float] = {}
-    for split, root, n in (("train", train_dir, train_samples), ("val", val_dir, val_samples)):
+    sets = training_sets(train_dir, train_samples)
+    for root, recipe in [*sets, (Path(val_dir), VALIDATION_RECIPE.scaled(val_samples))]:
         try:
             shard_paths(root)
             continue
         except FileNotFoundError:
             pass
         started = time.monotonic()
-        generate_dataset(split, root, n, workers)
-        timings[f"synthesise {split} ({n} windows)"] = time.monotonic() - started
+        generate_dataset(recipe, root, workers)
+        timings[f"synthesise {root.name} ({recipe.samples} windows)"] = time.monotonic() - started
     started = time.monotonic()
     config = config or FitConfig()
-    fit(train_dir, run_dir, config)
+    fit([root for root, _ in sets], run_dir, config)
     timings["fit"] = time.monotonic() - started
     log.info("fit config: %s", asdict(config))
     return finish(run_dir, train_dir, val_dir, models_dir=models_dir, timings=timings, figure=figure)
 
 
-def generate_dataset(split: str, root: str | Path, samples: int, workers: int) -> None:
-    """Make a synthetic split as ``darkread synth dataset`` does (train seed 1, val seed 2)."""
+def generate_dataset(recipe: SetRecipe, root: str | Path, workers: int) -> None:
+    """Make one set of the recipe as ``darkread synth dataset`` does."""
     from darkread.models.synth.shards import build_dataset
 
-    seed = 1 if split == "train" else 2
-    log.info("generating %s set: %d samples, seed %d, %d workers -> %s", split, samples, seed, workers, root)
-    build_dataset(root, samples, workers=workers, seed=seed, split=split)
+    log.info("generating %s: %s, %d workers -> %s", recipe.folder, recipe, workers, root)
+    build_dataset(root, recipe.samples, workers=workers, seed=recipe.seed, split=recipe.split,
+                  **({"lux_range": recipe.lux} if recipe.lux else {}), more_fonts=recipe.more_fonts)

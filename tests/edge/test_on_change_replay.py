@@ -24,8 +24,8 @@ pytestmark = pytest.mark.skipif(
 # classifier, the trigger, the window) and by whether a frame agreed with its view (a match score
 # far from the settled threshold on this sample), so the same on any CPU.
 SAMPLE_VIEWS = 13
-SAMPLE_FRAMES = 27  # (26 before the frames looked above and below the window, 28 before doubtful frames stopped settling views,
-# 32 with the previous network: the shipped one is surer of its frames at its own ink temperature)
+SAMPLE_FRAMES = 26  # with the shipped network (27 with the one before it, binary_unet_previous.onnx; 26 before the frames
+# looked above and below the window, 28 before doubtful frames stopped settling views, 32 with binary_unet_full.onnx)
 
 
 def replay(slice_us: int | None) -> tuple[list[ViewRecord], dict[str, int]]:

@@ -190,8 +190,10 @@ def test_a_bad_stored_temperature_is_one_clear_error(random_model: Path, tmp_pat
 
 @shipped
 def test_the_shipped_networks_carry_the_temperatures_they_were_read_at() -> None:
-    """The distilled half-resolution network is read at T = 1; the previous one (no metadata) at 1.5."""
+    """The shipped network is read at T = 1.5 (stored), the one before it at 1.0 (stored), the first one
+    (no metadata) at 1.5."""
     shipped_model = default_model_path()
-    assert Reconstructor(shipped_model, warmup=0).temperature == 1.0
-    assert Reconstructor(shipped_model.with_name("binary_unet_int8.onnx"), warmup=0).temperature == 1.0
+    assert Reconstructor(shipped_model, warmup=0).temperature == 1.5
+    assert Reconstructor(shipped_model.with_name("binary_unet_int8.onnx"), warmup=0).temperature == 1.5
+    assert Reconstructor(shipped_model.with_name("binary_unet_previous.onnx"), warmup=0).temperature == 1.0
     assert Reconstructor(shipped_model.with_name("binary_unet_full.onnx"), warmup=0).temperature == 1.5

@@ -54,10 +54,10 @@ def test_reproduce_synthesises_missing_sets_then_fits_and_writes_the_card(shard_
 
     made: list[str] = []
 
-    def fake_generate(split: str, root, samples: int, workers: int) -> None:
+    def fake_generate(recipe, root, workers: int) -> None:
         Path(root).mkdir(parents=True)
-        shard_writer(Path(root) / "shard-00000.npz", samples, seed=len(made))
-        made.append(split)
+        shard_writer(Path(root) / "shard-00000.npz", recipe.samples, seed=len(made))
+        made.append((Path(root).name, recipe.samples, recipe.lux, recipe.more_fonts))
 
     monkeypatch.setattr(pipeline, "generate_dataset", fake_generate)
     config = FitConfig(batch_size=8, warmup_steps=1, max_epochs=1, threads=1, validation_samples=4,
@@ -65,8 +65,10 @@ def test_reproduce_synthesises_missing_sets_then_fits_and_writes_the_card(shard_
     models = tmp_path / "models"
     info = pipeline.reproduce(tmp_path / "train", tmp_path / "val", tmp_path / "run", config=config,
                               train_samples=24, val_samples=6, models_dir=models, figure=None)
-    assert made == ["train", "val"]
-    assert set(info["timings_s"]) >= {"synthesise train (24 windows)", "synthesise val (6 windows)", "fit", "evaluate"}
+    dim = (4.0, 40.0)
+    assert made == [("train", 24, None, False), ("dim", 4, dim, False), ("dim_more_fonts", 4, dim, True), ("val", 6, None, False)]
+    assert set(info["timings_s"]) >= {"synthesise train (24 windows)", "synthesise dim (4 windows)", "synthesise val (6 windows)",
+                                      "fit", "evaluate"}
     assert (models / "MODEL_CARD.md").is_file() and (models / "binary_unet.onnx").is_file()
 
 
