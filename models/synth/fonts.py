@@ -64,21 +64,40 @@ def _matplotlib_ttf_dir() -> Path:
     return Path(matplotlib.get_data_path()) / "fonts" / "ttf"
 
 
+FONT_SPLITS = ("train", "train_more", "held_out", "all", "shifted")
+
+
+def families_of(split: str) -> tuple[str, ...]:
+    """The families of a font split: ``"train"``, ``"held_out"`` or ``"shifted"`` (``"all"``: train and
+    held out; ``"train_more"``: the training families and ``MORE_TRAIN_FAMILIES``)."""
+    families = {
+        "train": TRAIN_FAMILIES,
+        "train_more": TRAIN_FAMILIES + MORE_TRAIN_FAMILIES,
+        "held_out": HELD_OUT_FAMILIES,
+        "all": TRAIN_FAMILIES + HELD_OUT_FAMILIES,
+        "shifted": SHIFTED_FAMILIES,
+    }.get(split)
+    if families is None:
+        raise ValueError(f"unknown font split {split!r}; use {', '.join(repr(s) for s in FONT_SPLITS)}")
+    return tuple(families)
+
+
+def font_split(text_split: str, held_out: bool = False, more_fonts: bool = False, regime: str = "standard") -> str:
+    """Which font split a synthetic set draws from: the held-out families when asked, all families for
+    validation, the training ones (with ``MORE_TRAIN_FAMILIES`` on request) for training; the shifted
+    regime has its own."""
+    if regime == "shifted":
+        return "shifted"
+    if held_out:
+        return "held_out"
+    if text_split == "val":
+        return "all"
+    return "train_more" if more_fonts else "train"
+
+
 def faces_for(split: str) -> tuple[FontFace, ...]:
-    """Faces of the ``"train"``, ``"held_out"`` or ``"shifted"`` families (``"all"``: train and held out;
-    ``"train_more"``: the training families and ``MORE_TRAIN_FAMILIES``), in ``FACES`` order."""
-    if split == "train":
-        families = TRAIN_FAMILIES
-    elif split == "train_more":
-        families = TRAIN_FAMILIES + MORE_TRAIN_FAMILIES
-    elif split == "held_out":
-        families = HELD_OUT_FAMILIES
-    elif split == "all":
-        families = TRAIN_FAMILIES + HELD_OUT_FAMILIES
-    elif split == "shifted":
-        families = SHIFTED_FAMILIES
-    else:
-        raise ValueError(f"unknown font split {split!r}; use 'train', 'train_more', 'held_out', 'shifted' or 'all'")
+    """Faces of a font split (``families_of``), in ``FACES`` order."""
+    families = families_of(split)
     return tuple(f for f in FACES if f.family in families)
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.camera import random_calibration
-from darkread.models.synth.fonts import FontFace, face_by_name, faces_for
+from darkread.models.synth.fonts import FontFace, face_by_name, faces_for, font_split
 from darkread.models.synth.gaze import Scanpath, TrackerModel, reading_scanpath
 from darkread.models.synth.motion import MOTION_LEVELS, random_motion
 from darkread.models.synth.page import PrintedPage, reflectance, render_page
@@ -84,9 +84,7 @@ def random_lux(rng: np.random.Generator, lo: float = LUX_RANGE[0], hi: float = L
 def _pick_face(spec: SessionSpec, rng: np.random.Generator) -> FontFace:
     if spec.font is not None:
         return face_by_name(spec.font)
-    split = "held_out" if spec.held_out else ("all" if spec.split == "val" else ("train_more" if spec.more_fonts else "train"))
-    split = "shifted" if spec.regime == "shifted" else split
-    faces = faces_for(split)
+    faces = faces_for(font_split(spec.split, spec.held_out, spec.more_fonts, spec.regime))
     return faces[int(rng.integers(len(faces)))]
 
 

@@ -22,7 +22,7 @@ from darkread.edge.fovea import FoveaConfig, window_origin
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 from darkread.mask_bits import pack_rows
 from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
-from darkread.models.synth.fonts import HELD_OUT_FAMILIES, MORE_TRAIN_FAMILIES, TRAIN_FAMILIES
+from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES, families_of, font_split
 from darkread.models.synth.scene import Region, Scene
 from darkread.models.synth.sensor import EventSensor, SensorParams, concat_events
 from darkread.models.synth.session import LUX_RANGE, Session, SessionSpec, choose_dt_us, make_session, random_lux
@@ -332,13 +332,10 @@ def build_dataset(
                 bar.update(res["count"])
     bar.close()
     elapsed = time.perf_counter() - t0
-    font_split = {
+    fonts_of_the_set = {
         "train_families": list(TRAIN_FAMILIES),
         "held_out_families": list(HELD_OUT_FAMILIES),
-        "families_in_this_set": list(HELD_OUT_FAMILIES)
-        if held_out
-        else (list(TRAIN_FAMILIES + HELD_OUT_FAMILIES) if split == "val"
-              else list(TRAIN_FAMILIES + MORE_TRAIN_FAMILIES) if more_fonts else list(TRAIN_FAMILIES)),
+        "families_in_this_set": list(families_of(font_split(split, held_out, more_fonts))),
     }
     manifest = {
         "format_version": SHARD_FORMAT_VERSION,
@@ -348,7 +345,7 @@ def build_dataset(
         "seed": int(seed),
         "split": split,
         "held_out": bool(held_out),
-        "fonts": font_split,
+        "fonts": fonts_of_the_set,
         "text_split": "val" if split == "val" else "train",
         "voxel": {"bins": VOXEL.bins, "n_events": N_EVENTS, "height": VOXEL.height, "width": VOXEL.width,
                   "normalize": VOXEL.normalize},

@@ -32,12 +32,12 @@ def _init_config(args: argparse.Namespace):  # -> NetConfig | None
     init = getattr(args, "init", None)
     if init is None or not Path(init).is_file():
         return None
-    if str(init).endswith(".onnx"):
+    from darkread.models.train.fit import is_exported_network, load_model
+
+    if is_exported_network(init):
         from darkread.models.train.onnx_weights import onnx_config
 
         return onnx_config(init)
-    from darkread.models.train.fit import load_model
-
     return load_model(init).config
 
 
@@ -257,10 +257,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_all(args: argparse.Namespace) -> int:
-    from darkread.models.train.pipeline import reproduce
+    from darkread.models.train.pipeline import TRAINING_RECIPE, VALIDATION_RECIPE, reproduce
 
     info = reproduce(args.train_dir, args.val_dir, args.run_dir, config=_fit_config(args),
-                     train_samples=args.train_samples, val_samples=args.val_samples, workers=args.threads)
+                     train_samples=args.train_samples or TRAINING_RECIPE[0].samples,
+                     val_samples=args.val_samples or VALIDATION_RECIPE.samples, workers=args.threads)
     print(json.dumps({"overall": info["report"]["overall"], "timings_s": info["timings_s"]}, indent=1))
     return 0
 
@@ -441,7 +442,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser("all", help="reproduce the shipped model from scratch: synth -> fit -> export -> int8 -> evaluate -> card")
     p.add_argument("--train-dir", type=Path, default=DEFAULT_TRAIN)
     p.add_argument("--val-dir", type=Path, default=DEFAULT_VAL)
-    p.add_argument("--train-samples", type=int, default=30000)
-    p.add_argument("--val-samples", type=int, default=2000)
+    p.add_argument("--train-samples", type=_positive_int, metavar="N",
+                   help="windows of the recipe's first training set; its other sets are scaled alike "
+                        "(default: the recipe's, pipeline.TRAINING_RECIPE)")
+    p.add_argument("--val-samples", type=_positive_int, metavar="N",
+                   help="validation windows (default: the recipe's, pipeline.VALIDATION_RECIPE)")
     _add_fit_options(p)
     p.set_defaults(func=_cmd_all, minutes=90.0)  # the shipped network's budget

@@ -108,3 +108,15 @@ def test_more_fonts_adds_the_computer_modern_families_to_training_sets_only(tmp_
     assert set(load_dataset(tmp_path).meta["font"]) <= {f.name for f in more}
     with pytest.raises(ValueError, match="--more-fonts is for training sets"):
         build_dataset(tmp_path / "val", 4, workers=1, split="val", progress=False, more_fonts=True)
+
+
+def test_a_sets_font_split_is_named_once_for_sessions_and_manifests():
+    import pytest
+    from darkread.models.synth.fonts import SHIFTED_FAMILIES, families_of, font_split
+
+    assert font_split("train") == "train" and font_split("train", more_fonts=True) == "train_more"
+    assert font_split("val") == "all" and font_split("train", held_out=True) == "held_out"
+    assert font_split("val", regime="shifted") == "shifted" and families_of("shifted") == SHIFTED_FAMILIES
+    assert families_of("all") == TRAIN_FAMILIES + HELD_OUT_FAMILIES
+    with pytest.raises(ValueError, match="unknown font split 'bold'"):
+        families_of("bold")
