@@ -316,9 +316,6 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
 def attribution_section(out_dir: str | Path) -> list[str]:
     """The report's "Where the errors come from" section: ``attribution.md`` beside it (written by
     ``darkread eval attribute``), without its title; nothing when there is none."""
-    path = Path(out_dir) / ATTRIBUTION_NAME
-    if not path.is_file():
-        return []
-    body = path.read_text(encoding="utf-8").splitlines()
-    body = body[1:] if body and body[0].startswith("# ") else body
-    return ["## Where the errors come from", *body, ""]
+    from darkread.eval.tables import page_as_section
+
+    return page_as_section(Path(out_dir) / ATTRIBUTION_NAME, "Where the errors come from")

@@ -16,7 +16,7 @@ logger = logging.getLogger(__name__)
 BOTH = "both"
 
 EVAL_HELP = """\
-Four forms:
+Five forms:
 
   darkread eval make-suite OUT [--small | --subset simulator-check] [--simulator darkread|hesim] [--font FAMILY] [--jobs N]
       write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
@@ -54,6 +54,14 @@ Four forms:
       printed and written to --out (a .md file, or a folder: FOLDER/attribution.md) with the
       per-recording figures beside it (.json). --model: the network the suite was evaluated with.
 
+  darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]
+      how much of the ink the events themselves show, the bound on what any network can draw: for
+      windows of each synthetic recording cut as the edge cuts them (1600 events, and 3200 and 6400:
+      what temporal context could gather), with the head's motion as the edge measures it and known
+      exactly, the chance that an ink pixel has more events than a paper pixel, and the share of
+      ink with an event within 1 px; by lux and motion, written to --out (a .md file, or a folder:
+      FOLDER/evidence.md) with the per-recording figures beside it (.json). Needs no evaluation.
+
   Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
   PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
   default SUITE_DIR/eval_runs/<mode>), and the report puts the other mode beside the default:
@@ -69,7 +77,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
         description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]",
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]\n       darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
@@ -121,6 +129,8 @@ def _run(args: argparse.Namespace) -> int:
         return _compare_simulators(args)
     if args.target == "attribute":
         return _attribute(args)
+    if args.target == "evidence":
+        return _evidence(args)
     if args.second_suite is not None:
         raise ValueError(f"unexpected argument {args.second_suite!r}")
     if args.target == "make-suite":
@@ -170,6 +180,19 @@ def _attribute(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out = out / ATTRIBUTION_NAME if out.suffix != ".md" else out
     path = write_attribution(suite, work, out, backend=args.backend, notes=args.note, model=args.model)
+    print(path.read_text())
+    return 0
+
+
+def _evidence(args: argparse.Namespace) -> int:
+    from darkread.eval.evidence import write_evidence
+
+    if not args.make_suite_out or args.second_suite is not None:
+        raise ValueError("give one suite: darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]")
+    suite = Path(args.make_suite_out)
+    if not suite.is_dir():
+        raise FileNotFoundError(f"{suite}: no such suite directory")
+    path = write_evidence(suite, args.out, jobs=max(1, args.jobs))
     print(path.read_text())
     return 0
 

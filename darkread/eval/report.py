@@ -18,6 +18,7 @@ from typing import Any
 
 from darkread.eval.aggregate import held_out_fonts, mean, paired, sweep_subset
 from darkread.eval.attribution import attribution_section
+from darkread.eval.evidence import evidence_section
 from darkread.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
 from darkread.eval.provenance import ReportInfo, run_commits
 from darkread.eval.results import RecordingResult
@@ -130,6 +131,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         "",
         *simulator_section(out),
         *attribution_section(out),
+        *evidence_section(out),
         "By motion (left darkread, right the RGB snapshot: exposure lengthens as light falls, so motion blur grows):",
         "",
         "![CER vs lux by motion](cer_vs_lux_by_motion.png)",

@@ -119,9 +119,6 @@ def write_comparison(first_suite: str | Path, second_suite: str | Path, out: str
 def simulator_section(out_dir: str | Path) -> list[str]:
     """The report's "Second simulator" section: the comparison page beside it (``simulators.md``,
     written by ``compare-simulators``), without its title; nothing when there is none."""
-    path = Path(out_dir) / SIMULATORS_NAME
-    if not path.is_file():
-        return []
-    body = path.read_text().splitlines()
-    body = body[1:] if body and body[0].startswith("# ") else body
-    return ["## Second simulator", *body, ""]
+    from darkread.eval.tables import page_as_section
+
+    return page_as_section(Path(out_dir) / SIMULATORS_NAME, "Second simulator")

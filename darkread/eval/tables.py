@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 from darkread.eval.aggregate import backend_names, bandwidth_rows, group_by, mean, median
@@ -16,6 +17,17 @@ from darkread.eval.bandwidth import (
 from darkread.eval.results import Bandwidth, RecordingResult
 
 PAPER_CER_30LUX, PAPER_WER_30LUX = 0.025, 0.083  # GPT-4o on real 30-lux recordings (the paper's headline)
+
+
+def page_as_section(path: str | Path, title: str) -> list[str]:
+    """A Markdown page written beside the report (``attribution.md``, ``simulators.md``, ...) as one
+    of its sections: under ``title``, without its own title; nothing when there is no such page."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    body = path.read_text(encoding="utf-8").splitlines()
+    body = body[1:] if body and body[0].startswith("# ") else body
+    return [f"## {title}", *body, ""]
 
 
 def pct(value: float | None) -> str:
