@@ -201,6 +201,9 @@ def write_evidence(suite: str | Path, out: str | Path, *, lengths: Sequence[int]
                 bar.update()
     bar.close()
     kept = [r for r in rows if r is not None]
+    if not kept:
+        raise ValueError(f"{suite}: no recording carries the simulator's truth (pose_truth.npz, page_ink.npz); "
+                         "the evidence needs synthetic recordings (`darkread eval make-suite`)")
     lines = [
         "# How much of the ink the events show",
         "",

@@ -69,5 +69,9 @@ def test_a_synthetic_recordings_events_show_its_ink(tmp_path) -> None:
     assert main(["eval", "evidence", str(tmp_path / "missing")]) == 1  # one error line, not a traceback
 
 
-def test_a_recording_without_the_simulators_truth_has_no_evidence(tiny_recording) -> None:
+def test_a_recording_without_the_simulators_truth_has_no_evidence(tiny_recording, capsys) -> None:
+    from darkread.cli import main
+
     assert recording_evidence(tiny_recording) is None
+    assert main(["eval", "evidence", str(tiny_recording.parent), "--out", str(tiny_recording.parent / "e.md")]) == 1
+    assert "no recording carries the simulator's truth" in capsys.readouterr().err
