@@ -106,6 +106,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--simulator", choices=["darkread", "hesim"], default="darkread",
                         help="make-suite: what turns the rendered scenes into events: darkread (our sensor model, "
                              "default) or hesim (hesim-3d's H-ESIM, IMX636 preset; `make hesim` installs it)")
+    parser.add_argument("--regime", default="standard", metavar="REGIME",
+                        help="make-suite: our simulator's sensor regime (default standard); fast-photoreceptor: the same "
+                             "scenes and sensors with a photoreceptor that keeps up in the dark (~1 ms at 5 lux, the "
+                             "IMX636's stated latency read as scene light; standard: 4-50 ms): what that choice decides")
     parser.add_argument("--font", metavar="FAMILY",
                         help="make-suite: every selected recording not already in this font family made again in it "
                              "(same seed, light, motion, text kind and x-height; named <name-in-FAMILY>_as_<old family>), "
@@ -146,7 +150,7 @@ def _make_suite(args: argparse.Namespace) -> int:
     if not args.make_suite_out:
         raise ValueError("give the output folder: darkread eval make-suite OUT [--small]")
     entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
-                         subset=args.subset, simulator=args.simulator, font=args.font)
+                         subset=args.subset, simulator=args.simulator, font=args.font, regime=args.regime)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
     return 0
 

@@ -56,6 +56,7 @@ class SuiteEntry:
     split: str = "val"
     scanpath: str = "model"  # "human": the shipped real reader's fixations replayed on the page
     simulator: str = "darkread"  # "hesim": the same scene turned into events by hesim-3d (models/synth/hesim_sensor.py)
+    regime: str = "standard"  # our simulator's sensor regime (sensor.REGIMES), e.g. "fast-photoreceptor"
 
     def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
         from darkread.models.synth.recording import RecordingSpec
@@ -64,7 +65,7 @@ class SuiteEntry:
             lux=self.lux, motion=self.motion, kind=self.kind, seconds=self.seconds, seed=self.seed, font=self.font,
             xheight_px=self.xheight_px, n_lines=self.n_lines, line_chars=self.line_chars,
             description=f"darkread evaluation suite: {self.name}", split=self.split, read_once=self.read_once,
-            scanpath=self.scanpath, simulator=self.simulator,
+            scanpath=self.scanpath, simulator=self.simulator, regime=self.regime,
         )
 
 
@@ -159,10 +160,10 @@ def _slug(family: str) -> str:
 
 
 def select_entries(*, small: bool = False, match: str | Sequence[str] | None = None, subset: str | None = None,
-                   simulator: str = "darkread", font: str | None = None) -> list[SuiteEntry]:
+                   simulator: str = "darkread", font: str | None = None, regime: str = "standard") -> list[SuiteEntry]:
     """The recordings ``make_suite`` writes, in order (its arguments, checked there)."""
     entries = simulator_check_entries() if subset == "simulator-check" else suite_entries(small=small)
-    entries = [replace(e, simulator=simulator) for e in entries]
+    entries = [replace(e, simulator=simulator, regime=regime) for e in entries]
     if match:
         from fnmatch import fnmatch
 
@@ -178,14 +179,15 @@ def select_entries(*, small: bool = False, match: str | Sequence[str] | None = N
 def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
     match: str | Sequence[str] | None = None, subset: str | None = None, simulator: str = "darkread",
-    font: str | None = None,
+    font: str | None = None, regime: str = "standard",
 ) -> list[SuiteEntry]:
     """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
     ``spec.json`` matches) are kept, so an interrupted run resumes. ``match``: only the recordings
     whose name matches this shell pattern (e.g. ``*lux30_*_human``), or any of several; ``subset``: a named part of the
     full suite (``simulator-check``); ``simulator``: what turns the scenes into events; ``font``: every
     selected recording not already in this family made again in it (``in_font``), to tell what a
-    font costs from what a scene does."""
+    font costs from what a scene does; ``regime``: our simulator's sensor regime (the same scenes and
+    draws; ``fast-photoreceptor``: what the photoreceptor's speed in the dark decides)."""
     from tqdm import tqdm
 
     from darkread.jobs import run_jobs
@@ -198,6 +200,12 @@ def make_suite(
 
     if simulator not in SIMULATORS:
         raise ValueError(f"--simulator {simulator!r}: use one of {', '.join(SIMULATORS)}")
+    from darkread.models.synth.sensor import REGIMES
+
+    if regime not in REGIMES:
+        raise ValueError(f"--regime {regime!r}: use one of {', '.join(REGIMES)}")
+    if regime != "standard" and simulator != "darkread":
+        raise ValueError(f"--regime {regime} is our simulator's; leave out --simulator {simulator}")
     if subset is not None and subset not in SUBSETS:
         raise ValueError(f"--subset {subset!r}: use one of {', '.join(SUBSETS)}")
     if subset is not None and small:
@@ -209,10 +217,10 @@ def make_suite(
             raise ValueError(f"--simulator hesim: {reason}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    entries = select_entries(small=small, match=match, subset=subset, simulator=simulator, font=font)
+    entries = select_entries(small=small, match=match, subset=subset, simulator=simulator, font=font, regime=regime)
     entries = entries[:only]
     (out / SUITE_NAME).write_text(
-        json.dumps({"small": small, "subset": subset, "simulator": simulator, "font": font, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        json.dumps({"small": small, "subset": subset, "simulator": simulator, "regime": regime, "font": font, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )
     bar = tqdm(total=len(entries), desc="recordings", unit="rec", disable=not progress)

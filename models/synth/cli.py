@@ -13,6 +13,8 @@ KINDS = ("letters", "words", "pangram", "paragraph")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from darkread.models.synth.sensor import REGIMES
+
     synth = subparsers.add_parser(
         "synth",
         help="make synthetic reading recordings and training shards",
@@ -49,10 +51,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     rec.add_argument("--scanpath-file", default=None, metavar="FILE.json",
                      help="with --scanpath human: another human scanpath (the form of "
                           "models/synth/data/human_scanpath_oz.json; see models/synth/human_scanpath.py)")
-    rec.add_argument("--regime", choices=("standard", "shifted"), default="standard",
-                     help="sensor regime: standard (what training saw) or shifted (higher, more spread thresholds, a "
+    rec.add_argument("--regime", choices=REGIMES, default="standard",
+                     help="sensor regime: standard (what training saw), shifted (higher, more spread thresholds, a "
                           "faster photoreceptor in the dark, more shot noise, leak and hot pixels, and a font never used in training: "
-                          "the stand-in for a real camera when adapting the model)")
+                          "the stand-in for a real camera when adapting the model) or fast-photoreceptor (standard, but the "
+                          "photoreceptor keeps up in the dark: ~1 ms at 5 lux instead of 4-50 ms)")
     rec.add_argument("--markers", action="store_true",
                      help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "
                           "page.layout.json (every recording carries the simulator's true page pose per millisecond, "

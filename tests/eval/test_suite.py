@@ -211,3 +211,22 @@ def test_cli_make_suite_with_a_font(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert main(["eval", "make-suite", str(tmp_path / "s"), "--match", "*_lux5_*", "--font", "DejaVu Sans",
                  "--limit", "0"]) == 0
     assert "0 recordings" in capsys.readouterr().out
+
+
+def test_a_suite_in_another_sensor_regime_is_the_same_scenes() -> None:
+    from darkread.eval.suite import select_entries, spec_document
+
+    standard = select_entries(match="*_lux5_*")
+    fast = select_entries(match="*_lux5_*", regime="fast-photoreceptor")
+    assert [e.name for e in fast] == [e.name for e in standard] and all(e.regime == "fast-photoreceptor" for e in fast)
+    assert spec_document(standard[0])["regime"] == "standard"  # what the suites written so far hold
+    doc = spec_document(fast[0])
+    assert doc["regime"] == "fast-photoreceptor" and {k: v for k, v in doc.items() if k != "regime"} == {
+        k: v for k, v in spec_document(standard[0]).items() if k != "regime"}
+
+
+def test_make_suite_refuses_an_unknown_regime_or_one_for_the_other_simulator(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="--regime 'bright'"):
+        make_suite(tmp_path, regime="bright", progress=False)
+    with pytest.raises(ValueError, match="leave out --simulator hesim"):
+        make_suite(tmp_path, regime="fast-photoreceptor", simulator="hesim", progress=False)

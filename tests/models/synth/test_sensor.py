@@ -85,3 +85,29 @@ def test_background_events_stay_outside_the_simulated_region():
     inside = (ev["x"] >= 100) & (ev["x"] < 300) & (ev["y"] >= 100) & (ev["y"] < 200)
     assert not inside.any()
     assert np.all(np.diff(ev["t"]) >= 0) and ev["t"].min() >= 1_000 and ev["t"].max() < 101_000
+
+
+def test_the_fast_photoreceptor_regime_is_the_standard_draw_with_a_faster_photoreceptor_in_the_dark():
+    from dataclasses import asdict
+
+    from darkread.models.synth.sensor import random_sensor_params, regime_sensor_params
+
+    standard = random_sensor_params(np.random.default_rng(7), 5.0)
+    fast_rng = np.random.default_rng(7)
+    fast = regime_sensor_params("fast-photoreceptor", fast_rng, 5.0)
+    used = np.random.default_rng(7)
+    random_sensor_params(used, 5.0)
+    assert fast_rng.random() == used.random()  # the same random numbers used: the rest of the scene stays put
+    same = {k: v for k, v in asdict(fast).items() if k not in ("cutoff_hz", "cutoff_half_lux")}
+    assert same == {k: v for k, v in asdict(standard).items() if k not in ("cutoff_hz", "cutoff_half_lux")}
+    assert math.isclose(fast.cutoff_hz, 2.5 * standard.cutoff_hz) and math.isclose(fast.cutoff_half_lux, standard.cutoff_half_lux / 5)
+
+    def time_constant_ms(p, irradiance=0.85 * 5.0):  # a paper pixel at 5 lux
+        return 1e3 / (2 * math.pi * p.cutoff_hz * irradiance / (irradiance + p.cutoff_half_lux))
+
+    assert time_constant_ms(fast) < time_constant_ms(standard) / 5
+    # over the draws: the standard photoreceptor answers in 4-50 ms at 5 lux, the fast one in 0.4-4.2 ms
+    taus = [(time_constant_ms(random_sensor_params(np.random.default_rng(s), 5.0)),
+             time_constant_ms(regime_sensor_params("fast-photoreceptor", np.random.default_rng(s), 5.0))) for s in range(200)]
+    assert 3.5 < min(t for t, _ in taus) and max(t for t, _ in taus) < 51
+    assert 0.35 < min(f for _, f in taus) and max(f for _, f in taus) < 4.3
