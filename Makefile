@@ -10,7 +10,7 @@ EXTRAS ?= edge,cloud,dev,train,gaze,hesim
 HESIM  := hesim-3d==0.1.0
 PYTEST_ARGS ?=  # e.g. make test PYTEST_ARGS="-m postgres"
 
-.PHONY: help venv hesim test test-fast bench demo eval eval-small eval-hesim train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
+.PHONY: help venv hesim test test-fast bench demo eval eval-small eval-hesim eval-photoreceptor train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
@@ -74,8 +74,9 @@ bench: $(STAMP) postgres-deps  ## benchmarks; prints a table and writes bench.js
 demo: $(STAMP) speech-deps  ## read the shipped sample recording aloud and compare with its printed text
 	$(VENV)/bin/darkread read --demo --say
 
-eval: $(STAMP)  ## the full suite (93 recordings) in both edge modes (~30 min on 2 cores, half of it making the suite): report in docs/eval, the default mode first
+eval: $(STAMP)  ## the full suite (93 recordings) in both edge modes (~30 min on 2 cores, half of it making the suite): report in docs/eval, the default mode first, with how much ink the events show
 	$(VENV)/bin/darkread eval make-suite runs/eval_suite --jobs 2
+	$(VENV)/bin/darkread eval evidence runs/eval_suite --out docs/eval --jobs 2
 	$(VENV)/bin/darkread eval runs/eval_suite --out docs/eval --infer both --jobs 2
 
 eval-small: $(STAMP)  ## the small suite (17 recordings) in both edge modes (a few minutes); report in runs/eval_small_report
@@ -88,6 +89,11 @@ eval-hesim: hesim  ## the second-simulator check: 18 recordings of the suite mad
 	$(VENV)/bin/darkread eval runs/eval_hesim/darkread --out runs/eval_hesim/report_darkread --jobs 2
 	$(VENV)/bin/darkread eval runs/eval_hesim/hesim --out runs/eval_hesim/report_hesim --no-rgb --compare --jobs 2
 	$(VENV)/bin/darkread eval compare-simulators runs/eval_hesim/darkread runs/eval_hesim/hesim --out docs/eval/simulators.md
+
+eval-photoreceptor: $(STAMP)  ## what the photoreceptor's speed in the dark decides: the suite's 27 recordings at 10 and 5 lux made again with --regime fast-photoreceptor, read in both edge modes (~10 min on 2 cores); report and evidence in runs/eval_photoreceptor_report (models/MODEL_CARD.md)
+	$(VENV)/bin/darkread eval make-suite runs/eval_photoreceptor --regime fast-photoreceptor --match '*_lux10_*' --match '*_lux5_*' --jobs 2
+	$(VENV)/bin/darkread eval evidence runs/eval_photoreceptor --out runs/eval_photoreceptor_report --jobs 2
+	$(VENV)/bin/darkread eval runs/eval_photoreceptor --out runs/eval_photoreceptor_report --infer both --no-rgb --jobs 2
 
 train: $(STAMP)  ## reproduce the shipped model from scratch
 	$(VENV)/bin/darkread train all
