@@ -32,6 +32,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from darkread.eval.tables import page_as_section
+
 log = logging.getLogger(__name__)
 
 ATTRIBUTION_NAME = "attribution.md"
@@ -316,6 +318,4 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
 def attribution_section(out_dir: str | Path) -> list[str]:
     """The report's "Where the errors come from" section: ``attribution.md`` beside it (written by
     ``darkread eval attribute``), without its title; nothing when there is none."""
-    from darkread.eval.tables import page_as_section
-
     return page_as_section(Path(out_dir) / ATTRIBUTION_NAME, "Where the errors come from")

@@ -73,6 +73,8 @@ Five forms:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from darkread.models.synth.sensor import REGIMES
+
     parser = subparsers.add_parser(
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
@@ -106,7 +108,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--simulator", choices=["darkread", "hesim"], default="darkread",
                         help="make-suite: what turns the rendered scenes into events: darkread (our sensor model, "
                              "default) or hesim (hesim-3d's H-ESIM, IMX636 preset; `make hesim` installs it)")
-    parser.add_argument("--regime", default="standard", metavar="REGIME",
+    parser.add_argument("--regime", default="standard", choices=REGIMES,
                         help="make-suite: our simulator's sensor regime (default standard); fast-photoreceptor: the same "
                              "scenes and sensors with a photoreceptor that keeps up in the dark (~1 ms at 5 lux, the "
                              "IMX636's stated latency read as scene light; standard: 4-50 ms): what that choice decides")
@@ -172,14 +174,21 @@ def _first_mode(args: argparse.Namespace) -> str:
     return default_infer_mode() if args.infer in (None, BOTH) else args.infer
 
 
-def _attribute(args: argparse.Namespace) -> int:
-    from darkread.eval.attribution import ATTRIBUTION_NAME, write_attribution
-
+def _one_suite(args: argparse.Namespace, usage: str) -> Path:
+    """The one suite folder a form that reads a suite (``attribute``, ``evidence``) was given; ``usage``
+    is the error when there is not exactly one."""
     if not args.make_suite_out or args.second_suite is not None:
-        raise ValueError("give one evaluated suite: darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]")
+        raise ValueError(usage)
     suite = Path(args.make_suite_out)
     if not suite.is_dir():
         raise FileNotFoundError(f"{suite}: no such suite directory")
+    return suite
+
+
+def _attribute(args: argparse.Namespace) -> int:
+    from darkread.eval.attribution import ATTRIBUTION_NAME, write_attribution
+
+    suite = _one_suite(args, "give one evaluated suite: darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]")
     work = Path(args.work) if args.work else suite / "eval_runs" / _first_mode(args)
     out = Path(args.out)
     out = out / ATTRIBUTION_NAME if out.suffix != ".md" else out
@@ -191,11 +200,7 @@ def _attribute(args: argparse.Namespace) -> int:
 def _evidence(args: argparse.Namespace) -> int:
     from darkread.eval.evidence import write_evidence
 
-    if not args.make_suite_out or args.second_suite is not None:
-        raise ValueError("give one suite: darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]")
-    suite = Path(args.make_suite_out)
-    if not suite.is_dir():
-        raise FileNotFoundError(f"{suite}: no such suite directory")
+    suite = _one_suite(args, "give one suite: darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]")
     path = write_evidence(suite, args.out, jobs=max(1, args.jobs))
     print(path.read_text())
     return 0

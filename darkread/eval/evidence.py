@@ -26,10 +26,12 @@ import logging
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+
 import cv2
 import numpy as np
 
 from darkread.edge.events import Events
+from darkread.eval.tables import page_as_section
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +40,9 @@ LENGTHS = (1600, 3200, 6400)  # events per window: the edge's, and two and four 
 ESTIMATES = ("measured", "exact")  # the head's motion as the edge measures it, or known exactly
 PAPER_MARGIN_PX = 3  # paper: pixels at least this far from any ink
 BLUR_SIGMA_PX = 1.0  # the count image is blurred this much before scoring (strokes are ~2 px wide)
+FIRST_WINDOW_US = 300_000  # windows start this far into a recording: past the first fixation's landing ...
+EVERY_MS = 80.0  # ... one every this often ...
+MAX_WINDOWS = 25  # ... at most this many per recording
 
 
 # -- scores: arrays in, numbers out --------------------------------------------------------------
@@ -91,8 +96,8 @@ def _key(estimate: str, length: int) -> str:
     return f"{estimate}/{length}"
 
 
-def recording_evidence(recording: str | Path, lengths: Sequence[int] = LENGTHS, every_ms: float = 80.0,
-                       max_windows: int = 25) -> Evidence | None:
+def recording_evidence(recording: str | Path, lengths: Sequence[int] = LENGTHS, every_ms: float = EVERY_MS,
+                       max_windows: int = MAX_WINDOWS) -> Evidence | None:
     """Score the recording's windows (None for one without the simulator's truth: a real recording)."""
     from darkread.edge.deblur import DeblurConfig
     from darkread.edge.denoise import DenoiseConfig
@@ -115,8 +120,7 @@ def recording_evidence(recording: str | Path, lengths: Sequence[int] = LENGTHS, 
     mapper, fovea = GazeMapper(rec.calibration, rec.gaze()), FoveaConfig()
     shape_hw = (fovea.height, fovea.width)
     longest = max(lengths)
-    start = int(events["t"][0]) + 300_000  # past the first fixation's landing
-    times = np.arange(start, int(events["t"][-1]), int(every_ms * 1000))[:max_windows]
+    times = np.arange(int(events["t"][0]) + FIRST_WINDOW_US, int(events["t"][-1]), int(every_ms * 1000))[:max_windows]
     pooled = {_key(e, n): ([], []) for e in ESTIMATES for n in lengths}
     found = {_key(e, n): np.zeros(2, np.int64) for e in ESTIMATES for n in lengths}
     scored = 0
@@ -127,12 +131,13 @@ def recording_evidence(recording: str | Path, lengths: Sequence[int] = LENGTHS, 
         origin = window_origin(gaze.pixel, sensor_wh, fovea)
         end = int(np.searchsorted(events["t"], t, side="right"))
         recent = events[max(0, end - 400 * longest) : end]
-        if window_events(recent, origin, fovea, longest).shape[0] < longest:
+        widest = window_events(recent, origin, fovea, longest)
+        if widest.shape[0] < longest:
             continue  # every length scored on the same windows
         scored += 1
         for n in lengths:
-            sensed = window_events(recent, origin, fovea, n)
-            nearby = recent[recent["t"] >= sensed["t"][0]]
+            sensed = widest[-n:]  # the newest n of the window's events: ``window_events(recent, ..., n)``
+            nearby = recent[int(np.searchsorted(recent["t"], sensed["t"][0], side="left")) :]
             H = truth.pose_at(float(sensed["t"][-1]))
             ink = window_truth(truth, window_rays(truth.calibration, origin, shape_hw), shape_hw, H)
             for estimate in ESTIMATES:
@@ -183,22 +188,14 @@ def write_evidence(suite: str | Path, out: str | Path, *, lengths: Sequence[int]
     out = Path(out)
     report = out if out.suffix == ".md" else out / EVIDENCE_NAME
     recordings = load_suite(suite)
-    rows: list[Evidence] = []
+    from functools import partial
+
     from tqdm import tqdm
 
-    bar = tqdm(total=len(recordings), unit="rec", desc="evidence", disable=not progress)
-    if jobs <= 1:
-        for recording in recordings:
-            rows.append(recording_evidence(recording, lengths))
-            bar.update()
-    else:
-        import multiprocessing as mp
-        from functools import partial
+    from darkread.jobs import run_jobs
 
-        with mp.get_context("spawn").Pool(jobs) as pool:
-            for row in pool.imap(partial(recording_evidence, lengths=tuple(lengths)), recordings):
-                rows.append(row)
-                bar.update()
+    bar = tqdm(total=len(recordings), unit="rec", desc="evidence", disable=not progress)
+    rows = run_jobs(partial(recording_evidence, lengths=tuple(lengths)), recordings, jobs, bar.update)
     bar.close()
     kept = [r for r in rows if r is not None]
     if not kept:
@@ -207,9 +204,9 @@ def write_evidence(suite: str | Path, out: str | Path, *, lengths: Sequence[int]
     lines = [
         "# How much of the ink the events show",
         "",
-        f"`darkread eval evidence {Path(suite).name}`: {len(kept)} synthetic recordings, up to 25 windows each "
-        "(every 80 ms from 0.3 s, where the gaze rests, and only where the fovea holds the longest window's "
-        "events). Each window is cut as the edge cuts it: the newest N foveated events, moved back along the "
+        f"`darkread eval evidence {Path(suite).name}`: {len(kept)} synthetic recordings, up to {MAX_WINDOWS} windows each "
+        f"(every {EVERY_MS:g} ms from {FIRST_WINDOW_US / 1e6:g} s, where the gaze rests, and only where the fovea holds the "
+        "longest window's events). Each window is cut as the edge cuts it: the newest N foveated events, moved back along the "
         "head's motion, in dim light without isolated events. Its event counts per pixel (blurred by 1 px) "
         "are scored against its true ink: the chance that an ink pixel has more events than a paper pixel "
         f"{PAPER_MARGIN_PX} px or more from ink (0.5: the events cannot tell them apart; 1: perfectly). "
@@ -230,6 +227,4 @@ def write_evidence(suite: str | Path, out: str | Path, *, lengths: Sequence[int]
 def evidence_section(out_dir: str | Path) -> list[str]:
     """The report's "How much ink the events show" section: ``evidence.md`` beside it (written by
     ``darkread eval evidence``); nothing when there is none."""
-    from darkread.eval.tables import page_as_section
-
     return page_as_section(Path(out_dir) / EVIDENCE_NAME, "How much of the ink the events show")

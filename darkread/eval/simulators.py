@@ -16,7 +16,7 @@ from pathlib import Path
 
 from darkread.eval.aggregate import group_by, mean, median
 from darkread.eval.results import RecordingResult
-from darkread.eval.tables import pct
+from darkread.eval.tables import page_as_section, pct
 
 HESIM_NOTE = ("How the second one differs (models/synth/README.md): hesim-3d 0.1.0's H-ESIM with its IMX636 preset "
               "has no photoreceptor low-pass (ours slows in the dark and smears edges), no shot noise on still pixels "
@@ -119,6 +119,4 @@ def write_comparison(first_suite: str | Path, second_suite: str | Path, out: str
 def simulator_section(out_dir: str | Path) -> list[str]:
     """The report's "Second simulator" section: the comparison page beside it (``simulators.md``,
     written by ``compare-simulators``), without its title; nothing when there is none."""
-    from darkread.eval.tables import page_as_section
-
     return page_as_section(Path(out_dir) / SIMULATORS_NAME, "Second simulator")
