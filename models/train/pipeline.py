@@ -204,8 +204,8 @@ def reproduce(
 
 def generate_dataset(recipe: SetRecipe, root: str | Path, workers: int) -> None:
     """Make one set of the recipe as ``darkread synth dataset`` does."""
-    from darkread.models.synth.shards import build_dataset
+    from darkread.models.synth.shards import LUX_RANGE, build_dataset
 
     log.info("generating %s: %s, %d workers -> %s", recipe.folder, recipe, workers, root)
     build_dataset(root, recipe.samples, workers=workers, seed=recipe.seed, split=recipe.split,
-                  **({"lux_range": recipe.lux} if recipe.lux else {}), more_fonts=recipe.more_fonts)
+                  lux_range=recipe.lux or LUX_RANGE, more_fonts=recipe.more_fonts)
