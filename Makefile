@@ -69,7 +69,7 @@ test-fast: $(STAMP) postgres-deps  ## unit tests only (no integration tests)
 	$(PY) -m pytest -q -m "not slow"
 
 bench: $(STAMP) postgres-deps  ## benchmarks; prints a table and writes bench.json
-	$(PY) -m darkread.bench
+	$(PY) -m darkread.lab.bench
 
 demo: $(STAMP) speech-deps  ## read the shipped sample recording aloud and compare with its printed text
 	$(VENV)/bin/darkread read --demo --say

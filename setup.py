@@ -5,7 +5,7 @@ from pathlib import Path
 from setuptools import setup
 
 ROOT = Path(__file__).parent
-COMPONENTS = ("edge", "cloud", "proto", "stitch", "models")
+COMPONENTS = ("edge", "cloud", "proto", "stitch", "models", "lab")
 
 
 def _packages() -> tuple[list[str], dict[str, str]]:

@@ -1,11 +1,11 @@
 """Errors of the cloud service: storage, pages, start-up, OCR engines.
 
-They sit under ``DarkreadError``; the whole tree is drawn in ``darkread/errors.py``.
+They sit under ``DarkreadError``; the whole tree is drawn in ``darkread/core/errors.py``.
 """
 
 from __future__ import annotations
 
-from darkread.errors import DarkreadError
+from darkread.core.errors import DarkreadError
 
 
 class CloudError(DarkreadError):
@@ -30,10 +30,6 @@ class SessionShapeError(StoreError):
 
 class NoPageError(CloudError):
     """The session has nothing to read yet (no frames or pages stored)."""
-
-
-class PostgresUnavailable(CloudError):
-    """No PostgreSQL server can be started on this machine for tests or benchmarks (the message says why)."""
 
 
 class DataDirError(CloudError):

@@ -17,7 +17,7 @@ from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query
 from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 
-from darkread.image_codec import encode_png
+from darkread.core.image_codec import encode_png
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .auth import Principal, Scope

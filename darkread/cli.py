@@ -3,6 +3,10 @@
 Each component adds its own sub-commands through a ``register(subparsers)`` function in a light
 module (heavy imports happen inside the handlers), so ``darkread edge ...`` never imports the web
 stack and ``darkread cloud ...`` never imports the USB stack.
+
+The product's commands are listed here; the lab's (``synth``, ``train``, ``eval``, ``gaze``,
+``bench``) come through the ``darkread.commands`` entry-point group, so this module never imports
+the lab and an installation without it has the product's commands only.
 """
 
 from __future__ import annotations
@@ -11,24 +15,25 @@ import argparse
 import importlib
 import logging
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from importlib.metadata import entry_points
 
 from darkread import __version__
-from darkread.errors import DarkreadError
+from darkread.core.errors import DarkreadError
 
-# Modules that contribute sub-commands, in the order they appear in --help.
+# The product's modules that contribute sub-commands, in the order they appear in --help.
 COMMAND_MODULES: tuple[str, ...] = (
+    "darkread.read",
     "darkread.edge.inspect",
     "darkread.edge.cli",
     "darkread.edge.sources.evk4.cli",
     "darkread.cloud.cli",
-    "darkread.read",
-    "darkread.models.synth.cli",
-    "darkread.models.train.cli",
     "darkread.edge.calibrate.cli",
-    "darkread.eval.cli",
-    "darkread.gaze.cli",
 )
+# Where other installed parts (the lab) register theirs: ``name = "module:register"``.
+COMMAND_GROUP = "darkread.commands"
+
+Register = Callable[[argparse._SubParsersAction], None]
 
 DESCRIPTION = """\
 darkread reads text in the dark with an event camera on eye-tracking glasses.
@@ -48,6 +53,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for register in registrations():
+        register(subparsers)
+    return parser
+
+
+def registrations() -> Iterator[Register]:
+    """Each part's ``register``: the product's modules, then the entry points of ``COMMAND_GROUP``."""
     for name in COMMAND_MODULES:
         try:
             module = importlib.import_module(name)
@@ -55,8 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
             if exc.name and name.startswith(exc.name):
                 continue  # component not present in this installation
             raise
-        module.register(subparsers)
-    return parser
+        yield module.register
+    for entry in sorted(entry_points(group=COMMAND_GROUP), key=lambda e: e.name):
+        yield entry.load()
 
 
 def configure_logging(verbose: int, quiet: bool) -> None:

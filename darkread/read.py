@@ -22,7 +22,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from darkread.core.text_metrics import error_rates
 from darkread.edge.config import INFER_MODES, default_infer_mode
+from darkread.edge.head_motion import KnownHeadMotion
 
 logger = logging.getLogger(__name__)
 
@@ -83,14 +85,14 @@ def read_recording(
     lexicon: bool = True,
     infer: str | None = None,
     speech: bool = False,
-    true_motion: bool = False,
+    known_motion: KnownHeadMotion | None = None,
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says.
 
     With ``speech`` the answer is also asked for as speech (``Accept: audio/wav``) and written
-    to ``answer.wav`` in the output directory. With ``true_motion`` (synthetic recordings) the edge
-    takes the head's motion from the simulator's truth instead of measuring it from the events
-    (``eval.true_motion``); ValueError for a recording without truth.
+    to ``answer.wav`` in the output directory. With ``known_motion`` the edge takes the head's motion
+    from that source (an inertial sensor, or in the lab the simulator's truth) instead of measuring it
+    from the events.
     """
     import httpx
     from pydantic import SecretStr
@@ -110,16 +112,11 @@ def read_recording(
     if out_dir is None:  # a scratch directory that does not outlive the read
         with tempfile.TemporaryDirectory(prefix="darkread-read-", ignore_cleanup_errors=True) as scratch:
             result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
-                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer, true_motion=true_motion)
+                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer, known_motion=known_motion)
         result.page_png = ""
         return result
     started = time.perf_counter()
     recording = open_recording(path)  # fails early, naming any missing file
-    known_motion = None
-    if true_motion:
-        from darkread.eval.true_motion import TrueHeadMotion
-
-        known_motion = TrueHeadMotion.from_recording(recording.path if recording.path.is_dir() else Path(path))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     api_key = secrets.token_urlsafe(16)
@@ -183,8 +180,6 @@ def read_recording(
         speech_wav=str(out / "answer.wav") if spoken is not None else None,
     )
     if recording.text is not None:
-        from darkread.eval.error_rates import error_rates
-
         rates = error_rates(recording.text, result.text)
         result.reference, result.cer, result.wer = recording.text, rates.cer, rates.wer
     return result
@@ -218,10 +213,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
     parser.add_argument("--out", metavar="DIR", help="keep the page image, spool and cloud data here (default: a temp dir)")
     parser.add_argument("--json", action="store_true", help="print one JSON object with the text and per-stage figures")
-    parser.add_argument("--true-motion", action="store_true",
-                        help="synthetic recordings: take the head's motion from the simulator's truth (pose_truth.npz) "
-                             "instead of measuring it from the events, as an exact inertial sensor would give it; "
-                             "what is left of the errors is the frames' own (darkread eval attribute reports both)")
     parser.add_argument("--say", action="store_true",
                         help="speak the answer (espeak-ng in the cloud; played with paplay/aplay, else the WAV's path is printed)")
     parser.add_argument("--say-out", metavar="FILE.wav", type=Path,
@@ -230,7 +221,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from darkread.paths import SAMPLE_RECORDING
+    from darkread.core.paths import SAMPLE_RECORDING
 
     if args.demo:
         path = SAMPLE_RECORDING
@@ -242,7 +233,7 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError(f"--say-out {args.say_out}: give a .wav file name")
     speech = args.say or args.say_out is not None
     result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out,
-                           lexicon=args.lexicon, infer=args.infer, speech=speech, true_motion=args.true_motion)
+                           lexicon=args.lexicon, infer=args.infer, speech=speech)
     if result.speech_wav is not None and args.say_out is not None:
         args.say_out.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(result.speech_wav, args.say_out)

@@ -1,11 +1,11 @@
 """Errors raised on the glasses side: recordings, the event camera, the model.
 
-They sit under ``DarkreadError``; the whole tree is drawn in ``darkread/errors.py``.
+They sit under ``DarkreadError``; the whole tree is drawn in ``darkread/core/errors.py``.
 """
 
 from __future__ import annotations
 
-from darkread.errors import DarkreadError
+from darkread.core.errors import DarkreadError
 
 
 class RecordingError(DarkreadError):

@@ -6,9 +6,8 @@ maximisation (``edge.deblur``) and the scene's drift across views by correlating
 may land where the page is not. An inertial sensor on the glasses, or for a synthetic recording
 the simulator's own pose, knows the motion without looking at the events. A pipeline given a
 ``KnownHeadMotion`` takes both from it and measures neither; everything after (denoise, voxel
-grid, network, fusion, stitching) runs as always. ``darkread read --true-motion`` drives a
-synthetic recording this way, to measure how much of a page's errors the head's motion causes
-(``darkread eval attribute``).
+grid, network, fusion, stitching) runs as always. The lab drives a synthetic recording this way
+(``darkread eval attribute``) to measure how much of a page's errors the head's motion causes.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from darkread.frame_record import FrameRecord
+from darkread.core.frame_record import FrameRecord
 from darkread.stitch import PageStitcher
 from darkread.proto.messages import Page, pack_mask
 

@@ -49,7 +49,7 @@ from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.view_fusion import MARGIN_PX, ViewFuser, ViewRecord
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
 from darkread.edge.voxel import VoxelConfig, voxel_grid
-from darkread.frame_record import FrameRecord
+from darkread.core.frame_record import FrameRecord
 
 if TYPE_CHECKING:
     from darkread.proto.messages import Frame

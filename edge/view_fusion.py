@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from darkread.frame_record import MAX_VIEW_GROWTH, FrameRecord, threshold_levels
+from darkread.core.frame_record import MAX_VIEW_GROWTH, FrameRecord, threshold_levels
 from darkread.stitch.register import register_frame
 
 N_LEVELS = 8  # the mean of up to ~7 frames to within half a step; few levels compress well in a PNG

@@ -22,8 +22,8 @@ import zlib
 import numpy as np
 from PIL import Image
 
-from darkread.image_codec import ImageCodecError, decode_image, encode_png, encode_png_bilevel
-from darkread.mask_bits import pack_bits, packed_length, unpack_bits
+from darkread.core.image_codec import ImageCodecError, decode_image, encode_png, encode_png_bilevel
+from darkread.core.mask_bits import pack_bits, packed_length, unpack_bits
 
 from .errors import BadMaskError
 

@@ -2,14 +2,14 @@
 
 Every error carries ``close_code`` so the server can close the websocket with the right code and
 the error's message as the reason. They sit under ``DarkreadError``; the whole tree, with each
-error's close code, is drawn in ``darkread/errors.py``.
+error's close code, is drawn in ``darkread/core/errors.py``.
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
 
-from darkread.errors import DarkreadError
+from darkread.core.errors import DarkreadError
 
 
 class CloseCode(IntEnum):

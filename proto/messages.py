@@ -22,8 +22,8 @@ from typing import Any, ClassVar, Literal, TypeAlias
 import msgpack
 import numpy as np
 
-from darkread.frame_record import MAX_VIEW_GROWTH, FrameRecord, threshold_levels
-from darkread.mask_bits import pack_bits, packed_length, unpack_bits
+from darkread.core.frame_record import MAX_VIEW_GROWTH, FrameRecord, threshold_levels
+from darkread.core.mask_bits import pack_bits, packed_length, unpack_bits
 
 from .codecs import LEVEL_ENCODINGS, MASK_ENCODINGS, compress_bits, compress_levels, decompress_bits, decompress_levels
 from .errors import (
@@ -306,7 +306,7 @@ class Frame(_Checked):
     gaze_rad: tuple[float, float] = _spec(_pair_float)  # (yaw, pitch), radians
     events_used: int = _spec(_count)
     shape: tuple[int, int] = _spec(_mask_shape)  # (rows, cols)
-    bits: bytes = _spec(_bytes, repr=False)  # the ink mask, darkread.mask_bits.pack_bits (decoded form)
+    bits: bytes = _spec(_bytes, repr=False)  # the ink mask, darkread.core.mask_bits.pack_bits (decoded form)
     enc: str = _spec(_choice(FRAME_ENCODINGS), "bits")  # v2: how ``bits`` go on the wire
     scene_px: tuple[float, float] | None = _spec(_optional(_pair_float), None)  # the scene's motion so far, sensor px
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from darkread.image_codec import encode_png
+from darkread.core.image_codec import encode_png
 
 
 def ink_mask_to_paper(mask: np.ndarray) -> np.ndarray:

@@ -11,10 +11,10 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from darkread.paths import find_shared_data
+from darkread.lab.shared_data import find_shared_data
 
 if TYPE_CHECKING:
-    from darkread.cloud.store.pg_server import TemporaryPostgres
+    from darkread.lab.fixtures.pg_server import TemporaryPostgres
 
 
 @pytest.fixture(scope="session")
@@ -49,7 +49,7 @@ def postgres_required() -> bool:
 @pytest.fixture(scope="session")
 def postgres_server() -> Iterator[TemporaryPostgres]:
     """One real PostgreSQL server for the session, in a temporary directory on 127.0.0.1."""
-    from darkread.cloud.store.pg_server import PostgresUnavailable, TemporaryPostgres
+    from darkread.lab.fixtures.pg_server import PostgresUnavailable, TemporaryPostgres
 
     server = TemporaryPostgres()
     try:

@@ -86,7 +86,7 @@ def angles_at(lookup, t_event_us: int) -> tuple[float, float] | None:  # noqa: A
 def pangram_session(motion: str, lux: float = 1000.0):
     """A short synthetic reading of a two-line pangram (seed 5, DejaVu Sans, x-height 11 px)."""
     from darkread.models.synth.recording import RecordingSpec
-    from darkread.models.synth.rgb_camera import session_for
+    from darkread.lab.synth.rgb_camera import session_for
 
     spec = RecordingSpec(lux=lux, motion=motion, kind="pangram", seconds=2.0, seed=5, font="DejaVu Sans",
                          xheight_px=11.0, n_lines=2, line_chars=24)

@@ -1,7 +1,10 @@
 """The module map of docs/architecture.md, enforced: which component may import which.
 
-Every import statement in the shipped code (module level or inside a function, where the heavy
+Every import statement in the installed code (module level or inside a function, where the heavy
 imports of the command line live) is parsed with ``ast`` and checked against the allowed edges.
+The layers are read from the folders: ``darkread/core/`` is the core, the rest of ``darkread/`` the
+application (the command line and ``darkread read``), each top-level folder its component, and
+``lab/`` (installed as ``darkread.lab``) the lab, which nothing outside it imports.
 """
 
 from __future__ import annotations
@@ -15,11 +18,10 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# folder -> component
-FOLDERS = {"proto": "proto", "stitch": "stitch", "edge": "edge", "cloud": "cloud", "models": "models", "darkread": "app"}
-# the small pure modules of the darkread package every component shares: the version, the error
-# tree's base, the frame record, the mask bit layout, the image codec
-CORE = {"darkread", "darkread.errors", "darkread.frame_record", "darkread.mask_bits", "darkread.image_codec", "darkread.json_file"}
+# top-level folder -> component (darkread/core/ and the package's own __init__ are the core)
+FOLDERS = {"proto": "proto", "stitch": "stitch", "edge": "edge", "cloud": "cloud", "models": "models", "lab": "lab",
+           "darkread": "app"}
+PRODUCT = {"core", "proto", "stitch", "edge", "cloud", "models", "app"}
 
 # component -> the darkread components it may import
 ALLOWED: dict[str, set[str]] = {
@@ -28,8 +30,9 @@ ALLOWED: dict[str, set[str]] = {
     "stitch": {"stitch", "core"},
     "edge": {"edge", "proto", "stitch", "core"},
     "cloud": {"cloud", "proto", "stitch", "core"},
-    "models": {"models", "edge", "proto", "stitch", "core", "app"},  # app: darkread.paths, the latency benchmark
+    "models": {"models", "edge", "proto", "stitch", "core"},  # what makes and ships the network: nothing above it
     "app": {"app", "core", "proto", "stitch", "edge", "cloud", "models"},
+    "lab": {"lab", "app", "core", "proto", "stitch", "edge", "cloud", "models"},
 }
 
 # third-party packages a component must not import, whatever extras are installed here
@@ -41,27 +44,32 @@ FORBIDDEN: dict[str, set[str]] = {
 }
 # pure components: the standard library and these only
 PURE_THIRD_PARTY: dict[str, set[str]] = {
-    "core": {"numpy", "cv2"},
+    "core": {"numpy", "cv2", "jiwer"},  # jiwer: the text metrics (a core dependency)
     "proto": {"msgpack", "numpy", "PIL"},  # PIL: the CCITT G4 codec of stitched pages (libtiff)
     "stitch": {"numpy", "cv2"},
 }
 
 
+def module_of_file(path: Path) -> str:
+    """``edge/pipeline.py`` -> ``darkread.edge.pipeline``; ``darkread/core/errors.py`` -> ``darkread.core.errors``."""
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    dotted = ".".join(parts if parts[0] == "darkread" else ("darkread", *parts))
+    return dotted.removesuffix(".__init__")
+
+
 def component_of_file(path: Path) -> str:
-    rel = path.relative_to(ROOT)
-    if rel.parts[0] == "darkread":
-        module = ".".join(rel.with_suffix("").parts).removesuffix(".__init__")
-        return "core" if module in CORE else "app"
-    return FOLDERS[rel.parts[0]]
+    component = component_of_module(module_of_file(path))
+    assert component is not None
+    return component
 
 
 def component_of_module(module: str) -> str | None:
-    """``darkread.edge.pipeline`` -> "edge"; None for anything outside darkread."""
+    """``darkread.edge.pipeline`` -> "edge", ``darkread.core.errors`` -> "core"; None outside darkread."""
     parts = module.split(".")
     if parts[0] != "darkread":
         return None
-    if ".".join(parts[:2]) in CORE:
-        return "core"
+    if len(parts) == 1 or parts[1] in ("core", "__version__"):
+        return "core"  # the package itself holds only the version
     return parts[1] if parts[1] in FOLDERS and parts[1] != "darkread" else "app"
 
 
@@ -72,13 +80,20 @@ def shipped_files() -> Iterator[Path]:
 
 
 def imports(path: Path) -> Iterator[tuple[int, str]]:
-    """(line, absolute module) of every import in ``path``; relative ones stay in their package."""
+    """(line, absolute name) of every import in ``path``, relative ones resolved; ``from a import b``
+    gives ``a.b`` (a module, or a name inside module ``a``)."""
+    package = module_of_file(path).split(".")
+    if path.name != "__init__.py":
+        package = package[:-1]
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 yield node.lineno, alias.name
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            yield node.lineno, node.module
+        elif isinstance(node, ast.ImportFrom):
+            base = [] if node.level == 0 else package[: len(package) - node.level + 1]
+            module = ".".join([*base, *([node.module] if node.module else [])])
+            for alias in node.names:  # ``from package import module`` names the module itself
+                yield node.lineno, f"{module}.{alias.name}"
 
 
 def violations() -> list[str]:
@@ -109,11 +124,81 @@ def test_the_rules_see_every_component() -> None:
     assert seen == set(ALLOWED)
 
 
+def test_nothing_outside_the_lab_imports_it() -> None:
+    assert not [rule for rule, allowed in ALLOWED.items() if rule in PRODUCT and "lab" in allowed]
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module -> the darkread modules it imports (a ``from package import name`` counts as the package)."""
+    modules = {module_of_file(path): path for path in shipped_files()}
+    graph: dict[str, set[str]] = {}
+    for module, path in modules.items():
+        targets = set()
+        for _, imported in imports(path):
+            while imported and imported not in modules:
+                imported = imported.rpartition(".")[0]
+            if imported and imported != module:
+                targets.add(imported)
+        graph[module] = targets
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph.get(child, ())))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return found
+
+
+def test_no_module_imports_itself_through_others() -> None:
+    """No circle of imports, module level or inside functions: each layer reads top to bottom."""
+    assert circles(import_graph()) == []
+
+
+def test_circles_are_found() -> None:
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
 @pytest.mark.parametrize(
     ("source", "module", "allowed"),
     [("edge", "darkread.cloud.app", False), ("cloud", "darkread.edge.sources.evk4.camera", False),
      ("cloud", "darkread.stitch", True), ("proto", "darkread.edge.events", False), ("edge", "darkread.proto", True),
-     ("stitch", "darkread.frame_record", True), ("proto", "darkread.cli", False), ("edge", "darkread.errors", True)],
+     ("stitch", "darkread.core.frame_record", True), ("proto", "darkread.cli", False), ("edge", "darkread.core.errors", True)],
 )
 def test_the_rules_themselves(source: str, module: str, allowed: bool) -> None:
     assert (component_of_module(module) in ALLOWED[source]) is allowed

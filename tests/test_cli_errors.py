@@ -11,7 +11,7 @@ import pytest
 
 from darkread.cli import EXIT_ERROR, EXIT_INTERNAL, error_line
 from darkread.edge.errors import CalibrationError
-from darkread.errors import DarkreadError
+from darkread.core.errors import DarkreadError
 
 SAMPLE = Path(__file__).resolve().parents[1] / "darkread" / "data" / "sample_recording"
 
@@ -59,8 +59,9 @@ def test_read_a_recording_whose_gaze_csv_is_not_text(tmp_path: Path) -> None:
     _assert_one_line(_darkread("read", str(recording)), mentions="general_eye_gaze.csv")
 
 
-def test_read_a_real_recording_with_the_true_motion() -> None:
-    _assert_one_line(_darkread("read", "--demo", "--true-motion"), mentions="synthetic recordings only")
+def test_read_has_no_research_flags() -> None:
+    result = _darkread("read", "--demo", "--true-motion")
+    assert result.returncode == 2 and "unrecognized arguments: --true-motion" in result.stderr
 
 
 def test_synth_into_a_path_under_a_regular_file(tmp_path: Path) -> None:
@@ -96,18 +97,18 @@ def test_each_component_error_derives_from_the_one_base(module: str) -> None:
 
 
 def test_the_drawn_tree_is_the_real_tree() -> None:
-    """Every class in the diagram of ``darkread/errors.py`` exists and derives from the one drawn above it."""
+    """Every class in the diagram of ``darkread/core/errors.py`` exists and derives from the one drawn above it."""
     import importlib
     import re
 
-    import darkread.errors
+    import darkread.core.errors
 
-    modules = ["darkread.errors", "darkread.image_codec", "darkread.edge.errors", "darkread.edge.sources.evk4.treuzell",
+    modules = ["darkread.core.errors", "darkread.core.image_codec", "darkread.edge.errors", "darkread.edge.sources.evk4.treuzell",
                "darkread.proto.errors", "darkread.cloud.errors"]
     known = {name: obj for m in modules for name, obj in vars(importlib.import_module(m)).items() if isinstance(obj, type)}
     parents: list[tuple[int, type]] = []
     drawn = 0
-    for line in (darkread.errors.__doc__ or "").splitlines():
+    for line in (darkread.core.errors.__doc__ or "").splitlines():
         match = re.match(r"^(\s*[│ ]*(?:├── |└── )?)([A-Z]\w+Error)\b", line)
         if not match:
             continue

@@ -7,7 +7,7 @@ import pytest
 
 from darkread.cloud.store import StoredFrame
 from darkread.edge.pipeline import FrameResult
-from darkread.frame_record import FrameRecord
+from darkread.core.frame_record import FrameRecord
 from darkread.proto.messages import Frame, decode, encode
 
 

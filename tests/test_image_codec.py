@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from darkread.errors import DarkreadError
-from darkread.image_codec import ImageCodecError, decode_image, encode_jpeg, encode_png, read_image, write_png
+from darkread.core.errors import DarkreadError
+from darkread.core.image_codec import ImageCodecError, decode_image, encode_jpeg, encode_png, read_image, write_png
 
 images = st.one_of(
     hnp.arrays(np.uint8, hnp.array_shapes(min_dims=2, max_dims=2, min_side=1, max_side=24)),

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from darkread.jobs import run_jobs
+from darkread.lab.jobs import run_jobs
 
 
 def _square_slowly_for_small(n: int) -> int:

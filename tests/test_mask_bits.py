@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from darkread.mask_bits import pack_bits, pack_rows, packed_length, unpack_bits, unpack_rows
+from darkread.core.mask_bits import pack_bits, pack_rows, packed_length, unpack_bits, unpack_rows
 
 masks = hnp.arrays(np.uint8, hnp.array_shapes(min_dims=2, max_dims=2, min_side=1, max_side=40), elements=st.integers(0, 3))
 batches = hnp.arrays(np.uint8, hnp.array_shapes(min_dims=2, max_dims=4, min_side=1, max_side=19), elements=st.integers(0, 1))

@@ -17,7 +17,7 @@ WEB_AND_MODELS = {"torch", "onnxruntime", "fastapi", "starlette", "uvicorn", "ra
         # the glasses stitch too: numpy, OpenCV and the standard library only
         (["darkread.stitch"], WEB_AND_MODELS | {"PIL", "matplotlib", "scipy"}),
         # the wire and the shared records: numpy and msgpack only, neither side nor OpenCV
-        (["darkread.proto.messages", "darkread.errors", "darkread.frame_record", "darkread.mask_bits"],
+        (["darkread.proto.messages", "darkread.core.errors", "darkread.core.frame_record", "darkread.core.mask_bits"],
          WEB_AND_MODELS | {"darkread.edge", "darkread.cloud", "darkread.stitch", "cv2"}),
     ],
 )

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from darkread.frame_record import FrameRecord
+from darkread.core.frame_record import FrameRecord
 from darkread.stitch import PageStitcher, StitchConfig
 from darkread.stitch.page import text_bands
 from darkread.stitch.stitcher import MIN_FRAME_SIDE

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
-from darkread.image_codec import encode_png
+from darkread.core.image_codec import encode_png
 
 from ..errors import OcrError, OcrUnavailableError
 from .base import OcrLine, OcrResult, check_image, join_lines, reading_order

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import httpx
 import numpy as np
-from darkread.image_codec import encode_png
+from darkread.core.image_codec import encode_png
 
 from ..errors import OcrError, OcrUnavailableError
 from .base import OcrLine, OcrResult, check_image

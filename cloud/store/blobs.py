@@ -14,7 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
-from darkread.image_codec import ImageCodecError, decode_image
+from darkread.core.image_codec import ImageCodecError, decode_image
 
 from ..errors import StoreError
 

@@ -37,8 +37,8 @@ import psycopg
 from psycopg import conninfo
 from psycopg_pool import AsyncConnectionPool, ConnectionPool, PoolTimeout
 
-from darkread.image_codec import encode_png
-from darkread.mask_bits import pack_bits, unpack_bits
+from darkread.core.image_codec import encode_png
+from darkread.core.mask_bits import pack_bits, unpack_bits
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .blobs import BlobStore, decode_mask_png, page_key

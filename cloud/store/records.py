@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from darkread.frame_record import FrameRecord
+from darkread.core.frame_record import FrameRecord
 
 from ..errors import SessionOwnedError, SessionShapeError, StoreError, UnknownSessionError
 

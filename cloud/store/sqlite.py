@@ -28,8 +28,8 @@ from typing import Any, TypeVar
 import msgpack
 import numpy as np
 
-from darkread.image_codec import encode_png
-from darkread.mask_bits import pack_bits, unpack_bits
+from darkread.core.image_codec import encode_png
+from darkread.core.mask_bits import pack_bits, unpack_bits
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .blobs import BlobStore, FileBlobs, decode_mask_png, page_key

@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 from darkread.edge.calibrate.event_image import Burst
 from darkread.edge.errors import CalibrationError
-from darkread.image_codec import ImageCodecError, read_image
+from darkread.core.image_codec import ImageCodecError, read_image
 
 logger = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from darkread.edge.errors import CalibrationError
-from darkread.json_file import read_json_file
+from darkread.core.json_file import read_json_file
 
 BOARD_NAME = "board.json"
 KINDS = ("charuco", "grid")

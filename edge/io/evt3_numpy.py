@@ -42,7 +42,8 @@ from darkread.edge.io.evt3_words import (
 )
 
 if TYPE_CHECKING:
-    from darkread.edge.io.evt3 import DecodeStats, Triggers
+    from darkread.edge.io.evt3_encode import Triggers
+    from darkread.edge.io.word_stream import DecodeStats
 
 
 @dataclass

@@ -29,7 +29,7 @@ SAMPLE_SPEC = RecordingSpec(
 
 
 def default_out() -> Path:
-    from darkread.paths import SAMPLE_RECORDING
+    from darkread.core.paths import SAMPLE_RECORDING
 
     return SAMPLE_RECORDING
 

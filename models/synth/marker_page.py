@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from darkread.edge.calibrate.markers import BoardSpec
-from darkread.json_file import read_json_file
+from darkread.core.json_file import read_json_file
 from darkread.models.synth.fonts import face_by_name
 from darkread.models.synth.page import render_page
 

@@ -16,6 +16,7 @@ import time
 import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -55,10 +56,9 @@ class RecordingSpec:
     scanpath_file: str | None = None
     regime: str = "standard"  # "shifted": a sensor and a font training never saw
     markers: bool = False  # the text printed with ArUco markers around it (page.layout.json)
-    simulator: str = "darkread"  # "hesim": hesim-3d's H-ESIM turns the same scene into events (hesim_sensor.py)
+    simulator: str = "darkread"  # the name of what turned the scene into events (``write_recording``'s ``simulator``)
 
 
-SIMULATORS: tuple[str, ...] = ("darkread", "hesim")  # our sensor model (sensor.py), the second one (hesim_sensor.py)
 LAYOUT_NAME = "page.layout.json"
 POSE_TRUTH_NAME = "pose_truth.npz"
 PAGE_INK_NAME = "page_ink.npz"  # a plain page's ink (a marker page's is re-created from its layout)
@@ -190,6 +190,26 @@ def read_truth(recording: str | Path, name: str, keys: tuple[str, ...]) -> dict[
                          "make the recording again with `darkread synth recording`") from exc
 
 
+@dataclass
+class PoseTruth:
+    """The simulator's page pose (page mm -> camera point) per millisecond, for scoring only."""
+
+    t_us: np.ndarray
+    H: np.ndarray
+
+    def at(self, t_us: float) -> np.ndarray:
+        k = int(np.clip(np.searchsorted(self.t_us, t_us), 1, len(self.t_us) - 1))
+        t0, t1 = self.t_us[k - 1], self.t_us[k]
+        w = float(np.clip((t_us - t0) / max(t1 - t0, 1), 0.0, 1.0))
+        return (1 - w) * self.H[k - 1] + w * self.H[k]
+
+
+def load_pose_truth(recording: str | Path) -> PoseTruth | None:
+    """The page's pose per millisecond a synthetic recording carries (None for a real one)."""
+    data = read_truth(recording, POSE_TRUTH_NAME, ("t_us", "H_mm_to_camera"))
+    return None if data is None else PoseTruth(data["t_us"].astype(np.float64), data["H_mm_to_camera"].astype(np.float64))
+
+
 def load_page_ink(recording: str | Path) -> tuple[np.ndarray, float] | None:
     """(ink coverage, px_per_mm) of a plain synthetic page, or None when the recording has none."""
     data = read_truth(recording, PAGE_INK_NAME, ("ink", "px_per_mm"))
@@ -224,20 +244,20 @@ def simulate_region(
     return events[events["t"] < int(seconds * 1e6)]
 
 
+class Simulator(Protocol):
+    """What turns a session's scene into events: (events of the simulated region, noise events of
+    the rest of the sensor, the sensor for ``meta.json``); times in us from the session start."""
+
+    def __call__(self, spec: RecordingSpec, session: Session, region: Region, seconds: float,
+                 rng: np.random.Generator, *, progress: bool = False) -> tuple[np.ndarray, np.ndarray, dict]: ...
+
+
 def simulate_events(
     spec: RecordingSpec, session: Session, region: Region, seconds: float, rng: np.random.Generator, *,
     progress: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
-    """(events of the simulated region, noise events of the rest of the sensor, the sensor for
-    ``meta.json``) from the spec's simulator; times in us from the session start."""
+    """Our sensor model (``sensor.py``): the ``Simulator`` every recording uses unless told otherwise."""
     x0, y0, w, h = region.x0, region.y0, region.width, region.height
-    if spec.simulator == "hesim":
-        from darkread.models.synth import hesim_sensor
-
-        config = hesim_sensor.load_config()
-        signal = hesim_sensor.simulate_region(session, region, seconds, int(rng.integers(0, 1 << 62)), progress=progress)
-        background = hesim_sensor.background_events(config, seconds, hesim_sensor.STEP_US, SENSOR_WH, (x0, y0, w, h), rng)
-        return signal, background, hesim_sensor.describe(config, hesim_sensor.STEP_US)
     signal = simulate_region(session, region, seconds, rng, progress=progress)
     background = background_events(session.sensor, 0, int(seconds * 1e6), SENSOR_WH, (x0, y0, w, h), rng)
     return signal, background, session.sensor.to_dict()
@@ -254,8 +274,12 @@ def drop_same_time_duplicates(events: np.ndarray, width: int = SENSOR_WH[0]) -> 
     return ev[keep]
 
 
-def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = True) -> dict:
+def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = True,
+                    simulator: Simulator = simulate_events) -> dict:
     """Write a recording folder (events.raw, general_eye_gaze.csv, calibration.json, text.txt, meta.json).
+
+    ``simulator`` turns the scene into events (our sensor model unless the caller brings another one:
+    ``spec.simulator`` names it in ``meta.json``).
 
     Beside them, for scoring only, the simulator's truth: ``pose_truth.npz`` (page pose per ms) and
     the page's ink (``page.layout.json`` for a marker page, ``page_ink.npz`` for a plain one).
@@ -269,13 +293,9 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     out.mkdir(parents=True, exist_ok=True)
     if spec.split not in ("train", "val"):
         raise ValueError(f"split {spec.split!r}: use 'train' or 'val'")
-    if spec.simulator not in SIMULATORS:
-        raise ValueError(f"simulator {spec.simulator!r}: use one of {', '.join(SIMULATORS)}")
-    if spec.simulator == "hesim":
-        from darkread.models.synth.hesim_sensor import hesim_missing
-
-        if (reason := hesim_missing()) is not None:
-            raise ValueError(f"--simulator hesim: {reason}")
+    if spec.simulator != "darkread" and simulator is simulate_events:
+        raise ValueError(f"simulator {spec.simulator!r}: pass it as write_recording's simulator "
+                         "(darkread.lab.synth.simulators.simulator_for)")
     session = make_session(session_spec(spec), spec.seed)
     seconds = recording_seconds(spec, session)
     rng = np.random.default_rng([spec.seed, 2])
@@ -293,7 +313,7 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         x0, y0, w, h = union_region((x0, y0, w, h), page_region(session, seconds))
     region = Region.of(session.calib, x0, y0, w, h)
     log.info("simulating region x=%d..%d y=%d..%d (%d px)", x0, x0 + w, y0, y0 + h, w * h)
-    signal, background, sensor_doc = simulate_events(spec, session, region, seconds, rng, progress=progress)
+    signal, background, sensor_doc = simulator(spec, session, region, seconds, rng, progress=progress)
     events = drop_same_time_duplicates(concat_events([signal, background]))
     events["t"] += event_t0
 

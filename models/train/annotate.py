@@ -45,6 +45,7 @@ import numpy as np
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.marker_page import MarkerPage, mm_to_px
 from darkread.models.synth.shards import ncc, window_count_image
+from darkread.models.synth.recording import load_pose_truth
 from darkread.edge.calibrate.event_image import count_image
 from darkread.models.train.page_search import (
     SearchConfig,
@@ -578,66 +579,3 @@ def annotate_recording(recording: str | Path, layout: str | Path | None, out: st
     return summary
 
 
-def annotate_from_truth(recording: str | Path, out: str | Path, every_ms: float = 40.0, max_windows: int = 400,
-                        deblur: bool = True, denoise: bool = True) -> dict[str, Any]:
-    """A synthetic recording's windows labelled from the simulator's own pose and ink (no markers
-    needed: any plain page ``synth recording`` wrote), deblurred and denoised as the edge does them; writes
-    the shard and summary as ``annotate_recording`` does. For tuning on the windows the glasses cut
-    while a simulated reader reads (fixations, saccades, head motion), not on random crops."""
-    from darkread.edge.io.recording import open_recording
-    from darkread.models.synth.shards import SampleMeta, write_shard
-    from darkread.models.train.compare import truth_windows
-
-    recording = Path(recording)
-    scored = truth_windows(recording, every_ms=every_ms, max_windows=max_windows, deblur=deblur, denoise=denoise)
-    windows = scored.windows
-    assert windows is not None  # noqa: S101 - truth_windows keeps them
-    if len(windows.t_end_us) == 0:
-        raise AnnotationError(f"{recording}: no windows to annotate (no gaze, or too few events)")
-    if scored.targets is None:
-        raise AnnotationError(f"{recording}: no simulator truth (pose_truth.npz with page_ink.npz or page.layout.json): "
-                              "only a recording `darkread synth recording` made can be annotated with --truth")
-    meta = open_recording(recording).meta
-    metas = [SampleMeta(lux=float(meta.get("lux", 0.0)), motion=str(meta.get("motion", "")), kind=str(meta.get("text_kind", "")),
-                        font=str(meta.get("font", "")), xheight_px=float(meta.get("xheight_px", 0.0)), seed=int(meta.get("seed", 0)),
-                        x0=int(o[0]), y0=int(o[1]), t_end_us=int(t), n_events=len(events))
-             for o, t, events in zip(windows.origins, windows.t_end_us, windows.events)]
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_shard(out / SHARD_NAME, scored.voxels, scored.targets, metas)
-    summary: dict[str, Any] = {
-        "recording": str(recording),
-        "source": scored.source,
-        "lux": meta.get("lux"),
-        "motion": meta.get("motion"),
-        "windows": int(len(scored.targets)),
-        "annotated": int(len(scored.targets)),
-        "annotated_share": 1.0,
-        "ink_share": round(float(scored.targets.mean()), 4),
-        "deblurred": bool(deblur),
-        "denoised": bool(denoise),
-        "every_ms": every_ms,
-    }
-    (out / SUMMARY_NAME).write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
-    return summary
-
-
-@dataclass
-class PoseTruth:
-    """The simulator's page pose (page mm -> camera point) per millisecond, for scoring only."""
-
-    t_us: np.ndarray
-    H: np.ndarray
-
-    def at(self, t_us: float) -> np.ndarray:
-        k = int(np.clip(np.searchsorted(self.t_us, t_us), 1, len(self.t_us) - 1))
-        t0, t1 = self.t_us[k - 1], self.t_us[k]
-        w = float(np.clip((t_us - t0) / max(t1 - t0, 1), 0.0, 1.0))
-        return (1 - w) * self.H[k - 1] + w * self.H[k]
-
-
-def load_pose_truth(recording: Path) -> PoseTruth | None:
-    from darkread.models.synth.recording import POSE_TRUTH_NAME, read_truth
-
-    data = read_truth(recording, POSE_TRUTH_NAME, ("t_us", "H_mm_to_camera"))
-    return None if data is None else PoseTruth(data["t_us"].astype(np.float64), data["H_mm_to_camera"].astype(np.float64))

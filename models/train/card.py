@@ -91,7 +91,7 @@ bilinear resize + **add** (not concat) skip + separable refinement, 1x1 head.
 round-trip without padding. Full-resolution work (the memory-bound part at this size) is kept to
 {fit['net']['widths'][0]} channels; that is what brings it near the 2 ms goal.
 
-## Latency (`python -m darkread.bench --only inference`, one core, onnxruntime {latency.get('ort_version', '')})
+## Latency (`python -m darkread.lab.bench --only inference`, one core, onnxruntime {latency.get('ort_version', '')})
 
 | model | median ms / window |
 |---|---:|

@@ -1,7 +1,7 @@
 """Training data: synthetic shards -> shuffled, augmented torch batches.
 
 A shard ``shard-NNNNN.npz`` holds ``voxels`` float16 [n,4,100,200], ``targets`` packed bits
-(``darkread.mask_bits.pack_rows``, [n,100,25]), optionally ``ignore`` (packed the same way: pixels
+(``darkread.core.mask_bits.pack_rows``, [n,100,25]), optionally ``ignore`` (packed the same way: pixels
 no loss or score may count, e.g. the markers an annotated window sees; a shard without it, every
 synthetic one, has all pixels valid), ``target_shape`` and per-sample metadata
 (``models.synth.shards.METADATA_KEYS``: lux, x-height, motion, font, kind, seed, window origin,
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from darkread.mask_bits import unpack_rows
+from darkread.core.mask_bits import unpack_rows
 from darkread.models.synth.shards import METADATA_KEYS
 
 log = logging.getLogger(__name__)

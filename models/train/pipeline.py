@@ -43,7 +43,7 @@ def export_models(checkpoint: str | Path, train_dir: str | Path, out_dir: str | 
 def measure_latency(models_dir: str | Path = MODELS_DIR, runs: int = 60) -> dict[str, Any]:
     import onnxruntime
 
-    from darkread.bench.inference import onnx_latency_ms, reference_latency_ms
+    from darkread.models.train.latency import onnx_latency_ms, reference_latency_ms
 
     ref_ms, ref = reference_latency_ms(runs)
     out = Path(models_dir)

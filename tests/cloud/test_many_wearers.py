@@ -1,6 +1,6 @@
 """Several wearers stream into one real uvicorn at the glasses' pace and ask while they read:
 every frame is stored exactly once and every question is answered from the wearer's own page.
-(The 20-wearer figures with the real OCR engine are in ``make bench``: ``darkread/bench/ask.py``.)"""
+(The 20-wearer figures with the real OCR engine are in ``make bench``: ``lab/bench/ask.py``.)"""
 
 from __future__ import annotations
 

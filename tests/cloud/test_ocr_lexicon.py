@@ -9,7 +9,7 @@ from darkread.cloud.ocr import create_backend  # noqa: E402
 from darkread.cloud.ocr.base import OcrLine, OcrResult  # noqa: E402
 from darkread.cloud.ocr.lexicon import LexiconCorrected, LexiconCorrector  # noqa: E402
 from darkread.cloud.settings import Settings  # noqa: E402
-from darkread.eval.error_rates import error_rates  # noqa: E402
+from darkread.core.text_metrics import error_rates  # noqa: E402
 
 
 @pytest.fixture(scope="module")

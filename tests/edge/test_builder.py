@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from factories import sum_bins_model, synthetic_recording
 
-from darkread.bench.ack_server import AckServer
+from darkread.lab.bench.ack_server import AckServer
 from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon

@@ -109,8 +109,8 @@ def test_bad_input_and_conventions() -> None:
 @pytest.mark.shared
 def test_fixation_onsets_of_the_oz_reader(shared_data) -> None:
     """EyeLink's 1000 Hz samples of a real reader at Aria's rates with Aria-like noise (~1.1 deg RMS)."""
-    from darkread.gaze import human
-    from darkread.gaze.scores import ARIA_RATES_HZ, oz_onset_scores
+    from darkread.lab.gaze import human
+    from darkread.lab.gaze.scores import ARIA_RATES_HZ, oz_onset_scores
 
     raw = human.load_eyelink_asc(shared_data / "reading_gaze" / "oz" / "OZ_1trial.txt")
     print(f"\noz reader, {len(raw.fixations)} EyeLink fixations; noise {human.NoiseModel()}")

@@ -13,7 +13,7 @@ from darkread.edge.config import load_config
 from darkread.edge.reconstruct import default_model_path
 from darkread.edge.sources.replay import ReplaySource
 from darkread.edge.view_fusion import ViewRecord
-from darkread.paths import SAMPLE_RECORDING
+from darkread.core.paths import SAMPLE_RECORDING
 
 pytestmark = pytest.mark.skipif(
     not (SAMPLE_RECORDING / "events.raw").is_file() or not default_model_path().is_file(),

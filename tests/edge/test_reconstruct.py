@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from darkread.edge.errors import ModelError
 from darkread.edge.reconstruct import Reconstructor, default_model_path
+from darkread.lab import FULL_NETWORK, PREVIOUS_NETWORK
 
 
 @pytest.fixture(scope="module")
@@ -195,5 +196,5 @@ def test_the_shipped_networks_carry_the_temperatures_they_were_read_at() -> None
     shipped_model = default_model_path()
     assert Reconstructor(shipped_model, warmup=0).temperature == 1.5
     assert Reconstructor(shipped_model.with_name("binary_unet_int8.onnx"), warmup=0).temperature == 1.5
-    assert Reconstructor(shipped_model.with_name("binary_unet_previous.onnx"), warmup=0).temperature == 1.0
-    assert Reconstructor(shipped_model.with_name("binary_unet_full.onnx"), warmup=0).temperature == 1.5
+    assert Reconstructor(PREVIOUS_NETWORK, warmup=0).temperature == 1.0
+    assert Reconstructor(FULL_NETWORK, warmup=0).temperature == 1.5

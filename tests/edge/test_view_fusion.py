@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from darkread.edge.view_fusion import N_LEVELS, ViewFuser, quantise, threshold
-from darkread.frame_record import FrameRecord
+from darkread.core.frame_record import FrameRecord
 from darkread.proto.messages import View, decode, encode
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from darkread.paths import SAMPLE_RECORDING
+from darkread.core.paths import SAMPLE_RECORDING
 
 from factories import sum_bins_model as tiny_model
 

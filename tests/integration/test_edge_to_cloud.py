@@ -25,7 +25,7 @@ from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon
 from darkread.edge.notify import Notifier
-from darkread.paths import SAMPLE_RECORDING
+from darkread.core.paths import SAMPLE_RECORDING
 
 pytestmark = pytest.mark.slow
 

@@ -28,8 +28,8 @@ from darkread.cloud.app import create_app
 from darkread.cloud.server import serve_in_thread
 from darkread.cloud.settings import Settings
 from darkread.edge.io.recording import open_recording
-from darkread.eval.error_rates import error_rates
-from darkread.paths import SAMPLE_RECORDING
+from darkread.core.text_metrics import error_rates
+from darkread.core.paths import SAMPLE_RECORDING
 
 pytestmark = pytest.mark.slow
 

@@ -23,8 +23,8 @@ from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon
 from darkread.edge.notify import Notifier
 from darkread.edge.io.recording import open_recording
-from darkread.eval.error_rates import error_rates
-from darkread.paths import SAMPLE_RECORDING
+from darkread.core.text_metrics import error_rates
+from darkread.core.paths import SAMPLE_RECORDING
 
 pytestmark = [pytest.mark.slow, pytest.mark.postgres]
 
@@ -115,7 +115,7 @@ def test_an_instance_killed_mid_stream_the_other_serves_the_whole_session(tmp_pa
 def test_paced_replays_over_two_instances_store_every_frame_once(tmp_path: Path, postgres_url: str) -> None:
     """The short form of ``make bench``'s 50 replays for 60 s: 8 replays at 1x for 4 s, the first
     instance SIGKILLed halfway (its replays fail over to the second)."""
-    from darkread.bench.replays import count_stored_in, run_replays
+    from darkread.lab.bench.replays import count_stored_in, run_replays
 
     a = CloudProcess(tmp_path / "a", database_url=postgres_url)
     b = CloudProcess(tmp_path / "b", database_url=postgres_url)

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from darkread.edge.io.recording import open_recording
-from darkread.paths import SAMPLE_RECORDING
+from darkread.core.paths import SAMPLE_RECORDING
 from darkread.read import read_recording
 
 pytestmark = pytest.mark.slow

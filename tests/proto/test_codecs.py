@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from darkread.mask_bits import pack_bits, packed_length
+from darkread.core.mask_bits import pack_bits, packed_length
 from darkread.proto.codecs import (
     LEVEL_ENCODINGS,
     MASK_ENCODINGS,
@@ -216,7 +216,7 @@ def test_random_compressed_bits_raise_only_bad_mask(data: bytes, enc: str) -> No
 
 
 def test_view_of_carries_a_fused_record_and_refuses_a_binary_one() -> None:
-    from darkread.frame_record import FrameRecord
+    from darkread.core.frame_record import FrameRecord
 
     levels = np.frombuffer(LEVELS, np.uint8).reshape(4, 5)
     record = FrameRecord(3, 1200000, (levels >= 2).astype(np.uint8), GAZE["origin"], GAZE["gaze_px"],

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from darkread.frame_record import FrameRecord
+from darkread.core.frame_record import FrameRecord
 from PIL import Image, ImageDraw, ImageFont
 
 PARAGRAPH = (

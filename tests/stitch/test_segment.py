@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from darkread.frame_record import FrameRecord
+from darkread.core.frame_record import FrameRecord
 from darkread.stitch import LineSegmenter, StitchConfig, segment_lines
 from reading_factory import ScanParams, simulate_reading
 

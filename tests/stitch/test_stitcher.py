@@ -4,7 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from darkread.frame_record import FrameRecord
+from darkread.core.frame_record import FrameRecord
 from darkread.stitch import (
     PageStitcher,
     StitchConfig,

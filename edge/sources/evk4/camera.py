@@ -25,7 +25,7 @@ from darkread.edge.sources.evk4 import registers as regs
 from darkread.edge.sources.evk4.device import Evk4Device, Sleep
 from darkread.edge.sources.evk4.resync import ChunkAligner
 from darkread.edge.sources.evk4.treuzell import format_version
-from darkread.errors import DarkreadError
+from darkread.core.errors import DarkreadError
 
 log = logging.getLogger(__name__)
 

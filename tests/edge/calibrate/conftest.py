@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from darkread.models.synth.calibration_capture import (
+from darkread.lab.fixtures.calibration_capture import (
     FlashCapture,
     FlashCaptureSpec,
     simulate_flash_capture,

@@ -80,7 +80,7 @@ def test_aria_device_calibration_gives_fisheye_and_pose(tmp_path):
 def test_aria_pose_layout_round_trips():
     from darkread.edge.calibrate.cameras import pose_from_aria_json
     from darkread.edge.calibrate.markers import pose_matrix
-    from darkread.models.synth.calibration_capture import aria_pose
+    from darkread.lab.fixtures.calibration_capture import aria_pose
 
     T = pose_matrix(np.radians([20.0, -170.0, 35.0]), [0.01, -0.02, 0.03])
     assert np.allclose(pose_from_aria_json(aria_pose(T)), T, atol=1e-12)

@@ -8,7 +8,7 @@ import pytest
 from darkread.edge.calibrate.extrinsics import rotation_deg
 from darkread.edge.io.calibration import load_calibration, save_calibration
 from darkread.models.synth.camera import rotation_xyz
-from darkread.models.synth.calibration_capture import write_flash_capture
+from darkread.lab.fixtures.calibration_capture import write_flash_capture
 
 from darkread.cli import main
 
@@ -66,7 +66,7 @@ def test_full_session_through_the_commands(posed_capture, still_capture_dir, tmp
 
 
 def test_homography_only_on_a_printed_page(tmp_path, capsys):
-    from darkread.models.synth.calibration_capture import simulate_page_capture, write_page_capture
+    from darkread.lab.fixtures.calibration_capture import simulate_page_capture, write_page_capture
 
     capture = write_page_capture(tmp_path / "page", simulate_page_capture(seed=2))
     before = (capture / "calibration.json").read_bytes()

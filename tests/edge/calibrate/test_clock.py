@@ -14,7 +14,7 @@ from darkread.edge.calibrate.clock import (
 )
 from darkread.edge.errors import CalibrationError
 from darkread.edge.events import empty_triggers
-from darkread.models.synth.calibration_capture import shown_fraction, simulate_gaze_flow
+from darkread.lab.fixtures.calibration_capture import shown_fraction, simulate_gaze_flow
 
 
 def test_predicted_fractions_integrate_the_square_wave():

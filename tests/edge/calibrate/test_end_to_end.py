@@ -94,7 +94,7 @@ def test_pose_through_an_aria_fisheye_rgb_camera(tmp_path, capsys):
     """RGB frames rendered through a Fisheye624 lens; poses from unprojected rays (library and CLI)."""
     from darkread.edge.calibrate.cameras import Fisheye624Camera
     from darkread.edge.io.calibration import load_calibration, save_calibration
-    from darkread.models.synth.calibration_capture import (
+    from darkread.lab.fixtures.calibration_capture import (
         FlashCaptureSpec,
         simulate_flash_capture,
         write_flash_capture,

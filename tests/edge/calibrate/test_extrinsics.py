@@ -76,7 +76,7 @@ def test_homography_fallback_on_a_printed_page_lit_by_a_lamp():
     """Static markers around text (ESIM): first-event latency image vs one RGB frame."""
     from darkread.edge.calibrate.event_image import find_bursts, latency_image
     from darkread.edge.calibrate.markers import detect_board
-    from darkread.models.synth.calibration_capture import simulate_page_capture
+    from darkread.lab.fixtures.calibration_capture import simulate_page_capture
 
     page = simulate_page_capture(seed=1)
     bursts = find_bursts(page.events)
@@ -96,7 +96,7 @@ def test_homography_fallback_on_a_printed_page_lit_by_a_lamp():
 
 def test_lamp_views_find_the_printed_markers():
     from darkread.edge.calibrate.intrinsics import detect_views
-    from darkread.models.synth.calibration_capture import simulate_page_capture
+    from darkread.lab.fixtures.calibration_capture import simulate_page_capture
 
     page = simulate_page_capture(seed=3)
     views = detect_views(page.events, page.markers, 1280, 720, lamp=True)

@@ -13,7 +13,7 @@ from darkread.edge.calibrate.intrinsics import IntrinsicsResult
 from darkread.edge.errors import CalibrationError
 from darkread.edge.io.calibration import Calibration
 from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics, intrinsics_from_dict, intrinsics_to_dict
-from darkread.models.synth.rgb_camera import RgbCameraModel
+from darkread.lab.synth.rgb_camera import RgbCameraModel
 
 CAMERA = Intrinsics(1280, 720, 1400.0, 1401.0, 641.0, 359.0, (-0.05, 0.02, 1e-3, -5e-4))
 

@@ -9,7 +9,7 @@ from darkread.models.train.data import (
     load_shard,
     shard_paths,
 )
-from darkread.mask_bits import pack_rows, unpack_rows
+from darkread.core.mask_bits import pack_rows, unpack_rows
 
 
 def test_packed_targets_round_trip() -> None:

@@ -74,7 +74,7 @@ def test_reproduce_synthesises_missing_sets_then_fits_and_writes_the_card(shard_
 
 def test_the_network_shape_comes_from_the_options_else_the_init_network_else_the_default(tmp_path: Path) -> None:
     from darkread.cli import build_parser
-    from darkread.models.train.cli import _net_config
+    from darkread.lab.train.cli import _net_config
     from darkread.models.train.export import export_onnx
     from darkread.models.train.net import BinaryUNet
 

@@ -1,0 +1,60 @@
+"""Reconstruction latency per 100x200 window on one core: the shipped ONNX U-Net, fp32 and static int8.
+
+Reference measured in the same run: the same network in PyTorch eager mode on one thread when
+torch is installed (the training stack), else the naive count-image baseline (numpy + OpenCV);
+and the previous network (``binary_unet_previous.onnx``: 53 k parameters, a 64-wide 1/8 scale with four
+blocks where the shipped one has 96 and eight), alternated with the shipped one:
+``inference_cost_ratio_vs_previous`` (issue 20's budget: at most 1.5).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from darkread.lab import PREVIOUS_NETWORK
+from darkread.lab.bench import BenchContext, Figure
+from darkread.models.train.latency import median_ms, onnx_latency_ms, reference_latency_ms
+
+INT8_FILENAME = "binary_unet_int8.onnx"
+
+
+def run(ctx: BenchContext) -> list[Figure]:
+    from darkread.edge.reconstruct import default_model_path
+
+    fp32 = default_model_path()
+    if not fp32.is_file():
+        ctx.notes.append(f"inference: no shipped model at {fp32}; run `darkread train all`")
+        return []
+    runs = ctx.runs(100, 20, 3)
+    reference_ms, reference = reference_latency_ms(runs)
+    figures = [
+        Figure("inference_ms_fp32", onnx_latency_ms(fp32, runs), "U-Net fp32 ORT, 1 core (ms/window)", reference, "<= 3 ms (goal 2)"),
+    ]
+    int8 = fp32.with_name(INT8_FILENAME)
+    if int8.is_file():
+        figures.append(
+            Figure("inference_ms_int8", onnx_latency_ms(int8, runs), "U-Net int8 QDQ ORT, 1 core (ms/window)", reference, "<= 3 ms")
+        )
+    else:
+        ctx.notes.append(f"inference: no int8 model at {int8}")
+    figures.append(Figure("inference_ms_reference", reference_ms, "reference (see column), 1 core (ms/window)", reference))
+    previous = PREVIOUS_NETWORK
+    if previous.is_file():
+        # alternated, so a drift of the host's speed falls on both alike
+        shipped_ms, previous_ms = [], []
+        for _ in range(3):
+            shipped_ms.append(onnx_latency_ms(fp32, runs, repeats=1))
+            previous_ms.append(onnx_latency_ms(previous, runs, repeats=1))
+        ratio = min(shipped_ms) / min(previous_ms)
+        figures += [
+            Figure("inference_ms_previous_model", min(previous_ms), "the previous network (53 k parameters), fp32 ORT, 1 core (ms/window)",
+                   f"shipped network, same run, alternated: {min(shipped_ms):.2f} ms"),
+            Figure("inference_cost_ratio_vs_previous", ratio, "per-window inference cost, shipped / previous network (same run)",
+                   f"{min(shipped_ms):.2f} / {min(previous_ms):.2f} ms", "<= 1.5"),
+        ]
+    else:
+        ctx.notes.append(f"inference: no previous network at {previous}")
+    return figures

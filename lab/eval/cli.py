@@ -1,0 +1,265 @@
+"""``darkread eval SUITE_DIR`` and ``darkread eval make-suite OUT``: evaluation suites and the report."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from darkread.lab.eval.results import RecordingResult
+
+from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
+
+logger = logging.getLogger(__name__)
+BOTH = "both"
+
+EVAL_HELP = """\
+Five forms:
+
+  darkread eval make-suite OUT [--small | --subset simulator-check] [--simulator darkread|hesim] [--font FAMILY] [--jobs N]
+      write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
+      text kinds, three font families incl. one held out of training, x-heights 7-12, motion
+      still/normal/walking, and nine 30-lux paragraphs). Each recording ends when the page has been
+      read once; texts come from the corpus part never used for training; six more replay a real
+      reader's fixations (30 and 10 lux paragraphs, three motions; names end in _human). --small:
+      17 short recordings, one axis varied at a time (CI-sized). --match PATTERN: only those
+      recordings (e.g. --match '*lux30_*_human'). --simulator hesim: the same scenes, gaze and
+      texts turned into events by a second, independent simulator (hesim-3d); --subset
+      simulator-check: the 18 recordings `make eval-hesim` compares on both simulators. --font
+      FAMILY: the selected recordings made again in another font family, all else alike (names end
+      in _as_<their own family>), to tell what a font costs from what a scene does.
+
+  darkread eval SUITE_DIR [--out docs/eval] [--backend local] [--infer MODE|both] [--beside DIR] [--jobs N]
+      read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
+      snapshot of the same scene, compare OCR engines on the stitched pages, measure bandwidth, and
+      write the Markdown report with PNG plots to --out. Results are kept per recording under
+      SUITE_DIR/eval_runs/<mode> (or --work), so an interrupted evaluation resumes (--force redoes
+      them). --report-only rebuilds the report from the stored results.
+
+  darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md] [--infer MODE]
+      the same recordings made by two event simulators (make-suite --simulator), both evaluated:
+      mean CER per lux and per lux x motion side by side, with each suite's event rates; printed and
+      written to --out (a .md file, or a folder: FOLDER/simulators.md; default docs/eval/simulators.md,
+      which the report of docs/eval then shows as its "Second simulator" section). `make eval-hesim`
+      runs it all.
+
+  darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md] [--infer MODE] [--model ONNX]
+      where an evaluated suite's errors come from: each recording read again end to end with the
+      head's motion known exactly (the edge given the simulator's pose: what an exact inertial sensor would
+      give), each page read again with its frames placed by the simulator's true pose (perfect
+      stitching) and with every frame replaced by its window's true ink (perfect frames), and each
+      frame's ink recall and precision against that truth; mean CER of the four by lux and motion,
+      printed and written to --out (a .md file, or a folder: FOLDER/attribution.md) with the
+      per-recording figures beside it (.json). --model: the network the suite was evaluated with.
+
+  darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]
+      how much of the ink the events themselves show, the bound on what any network can draw: for
+      windows of each synthetic recording cut as the edge cuts them (1600 events, and 3200 and 6400:
+      what temporal context could gather), with the head's motion as the edge measures it and known
+      exactly, the chance that an ink pixel has more events than a paper pixel, and the share of
+      ink with an event within 1 px; by lux and motion, written to --out (a .md file, or a folder:
+      FOLDER/evidence.md) with the per-recording figures beside it (.json). Needs no evaluation.
+
+  Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
+  PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
+  default SUITE_DIR/eval_runs/<mode>), and the report puts the other mode beside the default:
+  CER by lux and motion with the difference, the 30-lux headline, a CER-vs-lux plot of both, and
+  each mode's stream in the bandwidth table. --beside DIR alone puts the stored results of another
+  run (the other mode, same suite) beside this one without evaluating them, e.g.
+      darkread eval SUITE --infer on-change --work W1 --beside SUITE/eval_runs/every-window
+"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from darkread.models.synth.sensor import REGIMES
+
+    parser = subparsers.add_parser(
+        "eval",
+        help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
+        description=EVAL_HELP,
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]\n       darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
+    parser.add_argument("make_suite_out", nargs="?", metavar="OUT", help=argparse.SUPPRESS)
+    parser.add_argument("second_suite", nargs="?", metavar="OTHER_SUITE", help=argparse.SUPPRESS)
+    parser.add_argument("--out", default="docs/eval", metavar="DIR", help="report folder (default docs/eval)")
+    parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
+                        help="OCR engine for darkread and the RGB baseline (default: local)")
+    parser.add_argument("--compare", nargs="*", metavar="ENGINE", default=None,
+                        help="OCR engines to compare on the stitched pages (default: every installed offline "
+                             "engine with and without the word-list correction, e.g. rapidocr and rapidocr-raw, plus "
+                             "remote ones when configured; --compare alone: no comparison)")
+    parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
+    parser.add_argument("--work", metavar="DIR", help="per-recording outputs of the (default) mode (default SUITE_DIR/eval_runs/<mode>)")
+    parser.add_argument("--force", action="store_true", help="re-evaluate recordings that already have results")
+    parser.add_argument("--report-only", action="store_true", help="rebuild the report from stored results")
+    parser.add_argument("--note", action="append", default=[], metavar="TEXT", help="a line for the report's header (repeatable)")
+    parser.add_argument("--small", action="store_true", help="make-suite: the small (CI) suite")
+    parser.add_argument("--limit", type=int, metavar="N", help="make-suite: only the first N recordings")
+    parser.add_argument("--match", metavar="PATTERN", action="append",
+                        help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
+                             "'*lux30_*_human' for the real-scanpath recordings at 30 lux (repeatable: any of them)")
+    parser.add_argument("--subset", choices=["simulator-check"],
+                        help="make-suite: a named part of the full suite; simulator-check: its words and paragraph "
+                             "recordings at 30, 10 and 5 lux, every motion (18, same names, seeds and texts)")
+    parser.add_argument("--simulator", choices=["darkread", "hesim"], default="darkread",
+                        help="make-suite: what turns the rendered scenes into events: darkread (our sensor model, "
+                             "default) or hesim (hesim-3d's H-ESIM, IMX636 preset; `make hesim` installs it)")
+    parser.add_argument("--regime", default="standard", choices=REGIMES,
+                        help="make-suite: our simulator's sensor regime (default standard); fast-photoreceptor: the same "
+                             "scenes and sensors with a photoreceptor that keeps up in the dark (~1 ms at 5 lux, the "
+                             "IMX636's stated latency read as scene light; standard: 4-50 ms): what that choice decides")
+    parser.add_argument("--font", metavar="FAMILY",
+                        help="make-suite: every selected recording not already in this font family made again in it "
+                             "(same seed, light, motion, text kind and x-height; named <name-in-FAMILY>_as_<old family>), "
+                             "e.g. --font 'DejaVu Sans' --match '*_lux5_*roboto*': what the held-out font costs")
+    parser.add_argument("--infer", default=None, choices=[*INFER_MODES, BOTH],
+                        help="the edge's mode (default: the edge's default, PipelineConfig().infer; every-window: every frame; "
+                             "on-change: one fused view per fixation; both: the default and the other beside it)")
+    parser.add_argument("--beside", metavar="DIR",
+                        help="results of the other mode to put beside this run in the report (a --work folder of the same "
+                             "suite); with --infer both, where the other mode is evaluated (default SUITE_DIR/eval_runs/<mode>)")
+    parser.add_argument("--no-rgb", action="store_true",
+                        help="leave out the RGB baseline and the bandwidth figures (they need its snapshot): darkread's "
+                             "reading only, e.g. for a second simulator's suite whose scenes another suite already has")
+    parser.add_argument("--jobs", type=int, default=1, metavar="N",
+                        help="worker processes (make-suite and evaluation; default 1)")
+    parser.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    if args.target == "compare-simulators":
+        return _compare_simulators(args)
+    if args.target == "attribute":
+        return _attribute(args)
+    if args.target == "evidence":
+        return _evidence(args)
+    if args.second_suite is not None:
+        raise ValueError(f"unexpected argument {args.second_suite!r}")
+    if args.target == "make-suite":
+        return _make_suite(args)
+    if args.make_suite_out is not None:
+        raise ValueError(f"unexpected argument {args.make_suite_out!r}; `darkread eval SUITE_DIR` takes one folder")
+    return _evaluate(args)
+
+
+def _make_suite(args: argparse.Namespace) -> int:
+    from darkread.lab.eval.suite import make_suite
+
+    if not args.make_suite_out:
+        raise ValueError("give the output folder: darkread eval make-suite OUT [--small]")
+    entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
+                         subset=args.subset, simulator=args.simulator, font=args.font, regime=args.regime)
+    print(f"{len(entries)} recordings in {args.make_suite_out}")
+    return 0
+
+
+def _compare_simulators(args: argparse.Namespace) -> int:
+    from darkread.lab.eval.simulators import SIMULATORS_NAME, write_comparison
+
+    if not (args.make_suite_out and args.second_suite):
+        raise ValueError("give two evaluated suites: darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]")
+    out = Path(args.out)
+    out = out / SIMULATORS_NAME if out.suffix != ".md" else out
+    path = write_comparison(args.make_suite_out, args.second_suite, out, mode=args.infer or default_infer_mode())
+    print(path.read_text())
+    return 0
+
+
+def _first_mode(args: argparse.Namespace) -> str:
+    """The edge mode an evaluation reads first: --infer's, or the edge's default (for none or both)."""
+    return default_infer_mode() if args.infer in (None, BOTH) else args.infer
+
+
+def _one_suite(args: argparse.Namespace, usage: str) -> Path:
+    """The one suite folder a form that reads a suite (``attribute``, ``evidence``) was given; ``usage``
+    is the error when there is not exactly one."""
+    if not args.make_suite_out or args.second_suite is not None:
+        raise ValueError(usage)
+    suite = Path(args.make_suite_out)
+    if not suite.is_dir():
+        raise FileNotFoundError(f"{suite}: no such suite directory")
+    return suite
+
+
+def _attribute(args: argparse.Namespace) -> int:
+    from darkread.lab.eval.attribution import ATTRIBUTION_NAME, write_attribution
+
+    suite = _one_suite(args, "give one evaluated suite: darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]")
+    work = Path(args.work) if args.work else suite / "eval_runs" / _first_mode(args)
+    out = Path(args.out)
+    out = out / ATTRIBUTION_NAME if out.suffix != ".md" else out
+    path = write_attribution(suite, work, out, backend=args.backend, notes=args.note, model=args.model)
+    print(path.read_text())
+    return 0
+
+
+def _evidence(args: argparse.Namespace) -> int:
+    from darkread.lab.eval.evidence import write_evidence
+
+    suite = _one_suite(args, "give one suite: darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]")
+    path = write_evidence(suite, args.out, jobs=max(1, args.jobs))
+    print(path.read_text())
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from darkread.edge.reconstruct import default_model_path
+    from darkread.lab.eval.provenance import ReportInfo, describe_model, git_commit
+    from darkread.lab.eval.report import write_report
+
+    suite = Path(args.target)
+    mode = _first_mode(args)
+    runs = [(mode, Path(args.work) if args.work else suite / "eval_runs" / mode)]
+    if args.infer == BOTH or args.beside:
+        other = other_infer_mode(mode)
+        runs.append((other, Path(args.beside) if args.beside else suite / "eval_runs" / other))
+    evaluate = [] if args.report_only else runs if args.infer == BOTH else runs[:1]
+    per_mode = [_results(suite, work, expected, args, evaluate=(expected, work) in evaluate) for expected, work in runs]
+    info = ReportInfo(
+        commit=git_commit(),
+        backend=args.backend,
+        model=describe_model(args.model or default_model_path()),
+        suite=_describe_suite(suite, per_mode[0]),
+        notes=list(args.note),
+    )
+    path = write_report(per_mode[0], args.out, info, beside=per_mode[1] if len(per_mode) > 1 else None,
+                        suite_dir=suite)
+    print(f"report: {path}")
+    return 0
+
+
+def _results(suite: Path, work: Path, mode: str, args: argparse.Namespace, *, evaluate: bool) -> list[RecordingResult]:
+    """One mode's results: evaluated (resuming from ``work``) or read from ``work``; all of ``mode``."""
+    from darkread.lab.eval.runner import evaluate_suite, load_results
+
+    if evaluate:
+        return evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model, rgb=not args.no_rgb,
+                              force=args.force, jobs=args.jobs, infer=mode)
+    results = load_results(work)
+    if not results:
+        raise FileNotFoundError(f"{work}: no stored results; run `darkread eval {suite} --infer {mode} --work {work}` first")
+    others = sorted({r.infer for r in results} - {mode})
+    if others:
+        raise ValueError(f"{work}: expected {mode} results, found {', '.join(others)} ones; give the folder of a {mode} run")
+    return results
+
+
+def _describe_suite(suite: Path, results: list[RecordingResult]) -> str:
+    import json
+
+    seconds = sorted(r.duration_s for r in results if r.duration_s)
+    kind = ""
+    doc = suite / "suite.json"
+    if doc.is_file():
+        kind = "small suite, " if json.loads(doc.read_text()).get("small") else "full suite, "
+    if not seconds:
+        span = "durations unknown"
+    elif seconds[0] == seconds[-1]:
+        span = f"{seconds[0]:g} s each"
+    else:
+        span = f"{seconds[0]:.1f}-{seconds[-1]:.1f} s each, {sum(seconds) / 60:.1f} min in all"
+    return f"{len(results)} synthetic recordings ({kind}{span}; `darkread eval make-suite`, fixed seeds)"

@@ -1,0 +1,141 @@
+"""``darkread synth recording`` and ``darkread synth dataset``: synthetic reading sessions."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+MOTIONS = ("still", "normal", "walking")
+KINDS = ("letters", "words", "pangram", "paragraph")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from darkread.models.synth.sensor import REGIMES
+
+    synth = subparsers.add_parser(
+        "synth",
+        help="make synthetic reading recordings and training shards",
+        description="Simulate a person reading a printed page with event-camera glasses: page, head "
+        "motion, reading gaze, low-light event sensor.",
+    )
+    sub = synth.add_subparsers(dest="synth_command", metavar="SUBCOMMAND")
+    synth.set_defaults(func=lambda args: (synth.print_help(), 2)[1])
+
+    rec = sub.add_parser(
+        "recording",
+        help="write one recording (events.raw, general_eye_gaze.csv, calibration.json, text.txt, meta.json)",
+        description="Write a synthetic reading session in the recording format to OUT.",
+    )
+    rec.add_argument("out", metavar="OUT", help="output folder (created)")
+    rec.add_argument("--lux", type=float, default=100.0, help="illuminance at the page (5..1000; default 100)")
+    rec.add_argument("--motion", choices=MOTIONS, default="normal", help="head / page motion level")
+    rec.add_argument("--kind", choices=KINDS, default="paragraph", help="what is printed")
+    rec.add_argument("--seconds", type=float, default=10.0,
+                     help="duration of the recording (s); with --read-once the longest it may last")
+    rec.add_argument("--read-once", action="store_true",
+                     help="end the recording when the reader has read the last line (no re-reading)")
+    rec.add_argument("--text-split", choices=("train", "val"), default="train",
+                     help="val: texts never used for training (for evaluation)")
+    rec.add_argument("--seed", type=int, default=0, help="random seed (same seed, same recording)")
+    rec.add_argument("--font", default=None, help="font face, e.g. 'DejaVu Sans' (default: random training font)")
+    rec.add_argument("--xheight", type=float, default=None, help="x-height in event pixels (5..16; default random)")
+    rec.add_argument("--lines", type=int, default=None, help="number of printed lines (default 3..10)")
+    rec.add_argument("--line-chars", type=int, default=None, help="characters per line (default 20..50)")
+    rec.add_argument("--scanpath", choices=("model", "human"), default="model",
+                     help="model: the reading model's eye movements; human: a real reader's fixations replayed on "
+                          "this page line by line (durations, regressions, skips, sweep undershoot, vertical drift; "
+                          "shipped: one reader of the oz data, MIT licence)")
+    rec.add_argument("--scanpath-file", default=None, metavar="FILE.json",
+                     help="with --scanpath human: another human scanpath (the form of "
+                          "models/synth/data/human_scanpath_oz.json; see models/synth/human_scanpath.py)")
+    rec.add_argument("--regime", choices=REGIMES, default="standard",
+                     help="sensor regime: standard (what training saw), shifted (higher, more spread thresholds, a "
+                          "faster photoreceptor in the dark, more shot noise, leak and hot pixels, and a font never used in training: "
+                          "the stand-in for a real camera when adapting the model) or fast-photoreceptor (standard, but the "
+                          "photoreceptor keeps up in the dark: ~1 ms at 5 lux instead of 4-50 ms)")
+    rec.add_argument("--markers", action="store_true",
+                     help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "
+                          "page.layout.json (every recording carries the simulator's true page pose per millisecond, "
+                          "pose_truth.npz, and a plain page its ink, page_ink.npz: for scoring only)")
+    rec.add_argument("--simulator", choices=("darkread", "hesim"), default="darkread",
+                     help="what turns the rendered scene into events: darkread (our sensor model, default) or hesim "
+                          "(hesim-3d's H-ESIM with its Sony IMX636 preset, a second, independent simulator; the "
+                          "page, motion, gaze, calibration and truth files stay the same; `make hesim` installs it)")
+    rec.set_defaults(func=_recording)
+
+    ds = sub.add_parser(
+        "dataset",
+        help="write training shards (voxel grid + ideal ink mask) for the reconstruction network",
+        description="Write SAMPLES training pairs as compressed shards plus dataset.json. Deterministic "
+        "for a seed whatever the number of workers; an interrupted run resumes (finished shards are kept).",
+    )
+    ds.add_argument("out", metavar="OUT", help="output folder (created)")
+    ds.add_argument("--samples", type=int, default=90000, help="number of samples (default 90000)")
+    ds.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    ds.add_argument("--seed", type=int, default=0, help="dataset seed")
+    ds.add_argument("--split", choices=("train", "val"), default="train",
+                    help="train: training fonts and texts; val: validation texts, all fonts incl. held-out")
+    ds.add_argument("--held-out", action="store_true", help="only the held-out font families")
+    ds.add_argument("--more-fonts", action="store_true",
+                    help="a training set drawn from two more families too (Computer Modern Sans and Roman, "
+                         "matplotlib's): more letter shapes than the three training families")
+    ds.add_argument("--shard-size", type=int, default=250, help="samples per shard")
+    ds.add_argument("--lux", type=float, nargs=2, metavar=("LOW", "HIGH"),
+                    help="light at the page, log-uniform between LOW and HIGH lux (default: the training range, "
+                         "4 1200; e.g. 4 40 for a low-light set to mix into training)")
+    ds.add_argument("--target-time", choices=("end", "evidence"), default="end",
+                    help="when each target shows the page: end (the window's newest event, default) or evidence "
+                         "(the time, up to 60 ms earlier, its events match best: in the dark events trail the page)")
+    ds.set_defaults(func=_dataset)
+
+
+def _dataset(args: argparse.Namespace) -> int:
+    from darkread.models.synth.shards import build_dataset
+
+    manifest = build_dataset(
+        args.out,
+        args.samples,
+        workers=args.workers,
+        seed=args.seed,
+        split=args.split,
+        held_out=args.held_out,
+        shard_size=args.shard_size,
+        target_time=args.target_time,
+        more_fonts=args.more_fonts,
+        **({"lux_range": (args.lux[0], args.lux[1])} if args.lux else {}),
+    )
+    print(f"{manifest['samples']} samples in {len(manifest['shards'])} shards -> {args.out} "
+          f"({manifest['samples_per_s']} samples/s)")
+    return 0
+
+
+def _recording(args: argparse.Namespace) -> int:
+    from darkread.lab.synth.simulators import simulator_for
+    from darkread.models.synth.recording import RecordingSpec, write_recording
+
+    spec = RecordingSpec(
+        lux=args.lux,
+        motion=args.motion,
+        kind=args.kind,
+        seconds=args.seconds,
+        seed=args.seed,
+        font=args.font,
+        xheight_px=args.xheight,
+        n_lines=args.lines,
+        line_chars=args.line_chars,
+        split=args.text_split,
+        read_once=args.read_once,
+        scanpath="human" if args.scanpath_file else args.scanpath,
+        scanpath_file=args.scanpath_file,
+        regime=args.regime,
+        markers=args.markers,
+        simulator=args.simulator,
+    )
+    if args.scanpath_file and not Path(args.scanpath_file).is_file():
+        raise FileNotFoundError(f"--scanpath-file {args.scanpath_file}: no such file")
+    meta = write_recording(args.out, spec, simulator=simulator_for(args.simulator))
+    print(f"{args.out}: {meta['event_count']} events over {meta['duration_s']} s ({meta['event_rate_hz']:.0f} ev/s)")
+    return 0
