@@ -68,6 +68,10 @@ class Principal:
         return Scope.ADMIN in self.scopes or self.device is None or self.device == device_id
 
 
+# DARKREAD_API_KEY beyond loopback: a key anyone could guess in a few tries is no key (device keys
+# made by ``keys add`` are 32 random bytes).
+MIN_API_KEY_CHARS = 16
+
 ALL_SCOPES = frozenset(Scope)
 LOOPBACK_DEVELOPER = Principal("loopback", None, ALL_SCOPES)  # no keys configured, local client
 ENVIRONMENT_ADMIN = Principal("env", None, ALL_SCOPES)  # DARKREAD_API_KEY

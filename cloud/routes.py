@@ -10,7 +10,7 @@ import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import asdict, dataclass
-from typing import Annotated, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
 from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
@@ -367,8 +367,30 @@ async def events(session_id: SessionId, context: Context, principal: Reader) -> 
     info = await _session(context, session_id, principal)
     if info.mode == "pages":
         raise HTTPException(status.HTTP_409_CONFLICT, detail="live pages are for sessions that stream frames")
-    return StreamingResponse(_event_stream(context, session_id), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})  # fmt: skip
+    streams = context.event_streams
+    if not streams.try_acquire(principal.key_id):
+        raise HTTPException(
+            status.HTTP_429_TOO_MANY_REQUESTS, headers={"Retry-After": str(round(KEEPALIVE_S))},
+            detail=f"this key has {streams.limit} event streams open, the most it may (DARKREAD_SSE_PER_KEY); "
+            "close one first",
+        )  # fmt: skip
+    return _HeldStream(lambda: streams.release(principal.key_id), _event_stream(context, session_id),
+                       media_type="text/event-stream", headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})  # fmt: skip
+
+
+class _HeldStream(StreamingResponse):
+    """A streamed answer that gives back what it holds (a per-key slot) however it ends: finished,
+    client gone, or cancelled before its first byte."""
+
+    def __init__(self, release: Callable[[], None], *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._release = release
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        try:
+            await super().__call__(scope, receive, send)
+        finally:
+            self._release()
 
 
 async def _event_stream(context: AppContext, session_id: str) -> AsyncIterator[str]:
