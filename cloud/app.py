@@ -101,7 +101,8 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
         datadir.check_data_dir(settings.data_dir)
         held = datadir.acquire(settings.data_dir)
         database_url = settings.database_url.get_secret_value() if settings.database_url else None
-        store = await open_store(settings.data_dir, database_url)
+        store = await open_store(settings.data_dir, database_url, timeout_s=settings.store_timeout_s,
+                                 read_threads=settings.store_read_threads)
         engine = ocr or create_backend(settings)
         context = AppContext(
             settings=settings,
@@ -133,6 +134,7 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
                 log.debug("OCR warm-up failed: %s", warm.exception())
             unsubscribe()
             await context.pages.close(timeout_s=min(5.0, settings.shutdown_timeout_s))
+            context.speech_pool.shutdown(wait=False, cancel_futures=True)
             close = getattr(engine, "close", None)
             if callable(close):
                 close()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import secrets
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -35,12 +36,14 @@ class AppContext:
     limiter: RateLimiter | None = None  # asks and page.png per key (from settings when None)
     event_streams: PerKeyCap = field(init=False)  # open GET .../events per key
     syntheses: PerKeyCap = field(init=False)  # spoken answers running or waiting per key
+    speech_pool: ThreadPoolExecutor = field(init=False)  # speech only: store reads and OCR have their own
 
     def __post_init__(self) -> None:
         if self.limiter is None:
             self.limiter = RateLimiter(self.settings.ask_rate_per_min, self.settings.ask_burst)
         self.event_streams = PerKeyCap(self.settings.sse_per_key)
         self.syntheses = PerKeyCap(self.settings.speech_per_key)
+        self.speech_pool = ThreadPoolExecutor(self.settings.speech_threads, thread_name_prefix="darkread-speech")
 
     def auth_configured(self) -> bool:
         return self.settings.api_key is not None or bool(self.keys)

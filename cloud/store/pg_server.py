@@ -101,11 +101,22 @@ class TemporaryPostgres:
                   "-E", "UTF8", "--locale=C", "--no-sync")  # fmt: skip
         pwfile.unlink()
         self.port = self.port or _free_port()
+        self.resume()
+        return self
+
+    def resume(self) -> None:
+        """Start the server on its data directory (after ``start()`` made it, or after ``halt()``)."""
+        assert self.root is not None  # noqa: S101 - start() first
         options = f"-c listen_addresses=127.0.0.1 -p {self.port} -k {self.root} -c max_connections=200"
         if not self.durable:
             options += " -c fsync=off -c full_page_writes=off"
-        self._run("pg_ctl", "-D", str(data), "-l", str(self.root / "server.log"), "-o", options, "-w", "-t", "60", "start")
-        return self
+        self._run("pg_ctl", "-D", str(self.root / "data"), "-l", str(self.root / "server.log"), "-o", options,
+                  "-w", "-t", "60", "start")  # fmt: skip
+
+    def halt(self) -> None:
+        """Stop the server at once (an outage), keeping its data for ``resume()``."""
+        assert self.root is not None  # noqa: S101 - start() first
+        self._run("pg_ctl", "-D", str(self.root / "data"), "-m", "immediate", "-w", "stop", timeout_s=30)
 
     def create_database(self, name: str) -> str:
         """A new empty database; its URL."""
