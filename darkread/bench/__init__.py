@@ -25,6 +25,7 @@ BENCH_MODULES: tuple[str, ...] = (
     "darkread.bench.edge",
     "darkread.bench.cloud",
     "darkread.bench.ask",
+    "darkread.bench.speech",
     "darkread.bench.stitch",
     "darkread.bench.ocr",
 )
