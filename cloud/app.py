@@ -19,6 +19,8 @@ from darkread import __version__
 from . import datadir
 from .auth import KeyRing, Scope, install_log_redaction
 from .context import AppContext
+from .errors import StoreError
+from .guard import RequestGuard
 from .prometheus import Metrics
 from .ocr import OcrBackend, create_backend
 from .live import LiveConfig, LivePages, PagingConfig
@@ -99,7 +101,8 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
         datadir.check_data_dir(settings.data_dir)
         held = datadir.acquire(settings.data_dir)
         database_url = settings.database_url.get_secret_value() if settings.database_url else None
-        store = await open_store(settings.data_dir, database_url)
+        store = await open_store(settings.data_dir, database_url, timeout_s=settings.store_timeout_s,
+                                 read_threads=settings.store_read_threads)
         engine = ocr or create_backend(settings)
         context = AppContext(
             settings=settings,
@@ -131,6 +134,7 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
                 log.debug("OCR warm-up failed: %s", warm.exception())
             unsubscribe()
             await context.pages.close(timeout_s=min(5.0, settings.shutdown_timeout_s))
+            context.speech_pool.shutdown(wait=False, cancel_futures=True)
             close = getattr(engine, "close", None)
             if callable(close):
                 close()
@@ -143,6 +147,8 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
         docs_url="/docs" if docs else None, redoc_url="/redoc" if docs else None,
         openapi_url="/openapi.json" if docs else None,
     )
+    app.add_middleware(RequestGuard)
+    app.add_exception_handler(StoreError, _store_unavailable)
     app.include_router(public)
     app.include_router(api)
     app.add_api_websocket_route("/v1/stream", stream_endpoint, name="stream")
@@ -150,6 +156,18 @@ def create_app(settings: Settings | None = None, *, ocr: OcrBackend | None = Non
     metrics_app = make_asgi_app(registry=metrics.registry)
     app.mount("/metrics", metrics_app if settings.metrics_public else _admin_only(metrics_app))
     return app
+
+
+STORE_RETRY_AFTER_S = 5
+
+
+async def _store_unavailable(request: Request, exc: Exception) -> JSONResponse:
+    """A store that fails (a database down, a pool without a connection in time): 503 with the
+    reason in one line and when to retry, logged once without a traceback."""
+    reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    log.warning("%s %s: 503, the store failed: %s", request.method, request.url.path, reason)
+    return JSONResponse({"detail": f"the session store is unavailable: {reason}"}, 503,
+                        headers={"Retry-After": str(STORE_RETRY_AFTER_S)})  # fmt: skip
 
 
 def _where(settings: Settings) -> str:

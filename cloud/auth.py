@@ -23,10 +23,11 @@ import os
 import re
 import secrets
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, MutableMapping
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
+from typing import Any
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +68,10 @@ class Principal:
         """May act on a session of ``device_id``."""
         return Scope.ADMIN in self.scopes or self.device is None or self.device == device_id
 
+
+# DARKREAD_API_KEY beyond loopback: a key anyone could guess in a few tries is no key (device keys
+# made by ``keys add`` are 32 random bytes).
+MIN_API_KEY_CHARS = 16
 
 ALL_SCOPES = frozenset(Scope)
 LOOPBACK_DEVELOPER = Principal("loopback", None, ALL_SCOPES)  # no keys configured, local client
@@ -201,3 +206,12 @@ def install_log_redaction() -> None:
         logger = logging.getLogger(name)
         if not any(isinstance(f, RedactKeys) for f in logger.filters):
             logger.addFilter(RedactKeys())
+
+
+UNAUTHORIZED = "missing or wrong API key (send it in the X-API-Key header)"
+
+
+def principal_of(scope: MutableMapping[str, Any]) -> Principal | None:
+    """The caller the request guard (``guard.py``) authenticated for this request (None: a route without a key)."""
+    principal = scope.get("state", {}).get("principal")
+    return principal if isinstance(principal, Principal) else None

@@ -105,7 +105,7 @@ def _fail(message: str) -> int:
 def _serve(args: argparse.Namespace) -> int:
     import logging
 
-    from darkread.cloud.auth import KeyRing, is_loopback
+    from darkread.cloud.auth import MIN_API_KEY_CHARS, KeyRing, is_loopback
 
     try:
         settings = _settings(args)
@@ -117,6 +117,13 @@ def _serve(args: argparse.Namespace) -> int:
             f"refusing to serve {args.host} without an API key: set DARKREAD_API_KEY (an admin key) or add device "
             "keys with `darkread cloud keys add --device ID --scope stream,read`; or bind 127.0.0.1, or pass "
             "--insecure on a closed network"
+        )
+    api_key = settings.api_key  # type: ignore[attr-defined]
+    if api_key is not None and len(api_key.get_secret_value()) < MIN_API_KEY_CHARS and not is_loopback(args.host):
+        return _fail(
+            f"refusing to serve {args.host} with a {len(api_key.get_secret_value())}-character API key: beyond "
+            f"loopback DARKREAD_API_KEY must have at least {MIN_API_KEY_CHARS} characters (or use `darkread cloud "
+            "keys add`)"
         )
 
     import uvicorn

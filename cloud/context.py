@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import secrets
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -11,7 +12,8 @@ from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader, APIKeyQuery
 
 from .auth import ENVIRONMENT_ADMIN, LOOPBACK_DEVELOPER, KeyRing, Principal, Scope, is_loopback
-from .limits import RateLimiter, SingleFlight
+from .auth import UNAUTHORIZED, principal_of
+from .limits import PerKeyCap, RateLimiter, SingleFlight
 from .live import LivePages
 from .prometheus import Metrics
 from .settings import Settings
@@ -32,10 +34,16 @@ class AppContext:
     live: dict[str, Any] = field(default_factory=dict)  # session id -> its StreamConnection
     asks: SingleFlight = field(default_factory=SingleFlight)  # one reading per session page
     limiter: RateLimiter | None = None  # asks and page.png per key (from settings when None)
+    event_streams: PerKeyCap = field(init=False)  # open GET .../events per key
+    syntheses: PerKeyCap = field(init=False)  # spoken answers running or waiting per key
+    speech_pool: ThreadPoolExecutor = field(init=False)  # speech only: store reads and OCR have their own
 
     def __post_init__(self) -> None:
         if self.limiter is None:
             self.limiter = RateLimiter(self.settings.ask_rate_per_min, self.settings.ask_burst)
+        self.event_streams = PerKeyCap(self.settings.sse_per_key)
+        self.syntheses = PerKeyCap(self.settings.speech_per_key)
+        self.speech_pool = ThreadPoolExecutor(self.settings.speech_threads, thread_name_prefix="darkread-speech")
 
     def auth_configured(self) -> bool:
         return self.settings.api_key is not None or bool(self.keys)
@@ -69,12 +77,14 @@ def require(scope: Scope) -> Callable[..., Principal]:
         header: str | None = Security(_header_key),
         query: str | None = Security(_query_key),
     ) -> Principal:
-        client = request.client.host if request.client else None
-        principal = get_context(request).authenticate(header if header is not None else query, client_host=client)
+        principal = principal_of(request.scope)  # the guard authenticated it before the body was read
+        if principal is None:
+            client = request.client.host if request.client else None
+            principal = get_context(request).authenticate(header if header is not None else query, client_host=client)
         if principal is None:
             raise HTTPException(
                 status_code=status.HTTP_401_UNAUTHORIZED,
-                detail="missing or wrong API key (send it in the X-API-Key header)",
+                detail=UNAUTHORIZED,
                 headers={"WWW-Authenticate": "APIKey"},
             )
         if not principal.can(scope):

@@ -3,7 +3,7 @@
 ``SingleFlight`` keeps, per session, the task reading its current page (keyed by the session's
 last stored seq): concurrent asks await the same task, a later ask of the unchanged page gets its
 result, and a caller that gives up (the ask time limit) does not cancel it for the others.
-``RateLimiter`` is a token bucket per API key.
+``RateLimiter`` is a token bucket per API key; ``PerKeyCap`` bounds what one key holds at once.
 """
 
 from __future__ import annotations
@@ -54,3 +54,25 @@ class RateLimiter:
             return 0.0
         self._buckets[key] = (tokens, now)
         return (1.0 - tokens) / self.rate_s if self.rate_s > 0 else math.inf
+
+
+class PerKeyCap:
+    """At most ``limit`` of something held at once per key (open event streams, syntheses)."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self._held: dict[str, int] = {}
+
+    def try_acquire(self, key: str) -> bool:
+        held = self._held.get(key, 0)
+        if held >= self.limit:
+            return False
+        self._held[key] = held + 1
+        return True
+
+    def release(self, key: str) -> None:
+        held = self._held.get(key, 0) - 1
+        if held > 0:
+            self._held[key] = held
+        else:
+            self._held.pop(key, None)

@@ -10,7 +10,7 @@ import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import asdict, dataclass
-from typing import Annotated, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
 from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
@@ -109,13 +109,25 @@ async def healthz() -> Health:
     responses={503: {"model": Health, "description": "a dependency is not ready"}},
 )
 async def readyz(context: Context, response: Response) -> Health:
-    store_ok = await context.store.ping()
-    ocr_ok = await asyncio.to_thread(context.ocr.ready)
+    limit = context.settings.ready_timeout_s  # a probe that waits longer counts a slow answer as down
+    store_ok, ocr_ok = await asyncio.gather(
+        _within(context.store.ping(), limit), _within(asyncio.to_thread(context.ocr.ready), limit)
+    )
     checks = {"store": store_ok, f"ocr:{context.ocr.name}": ocr_ok}
     if not all(checks.values()):
         response.status_code = status.HTTP_503_SERVICE_UNAVAILABLE
         return Health(status="unavailable", checks=checks)
     return Health(status="ready", checks=checks)
+
+
+async def _within(check: Awaitable[bool], limit_s: float) -> bool:
+    """A readiness check's answer, False when it takes longer than ``limit_s`` (it is left to finish)."""
+    task = asyncio.ensure_future(check)
+    done, _ = await asyncio.wait({task}, timeout=limit_s)
+    if not done:
+        task.add_done_callback(lambda t: t.cancelled() or t.exception())  # its late failure is not "never retrieved"
+        return False
+    return not task.cancelled() and task.exception() is None and bool(task.result())
 
 
 async def _session(context: AppContext, session_id: str, principal: Principal) -> SessionInfo:
@@ -259,6 +271,7 @@ async def ask(
     request: Annotated[AskRequest | None, Body()] = None,
     page: PageQuery = None,
     format_: Annotated[Literal["json", "wav"] | None, Query(alias="format", description="wav: the answer spoken")] = None,
+    part: Annotated[int, Query(ge=0, le=100_000, description="spoken answers: which part (X-Speech-Parts says how many)")] = 0,
     accept: Annotated[str | None, Header()] = None,
 ) -> AskResponse | Response:
     question = (request or AskRequest()).question
@@ -271,7 +284,7 @@ async def ask(
     answer = await _answer(context, info, page)
     answer = answer.model_copy(update={"question": question, "latency_ms": round((time.perf_counter() - started) * 1000, 1)})
     log.info("session %s: read %s with %s in %.0f ms", session_id, answer.page_id, answer.backend, answer.latency_ms)
-    return await speak(context.settings, answer, session_id) if spoken else answer
+    return await speak(context, principal, answer, session_id, part) if spoken else answer
 
 
 @api.get(
@@ -301,7 +314,7 @@ async def speak_line(
         raise HTTPException(status.HTTP_404_NOT_FOUND,
                             detail=f"{answer.page_id} has {len(answer.lines)} lines read so far, no line {line}")  # fmt: skip
     one = answer.model_copy(update={"text": answer.lines[line].text, "lines": [answer.lines[line]]})
-    response = await speak(context.settings, one, session_id)
+    response = await speak(context, principal, one, session_id)
     response.headers["X-Line"] = str(line)
     response.headers["X-Line-Count"] = str(len(answer.lines))
     return response
@@ -329,7 +342,8 @@ async def _read(context: AppContext, info: SessionInfo, page: int | None) -> Ask
     """What the OCR engine reads on the page (shared by concurrent asks of it)."""
     if info.mode == "pages":
         glasses = await _glasses_page(context, info)
-        result = await _ocr(context, lambda: asyncio.to_thread(context.ocr.read, glasses.image))
+        loop = asyncio.get_running_loop()  # on the OCR threads, never the default executor
+        result = await _ocr(context, lambda: loop.run_in_executor(context.pages.ocr_pool, context.ocr.read, glasses.image))
         lines = [LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines]
         return AskResponse(text=result.text, backend=context.ocr.name, page_id=glasses.page_id, latency_ms=0.0,
                            lines=lines, question="", truncated=result.truncated)  # fmt: skip
@@ -367,8 +381,30 @@ async def events(session_id: SessionId, context: Context, principal: Reader) -> 
     info = await _session(context, session_id, principal)
     if info.mode == "pages":
         raise HTTPException(status.HTTP_409_CONFLICT, detail="live pages are for sessions that stream frames")
-    return StreamingResponse(_event_stream(context, session_id), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})  # fmt: skip
+    streams = context.event_streams
+    if not streams.try_acquire(principal.key_id):
+        raise HTTPException(
+            status.HTTP_429_TOO_MANY_REQUESTS, headers={"Retry-After": str(round(KEEPALIVE_S))},
+            detail=f"this key has {streams.limit} event streams open, the most it may (DARKREAD_SSE_PER_KEY); "
+            "close one first",
+        )  # fmt: skip
+    return _HeldStream(lambda: streams.release(principal.key_id), _event_stream(context, session_id),
+                       media_type="text/event-stream", headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"})  # fmt: skip
+
+
+class _HeldStream(StreamingResponse):
+    """A streamed answer that gives back what it holds (a per-key slot) however it ends: finished,
+    client gone, or cancelled before its first byte."""
+
+    def __init__(self, release: Callable[[], None], *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._release = release
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        try:
+            await super().__call__(scope, receive, send)
+        finally:
+            self._release()
 
 
 async def _event_stream(context: AppContext, session_id: str) -> AsyncIterator[str]:

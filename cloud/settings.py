@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import json
 from functools import lru_cache
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, SecretStr, field_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from darkread.proto.messages import DEFAULT_MAX_MESSAGE_BYTES
 
+from .origins import normalise_origin
 from .speech import VOICE_NAME_PATTERN, Voice
 
 OcrBackendName = Literal["local", "rapidocr", "tesseract", "google", "openai"]
@@ -34,11 +36,23 @@ class Settings(BaseSettings):
     insecure: bool = Field(False, description="serve clients on other hosts without any key (never in production)")
     api_docs: bool = Field(False, description="serve /docs, /redoc and /openapi.json")
     metrics_public: bool = Field(False, description="serve /metrics without a key (else an admin key is needed)")
+    allowed_origins: Annotated[list[str], NoDecode] = Field(
+        default_factory=list,
+        description="web origins (https://host[:port]) whose pages may call the API besides the service's own; "
+        "JSON list or comma-separated",
+    )
     database_url: SecretStr | None = Field(
         None,
         description="postgresql://user:password@host:port/db: keep sessions in PostgreSQL (several instances "
         "share it); unset = SQLite in data_dir",
     )
+
+    store_timeout_s: float = Field(
+        3.0, gt=0, description="longest a request waits for a database connection before answering 503"
+    )
+    store_read_threads: int = Field(4, ge=1, description="threads reading the SQLite store (apart from speech and OCR)")
+    ready_timeout_s: float = Field(1.0, gt=0, description="/readyz answers within this (a probe's timeout)")
+    sse_per_key: int = Field(8, ge=1, description="event streams (GET .../events) one key may hold open at once")
 
     # Stream limits.
     max_message_bytes: int = Field(DEFAULT_MAX_MESSAGE_BYTES, ge=1024, le=64 * 1024 * 1024)
@@ -94,9 +108,28 @@ class Settings(BaseSettings):
     )
     speech_rate_wpm: int = Field(140, ge=80, le=450, description="speaking rate in words per minute")
     speech_timeout_s: float = Field(20.0, gt=0, description="longest a single answer may take to synthesise")
+    speech_part_words: int = Field(
+        200, ge=10, le=2000, description="a longer answer is spoken in parts of at most this many words (?part=N)"
+    )
+    speech_max_seconds: float = Field(
+        180.0, gt=0, le=3600, description="audio of one spoken part is cut after this long (bounds its memory)"
+    )
+    speech_threads: int = Field(2, ge=1, description="syntheses running at once (all keys); more wait their turn")
+    speech_per_key: int = Field(2, ge=1, description="syntheses one key may have running or waiting at once; 429 beyond")
 
     def voice(self) -> Voice:
         return Voice(self.speech_language, self.speech_voice, self.speech_rate_wpm)
+
+    @field_validator("allowed_origins", mode="before")
+    @classmethod
+    def _origin_list(cls, value: object) -> object:
+        """``DARKREAD_ALLOWED_ORIGINS=https://a.example,https://b.example`` as well as a JSON list."""
+        if isinstance(value, str):
+            text = value.strip()
+            value = json.loads(text) if text.startswith("[") else [part for part in text.split(",") if part.strip()]
+        if isinstance(value, list | tuple):
+            return [normalise_origin(str(item)) for item in value]
+        return value
 
     @field_validator("api_key", mode="before")
     @classmethod

@@ -24,10 +24,11 @@ class CloudProcess:
     """One cloud instance: SQLite in ``data_dir``, or the PostgreSQL database at ``database_url``."""
 
     def __init__(self, data_dir: Path, port: int | None = None, *, database_url: str | None = None,
-                 api_key: str = API_KEY, log_path: Path | None = None) -> None:  # fmt: skip
+                 api_key: str = API_KEY, log_path: Path | None = None, env: dict[str, str] | None = None) -> None:  # fmt: skip
         self.data_dir, self.port = data_dir, port or free_port()
         self.database_url, self.api_key = database_url, api_key
         self.log_path = log_path
+        self.env = env or {}  # more DARKREAD_* settings
         self.process: subprocess.Popen[bytes] | None = None
 
     @property
@@ -45,7 +46,7 @@ class CloudProcess:
     def launch(self) -> None:
         """Start the process without waiting (start several instances side by side)."""
         # a loaded machine stitches slowly: an ask waits for every stored frame, as the tests check
-        env = dict(os.environ, DARKREAD_API_KEY=self.api_key, DARKREAD_ASK_CATCH_UP_S="60")
+        env = dict(os.environ, DARKREAD_API_KEY=self.api_key, DARKREAD_ASK_CATCH_UP_S="60", **self.env)
         if self.database_url:
             env["DARKREAD_DATABASE_URL"] = self.database_url
         log = open(self.log_path, "ab") if self.log_path else subprocess.DEVNULL  # noqa: SIM115 - closed below
@@ -71,6 +72,12 @@ class CloudProcess:
             except OSError:
                 time.sleep(0.1)
         raise RuntimeError(f"cloud did not come up within {timeout_s:g} s")
+
+    def memory_mb(self) -> tuple[float, float]:
+        """(resident set now, its peak so far) in MB, from /proc."""
+        assert self.process is not None  # noqa: S101 - launch() first
+        fields = dict(line.split(":", 1) for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines())
+        return int(fields["VmRSS"].split()[0]) / 1024, int(fields["VmHWM"].split()[0]) / 1024
 
     def kill(self) -> None:
         """SIGKILL: no shutdown, no flush, connections cut."""

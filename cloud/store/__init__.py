@@ -20,13 +20,15 @@ from .records import (
 from .sqlite import SqliteStore
 
 
-async def open_store(data_dir: Path, database_url: str | None = None) -> SessionStore:
-    """PostgreSQL when ``database_url`` is given (several instances share it), else SQLite in ``data_dir``."""
+async def open_store(data_dir: Path, database_url: str | None = None, *, timeout_s: float = 3.0,
+                     read_threads: int = 4) -> SessionStore:  # fmt: skip
+    """PostgreSQL when ``database_url`` is given (several instances share it), else SQLite in
+    ``data_dir``. ``timeout_s``: a request's longest wait for a database connection."""
     if database_url:
         from .postgres import PostgresStore  # psycopg only where PostgreSQL is used
 
-        return await PostgresStore.open(database_url)
-    return SqliteStore(data_dir)
+        return await PostgresStore.open(database_url, timeout_s=timeout_s)
+    return SqliteStore(data_dir, read_threads=read_threads)
 
 
 __all__ = [

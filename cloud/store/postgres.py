@@ -417,20 +417,24 @@ class PostgresStore:
         self._closed = False
 
     @classmethod
-    async def open(cls, url: str, *, blobs: BlobStore | None = None, max_connections: int = 8) -> PostgresStore:
-        """Migrate the schema, open the connection pools and start the writer and the listener."""
+    async def open(cls, url: str, *, blobs: BlobStore | None = None, max_connections: int = 8,
+                   timeout_s: float = 3.0) -> PostgresStore:  # fmt: skip
+        """Migrate the schema, open the connection pools and start the writer and the listener.
+        ``timeout_s`` bounds a request's wait for a connection (the database down: a StoreError
+        after that long, not psycopg's default 30 s)."""
         where = describe(url)
         before = await asyncio.to_thread(migrate_database, url)
         log.info("PostgreSQL store %s at schema version %d (was %d)", where, SCHEMA_VERSION, before)
+        connect = {"autocommit": True, "connect_timeout": max(2, round(timeout_s))}
         pool: AsyncConnectionPool[Any] = AsyncConnectionPool(
-            url, min_size=1, max_size=max_connections, open=False, kwargs={"autocommit": True},
+            url, min_size=1, max_size=max_connections, open=False, kwargs=connect, timeout=timeout_s,
             check=AsyncConnectionPool.check_connection, name="darkread-pg",
         )  # fmt: skip
         blob_pool = None
         try:
             await pool.open(wait=True, timeout=15)
             if blobs is None:
-                blob_pool = ConnectionPool(url, min_size=1, max_size=4, open=False, kwargs={"autocommit": True},
+                blob_pool = ConnectionPool(url, min_size=1, max_size=4, open=False, kwargs=connect, timeout=timeout_s,
                                            check=ConnectionPool.check_connection, name="darkread-pg-blobs")  # fmt: skip
                 await asyncio.to_thread(blob_pool.open, True, 15)
                 blobs = PgBlobs(blob_pool)

@@ -21,6 +21,7 @@ import sqlite3
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing
 from pathlib import Path
 from typing import Any, TypeVar
@@ -149,7 +150,7 @@ class SqliteStore:
     """``SessionStore`` on one SQLite file. Writes go through one group-commit thread; reads run
     in worker threads on their own connections (WAL lets them run beside the writer)."""
 
-    def __init__(self, data_dir: Path, *, blobs: BlobStore | None = None) -> None:
+    def __init__(self, data_dir: Path, *, blobs: BlobStore | None = None, read_threads: int = 4) -> None:
         self.data_dir = Path(data_dir)
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.db_path = self.data_dir / "darkread.sqlite3"
@@ -167,6 +168,8 @@ class SqliteStore:
         self._local = threading.local()
         self._readers: list[sqlite3.Connection] = []
         self._readers_lock = threading.Lock()
+        # reads run on threads of their own: speech, OCR and other blocking work cannot queue them
+        self._read_pool = ThreadPoolExecutor(read_threads, thread_name_prefix="darkread-store-read")
 
     def subscribe(self, listener: Listener) -> Callable[[], None]:
         return self._changes.subscribe(listener)
@@ -202,7 +205,7 @@ class SqliteStore:
                 self._drop_reader()  # the next read starts on a fresh connection
                 raise StoreError(f"read failed: {exc}") from exc
 
-        return await asyncio.to_thread(run)
+        return await asyncio.get_running_loop().run_in_executor(self._read_pool, run)
 
     # --- writes -------------------------------------------------------------------------------
 
@@ -318,6 +321,7 @@ class SqliteStore:
 
     async def close(self, timeout_s: float = 30.0) -> None:
         await asyncio.to_thread(self._writer.close, timeout_s)
+        self._read_pool.shutdown(wait=False, cancel_futures=True)
         with self._readers_lock:
             readers, self._readers = self._readers, []
         for conn in readers:

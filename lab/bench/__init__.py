@@ -25,6 +25,7 @@ BENCH_MODULES: tuple[str, ...] = (
     "darkread.lab.bench.edge",
     "darkread.lab.bench.cloud",
     "darkread.lab.bench.ask",
+    "darkread.lab.bench.speech",
     "darkread.lab.bench.stitch",
     "darkread.lab.bench.ocr",
 )

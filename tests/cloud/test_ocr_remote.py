@@ -163,9 +163,8 @@ def openai_app(state: dict[str, Any]) -> FastAPI:
         if scenario == "bad_request":
             body = {"error": {"message": "Invalid image.", "type": "invalid_request_error", "code": "invalid_image"}}
             return JSONResponse(body, status_code=400)
-        content, finish = {"length": ("Hello world\nsec", "length"), "null": (None, "stop")}.get(
-            scenario, ("Hello world\nsecond line", "stop")
-        )
+        content, finish = {"length": ("Hello world\nsec", "length"), "null": (None, "stop"),
+                           "text": (state.get("text"), "stop")}.get(scenario, ("Hello world\nsecond line", "stop"))  # fmt: skip
         return JSONResponse(
             {
                 "id": "chatcmpl-1",

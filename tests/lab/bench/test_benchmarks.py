@@ -111,6 +111,12 @@ def test_ocr_benchmark_writes_its_keys(tmp_path: Path) -> None:
     assert set(run_smoke("ocr", tmp_path)) == ocr_keys()
 
 
+def test_speech_benchmark_writes_its_keys(tmp_path: Path) -> None:
+    figures = run_smoke("speech", tmp_path)
+    assert set(figures) == {"speech_300_words_ms", "speech_300_words_peak_rss_mb"}
+    assert figures["speech_300_words_ms"] > 0 and figures["speech_300_words_peak_rss_mb"] > 0
+
+
 def test_gaze_benchmark_writes_its_keys(tmp_path: Path, shared_data: Path) -> None:
     from darkread.lab.gaze.scores import ARIA_RATES_HZ
 
@@ -132,7 +138,7 @@ def test_ask_benchmark_writes_its_keys(tmp_path: Path) -> None:
 
 
 def test_every_benchmark_module_is_tested() -> None:
-    tested = {"decode", "fovea", "synth", "gaze", "cloud", "ask", "inference", "edge", "stitch", "ocr"}
+    tested = {"decode", "fovea", "synth", "gaze", "cloud", "ask", "speech", "inference", "edge", "stitch", "ocr"}
     assert {name.rsplit(".", 1)[-1] for name in BENCH_MODULES} == tested
 
 
