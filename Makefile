@@ -10,7 +10,7 @@ EXTRAS ?= edge,cloud,dev,train,gaze,hesim
 HESIM  := hesim-3d==0.1.0
 PYTEST_ARGS ?=  # e.g. make test PYTEST_ARGS="-m postgres"
 
-.PHONY: help venv hesim test test-fast bench demo eval eval-small eval-hesim eval-photoreceptor train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
+.PHONY: help venv hesim test lint typecheck test-fast bench demo eval eval-small eval-hesim eval-photoreceptor train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
@@ -62,14 +62,25 @@ postgres-deps:  ## Debian's PostgreSQL server (initdb, pg_ctl) for the tests and
 			|| echo "postgres-deps: apt-get install postgresql failed; the postgres tests will say so"; \
 	else echo "postgres-deps: no PostgreSQL server binaries and not root: install postgresql (the postgres tests skip, or fail under CI)"; fi
 
-test: system-deps postgres-deps $(STAMP)  ## run the whole test suite (installs espeak-ng, Chromium, Tesseract, libcairo2, PostgreSQL when root)
+test: system-deps postgres-deps $(STAMP) lint typecheck  ## lint, type-check and run the whole test suite (installs espeak-ng, Chromium, Tesseract, libcairo2, PostgreSQL when root)
 	$(PY) -m pytest -q $(PYTEST_ARGS)
+
+lint: $(STAMP)  ## ruff: lint and import order ([tool.ruff] in pyproject.toml)
+	$(VENV)/bin/ruff check .
+
+# mypy reads the installed layout (the top-level folders inside darkread/) from a tree of links
+TYPECHECK_DIR := build/typecheck
+typecheck: $(STAMP)  ## mypy over darkread as installed ([tool.mypy] in pyproject.toml)
+	rm -rf $(TYPECHECK_DIR)/darkread && mkdir -p $(TYPECHECK_DIR)/darkread
+	for entry in darkread/*; do ln -s ../../../$$entry $(TYPECHECK_DIR)/darkread/; done
+	for top in edge cloud proto stitch models lab; do ln -s ../../../$$top $(TYPECHECK_DIR)/darkread/$$top; done
+	cd $(TYPECHECK_DIR) && ../../$(VENV)/bin/mypy --config-file ../../pyproject.toml -p darkread
 
 test-fast: $(STAMP) postgres-deps  ## unit tests only (no integration tests)
 	$(PY) -m pytest -q -m "not slow"
 
 bench: $(STAMP) postgres-deps  ## benchmarks; prints a table and writes bench.json
-	$(PY) -m darkread.lab.bench
+	$(VENV)/bin/darkread bench
 
 demo: $(STAMP) speech-deps  ## read the shipped sample recording aloud and compare with its printed text
 	$(VENV)/bin/darkread read --demo --say
