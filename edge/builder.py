@@ -239,8 +239,9 @@ def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) 
 
     ``coarse``: an as-fast-as-possible replay into a step with its own grid (on-change's
     ``replay_grid_us``) hands over the decoder's chunks whole instead of 1 ms slices: its pipeline
-    takes one processing step per grid slice of event time whatever the chunking, so whole chunks only save the per-chunk cost (slicing and re-joining,
-    ring push, window count, metrics); paced replays keep 1 ms, the latency's resolution."""
+    takes one processing step per slice of the grid whatever the chunking, so whole chunks only
+    save the per-chunk cost (slicing and re-joining, ring push, window count, metrics); paced
+    replays keep 1 ms, the latency's resolution."""
     from darkread.edge.io.calibration import load_calibration
 
     if cfg.kind == "replay":

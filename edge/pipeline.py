@@ -61,7 +61,7 @@ class Pipeline:
         source: EventSource,
         windows: Windows,
         step: Step,
-        settings: PipelineConfig = PipelineConfig(),
+        settings: PipelineConfig,
         watchdog: Callable[[], object] | None = None,
     ) -> None:
         self.source = source

@@ -147,11 +147,12 @@ class OnChangeStep:
 
     def _end_view(self, arrival: float, t_end: int) -> None:
         """The fixation ended at ``t_end``: a fixation too short for a frame gets one now; send its view."""
-        lasted = self._fixation is not None and t_end - self._fixation >= self.gate.cfg.min_fixation_ms * 1e3
-        if not len(self.fuser) and lasted and self.windows.origin is not None:  # (not a landing the classifier revised)
-            window = self._view_window(t_end)
+        fixation = self._fixation
+        lasted = fixation is not None and t_end - fixation >= self.gate.cfg.min_fixation_ms * 1e3
+        if fixation is not None and lasted and not len(self.fuser) and self.windows.origin is not None:
+            window = self._view_window(t_end)  # (not a landing the classifier revised)
             if window is not None:
-                self._infer_into_view(window[0], window[1], t_end, self._fixation, arrival)
+                self._infer_into_view(window[0], window[1], t_end, fixation, arrival)
         if len(self.fuser):
             self._send_view(arrival)
 
