@@ -85,6 +85,7 @@ class Pipeline:
 
     # -- reader thread ----------------------------------------------------------------------
     def sink(self, events: Events) -> None:
+        """Reader thread: one chunk of events, seen by the scene tracker, then live or lossless."""
         if events.shape[0] == 0:
             return
         self.windows.push_scene(events)
@@ -156,7 +157,7 @@ class Pipeline:
                     new = inside_before[j] - (inside_before[j - 1] if j else 0)
                     n_foveated += new
                 with self._cond:
-                    self._pending.add(new, end - start, self._pending.arrival)
+                    self._pending.add(new, end - start)
                     due = self.step.due(self._pending) or self._event_period_due(t_now)
                 if grid is not None and i == last:
                     self._open_piece = (piece, t_now)  # stepped by the next chunk or at the end

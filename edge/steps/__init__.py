@@ -35,10 +35,11 @@ class Pending:
     events: int = 0
     arrival: float = 0.0
 
-    def add(self, foveated: int, events: int, arrival: float) -> None:
+    def add(self, foveated: int, events: int, arrival: float | None = None) -> None:
         self.foveated += foveated
         self.events += events
-        self.arrival = arrival
+        if arrival is not None:
+            self.arrival = arrival
 
     def take(self) -> Pending:
         """The counts so far, reset to none (the newest arrival is kept: it stamps later steps too)."""
