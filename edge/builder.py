@@ -17,16 +17,23 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from darkread.edge.config import EdgeConfig, GazeConfig, SourceConfig
+from darkread.edge.config import EdgeConfig, GazeConfig, PipelineConfig, SourceConfig
 from darkread.edge.errors import RunError
+from darkread.edge.frame import FrameResult, Infer
 from darkread.edge.gaze import GazeLookup
 from darkread.edge.head_motion import KnownHeadMotion
 from darkread.edge.io.calibration import Calibration
-from darkread.edge.pipeline import FrameHandler, FrameResult, Pipeline
+from darkread.edge.pipeline import Pipeline
 from darkread.edge.reconstruct import Reconstructor
+from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
+from darkread.edge.steps import FrameHandler, Step
+from darkread.edge.steps.every_window import EveryWindowStep
+from darkread.edge.steps.on_change import OnChangeStep
 from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.view_fusion import ViewRecord
+from darkread.edge.voxel import VoxelConfig
+from darkread.edge.windows import Windows
 
 logger = logging.getLogger(__name__)
 
@@ -156,7 +163,8 @@ def build_edge(
 
     metrics = EdgeMetrics()
     with contextlib.ExitStack() as undo:  # a failure half-way closes what was opened
-        source, calibration, gaze_track = _open_source(config.source, metrics, coarse=config.pipeline.infer == "on-change")
+        coarse = STEPS[config.pipeline.infer].replay_grid_us is not None
+        source, calibration, gaze_track = _open_source(config.source, metrics, coarse=coarse)
         close = getattr(source, "close", None)
         if close is not None:
             undo.callback(close)
@@ -182,10 +190,34 @@ def build_edge(
         settings = config.pipeline
         if config.source.kind == "replay" and config.source.speed == 0:
             settings = dataclasses.replace(settings, lossless=True)  # no clock to keep up with: make every window
-        pipeline = Pipeline(source, gaze, reconstructor, on_frame, settings, voxel, metrics, watchdog=watchdog,
-                            known_motion=known_motion)
+        pipeline = build_pipeline(source, gaze, reconstructor, on_frame, settings, voxel, metrics, watchdog=watchdog,
+                                  known_motion=known_motion)
         undo.pop_all()
     return Edge(config, source, pipeline, reconstructor, metrics, uplink=uplink, pages=pages, feeds=feeds)
+
+
+STEPS: dict[str, type[OnChangeStep] | type[EveryWindowStep]] = {"on-change": OnChangeStep, "every-window": EveryWindowStep}
+"""``[pipeline] infer`` -> the pipeline's step (``edge.steps``)."""
+
+
+def build_pipeline(
+    source: EventSource,
+    gaze: GazeLookup,
+    infer: Infer,
+    on_frame: FrameHandler,
+    settings: PipelineConfig = PipelineConfig(),
+    voxel: VoxelConfig = VoxelConfig(),
+    metrics: EdgeMetrics | None = None,
+    *,
+    watchdog: Callable[[], object] | None = None,
+    known_motion: KnownHeadMotion | None = None,
+) -> Pipeline:
+    """The pipeline ``settings`` describe: its windows on a fresh ring, and the step ``infer`` names,
+    chosen here once. ``known_motion``: the head's motion from elsewhere (``edge.head_motion``)."""
+    windows = Windows(EventRing(settings.ring_capacity), source, gaze, infer, settings, voxel, metrics or EdgeMetrics(),
+                      known_motion)
+    step: Step = STEPS[settings.infer](windows, settings, on_frame)
+    return Pipeline(source, windows, step, settings, watchdog=watchdog)
 
 
 def _to_uplink(uplink: Any) -> FrameHandler:
@@ -205,10 +237,11 @@ def _to_pages(pages: Any) -> FrameHandler:
 def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) -> tuple[EventSource, Calibration, Any]:
     """The event source, its calibration and (for a replayed recording) its gaze track loader.
 
-    ``coarse``: an as-fast-as-possible replay in the on-change mode hands over the decoder's chunks
-    whole instead of 1 ms slices: its pipeline takes one processing step per 5 ms of event time
-    whatever the chunking, so whole chunks only save the per-chunk cost (slicing and re-joining,
-    ring push, window count, metrics); paced replays keep 1 ms, the latency's resolution."""
+    ``coarse``: an as-fast-as-possible replay into a step with its own grid (on-change's
+    ``replay_grid_us``) hands over the decoder's chunks whole instead of 1 ms slices: its pipeline
+    takes one processing step per slice of the grid whatever the chunking, so whole chunks only
+    save the per-chunk cost (slicing and re-joining, ring push, window count, metrics); paced
+    replays keep 1 ms, the latency's resolution."""
     from darkread.edge.io.calibration import load_calibration
 
     if cfg.kind == "replay":

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from darkread.cloud.store import StoredFrame
-from darkread.edge.pipeline import FrameResult
+from darkread.edge.frame import FrameResult
 from darkread.core.frame_record import FrameRecord
 from darkread.proto.messages import Frame, decode, encode
 

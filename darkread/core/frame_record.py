@@ -1,6 +1,6 @@
 """The one record of a reconstructed frame, shared by every step after the U-Net.
 
-The edge makes it (``edge.pipeline.FrameResult`` adds how it was made), the wire carries it
+The edge makes it (``edge.frame.FrameResult`` adds how it was made), the wire carries it
 (``proto.messages.Frame.of`` / ``Frame.record``), the cloud stores it (``cloud.store.StoredFrame``
 adds the sequence number) and the stitcher reads it (``darkread.stitch``). Pure: numpy only.
 

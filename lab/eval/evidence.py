@@ -102,8 +102,8 @@ def recording_evidence(recording: str | Path, lengths: Sequence[int] = LENGTHS, 
     from darkread.edge.deblur import DeblurConfig
     from darkread.edge.denoise import DenoiseConfig
     from darkread.edge.fovea import FoveaConfig, window_events, window_origin
+    from darkread.edge.frame import clean_window
     from darkread.edge.gaze import GazeMapper
-    from darkread.edge.pipeline import clean_window
     from darkread.lab.eval.attribution import ink_found, window_truth
     from darkread.lab.truth import load_truth_and_pose
     from darkread.lab.eval.true_motion import TrueHeadMotion

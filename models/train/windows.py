@@ -52,9 +52,10 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
     from darkread.edge.deblur import DeblurConfig
     from darkread.edge.denoise import DenoiseConfig
     from darkread.edge.fovea import window_events, window_origin
+    from darkread.edge.frame import clean_window
     from darkread.edge.gaze import GazeMapper
-    from darkread.edge.pipeline import MAX_HISTORY_EVENTS, clean_window
     from darkread.edge.voxel import VoxelConfig, voxel_grid
+    from darkread.edge.windows import MAX_HISTORY_EVENTS
 
     mapper = GazeMapper(rec.calibration, rec.gaze())
     deblur_cfg, denoise_cfg = DeblurConfig(enabled=deblur), DenoiseConfig(enabled=denoise)

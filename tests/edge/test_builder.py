@@ -76,7 +76,7 @@ def test_a_model_with_another_window_size_sets_the_fovea_everywhere(tmp_path: Pa
         recording = synthetic_recording(tmp_path / "rec", box_xywh=(640 - 48, 360 - 32, 96, 64))
         config = replay_config(recording, sum_bins_model(tmp_path / "small.onnx", (2, 64, 96)), cloud.url, tmp_path / "spool")
         edge = build_edge(config)
-        assert edge.pipeline.voxel.shape == (2, 64, 96)
+        assert edge.pipeline.windows.voxel.shape == (2, 64, 96)
         assert Daemon(edge, Notifier({}), tick_s=0.005).run() == 0
     finally:
         cloud.close()
@@ -116,7 +116,7 @@ def test_a_failed_build_closes_what_it_opened(tmp_path: Path) -> None:
 
 def test_pages_are_built_from_frames_and_sent_when_due() -> None:
     from darkread.edge.pages import PageBuilder
-    from darkread.edge.pipeline import FrameResult
+    from darkread.edge.frame import FrameResult
 
     now = [0.0]
     pages = PageBuilder(every_s=5.0, clock=lambda: now[0])

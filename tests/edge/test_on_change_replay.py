@@ -8,7 +8,7 @@ import hashlib
 import numpy as np
 import pytest
 
-from darkread.edge.builder import build_edge
+from darkread.edge.builder import build_edge, build_pipeline
 from darkread.edge.config import load_config
 from darkread.edge.reconstruct import default_model_path
 from darkread.edge.sources.replay import ReplaySource
@@ -38,9 +38,12 @@ def replay(slice_us: int | None) -> tuple[list[ViewRecord], dict[str, int]]:
     views: list[ViewRecord] = []
     edge = build_edge(config, on_frame=lambda view, arrival: views.append(view))
     source = edge.source
-    if slice_us is not None:
+    if slice_us is not None:  # the same pipeline reading another source
         source = ReplaySource(source.raw_path, speed=None, slice_us=slice_us)
-        edge.source = edge.pipeline.source = source
+        windows = edge.pipeline.windows
+        edge.source = source
+        edge.pipeline = build_pipeline(source, windows.gaze, windows.infer, lambda view, arrival: views.append(view),
+                                       edge.pipeline.settings, windows.voxel, edge.metrics)
     edge.startup()
     source.wait()
     edge.shutdown(5.0)

@@ -14,7 +14,8 @@ from darkread.edge.config import PipelineConfig
 from darkread.edge.events import EVENT_CD_DTYPE, Events, empty_events
 from darkread.edge.fovea import FoveaConfig, window_events, window_origin
 from darkread.edge.gaze import GazeSample
-from darkread.edge.pipeline import FrameResult, Pipeline, count_in_window, make_frame
+from darkread.edge.builder import build_pipeline
+from darkread.edge.frame import FrameResult, count_in_window, make_frame
 from darkread.edge.sources.base import EventSource
 from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.voxel import VoxelConfig
@@ -166,8 +167,8 @@ def test_a_model_with_another_window_size_just_works(tmp_path: Path) -> None:
     ev["p"] = 1
     frames: list[FrameResult] = []
     source = ListSource(chunked(ev, 200))
-    pipeline = Pipeline(source, FixedGaze(), reconstructor, lambda f, t: frames.append(f),
-                        every_window(lossless=True, denoise=False), reconstructor.voxel)  # (uniform events: all isolated)
+    pipeline = build_pipeline(source, FixedGaze(), reconstructor, lambda f, t: frames.append(f),
+                              every_window(lossless=True, denoise=False), reconstructor.voxel)  # (uniform events: all isolated)
     pipeline.start()
     assert source.done.wait(5)
     pipeline.stop()
@@ -188,12 +189,12 @@ def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, 
     frames: list[tuple[FrameResult, float]] = []
     metrics = EdgeMetrics()
     pings = []
-    pipeline = Pipeline(
+    pipeline = build_pipeline(
         source, gaze, infer, lambda f, t: frames.append((f, t)), dataclasses.replace(settings, ring_capacity=1 << 16),
         metrics=metrics, watchdog=lambda: pings.append(1), known_motion=known_motion,
     )
     if known_motion is not None:
-        assert pipeline.scene is None  # the head's motion is not measured from the events then
+        assert pipeline.windows.scene is None  # the head's motion is not measured from the events then
     assert isinstance(source, EventSource)
     pipeline.start()
     assert source.done.wait(5)
@@ -250,7 +251,7 @@ def test_ring_bounds_memory_and_counts_what_it_overwrote() -> None:
     settings = every_window(period_ms=1.0, ring_capacity=1 << 15)
     frames: list = []
     metrics = EdgeMetrics()
-    pipeline = Pipeline(source, FixedGaze(), ink_where_events, lambda f, t: frames.append(f), settings, metrics=metrics)
+    pipeline = build_pipeline(source, FixedGaze(), ink_where_events, lambda f, t: frames.append(f), settings, metrics=metrics)
     pipeline.start()
     source.done.wait(5)
     pipeline.stop()
@@ -325,8 +326,8 @@ def test_watchdog_is_no_longer_fed_when_the_source_stalls() -> None:
     source = ListSource(chunked(ev, 500))
     pings: list[float] = []
     settings = every_window(period_ms=5.0, stall_s=0.1)
-    pipeline = Pipeline(source, FixedGaze(), ink_where_events, lambda f, t: None, settings,
-                        watchdog=lambda: pings.append(time.monotonic()))
+    pipeline = build_pipeline(source, FixedGaze(), ink_where_events, lambda f, t: None, settings,
+                              watchdog=lambda: pings.append(time.monotonic()))
     pipeline.start()
     assert source.done.wait(5)  # then silence, as from a hung sensor
     last_event = time.monotonic()

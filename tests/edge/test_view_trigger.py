@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from darkread.edge.builder import build_pipeline
 from darkread.edge.config import PipelineConfig
 from darkread.edge.events import Events, make_events
 from darkread.edge.gaze import GazeSample
 from darkread.edge.gaze_events import EventKind
-from darkread.edge.pipeline import Pipeline
 from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.view_fusion import ViewRecord
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
@@ -101,7 +101,7 @@ def run_on_change(gaze: ScanGaze, events: Events, infer=the_same_text, source=No
     settings = {"dither_px": 0, **settings}
     config = PipelineConfig(lossless=True, infer="on-change", **settings)  # type: ignore[arg-type]
     metrics = EdgeMetrics()
-    pipeline = Pipeline(source, gaze, infer, lambda v, t: views.append((v, t)), config, metrics=metrics)
+    pipeline = build_pipeline(source, gaze, infer, lambda v, t: views.append((v, t)), config, metrics=metrics)
     pipeline.start()
     step = 5_000
     for t0 in range(0, int(events["t"][-1]) + 1, step):

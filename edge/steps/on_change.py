@@ -1,0 +1,165 @@
+"""``on-change`` (``[pipeline] infer``, the product default): the gaze decides when to infer.
+
+Every step feeds the gaze-event classifier (:mod:`darkread.edge.view_trigger`) up to its event
+time; no inference during saccades and blinks; during a fixation one when enough new events
+arrived, at most every ``min_interval_ms`` until a frame agrees with the view (then none until it
+is sent), all in one window placed at the fixation's mean gaze; the fixation's frames are fused
+into one view (:mod:`darkread.edge.view_fusion`) that goes to ``on_frame`` when the fixation ends
+and every ``view_every_ms`` during a long one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from darkread.edge.config import PipelineConfig
+from darkread.edge.fovea import window_origin
+from darkread.edge.gaze import GazeSample
+from darkread.edge.steps import FrameHandler, Pending
+from darkread.edge.view_fusion import MARGIN_PX, ViewFuser
+from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
+from darkread.edge.windows import Windows
+
+LOSSLESS_STEP_US = 5_000
+"""Lossless replays take one step per this much event time (a grid on the event clock, finer than
+any gaze row at 11-100 ms), however large the chunks the source hands over: the same steps, and so
+the same views, whatever the replay's chunking."""
+
+
+class OnChangeStep:
+    """One view per fixation, fused from the frames that changed it."""
+
+    replay_grid_us = LOSSLESS_STEP_US
+
+    def __init__(self, windows: Windows, settings: PipelineConfig, on_frame: FrameHandler) -> None:
+        self.windows = windows
+        self.settings = settings
+        self.on_frame = on_frame
+        self.gate = GazeGate(windows.gaze)
+        self.trigger = ViewTrigger(settings)
+        # the canvas reaches as far as the head drifts, beyond both dithered windows
+        self.fuser = ViewFuser(margin_px=MARGIN_PX + 2 * settings.dither_px)
+        self.views_made = 0
+        self._fixation: int | None = None  # the current fixation's key (its first row, event clock)
+        self._fixation_events = 0  # window events since it started
+        self._since_infer = 0  # window events since the last inference
+        self._view_origin: tuple[int, int] | None = None  # the current view's window (placed once per view)
+
+    def due(self, pending: Pending) -> bool:
+        return pending.events > 0  # every chunk: the gaze may have changed
+
+    def skipped(self, pending: Pending) -> int:
+        return 0  # a step looks at all that arrived: nothing is skipped
+
+    def step(self, t_us: int, pending: Pending, final: bool = False) -> None:
+        """Feed the gaze classifier up to ``t_us``; end, extend or start the fixation's view."""
+        t, arrival = t_us, pending.arrival
+        status = self.gate.update(t)
+        key = None if final else fixation_key(status)
+        # a later key is a new fixation; an earlier one is the classifier merging two halves of this one
+        if self._fixation is not None and (key is None or key > self._fixation):
+            self._end_view(arrival, t if final else min(t, status.since_us))
+            self._fixation = None
+        if key is None:
+            return  # saccade, blink, no gaze: nothing to infer
+        if self._fixation is None:
+            self._fixation, self._fixation_events, self._since_infer = key, 0, 0
+            self.trigger.reset()
+        self._fixation_events += pending.foveated
+        self._since_infer += pending.foveated
+        if len(self.fuser) and t - self.fuser.t0_us >= self.settings.view_every_ms * 1e3:
+            self._send_view(arrival)  # a long fixation: its view so far, the next one starts afresh
+        if not self.trigger.ready(t, self._fixation):
+            return  # the bounded rate (and the landing's wait), checked before anything costs
+        window = self._view_window(t)
+        if window is None:
+            return
+        origin, gaze = window
+        if self.trigger.due(t, self._fixation, self._since_infer, self._fixation_events, origin):
+            self._infer_into_view(origin, gaze, t, self._fixation, arrival)
+
+    def _view_window(self, t: int) -> tuple[tuple[int, int], GazeSample] | None:
+        """Where the current view's window is, and the gaze at ``t``. A view's window stays put: it
+        is placed once, at the mean gaze of the fixation's rows so far (one row's tracker noise
+        would put it tens of pixels off), so its frames all see the same stretch of text."""
+        w = self.windows
+        gaze = w.gaze.at(t)
+        if gaze is None:
+            return None
+        if len(self.fuser) and self._view_origin is not None:
+            return self._view_origin, gaze
+        centre = self._fixation_centre(t) or gaze.pixel
+        origin = window_origin(centre, w.sensor_wh, w.fovea)
+        if origin != w.origin and self.settings.sensor_roi:
+            self._roi_for_view(origin)
+        w.origin = self._view_origin = origin
+        return origin, gaze
+
+    def _fixation_centre(self, t: int) -> tuple[float, float] | None:
+        """Mean gaze pixel over the current fixation's valid tracker rows up to ``t`` (None without any)."""
+        if self._fixation is None:
+            return None
+        gaze = self.windows.gaze
+        times, yaw, _ = gaze.rows(self._fixation - 1, t)
+        pixels = [g.pixel for g in map(gaze.at, times[np.isfinite(yaw)].tolist()) if g is not None]
+        if not pixels:
+            return None
+        u, v = np.mean(np.asarray(pixels, np.float64), axis=0)
+        return float(u), float(v)
+
+    def _infer_into_view(self, origin: tuple[int, int], gaze: GazeSample, t: int, t_from: int, arrival: float) -> bool:
+        """One frame of the current fixation (its events only, up to ``n_events``), fused into the
+        view; a frame that does not register onto the view sends it and starts the next one."""
+        placed = self._dithered(origin, len(self.fuser))
+        window = self.windows.recent_events(placed, t, t_from=t_from)
+        if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
+            return False
+        frame = self.windows.frame(window, placed, gaze, t, probability=self.settings.fuse == "probability")
+        if frame is None:
+            return False
+        if self.fuser.add(frame, frame.events_used, frame.gaze_rad, frame.probability) is None:
+            self.windows.metrics.add("views_split")
+            self._send_view(arrival)
+            self.fuser.add(frame, frame.events_used, frame.gaze_rad, frame.probability)
+        self.trigger.inferred(t, origin, self.fuser.last_score, self.fuser.last_doubt)
+        self._since_infer = 0
+        return True
+
+    def _roi_for_view(self, origin: tuple[int, int]) -> None:
+        """The sensor's ROI over the view's window and both dithered ones (all its frames' events)."""
+        fov = self.windows.fovea
+        top, bottom = self._dithered(origin, 0), self._dithered(origin, 1)
+        y0, y1 = min(origin[1], top[1]), max(origin[1], bottom[1]) + fov.height
+        self.windows.source.set_roi(origin[0], y0, fov.width, y1 - y0)
+
+    def _dithered(self, origin: tuple[int, int], k: int) -> tuple[int, int]:
+        """The window of a view's ``k``-th frame: the view's window moved up (even ``k``) or down
+        (odd) by ``dither_px``, inside the sensor. The tracker's bias (about 1 deg) puts the line
+        being read anywhere in the window, often at its edge; two frames a few tens of pixels apart
+        see it whole, and the view is the union of its frames' windows."""
+        d = self.settings.dither_px
+        if d <= 0:
+            return origin
+        fov = self.windows.fovea
+        dy = -d if k % 2 == 0 else d
+        centre = (origin[0] + fov.width // 2, origin[1] + fov.height // 2 + dy)
+        return window_origin(centre, self.windows.sensor_wh, fov)
+
+    def _end_view(self, arrival: float, t_end: int) -> None:
+        """The fixation ended at ``t_end``: a fixation too short for a frame gets one now; send its view."""
+        fixation = self._fixation
+        lasted = fixation is not None and t_end - fixation >= self.gate.cfg.min_fixation_ms * 1e3
+        if fixation is not None and lasted and not len(self.fuser) and self.windows.origin is not None:
+            window = self._view_window(t_end)  # (not a landing the classifier revised)
+            if window is not None:
+                self._infer_into_view(window[0], window[1], t_end, fixation, arrival)
+        if len(self.fuser):
+            self._send_view(arrival)
+
+    def _send_view(self, arrival: float) -> None:
+        view = self.fuser.view(self.views_made)
+        self.fuser = self.fuser.fresh()
+        self._view_origin = None
+        self.views_made += 1
+        self.windows.metrics.add("views")
+        self.on_frame(view, arrival)

@@ -1,0 +1,132 @@
+"""The foveal window and its events, as the pipeline's steps see them.
+
+:class:`Windows` holds what both steps (:mod:`darkread.edge.steps`) share: the ring the reader
+fills, the gaze, where the window is now, the head's motion (measured from all events by
+:mod:`darkread.edge.scene_motion`, or known from elsewhere: :mod:`darkread.edge.head_motion`);
+it cuts one frame's events out of the ring and makes the frame (:mod:`darkread.edge.frame`).
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from darkread.edge.config import PipelineConfig
+from darkread.edge.deblur import DeblurConfig
+from darkread.edge.denoise import DenoiseConfig
+from darkread.edge.events import Events
+from darkread.edge.fovea import in_window
+from darkread.edge.frame import FrameResult, Infer, clean_window, make_frame
+from darkread.edge.gaze import GazeLookup, GazeSample
+from darkread.edge.head_motion import KnownHeadMotion
+from darkread.edge.ring import EventRing
+from darkread.edge.scene_motion import SceneMotion
+from darkread.edge.sources.base import EventSource
+from darkread.edge.telemetry import EdgeMetrics
+from darkread.edge.voxel import VoxelConfig
+
+MIN_HISTORY_EVENTS = 4096
+MAX_HISTORY_EVENTS = 1 << 16  # usual cap of the ring events searched for a window's events
+
+
+class Windows:
+    """The ring, the gaze and the window's place; one frame's events and the frame itself.
+
+    ``origin`` is where the window is now: the steps place it, the reader counts the new events
+    inside it. The scene's motion is pushed by the reader thread and asked for by the processing
+    step, hence its lock.
+    """
+
+    def __init__(
+        self,
+        ring: EventRing,
+        source: EventSource,
+        gaze: GazeLookup,
+        infer: Infer,
+        settings: PipelineConfig,
+        voxel: VoxelConfig,
+        metrics: EdgeMetrics,
+        known_motion: KnownHeadMotion | None = None,
+    ) -> None:
+        self.ring = ring
+        self.source = source  # (its ROI follows the window with ``sensor_roi``)
+        self.gaze = gaze
+        self.infer = infer
+        self.settings = settings
+        self.voxel = voxel
+        self.fovea = voxel.fovea
+        self.metrics = metrics
+        self.sensor_wh = (int(source.width), int(source.height))
+        self.deblur = DeblurConfig(enabled=settings.deblur)
+        self.denoise = DenoiseConfig(enabled=settings.denoise)
+        self.origin: tuple[int, int] | None = None
+        self.frames_made = 0
+        self._history = MIN_HISTORY_EVENTS
+        # the head's motion from all events, unless it is known from elsewhere (then it is neither
+        # measured nor searched)
+        self.known_motion = known_motion
+        measure_scene = settings.scene_motion and not settings.sensor_roi and known_motion is None
+        self.scene = SceneMotion(self.sensor_wh) if measure_scene else None
+        self._scene_lock = threading.Lock()
+
+    def push_scene(self, events: Events) -> None:
+        """Reader thread: every event goes to the scene's motion tracker (when it is measured)."""
+        if self.scene is not None:
+            with self._scene_lock:
+                self.scene.push(events)
+
+    def scene_at(self, t_us: int) -> tuple[float, float] | None:
+        """The scene's motion at ``t_us`` (None when not measured)."""
+        if self.known_motion is not None:
+            return self.known_motion.scene_px(t_us)
+        if self.scene is None:
+            return None
+        with self._scene_lock:
+            return self.scene.at(t_us)
+
+    def frame(self, window: Events, origin: tuple[int, int], gaze: GazeSample, t_us: int,
+              probability: bool = False) -> FrameResult | None:
+        """The frame of ``window`` (``make_frame``), counted; None when it holds no events."""
+        frame = make_frame(window, origin, gaze, t_us, self.voxel, self.infer, self.frames_made, self.scene_at(t_us),
+                           probability=probability)
+        if frame is None:
+            return None
+        self.frames_made += 1
+        self.metrics.add("frames")
+        self.metrics.observe_inference(frame.inference_ms)
+        return frame
+
+    def recent_events(self, origin: tuple[int, int], t_until: int, t_from: int | None = None) -> Events:
+        """Exactly the window's events for one frame: the newest ``n_events`` inside the window at
+        ``origin`` with ``t <= t_until`` (and ``t >= t_from``), searching back through the ring as needed,
+        moved back along the head's motion during their span (``edge.deblur``; measured from them and
+        the sensor's other events of that span around the window), and in dim light without those
+        that have no neighbour: shot noise (``edge.denoise``; a frame may then have fewer events).
+
+        The search starts from twice the depth the previous window needed, so a frame copies a
+        few thousand ring events, not the whole history.
+        """
+        k, cfg = self.settings.n_events, self.fovea
+        n = self._history
+        while True:
+            recent = self.ring.last(n, until_t=t_until)  # (the reader may have pushed newer events)
+            inside = np.flatnonzero(in_window(recent, origin[0], origin[1], cfg.width, cfg.height))
+            reached_start = t_from is not None and recent.shape[0] and int(recent["t"][0]) <= t_from
+            if inside.shape[0] >= k or n >= len(self.ring) or reached_start:
+                break
+            n *= 2
+        if t_from is not None and inside.shape[0]:
+            inside = inside[recent["t"][inside] >= t_from]
+        used = inside[-k:]
+        if used.shape[0]:
+            depth = recent.shape[0] - int(used[0])
+            self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), MAX_HISTORY_EVENTS))
+        nearby = recent[int(used[0]) :] if used.shape[0] else recent[:0]
+        window, deblurred, denoised = clean_window(recent[used], nearby, origin, (cfg.height, cfg.width), self.sensor_wh,
+                                                   self.deblur, self.denoise, self.known_motion)
+        if deblurred:
+            self.metrics.add("frames_deblurred")
+        if denoised:
+            self.metrics.add("frames_denoised")
+        return window
