@@ -9,8 +9,8 @@ import argparse
 import json
 from pathlib import Path
 
-MODELS_DIR = Path(__file__).resolve().parent.parent  # the darkread.models package: the shipped .onnx files
-FIGURE_PATH = MODELS_DIR.parent / "docs" / "model_samples.png"
+from darkread.models.train.pipeline import FIGURE_PATH, MODELS_DIR
+
 DEFAULT_TRAIN = Path("runs/data/train")  # relative to the working directory (`make train` runs at the repo root)
 DEFAULT_VAL = Path("runs/data/val")
 
@@ -267,12 +267,7 @@ def _cmd_all(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    train = subparsers.add_parser("train", help="train, export and evaluate the reconstruction network",
-                                  description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = train.add_subparsers(dest="train_command", metavar="STEP")
-    train.set_defaults(func=lambda _args: (train.print_help(), 2)[1])
-
+def _add_fit(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="train on synthetic shards (time-budgeted, resumes from RUN_DIR/last.pt)")
     p.add_argument("train_dir", type=Path, nargs="*", default=[DEFAULT_TRAIN], metavar="TRAIN_DIR",
                    help=f"dataset(s) of shard-*.npz; several are mixed shard by shard (default {DEFAULT_TRAIN})")
@@ -286,6 +281,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "head that reads like the shipped network")
     p.set_defaults(func=_cmd_fit)
 
+
+def _add_export(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("export", help="ONNX fp32 + static int8 QDQ from a checkpoint")
     p.add_argument("--run-dir", type=Path, default=Path("runs/binary_unet"))
     p.add_argument("--checkpoint", type=Path, help="default RUN_DIR/best.pt")
@@ -294,6 +291,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--models-dir", type=Path, default=MODELS_DIR, help=f"where the .onnx files go (default {MODELS_DIR})")
     p.set_defaults(func=_cmd_export)
 
+
+def _add_evaluate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("evaluate", help="held-out scores by lux/motion vs the naive baseline, latency, figure, MODEL_CARD.md")
     p.add_argument("--run-dir", type=Path, default=Path("runs/binary_unet"), help="training run (history.json)")
     p.add_argument("--train-dir", type=Path, default=DEFAULT_TRAIN, help="baseline tuning windows come from here")
@@ -304,6 +303,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--timing", action="append", default=[], metavar="STEP=SECONDS", help="extra rows for the card's reproduction-time table")
     p.set_defaults(func=_cmd_evaluate)
 
+
+def _add_finetune(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("finetune", help="fine-tune the shipped network on annotated recordings (mixed with synthetic windows), export ONNX",
                        description="Fine-tune from the shipped weights (BINARY_UNET.onnx read back into torch) on the windows "
                                    "`darkread train annotate` labelled from the page's pose, with synthetic standard-regime "
@@ -341,6 +342,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_finetune)
 
+
+def _add_compare(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compare", help="before/after: ink F1 and end-to-end CER of the shipped and a tuned model",
                        description="Score the shipped network and a tuned one (--model) on recordings they were not tuned on: "
                                    "ink F1 of the windows the glasses cut against the simulator's ground truth (a recording "
@@ -366,6 +369,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_compare)
 
+
+def _add_placebo(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("placebo", help="networks that learned nothing (the base's weights slightly perturbed): the chance spread of a before/after",
                        description="Write copies of the base network whose weights are each scaled by (1 + SCALE x N(0,1)): "
                                    "networks that learned nothing. `darkread train compare --model PLACEBO` on the same "
@@ -379,6 +384,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--count", type=int, default=1, help="how many placebos (default 1)")
     p.set_defaults(func=_cmd_placebo)
 
+
+def _add_rehearsal(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("rehearsal", help="windows of simulated reading in the shipped network's own sensor regime, for a fine-tune to rehearse",
                        description="Simulate reading sessions in the standard sensor regime (the one the shipped network was "
                                    "trained on: three lines of training text at 5-50 lux, still, normal and walking head "
@@ -395,6 +402,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_rehearsal)
 
+
+def _add_target(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("target", help="a printable page: the text with ArUco markers around it, and its layout",
                        description="Lay out a text file with ArUco markers around it (the synthesiser's page renderer, the "
                                    "calibration's marker dictionary) as a PDF or PNG, and write page.layout.json beside it: "
@@ -409,6 +418,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--dpi", type=float, default=300.0, help="PNG resolution (default 300; the PDF is always at size)")
     p.set_defaults(func=_cmd_target)
 
+
+def _add_annotate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("annotate", help="targets for every window of a recording of a marker page, from the page's pose",
                        description="Find the page's ArUco markers in event images, fit the page-to-sensor homography over "
                                    "time (refined on the events, interpolated between poses), choose the time offset that "
@@ -428,6 +439,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_annotate)
 
+
+def _add_calibrate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate", help="the ink temperature: sigmoid(logits / T) fitted by log-loss on held-out windows",
                        description="Fit the temperature that makes the network's ink probability mean what it says (the "
                                    "on-change mode averages it over a view's frames) on a shard directory's windows, and "
@@ -440,6 +453,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "without one is read at 1.5)")
     p.set_defaults(func=_cmd_calibrate)
 
+
+def _add_all(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("all", help="reproduce the shipped model from scratch: synth -> fit -> export -> int8 -> evaluate -> card")
     p.add_argument("--train-dir", type=Path, default=DEFAULT_TRAIN)
     p.add_argument("--val-dir", type=Path, default=DEFAULT_VAL)
@@ -450,3 +465,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="validation windows (default: the recipe's, pipeline.VALIDATION_RECIPE)")
     _add_fit_options(p)
     p.set_defaults(func=_cmd_all, minutes=90.0)  # the shipped network's budget
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    train = subparsers.add_parser("train", help="train, export and evaluate the reconstruction network",
+                                  description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = train.add_subparsers(dest="train_command", metavar="STEP")
+    train.set_defaults(func=lambda _args: (train.print_help(), 2)[1])
+    for add in (_add_fit, _add_export, _add_evaluate, _add_finetune, _add_compare, _add_placebo, _add_rehearsal, _add_target, _add_annotate, _add_calibrate, _add_all):
+        add(sub)
