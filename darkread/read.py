@@ -5,7 +5,8 @@ A real edge replays the recording as fast as inference allows into a real cloud 
 reads it with the chosen OCR backend, and the answer comes back over the REST ask endpoint — the
 same path the glasses and a user take, only on one machine. The cloud stitches each frame as it
 is stored, so once the stream has ended the question is answered from the page already there
-(``answer_ms``).
+(``answer_ms``). The OCR engine loads while the edge streams; if the stream ends first, the
+question is asked once the engine is ready, and that wait is its own stage (``ocr_ready``).
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import argparse
 import json
 import logging
 import secrets
-import shutil
 import sys
 import tempfile
 import time
@@ -82,13 +82,13 @@ def read_recording(
     drain_timeout_s: float = 60.0,
     lexicon: bool = True,
     infer: str | None = None,
-    speech: bool = False,
+    speech_wav: str | Path | None = None,
     true_motion: bool = False,
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says.
 
-    With ``speech`` the answer is also asked for as speech (``Accept: audio/wav``) and written
-    to ``answer.wav`` in the output directory. With ``true_motion`` (synthetic recordings) the edge
+    With ``speech_wav`` the answer is also asked for as speech (``Accept: audio/wav``) and written
+    to that WAV file (outside ``out_dir``, it outlives a scratch one). With ``true_motion`` (synthetic recordings) the edge
     takes the head's motion from the simulator's truth instead of measuring it from the events
     (``eval.true_motion``); ValueError for a recording without truth.
     """
@@ -110,7 +110,8 @@ def read_recording(
     if out_dir is None:  # a scratch directory that does not outlive the read
         with tempfile.TemporaryDirectory(prefix="darkread-read-", ignore_cleanup_errors=True) as scratch:
             result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
-                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer, true_motion=true_motion)
+                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer,
+                                    speech_wav=speech_wav, true_motion=true_motion)
         result.page_png = ""
         return result
     started = time.perf_counter()
@@ -148,11 +149,17 @@ def read_recording(
         headers = {"X-API-Key": api_key}
         with httpx.Client(base_url=server.url, headers=headers, timeout=settings.ocr_timeout_s + 30) as client:
             try:
+                # The OCR engine started loading with the cloud, before the edge; on a busy machine the
+                # stream can end first. That wait is the engine's start-up, reported apart (stage
+                # "ocr_ready"), so answer_ms stays question to answer.
+                t0 = time.perf_counter()
+                client.get("/readyz")
+                stages["ocr_ready"] = time.perf_counter() - t0
                 t0 = time.perf_counter()  # the pages grew while the frames arrived: this is the wait for the answer
                 answer = client.post(f"/v1/sessions/{session_id}/ask", json={}).raise_for_status().json()
                 answer_ms = (time.perf_counter() - t0) * 1000
                 page = client.get(f"/v1/sessions/{session_id}/page.png").raise_for_status().content
-                spoken = _ask_spoken(client, session_id) if speech else None
+                spoken = _ask_spoken(client, session_id) if speech_wav is not None else None
             except httpx.HTTPStatusError as exc:
                 detail = exc.response.json().get("detail", "") if exc.response.headers.get("content-type", "").startswith(
                     "application/json") else exc.response.text[:200]
@@ -161,8 +168,9 @@ def read_recording(
         stages["answer"] = answer_ms / 1000
     page_png = out / "page.png"
     page_png.write_bytes(page)
-    if spoken is not None:
-        (out / "answer.wav").write_bytes(spoken)
+    if speech_wav is not None and spoken is not None:
+        Path(speech_wav).parent.mkdir(parents=True, exist_ok=True)
+        Path(speech_wav).write_bytes(spoken)
     result = ReadResult(
         text=answer["text"],
         backend=answer["backend"],
@@ -180,7 +188,7 @@ def read_recording(
         seconds=time.perf_counter() - started,
         answer_ms=round(answer_ms, 1),
         stage_seconds=stages,
-        speech_wav=str(out / "answer.wav") if spoken is not None else None,
+        speech_wav=str(speech_wav) if spoken is not None else None,
     )
     if recording.text is not None:
         from darkread.eval.error_rates import error_rates
@@ -240,13 +248,9 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError("give a RECORDING directory, or --demo for the shipped sample")
     if args.say_out is not None and args.say_out.suffix.lower() != ".wav":
         raise ValueError(f"--say-out {args.say_out}: give a .wav file name")
-    speech = args.say or args.say_out is not None
     result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out,
-                           lexicon=args.lexicon, infer=args.infer, speech=speech, true_motion=args.true_motion)
-    if result.speech_wav is not None and args.say_out is not None:
-        args.say_out.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(result.speech_wav, args.say_out)
-        result.speech_wav = str(args.say_out)
+                            lexicon=args.lexicon, infer=args.infer, speech_wav=_speech_wav(args),
+                            true_motion=args.true_motion)
     if args.json:
         print(json.dumps(result.to_json(), indent=1))
     else:
@@ -256,6 +260,19 @@ def _run(args: argparse.Namespace) -> int:
     if result.speech_wav is not None:
         _say(Path(result.speech_wav), play=args.say)
     return 0
+
+
+def _speech_wav(args: argparse.Namespace) -> Path | None:
+    """Where the spoken answer goes: --say-out, else answer.wav in --out, else a file of its own in
+    the temp directory (it outlives the read's scratch directory, so it can be played or found)."""
+    if args.say_out is not None:
+        return Path(args.say_out)
+    if not args.say:
+        return None
+    if args.out is not None:
+        return Path(args.out) / "answer.wav"
+    with tempfile.NamedTemporaryFile(prefix="darkread-answer-", suffix=".wav", delete=False) as kept:
+        return Path(kept.name)
 
 
 def _say(wav: Path, *, play: bool) -> None:
