@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from darkread.cloud.ocr.base import OCR_BACKENDS
 from darkread.edge.config import INFER_MODES, default_infer_mode
 
 logger = logging.getLogger(__name__)
@@ -51,7 +52,7 @@ class ReadResult:
     backend: str
     recording: str
     events_in: int
-    events_foveated: int
+    events_foveated: int  # events the edge counted inside the window it had placed
     frames: int
     frames_no_gaze: int
     messages_sent: int
@@ -67,6 +68,7 @@ class ReadResult:
     cer: float | None = None
     wer: float | None = None
     speech_wav: str | None = None
+    fovea_event_fraction: float | None = None  # inside the window at their own gaze (as ``darkread inspect``)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -84,13 +86,16 @@ def read_recording(
     infer: str | None = None,
     speech_wav: str | Path | None = None,
     true_motion: bool = False,
+    gaze_csv: str | Path | None = None,
+    calibration: str | Path | None = None,
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says.
 
     With ``speech_wav`` the answer is also asked for as speech (``Accept: audio/wav``) and written
     to that WAV file (outside ``out_dir``, it outlives a scratch one). With ``true_motion`` (synthetic recordings) the edge
     takes the head's motion from the simulator's truth instead of measuring it from the events
-    (``eval.true_motion``); ValueError for a recording without truth.
+    (``eval.true_motion``); ValueError for a recording without truth. ``gaze_csv`` and
+    ``calibration`` go with a bare ``.raw`` file (or override a recording directory's own).
     """
     import httpx
     from pydantic import SecretStr
@@ -106,16 +111,20 @@ def read_recording(
 
     from darkread.cloud.errors import CloudError
     from darkread.edge.errors import RunError
+    from darkread.edge.inspect import fovea_event_fraction
 
     if out_dir is None:  # a scratch directory that does not outlive the read
         with tempfile.TemporaryDirectory(prefix="darkread-read-", ignore_cleanup_errors=True) as scratch:
             result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
                                     drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer,
-                                    speech_wav=speech_wav, true_motion=true_motion)
+                                    speech_wav=speech_wav, true_motion=true_motion, gaze_csv=gaze_csv,
+                                    calibration=calibration)
         result.page_png = ""
         return result
     started = time.perf_counter()
-    recording = open_recording(path)  # fails early, naming any missing file
+    recording = open_recording(path, gaze=str(gaze_csv) if gaze_csv else None,  # fails early, naming any missing file
+                               calibration=str(calibration) if calibration else None)
+    recording.gaze()  # a broken gaze CSV fails here too, before a cloud starts
     known_motion = None
     if true_motion:
         from darkread.eval.true_motion import TrueHeadMotion
@@ -130,7 +139,8 @@ def read_recording(
     with serve_in_thread(create_app(settings)) as server:
         stages["cloud_start"] = time.perf_counter() - started
         overrides = {
-            "source": {"kind": "replay", "path": str(recording.path if recording.path.is_dir() else recording.raw_path), "speed": 0.0},
+            "source": {"kind": "replay", "path": str(recording.path if recording.path.is_dir() else recording.raw_path), "speed": 0.0,
+                       "gaze_csv": str(recording.gaze_path), "calibration": str(calibration or "")},
             "gaze": {"kind": "recording"},
             "pipeline": {"lossless": True, "infer": infer or default_infer_mode(), **({"model": str(model)} if model else {})},
             "uplink": {"url": server.ws_url, "api_key": api_key, "mode": mode, "spool_dir": str(out / "spool"),
@@ -189,6 +199,7 @@ def read_recording(
         answer_ms=round(answer_ms, 1),
         stage_seconds=stages,
         speech_wav=str(speech_wav) if spoken is not None else None,
+        fovea_event_fraction=fovea_event_fraction(recording),
     )
     if recording.text is not None:
         from darkread.eval.error_rates import error_rates
@@ -214,9 +225,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "read", help="read a recording end to end (edge -> cloud -> stitch -> OCR) and print the text",
         description=READ_HELP, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("recording", nargs="?", help="recording directory (events.raw, general_eye_gaze.csv, calibration.json)")
+    parser.add_argument("recording", nargs="?",
+                        help="recording directory (events.raw, general_eye_gaze.csv, calibration.json), or a bare .raw "
+                             "file with --gaze-csv and --calibration")
+    parser.add_argument("--gaze-csv", metavar="CSV", help="eye-gaze CSV (for a bare .raw file, or to override the recording's)")
+    parser.add_argument("--calibration", metavar="JSON", help="calibration.json (for a bare .raw file, or to override the recording's)")
     parser.add_argument("--demo", action="store_true", help="read the shipped sample recording and compare with its printed text")
-    parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
+    parser.add_argument("--backend", default="local", choices=OCR_BACKENDS,
                         help="OCR backend (default: local, the embedded offline engine); remote ones read DARKREAD_* settings")
     parser.add_argument("--mode", default="frames", choices=["frames", "pages"], help="stream frames (default) or stitch on the glasses")
     parser.add_argument("--infer", default=None, choices=INFER_MODES,
@@ -250,7 +265,7 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError(f"--say-out {args.say_out}: give a .wav file name")
     result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out,
                             lexicon=args.lexicon, infer=args.infer, speech_wav=_speech_wav(args),
-                            true_motion=args.true_motion)
+                            true_motion=args.true_motion, gaze_csv=args.gaze_csv, calibration=args.calibration)
     if args.json:
         print(json.dumps(result.to_json(), indent=1))
     else:
@@ -291,7 +306,7 @@ def _say(wav: Path, *, play: bool) -> None:
 
 
 def _print_summary(result: ReadResult, stream: Any) -> None:
-    kept = result.events_foveated / max(result.events_in, 1)
+    kept = result.fovea_event_fraction if result.fovea_event_fraction is not None else 0.0
     print("", file=stream)
     if result.reference is not None:
         print("printed on the page:", file=stream)

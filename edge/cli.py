@@ -39,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--gaze-csv", metavar="CSV", help="gaze CSV for a bare .raw replay")
     run.add_argument("--calibration", metavar="JSON", help="calibration.json (bare .raw replay, or the camera)")
     run.add_argument(
-        "--speed", metavar="N|max",
+        "--speed", metavar="N|max", type=_speed_option,
         help="replay pacing: 1 = wall clock (default), 2 = twice as fast, max = as fast as inference allows (no skips)",
     )
     run.add_argument("--gaze", choices=["recording", "csv", "udp", "aria"], help="gaze source (default: the recording's for a replay)")
@@ -64,6 +64,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--drain-timeout", type=float, metavar="S", help="seconds to wait for acks at exit (default 30)")
     run.set_defaults(func=_run)
     edge.set_defaults(func=lambda args: edge.print_help() or 2)
+
+
+def _speed_option(text: str) -> str:
+    """``--speed`` as given, once it parses (argparse then names the option in its error)."""
+    from darkread.edge.sources.replay import parse_speed
+
+    try:
+        parse_speed(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def overrides_from_args(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
