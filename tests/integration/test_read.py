@@ -19,6 +19,7 @@ import pytest
 from speech_measure import require_espeak, transcribe
 
 from darkread.cloud.speech import spoken_text
+from darkread.edge.inspect import inspect_path
 from darkread.edge.io.recording import open_recording
 from darkread.paths import SAMPLE_RECORDING
 from darkread.read import read_recording
@@ -54,6 +55,18 @@ def test_the_default_on_change_mode_reads_the_sample_without_an_error(tmp_path: 
     assert result.reference is not None and result.backend == "rapidocr+lexicon"
     assert result.cer == 0.0, f"read {result.text!r} (CER {result.cer:.1%})"
     assert 0 < result.messages_sent < result.frames  # several frames behind each view
+    # "inside the fovea" is one figure, whichever command reports it
+    assert result.fovea_event_fraction == inspect_path(SAMPLE_RECORDING, progress=False)["fovea_event_fraction"]
+
+
+def test_read_a_bare_raw_file_with_its_gaze_csv_and_calibration(tmp_path: Path) -> None:
+    raw = tmp_path / "elsewhere" / "events.raw"
+    raw.parent.mkdir()
+    shutil.copyfile(SAMPLE_RECORDING / "events.raw", raw)
+    result = read_recording(raw, gaze_csv=SAMPLE_RECORDING / "general_eye_gaze.csv",
+                            calibration=SAMPLE_RECORDING / "calibration.json")
+    assert result.reference is None  # no text.txt beside it
+    assert result.text == open_recording(SAMPLE_RECORDING).text.strip()
 
 
 def test_read_json_has_the_per_stage_figures(tmp_path: Path) -> None:
