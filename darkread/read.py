@@ -39,6 +39,7 @@ Examples:
   darkread read --demo                         the shipped sample recording
   darkread read path/to/recording --json
   darkread read path/to/recording --backend tesseract --out /tmp/read
+  darkread read events.raw --gaze-csv gaze.csv --calibration calibration.json
   darkread read --demo --say                   ... and speak the answer (espeak-ng in the cloud)
   darkread read --demo --say-out answer.wav    ... and write the spoken answer to a WAV file
 """
@@ -92,8 +93,8 @@ def read_recording(
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says.
 
     With ``speech_wav`` the answer is also asked for as speech (``Accept: audio/wav``) and written
-    to that WAV file (outside ``out_dir``, it outlives a scratch one). With ``true_motion`` (synthetic recordings) the edge
-    takes the head's motion from the simulator's truth instead of measuring it from the events
+    to that WAV file (outside ``out_dir``, it outlives a scratch one). With ``true_motion``
+    (synthetic recordings) the edge takes the head's motion from the simulator's truth instead of measuring it from the events
     (``eval.true_motion``); ValueError for a recording without truth. ``gaze_csv`` and
     ``calibration`` go with a bare ``.raw`` file (or override a recording directory's own).
     """
