@@ -5,29 +5,50 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
-STAMP  := $(VENV)/.installed
 EXTRAS ?= edge,cloud,dev,train,gaze,hesim
+# What `make demo` runs: the edge and the cloud on one machine. The lab, training and test extras
+# (PyTorch, hesim, eyekit, the test oracles) come with `make venv` / `make test` and their targets.
+DEMO_EXTRAS := edge,cloud
+# One stamp per extras set: the full set also satisfies the demo's.
+STAMP      := $(VENV)/.installed
+DEMO_STAMP := $(VENV)/.installed-demo
 HESIM  := hesim-3d==0.1.0
 PYTEST_ARGS ?=  # e.g. make test PYTEST_ARGS="-m postgres"
 
-.PHONY: help venv hesim test lint typecheck test-fast bench demo eval eval-small eval-hesim eval-photoreceptor train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
+.PHONY: help venv venv-demo hesim test lint typecheck test-fast bench demo eval eval-small eval-hesim eval-photoreceptor train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
 
+# install-darkread EXTRAS: the virtual environment, then darkread (editable) with those extras;
+# one progress line per step (pip itself stays quiet)
+define install-darkread
+	@test -x $(PY) || { echo "set-up: creating the virtual environment $(VENV)"; $(PYTHON) -m venv $(VENV); }
+	@echo "set-up: pip, setuptools and wheel in $(VENV)"
+	@$(PIP) install -q --upgrade pip "setuptools>=77" wheel
+	@echo "set-up: darkread and its [$(1)] dependencies (the first time takes minutes)"
+	@$(PIP) install -q -e ".[$(1)]"
+endef
+
+$(DEMO_STAMP): pyproject.toml setup.py
+	$(call install-darkread,$(DEMO_EXTRAS))
+	@$(PY) -c "import cv2; cv2.aruco"
+	@touch $(DEMO_STAMP)
+
 $(STAMP): pyproject.toml setup.py
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PIP) install -q --upgrade pip "setuptools>=77" wheel
-	$(PIP) install -q -e ".[$(EXTRAS)]"
-	# test oracle for the Aria gaze conventions; its own dependencies (1.6 GB) are not needed
-	$(PIP) install -q --no-deps "projectaria-tools==2.3.0"
-	# the second event simulator, without the opencv-python it declares (it would break our cv2); its
-	# run-time needs are the `hesim` extra
-	$(if $(findstring hesim,$(EXTRAS)),$(PIP) install -q --no-deps "$(HESIM)")
-	$(PY) -c "import cv2; cv2.aruco"
-	touch $(STAMP)
+	$(call install-darkread,$(EXTRAS))
+	@# test oracle for the Aria gaze conventions; its own dependencies (1.6 GB) are not needed
+	@echo "set-up: projectaria-tools (the gaze test oracle, without its dependencies)"
+	@$(PIP) install -q --no-deps "projectaria-tools==2.3.0"
+	@# the second event simulator, without the opencv-python it declares (it would break our cv2); its
+	@# run-time needs are the `hesim` extra
+	@$(if $(findstring hesim,$(EXTRAS)),echo "set-up: $(HESIM) (without its opencv-python)" && $(PIP) install -q --no-deps "$(HESIM)")
+	@$(PY) -c "import cv2; cv2.aruco"
+	@touch $(STAMP) $(if $(and $(findstring edge,$(EXTRAS)),$(findstring cloud,$(EXTRAS))),$(DEMO_STAMP))
 
 venv: $(STAMP)  ## create .venv and install darkread with all extras
+
+venv-demo: $(DEMO_STAMP)  ## create .venv with only what the demo runs (edge and cloud)
 
 hesim: $(STAMP)  ## the second event simulator (hesim-3d, installed by venv without opencv-python): check it imports beside our cv2
 	$(PY) -c "import cv2, hesim3d; cv2.aruco; print('hesim-3d', hesim3d.__version__, 'beside cv2', cv2.__version__)"
@@ -40,24 +61,24 @@ system-deps: speech-deps browser-deps ocr-deps  ## every Debian package the test
 
 speech-deps:  ## espeak-ng, the offline speech engine of spoken answers (when root)
 	@if command -v espeak-ng >/dev/null; then :; \
-	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then $(APT_INSTALL) espeak-ng >/dev/null; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then echo "set-up: apt-get install espeak-ng"; $(APT_INSTALL) espeak-ng >/dev/null; \
 	else echo "speech-deps: not root or no apt-get; install espeak-ng for spoken answers"; fi
 
 browser-deps:  ## Chromium and its WebDriver for the live-page browser test (when root)
 	@if command -v chromium >/dev/null && command -v chromedriver >/dev/null; then :; \
-	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then $(APT_INSTALL) chromium chromium-driver >/dev/null; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then echo "set-up: apt-get install chromium chromium-driver"; $(APT_INSTALL) chromium chromium-driver >/dev/null; \
 	else echo "browser-deps: not root or no apt-get; the browser test will skip"; fi
 
 ocr-deps:  ## Tesseract (an optional second local OCR engine) and libcairo2 for eyekit (when root)
 	@if [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
-		command -v tesseract >/dev/null || ($(APT_INSTALL) tesseract-ocr tesseract-ocr-eng >/dev/null) || true; \
-		ldconfig -p | grep -q libcairo.so.2 || ($(APT_INSTALL) libcairo2 >/dev/null) || true; \
+		command -v tesseract >/dev/null || (echo "set-up: apt-get install tesseract-ocr" && $(APT_INSTALL) tesseract-ocr tesseract-ocr-eng >/dev/null) || true; \
+		ldconfig -p | grep -q libcairo.so.2 || (echo "set-up: apt-get install libcairo2" && $(APT_INSTALL) libcairo2 >/dev/null) || true; \
 	else echo "ocr-deps: not root or no apt-get; Tesseract stays optional"; fi
 
 postgres-deps:  ## Debian's PostgreSQL server (initdb, pg_ctl) for the tests and benchmarks, when run as root
 	@if ls /usr/lib/postgresql/*/bin/pg_ctl >/dev/null 2>&1 || command -v pg_ctl >/dev/null; then :; \
 	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null; then \
-		echo "postgres-deps: installing Debian's postgresql"; \
+		echo "set-up: apt-get install postgresql"; \
 		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends postgresql >/dev/null) \
 			|| echo "postgres-deps: apt-get install postgresql failed; the postgres tests will say so"; \
 	else echo "postgres-deps: no PostgreSQL server binaries and not root: install postgresql (the postgres tests skip, or fail under CI)"; fi
@@ -82,8 +103,9 @@ test-fast: $(STAMP) postgres-deps  ## unit tests only (no integration tests)
 bench: $(STAMP) postgres-deps  ## benchmarks; prints a table and writes bench.json
 	$(VENV)/bin/darkread bench
 
-demo: $(STAMP) speech-deps  ## read the shipped sample recording aloud and compare with its printed text
-	$(VENV)/bin/darkread read --demo --say
+demo: $(DEMO_STAMP) speech-deps  ## read the shipped sample recording aloud and compare with its printed text (installs only edge and cloud)
+	@echo "demo: darkread read --demo --say"
+	@$(VENV)/bin/darkread read --demo --say
 
 eval: $(STAMP)  ## the full suite (93 recordings) in both edge modes (~30 min on 2 cores, half of it making the suite): report in docs/eval, the default mode first, with how much ink the events show
 	$(VENV)/bin/darkread eval make-suite runs/eval_suite --jobs 2

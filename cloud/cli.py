@@ -9,6 +9,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from darkread.cloud.ocr.base import OCR_BACKENDS
+
 KEYS_HELP = """\
 API keys per device, stored hashed in <data dir>/keys.json (DARKREAD_KEYS_FILE elsewhere).
 Scopes: stream (open and stream its own device's sessions), read (list, read and ask about its
@@ -51,9 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     serve.add_argument("--api-key", help="an admin API key (prefer DARKREAD_API_KEY: arguments show up in ps)")
     serve.add_argument("--insecure", action="store_true",
                        help="serve other hosts without any key (a closed test network only)")
-    serve.add_argument(
-        "--ocr", choices=("local", "tesseract", "google", "openai"), help="OCR engine (default: local rapidocr)"
-    )
+    serve.add_argument("--ocr", choices=OCR_BACKENDS, help="OCR engine (default: local, the embedded rapidocr)")
     serve.set_defaults(func=_serve)
 
     keys = commands.add_parser("keys", help="add, list and revoke per-device API keys", description=KEYS_HELP,
@@ -98,7 +98,7 @@ class _UsageError(Exception):
 
 
 def _fail(message: str) -> int:
-    print(f"darkread cloud: error: {message}", file=sys.stderr)
+    print(f"darkread: error: {message}", file=sys.stderr)
     return 2
 
 
@@ -131,13 +131,13 @@ def _serve(args: argparse.Namespace) -> int:
     from darkread.cloud import datadir
     from darkread.cloud.app import create_app
     from darkread.cloud.errors import DataDirError
-    from darkread.cloud.server import WEBSOCKET_OPTIONS
+    from darkread.cloud.server import UVICORN_LOGGING, WEBSOCKET_OPTIONS
 
     try:  # before uvicorn: a bad data dir is one line, not a start-up traceback
         datadir.check_data_dir(settings.data_dir)  # type: ignore[attr-defined]
         held = datadir.acquire(settings.data_dir)  # type: ignore[attr-defined]
     except DataDirError as exc:
-        print(f"darkread cloud: error: {exc}", file=sys.stderr)
+        print(f"darkread: error: {exc}", file=sys.stderr)
         return 1
     if settings.database_url is not None:  # type: ignore[attr-defined]
         from darkread.cloud.errors import StoreError
@@ -147,7 +147,7 @@ def _serve(args: argparse.Namespace) -> int:
             migrate_database(settings.database_url.get_secret_value())  # type: ignore[attr-defined]
         except StoreError as exc:
             datadir.release(held)
-            print(f"darkread cloud: error: {exc}", file=sys.stderr)
+            print(f"darkread: error: {exc}", file=sys.stderr)
             return 1
     app = create_app(settings)  # type: ignore[arg-type]
     # uvicorn refuses larger websocket messages itself (close 1009); leave room so that our own
@@ -160,6 +160,7 @@ def _serve(args: argparse.Namespace) -> int:
         log_level=logging.getLevelName(logging.getLogger().getEffectiveLevel()).lower(),  # follows -v / -q
         access_log=False,
         timeout_graceful_shutdown=settings.shutdown_timeout_s,  # type: ignore[attr-defined]
+        **UVICORN_LOGGING,
         **WEBSOCKET_OPTIONS,
     )
     datadir.release(held)

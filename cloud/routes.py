@@ -45,11 +45,12 @@ class SessionModel(BaseModel):
     updated_s: float = Field(description="UNIX time of the last hello or stored message")
     last_seq: int = Field(description="highest seq durably stored, -1 if none")
     frames: int
-    pages: int
+    pages: int | None = Field(description="pages the glasses sent (mode 'pages'); null in mode 'frames', whose pages "
+                                          "the cloud stitches as frames arrive: GET /v1/sessions/{id}/pages lists them")
 
     @classmethod
     def of(cls, info: SessionInfo) -> SessionModel:
-        return cls(**asdict(info))
+        return cls(**{**asdict(info), "pages": info.pages if info.mode == "pages" else None})
 
 
 class AskRequest(BaseModel):

@@ -16,6 +16,9 @@ from .errors import ServiceStartError
 # Masks and views arrive compressed (zlib, PNG: proto/codecs.py); permessage-deflate on top of them
 # costs CPU on both ends for a few bytes, so the service never negotiates it.
 WEBSOCKET_OPTIONS = {"ws_per_message_deflate": False}
+# uvicorn's loggers go through darkread's handler (``darkread.cli.configure_logging``): one format
+# for every line, instead of uvicorn's own "INFO:     ..." lines beside darkread's.
+UVICORN_LOGGING = {"log_config": None}
 
 
 @dataclass(frozen=True)
@@ -39,7 +42,7 @@ def serve_in_thread(
 ) -> Iterator[RunningServer]:
     """Start uvicorn with ``app`` (port 0 = a free one), yield once it listens, stop on exit."""
     config = uvicorn.Config(app, host=host, port=port, log_level="warning", ws_max_size=ws_max_size, lifespan="on",
-                            **WEBSOCKET_OPTIONS)  # fmt: skip
+                            **UVICORN_LOGGING, **WEBSOCKET_OPTIONS)  # fmt: skip
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="darkread-cloud", daemon=True)
     thread.start()

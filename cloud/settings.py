@@ -13,9 +13,8 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 from darkread.proto.messages import DEFAULT_MAX_MESSAGE_BYTES
 
 from .origins import normalise_origin
+from .ocr.base import OcrBackendName
 from .speech import VOICE_NAME_PATTERN, Voice
-
-OcrBackendName = Literal["local", "rapidocr", "tesseract", "google", "openai"]
 
 OCR_PROMPT = (
     "Transcribe all text in this image exactly, line by line, top to bottom. "

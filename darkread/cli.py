@@ -12,6 +12,7 @@ the lab and an installation without it has the product's commands only.
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import logging
 import sys
@@ -75,6 +76,8 @@ def registrations() -> Iterator[Register]:
 def configure_logging(verbose: int, quiet: bool) -> None:
     level = logging.WARNING if quiet else (logging.DEBUG if verbose > 1 else logging.INFO)
     logging.basicConfig(level=level, format="%(asctime)s %(levelname)-7s %(name)s: %(message)s", stream=sys.stderr)
+    # httpx logs every request at INFO (darkread read asks its own cloud): only with -vv
+    logging.getLogger("httpx").setLevel(level if verbose > 1 else max(level, logging.WARNING))
 
 
 # What bad input and a failing environment raise: darkread's own errors, files and sockets
@@ -95,9 +98,36 @@ def error_line(exc: BaseException) -> str:
     return f"darkread: internal error: {type(exc).__name__}: {message} (run with -vv for the traceback)"
 
 
+def command_parser(parser: argparse.ArgumentParser, argv: Sequence[str]) -> argparse.ArgumentParser:
+    """The (sub-)command's own parser that ``argv`` names, e.g. ``darkread edge run``'s."""
+    current = parser
+    for token in argv:
+        commands = next((a for a in current._actions if isinstance(a, argparse._SubParsersAction)), None)
+        if commands is None:
+            break
+        if token in commands.choices:
+            current = commands.choices[token]
+    return current
+
+
+def parse(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
+    """Parse ``argv``; an unknown option is reported with the usage of the command it was given to
+    (argparse itself reports it with the top-level usage)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        command = command_parser(parser, argv)
+        known = [option for action in command._actions for option in action.option_strings]
+        options = [word.split("=", 1)[0] for word in unknown if word.startswith("-")]
+        near = difflib.get_close_matches(options[0], known, n=1) if options else []
+        hint = f" (did you mean {near[0]}?)" if near else f" (see {command.prog} --help)"
+        command.error(f"unrecognized arguments: {' '.join(unknown)}{hint}")
+    return args
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse(parser, argv)
     configure_logging(args.verbose, args.quiet)
     handler = getattr(args, "func", None)
     if handler is None:

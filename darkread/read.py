@@ -5,7 +5,8 @@ A real edge replays the recording as fast as inference allows into a real cloud 
 reads it with the chosen OCR backend, and the answer comes back over the REST ask endpoint — the
 same path the glasses and a user take, only on one machine. The cloud stitches each frame as it
 is stored, so once the stream has ended the question is answered from the page already there
-(``answer_ms``).
+(``answer_ms``). The OCR engine loads while the edge streams; if the stream ends first, the
+question is asked once the engine is ready, and that wait is its own stage (``ocr_ready``).
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import argparse
 import json
 import logging
 import secrets
-import shutil
 import sys
 import tempfile
 import time
@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from darkread.cloud.ocr.base import OCR_BACKENDS
 from darkread.core.text_metrics import error_rates
 from darkread.edge.config import INFER_MODES, default_infer_mode
 from darkread.edge.head_motion import KnownHeadMotion
@@ -40,6 +41,7 @@ Examples:
   darkread read --demo                         the shipped sample recording
   darkread read path/to/recording --json
   darkread read path/to/recording --backend tesseract --out /tmp/read
+  darkread read events.raw --gaze-csv gaze.csv --calibration calibration.json
   darkread read --demo --say                   ... and speak the answer (espeak-ng in the cloud)
   darkread read --demo --say-out answer.wav    ... and write the spoken answer to a WAV file
 """
@@ -53,7 +55,7 @@ class ReadResult:
     backend: str
     recording: str
     events_in: int
-    events_foveated: int
+    events_foveated: int  # events the edge counted inside the window it had placed
     frames: int
     frames_no_gaze: int
     messages_sent: int
@@ -69,6 +71,7 @@ class ReadResult:
     cer: float | None = None
     wer: float | None = None
     speech_wav: str | None = None
+    fovea_event_fraction: float | None = None  # inside the window at their own gaze (as ``darkread inspect``)
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -84,15 +87,18 @@ def read_recording(
     drain_timeout_s: float = 60.0,
     lexicon: bool = True,
     infer: str | None = None,
-    speech: bool = False,
+    speech_wav: str | Path | None = None,
     known_motion: KnownHeadMotion | None = None,
+    gaze_csv: str | Path | None = None,
+    calibration: str | Path | None = None,
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says.
 
-    With ``speech`` the answer is also asked for as speech (``Accept: audio/wav``) and written
-    to ``answer.wav`` in the output directory. With ``known_motion`` the edge takes the head's motion
-    from that source (an inertial sensor, or in the lab the simulator's truth) instead of measuring it
-    from the events.
+    With ``speech_wav`` the answer is also asked for as speech (``Accept: audio/wav``) and written
+    to that WAV file (outside ``out_dir``, it outlives a scratch one). With ``known_motion``
+    the edge takes the head's motion from that source (an inertial sensor, or in the lab the simulator's
+    truth) instead of measuring it from the events. ``gaze_csv`` and
+    ``calibration`` go with a bare ``.raw`` file (or override a recording directory's own).
     """
     import httpx
     from pydantic import SecretStr
@@ -108,15 +114,20 @@ def read_recording(
 
     from darkread.cloud.errors import CloudError
     from darkread.edge.errors import RunError
+    from darkread.edge.inspect import fovea_event_fraction
 
     if out_dir is None:  # a scratch directory that does not outlive the read
         with tempfile.TemporaryDirectory(prefix="darkread-read-", ignore_cleanup_errors=True) as scratch:
             result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
-                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer, known_motion=known_motion)
+                                    drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer,
+                                    speech_wav=speech_wav, known_motion=known_motion, gaze_csv=gaze_csv,
+                                    calibration=calibration)
         result.page_png = ""
         return result
     started = time.perf_counter()
-    recording = open_recording(path)  # fails early, naming any missing file
+    recording = open_recording(path, gaze=str(gaze_csv) if gaze_csv else None,  # fails early, naming any missing file
+                               calibration=str(calibration) if calibration else None)
+    recording.gaze()  # a broken gaze CSV fails here too, before a cloud starts
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     api_key = secrets.token_urlsafe(16)
@@ -126,7 +137,8 @@ def read_recording(
     with serve_in_thread(create_app(settings)) as server:
         stages["cloud_start"] = time.perf_counter() - started
         overrides = {
-            "source": {"kind": "replay", "path": str(recording.path if recording.path.is_dir() else recording.raw_path), "speed": 0.0},
+            "source": {"kind": "replay", "path": str(recording.path if recording.path.is_dir() else recording.raw_path), "speed": 0.0,
+                       "gaze_csv": str(recording.gaze_path), "calibration": str(calibration or "")},
             "gaze": {"kind": "recording"},
             "pipeline": {"lossless": True, "infer": infer or default_infer_mode(), **({"model": str(model)} if model else {})},
             "uplink": {"url": server.ws_url, "api_key": api_key, "mode": mode, "spool_dir": str(out / "spool"),
@@ -145,11 +157,17 @@ def read_recording(
         headers = {"X-API-Key": api_key}
         with httpx.Client(base_url=server.url, headers=headers, timeout=settings.ocr_timeout_s + 30) as client:
             try:
+                # The OCR engine started loading with the cloud, before the edge; on a busy machine the
+                # stream can end first. That wait is the engine's start-up, reported apart (stage
+                # "ocr_ready"), so answer_ms stays question to answer.
+                t0 = time.perf_counter()
+                client.get("/readyz")
+                stages["ocr_ready"] = time.perf_counter() - t0
                 t0 = time.perf_counter()  # the pages grew while the frames arrived: this is the wait for the answer
                 answer = client.post(f"/v1/sessions/{session_id}/ask", json={}).raise_for_status().json()
                 answer_ms = (time.perf_counter() - t0) * 1000
                 page = client.get(f"/v1/sessions/{session_id}/page.png").raise_for_status().content
-                spoken = _ask_spoken(client, session_id) if speech else None
+                spoken = _ask_spoken(client, session_id) if speech_wav is not None else None
             except httpx.HTTPStatusError as exc:
                 detail = exc.response.json().get("detail", "") if exc.response.headers.get("content-type", "").startswith(
                     "application/json") else exc.response.text[:200]
@@ -158,8 +176,9 @@ def read_recording(
         stages["answer"] = answer_ms / 1000
     page_png = out / "page.png"
     page_png.write_bytes(page)
-    if spoken is not None:
-        (out / "answer.wav").write_bytes(spoken)
+    if speech_wav is not None and spoken is not None:
+        Path(speech_wav).parent.mkdir(parents=True, exist_ok=True)
+        Path(speech_wav).write_bytes(spoken)
     result = ReadResult(
         text=answer["text"],
         backend=answer["backend"],
@@ -177,7 +196,8 @@ def read_recording(
         seconds=time.perf_counter() - started,
         answer_ms=round(answer_ms, 1),
         stage_seconds=stages,
-        speech_wav=str(out / "answer.wav") if spoken is not None else None,
+        speech_wav=str(speech_wav) if spoken is not None else None,
+        fovea_event_fraction=fovea_event_fraction(recording),
     )
     if recording.text is not None:
         rates = error_rates(recording.text, result.text)
@@ -201,9 +221,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "read", help="read a recording end to end (edge -> cloud -> stitch -> OCR) and print the text",
         description=READ_HELP, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("recording", nargs="?", help="recording directory (events.raw, general_eye_gaze.csv, calibration.json)")
+    parser.add_argument("recording", nargs="?",
+                        help="recording directory (events.raw, general_eye_gaze.csv, calibration.json), or a bare .raw "
+                             "file with --gaze-csv and --calibration")
+    parser.add_argument("--gaze-csv", metavar="CSV", help="eye-gaze CSV (for a bare .raw file, or to override the recording's)")
+    parser.add_argument("--calibration", metavar="JSON", help="calibration.json (for a bare .raw file, or to override the recording's)")
     parser.add_argument("--demo", action="store_true", help="read the shipped sample recording and compare with its printed text")
-    parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
+    parser.add_argument("--backend", default="local", choices=OCR_BACKENDS,
                         help="OCR backend (default: local, the embedded offline engine); remote ones read DARKREAD_* settings")
     parser.add_argument("--mode", default="frames", choices=["frames", "pages"], help="stream frames (default) or stitch on the glasses")
     parser.add_argument("--infer", default=None, choices=INFER_MODES,
@@ -231,13 +255,9 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError("give a RECORDING directory, or --demo for the shipped sample")
     if args.say_out is not None and args.say_out.suffix.lower() != ".wav":
         raise ValueError(f"--say-out {args.say_out}: give a .wav file name")
-    speech = args.say or args.say_out is not None
     result = read_recording(path, backend=args.backend, mode=args.mode, model=args.model, out_dir=args.out,
-                           lexicon=args.lexicon, infer=args.infer, speech=speech)
-    if result.speech_wav is not None and args.say_out is not None:
-        args.say_out.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(result.speech_wav, args.say_out)
-        result.speech_wav = str(args.say_out)
+                            lexicon=args.lexicon, infer=args.infer, speech_wav=_speech_wav(args),
+                            gaze_csv=args.gaze_csv, calibration=args.calibration)
     if args.json:
         print(json.dumps(result.to_json(), indent=1))
     else:
@@ -247,6 +267,19 @@ def _run(args: argparse.Namespace) -> int:
     if result.speech_wav is not None:
         _say(Path(result.speech_wav), play=args.say)
     return 0
+
+
+def _speech_wav(args: argparse.Namespace) -> Path | None:
+    """Where the spoken answer goes: --say-out, else answer.wav in --out, else a file of its own in
+    the temp directory (it outlives the read's scratch directory, so it can be played or found)."""
+    if args.say_out is not None:
+        return Path(args.say_out)
+    if not args.say:
+        return None
+    if args.out is not None:
+        return Path(args.out) / "answer.wav"
+    with tempfile.NamedTemporaryFile(prefix="darkread-answer-", suffix=".wav", delete=False) as kept:
+        return Path(kept.name)
 
 
 def _say(wav: Path, *, play: bool) -> None:
@@ -265,7 +298,7 @@ def _say(wav: Path, *, play: bool) -> None:
 
 
 def _print_summary(result: ReadResult, stream: Any) -> None:
-    kept = result.events_foveated / max(result.events_in, 1)
+    kept = result.fovea_event_fraction if result.fovea_event_fraction is not None else 0.0
     print("", file=stream)
     if result.reference is not None:
         print("printed on the page:", file=stream)

@@ -6,6 +6,7 @@ Light module: heavy imports happen inside the handler.
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from darkread.edge.config import INFER_MODES
@@ -39,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--gaze-csv", metavar="CSV", help="gaze CSV for a bare .raw replay")
     run.add_argument("--calibration", metavar="JSON", help="calibration.json (bare .raw replay, or the camera)")
     run.add_argument(
-        "--speed", metavar="N|max",
+        "--speed", metavar="N|max", type=_speed_option,
         help="replay pacing: 1 = wall clock (default), 2 = twice as fast, max = as fast as inference allows (no skips)",
     )
     run.add_argument("--gaze", choices=["recording", "csv", "udp", "aria"], help="gaze source (default: the recording's for a replay)")
@@ -64,6 +65,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--drain-timeout", type=float, metavar="S", help="seconds to wait for acks at exit (default 30)")
     run.set_defaults(func=_run)
     edge.set_defaults(func=lambda args: edge.print_help() or 2)
+
+
+def _speed_option(text: str) -> str:
+    """``--speed`` as given, once it parses (argparse then names the option in its error)."""
+    from darkread.edge.sources.replay import parse_speed
+
+    try:
+        parse_speed(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 def overrides_from_args(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
@@ -115,4 +127,22 @@ def _run(args: argparse.Namespace) -> int:
     config = load_config(args.config, overrides=overrides_from_args(args))
     notifier = Notifier()
     edge = build_edge(config, watchdog=notifier.watchdog_tick)
+    if not args.quiet:
+        print(streaming_line(config.uplink.url, edge.uplink.session_id), file=sys.stderr, flush=True)
     return Daemon(edge, notifier, shutdown_timeout_s=config.uplink.drain_timeout_s).run()
+
+
+def live_page_url(stream_url: str, session_id: str) -> str:
+    """The cloud's live page of a session, from the websocket URL the edge streams to."""
+    scheme, _, rest = stream_url.strip().partition("://")
+    host = rest.split("/", 1)[0]
+    return f"{'https' if scheme == 'wss' else 'http'}://{host}/sessions/{session_id}"
+
+
+def streaming_line(urls: str, session_id: str) -> str:
+    """What ``edge run`` says at start: the session it streams to, where, and its live page."""
+    from darkread.edge.uplink import split_urls
+
+    first, *others = split_urls(urls)  # at least one: the config is validated
+    failover = f" (then {', '.join(others)})" if others else ""
+    return f"streaming session {session_id} to {first}{failover}; live page: {live_page_url(first, session_id)}"

@@ -36,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("path", help="recording directory or .raw file")
-    parser.add_argument("--gaze", help="eye-gaze CSV (for a bare .raw file, or to override the recording's)")
+    parser.add_argument("--gaze-csv", "--gaze", dest="gaze", metavar="CSV",
+                        help="eye-gaze CSV (for a bare .raw file, or to override the recording's)")
     parser.add_argument("--calibration", help="calibration.json (for a bare .raw file, or to override)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     parser.add_argument("--png", metavar="OUT", help="write an accumulated-event picture with the fovea track")
@@ -61,7 +62,7 @@ def _main(args: argparse.Namespace) -> int:
     else:
         print(format_report(report))
     if report["problems"]:  # decoded, but not what the header says: the figures above are nonsense
-        print(f"darkread inspect: error: {report['path']} does not look like a valid recording: "
+        print(f"darkread: error: {report['path']} does not look like a valid recording: "
               f"{'; '.join(report['problems'])}", file=sys.stderr)
     return 1 if report["problems"] else 0
 
@@ -96,6 +97,11 @@ class EventSummary:
         self.sum_x += int(events["x"].sum(dtype=np.int64))
         self.sum_y += int(events["y"].sum(dtype=np.int64))
 
+    @property
+    def fovea_fraction(self) -> float:
+        """Share of the events inside the gaze window (0 without events)."""
+        return self.fovea_events / self.events if self.events else 0.0
+
     def accumulate_image(self, events: np.ndarray, width: int, height: int) -> None:
         if self.counts is None:
             self.counts = np.zeros(height * width, dtype=np.int64)
@@ -125,6 +131,19 @@ def summarize(
             summary.gaze_events += int(np.count_nonzero(np.isfinite(origins[:, 0])))
             summary.fovea_events += int(crop_along_track(events, origins).shape[0])
     return summary
+
+
+def fovea_event_fraction(recording: Any) -> float:
+    """Share of a recording's events inside the fovea window at the gaze of their own time: the
+    one figure ``darkread inspect`` and ``darkread read`` report as "inside the fovea"."""
+    from darkread.edge.gaze import GazeMapper
+
+    reader = recording.reader()
+    width, height = int(reader.header.width), int(reader.header.height)
+    summary = summarize(reader, width=width, height=height, mapper=GazeMapper(recording.calibration, recording.gaze()))
+    return summary.fovea_fraction
+
+
 
 
 def inspect_path(
@@ -184,7 +203,7 @@ def inspect_path(
             gaze_valid_fraction=track.valid_fraction,
             gaze_schema=track.schema,
             gaze_event_fraction=summary.gaze_events / summary.events if summary.events else 0.0,
-            fovea_event_fraction=summary.fovea_events / summary.events if summary.events else 0.0,
+            fovea_event_fraction=summary.fovea_fraction,
             fovea_window_hw=[100, 200],
             clock_offset_us=mapper.clock_offset_us if mapper is not None else None,
         )

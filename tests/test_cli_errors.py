@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from darkread.cli import EXIT_ERROR, EXIT_INTERNAL, error_line
+from darkread.cli import EXIT_ERROR, EXIT_INTERNAL, EXIT_USAGE, error_line
 from darkread.edge.errors import CalibrationError
 from darkread.core.errors import DarkreadError
 
@@ -62,6 +62,41 @@ def test_read_a_recording_whose_gaze_csv_is_not_text(tmp_path: Path) -> None:
 def test_read_has_no_research_flags() -> None:
     result = _darkread("read", "--demo", "--true-motion")
     assert result.returncode == 2 and "unrecognized arguments: --true-motion" in result.stderr
+
+
+def test_read_a_bare_raw_file_names_the_options_it_needs(tmp_path: Path) -> None:
+    raw = tmp_path / "events.raw"
+    shutil.copyfile(SAMPLE / "events.raw", raw)
+    result = _darkread("read", str(raw))
+    _assert_one_line(result, mentions="--gaze-csv CSV")
+    assert "--calibration JSON" in result.stderr
+
+
+def _assert_usage_error(result: subprocess.CompletedProcess[str], *, command: str, mentions: str) -> None:
+    """argparse's way: the command's own usage, then one error line naming what to give."""
+    assert result.returncode == EXIT_USAGE, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert lines[0].startswith(f"usage: {command} "), result.stderr
+    assert lines[-1].startswith(f"{command}: error: ") and mentions in lines[-1], lines[-1]
+    assert "Traceback" not in result.stderr
+
+
+def test_a_replay_speed_that_is_not_a_number_names_the_option_and_its_values() -> None:
+    result = _darkread("edge", "run", "--speed", "fast")
+    _assert_usage_error(result, command="darkread edge run", mentions="argument --speed:")
+    assert "'max'" in result.stderr and "'fast'" in result.stderr
+
+
+@pytest.mark.parametrize(
+    ("argv", "command", "mentions"),
+    [
+        (("read", "--demo", "--sya"), "darkread read", "--sya (did you mean --say?)"),
+        (("cloud", "serve", "--prot", "8001"), "darkread cloud serve", "--prot 8001 (did you mean --port?)"),
+        (("edge", "run", "--replay", "x", "--zzz"), "darkread edge run", "--zzz (see darkread edge run --help)"),
+    ],
+)
+def test_a_mistyped_option_prints_the_usage_of_its_own_command(argv: tuple[str, ...], command: str, mentions: str) -> None:
+    _assert_usage_error(_darkread(*argv), command=command, mentions=f"unrecognized arguments: {mentions}")
 
 
 def test_synth_into_a_path_under_a_regular_file(tmp_path: Path) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ..errors import OcrError, OcrUnavailableError
-from .base import OcrBackend, OcrLine, OcrResult
+from .base import OCR_BACKENDS, OcrBackend, OcrLine, OcrResult
 
 if TYPE_CHECKING:
     from darkread.cloud.settings import Settings
@@ -43,4 +43,4 @@ def create_backend(settings: Settings) -> OcrBackend:
         from .openai_compatible import OpenAiCompatibleBackend
 
         return OpenAiCompatibleBackend.from_settings(settings)
-    raise ValueError(f"unknown OCR backend {name!r}; choose local, tesseract, google or openai")
+    raise ValueError(f"unknown OCR backend {name!r}; choose {', '.join(OCR_BACKENDS)}")

@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Literal, Protocol, get_args, runtime_checkable
 
 import numpy as np
 
 from ..errors import OcrError
+
+# The engines a service can read with (``DARKREAD_OCR_BACKEND``, ``cloud serve --ocr``, ``read --backend``):
+# local and rapidocr name the same embedded engine.
+OcrBackendName = Literal["local", "rapidocr", "tesseract", "google", "openai"]
+OCR_BACKENDS: tuple[str, ...] = get_args(OcrBackendName)
 
 Box = tuple[int, int, int, int]  # x0, y0, x1, y1 in image pixels
 Quad = tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]]

@@ -73,11 +73,11 @@ def open_recording(path: str | Path, *, gaze: str | None = None, calibration: st
     if not raw_path.is_file():
         missing.append(f"{raw_path} (event stream)")
     if gaze_path is None:
-        missing.append("an eye-gaze CSV (pass gaze=... / --gaze for a bare .raw file)")
+        missing.append("an eye-gaze CSV (for a bare .raw file: --gaze-csv CSV, or gaze=...)")
     elif not gaze_path.is_file():
         missing.append(f"{gaze_path} (eye-gaze CSV)")
     if calibration_path is None:
-        missing.append("a calibration.json (pass calibration=... / --calibration for a bare .raw file)")
+        missing.append("a calibration.json (for a bare .raw file: --calibration JSON, or calibration=...)")
     elif not calibration_path.is_file():
         missing.append(f"{calibration_path} (calibration)")
     if missing or gaze_path is None or calibration_path is None:

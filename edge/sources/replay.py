@@ -33,9 +33,12 @@ def parse_speed(text: str | float | None) -> float | None:
     """``"max"``/``0``/None -> None (as fast as possible); otherwise a positive factor."""
     if text is None or (isinstance(text, str) and text.strip().lower() in {"max", "inf", ""}):
         return None
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
     if value < 0:
-        raise ValueError(f"replay speed must be positive or 'max', got {text!r}")
+        raise ValueError(f"replay speed must be a positive number (1 = wall clock, 2 = twice as fast) or 'max', not {text!r}")
     return None if value == 0 else value
 
 

@@ -111,6 +111,8 @@ def test_session_without_data_answers_409(server: Any, client: httpx.Client) -> 
     asyncio.run(hello_only())
     assert client.post("/v1/sessions/empty/ask", headers=AUTH).status_code == 409
     assert client.get("/v1/sessions/empty/page.png", headers=AUTH).status_code == 409
+    # a frames session's pages are the cloud's, listed by /pages: no count that could disagree with it
+    assert client.get("/v1/sessions/empty", headers=AUTH).json()["pages"] is None
 
 
 def test_list_and_delete_sessions(server: Any, client: httpx.Client) -> None:

@@ -17,6 +17,7 @@ import threading
 import time
 from pathlib import Path
 
+import httpx
 import pytest
 from cloud_process import API_KEY, CloudProcess, free_port
 from factories import sum_bins_model
@@ -135,5 +136,10 @@ def test_edge_run_cli_stitches_pages_on_the_glasses(tmp_path: Path, recording: P
         assert pages and frames == 0
         assert all(rows > 0 and cols > 0 for _, rows, cols in pages)
         assert "stopped (clean)" in run.stderr
+        # it said plainly where it streams and where the session's live page is; the page is there
+        live = f"http://127.0.0.1:{port}/sessions/cli-pages"
+        assert f"streaming session cli-pages to ws://127.0.0.1:{port}/v1/stream; live page: {live}" in run.stderr.splitlines()
+        page = httpx.get(live, timeout=10)
+        assert page.status_code == 200 and "cli-pages" in page.text
     finally:
         cloud.stop()
