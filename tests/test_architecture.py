@@ -18,8 +18,9 @@ ROOT = Path(__file__).resolve().parents[1]
 # folder -> component
 FOLDERS = {"proto": "proto", "stitch": "stitch", "edge": "edge", "cloud": "cloud", "models": "models", "darkread": "app"}
 # the small pure modules of the darkread package every component shares: the version, the error
-# tree's base, the frame record, the mask bit layout, the image codec
-CORE = {"darkread", "darkread.errors", "darkread.frame_record", "darkread.mask_bits", "darkread.image_codec", "darkread.json_file"}
+# tree's base, the frame record, the mask bit layout, the image codec, secrets out of log lines
+CORE = {"darkread", "darkread.errors", "darkread.frame_record", "darkread.mask_bits", "darkread.image_codec", "darkread.json_file",
+        "darkread.redact"}
 
 # component -> the darkread components it may import
 ALLOWED: dict[str, set[str]] = {
