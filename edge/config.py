@@ -93,7 +93,9 @@ class UplinkConfig:
     device_id: str = ""  # empty: the host name
     session_id: str = ""  # empty: resume the spool's session if frames wait in it, else a new one
     mode: str = "frames"  # "frames" (binary frames) or "pages" (stitched on the glasses)
-    spool_dir: str = ""  # empty: in memory (lost on restart)
+    # empty: on disk under the user's state directory ($XDG_STATE_HOME/darkread/spool, else
+    # ~/.local/state/darkread/spool); ":memory:" in memory only (what is unsent at exit is lost)
+    spool_dir: str = ""
     spool_max_mb: float = 256.0
     drain_timeout_s: float = 30.0
     backoff_initial_s: float = 0.2

@@ -49,6 +49,7 @@ from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.view_fusion import MARGIN_PX, ViewFuser, ViewRecord
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
 from darkread.edge.voxel import VoxelConfig, voxel_grid
+from darkread.errors import DarkreadError
 from darkread.frame_record import FrameRecord
 
 if TYPE_CHECKING:
@@ -388,7 +389,10 @@ class Pipeline:
             self._loop()
         except BaseException as exc:  # surfaced to the daemon, which exits non-zero
             self.error = exc
-            logger.exception("reconstruction loop failed")
+            if isinstance(exc, DarkreadError):  # says what failed in words (a full spool disk): no traceback
+                logger.error("reconstruction loop failed: %s", exc)
+            else:
+                logger.exception("reconstruction loop failed")
 
     def _loop(self) -> None:
         period_s = self.settings.period_ms / 1e3
