@@ -18,6 +18,7 @@ spool directory (``spool.lock``): two processes numbering one seq space would ov
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import logging
 import os
@@ -77,11 +78,15 @@ def failure_cause(exc: BaseException, directory: Path | None) -> str:
     if directory is not None:
         with contextlib.suppress(OSError):
             read_only = bool(os.statvfs(directory).f_flag & os.ST_RDONLY)
-    if read_only or (isinstance(exc, OSError) and exc.errno == 30) or code == sqlite3.SQLITE_READONLY:
-        return f"read-only file system ({detail})"
-    if code == sqlite3.SQLITE_FULL or (isinstance(exc, OSError) and exc.errno == 28):
-        return f"the disk is full ({detail})"
+    if read_only or (isinstance(exc, OSError) and exc.errno == errno.EROFS) or code == sqlite3.SQLITE_READONLY:
+        return _with_detail("read-only file system", detail)
+    if code == sqlite3.SQLITE_FULL or (isinstance(exc, OSError) and exc.errno == errno.ENOSPC):
+        return _with_detail("the disk is full", detail)
     return detail
+
+
+def _with_detail(cause: str, detail: str) -> str:
+    return cause if detail.lower() == cause.lower() else f"{cause} ({detail})"
 
 
 class Spool:

@@ -370,7 +370,13 @@ class Uplink:
                 "uplink connected to %s, session %s, cloud has up to seq %d, %d to send",
                 redact(url), self.session_id, welcome.last_acked_seq, self.spool.depth,
             )
-            await self._stream(ws, welcome)
+            try:
+                await self._stream(ws, welcome)
+            except SpoolError:
+                # nothing reads the cloud's acks any more: a closing handshake would wait behind them
+                # for the close timeout; the connection is given up anyway
+                ws.transport.abort()
+                raise
 
     async def _stream(self, ws: ClientConnection, welcome: Welcome) -> None:
         assert self._wake is not None and self._acked is not None
