@@ -1,4 +1,4 @@
-"""Secrets out of log lines: API keys in URL queries and passwords in URL user parts.
+"""Secrets out of log lines: API keys in URL queries, passwords in URL user parts, key headers.
 
 The edge logs the cloud URL it streams to (which may carry ``?key=``, e.g. in a systemd unit) and
 the cloud's web server logs request paths with their query string; both go through here, so no key
@@ -19,11 +19,16 @@ _SECRET_IN_QUERY = re.compile(
 )
 # ``ws://user:password@host``: the password of a URL's user part
 _PASSWORD_IN_URL = re.compile(r"(://[^/\s:@]*:)[^/\s@]+@")
+# ``X-API-Key: ...`` and its kin, as a websocket library logs the headers it sends at debug level
+_SECRET_HEADER = re.compile(r"\b((?:x-api-key|authorization|proxy-authorization|cookie|set-cookie):[ \t]*)[^\r\n]+",
+                            re.IGNORECASE)
 
 
 def redact(text: str) -> str:
-    """``text`` with every secret a URL in it carries replaced by ``REDACTED``."""
-    return _PASSWORD_IN_URL.sub(rf"\1{REDACTED}@", _SECRET_IN_QUERY.sub(rf"\1{REDACTED}", text))
+    """``text`` with every secret a URL or a logged header in it carries replaced by ``REDACTED``."""
+    text = _SECRET_IN_QUERY.sub(rf"\1{REDACTED}", text)
+    text = _PASSWORD_IN_URL.sub(rf"\1{REDACTED}@", text)
+    return _SECRET_HEADER.sub(rf"\1{REDACTED}", text)
 
 
 class RedactKeys(logging.Filter):

@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from darkread.redact import redact
+
 ENV_PREFIX = "DARKREAD_EDGE_"
 
 
@@ -230,7 +232,7 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError("config [uplink] url: no cloud URL given")
     for url in urls:
         if not url.startswith(("ws://", "wss://")):
-            raise ValueError(f"config [uplink] url: {url!r} is not a ws:// or wss:// URL")
+            raise ValueError(f"config [uplink] url: {redact(url)!r} is not a ws:// or wss:// URL")
     if config.uplink.mode not in {"frames", "pages"}:
         raise ValueError(f"config [uplink] mode must be 'frames' or 'pages', not {config.uplink.mode!r}")
     if config.source.kind not in {"replay", "evk4"}:

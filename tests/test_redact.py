@@ -20,6 +20,8 @@ KEY = "drk_0123abcd_s3cretS3cretS3cretS3cret"
         (f"ws://a/s?access_token={KEY}", "ws://a/s?access_token=REDACTED"),
         (f"ws://glasses:{KEY}@cloud.example.org/v1/stream", "ws://glasses:REDACTED@cloud.example.org/v1/stream"),
         (f"to ws://a/s?key={KEY}, ws://b/s?key={KEY}", "to ws://a/s?key=REDACTED, ws://b/s?key=REDACTED"),
+        (f"> X-API-Key: {KEY}", "> X-API-Key: REDACTED"),
+        (f"authorization: Bearer {KEY}", "authorization: REDACTED"),
         ("ws://127.0.0.1:8000/v1/stream?device=g1", "ws://127.0.0.1:8000/v1/stream?device=g1"),
         ("spool 13 (lost 0), 42 keys", "spool 13 (lost 0), 42 keys"),
     ],

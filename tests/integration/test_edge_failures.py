@@ -44,13 +44,13 @@ def spool_counts(spool: Path) -> tuple[int, int]:
 
 
 def edge(recording: Path, model: Path, cloud: str, state: Path, *extra: str,
-         key: str | None = API_KEY) -> subprocess.CompletedProcess[str]:  # fmt: skip
+         key: str | None = API_KEY, verbose: str = "") -> subprocess.CompletedProcess[str]:  # fmt: skip
     """``darkread edge run`` as a user types it; ``state`` is the user's XDG state directory."""
     env = {**os.environ, "XDG_STATE_HOME": str(state)}
     env.pop("DARKREAD_EDGE_UPLINK_API_KEY", None)
     if key is not None:
         env["DARKREAD_EDGE_UPLINK_API_KEY"] = key
-    command = [sys.executable, "-m", "darkread", "edge", "run", "--replay", str(recording), "--speed", "max",
+    command = [sys.executable, "-m", "darkread", *([verbose] if verbose else []), "edge", "run", "--replay", str(recording), "--speed", "max",
                "--model", str(model), "--cloud", cloud, "--drain-timeout", "3", *extra]
     return subprocess.run(command, env=env, capture_output=True, text=True, timeout=180, cwd=state.parent)
 
@@ -90,8 +90,9 @@ def test_the_edge_log_holds_no_key(tmp_path: Path, recording: Path, model: Path)
     cloud.start()
     dead = f"ws://127.0.0.1:{free_port()}/v1/stream?key={API_KEY}"
     try:
+        # -vv: the debug log too, where the websocket library writes the request and its X-API-Key header
         result = edge(recording, model, f"{dead},{cloud.ws_url}?key={API_KEY}", tmp_path / "state",
-                      "--session", "keyed", key=None)
+                      "--session", "keyed", verbose="-vv")
         stored = cloud.stored_seqs("keyed")
     finally:
         cloud.stop()
