@@ -7,6 +7,7 @@ reaches a log, a journal or a status line. Pure: the standard library only.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import re
 
@@ -39,6 +40,11 @@ class RedactKeys(logging.Filter):
             record.args = tuple(_redacted_arg(a) for a in record.args)
         if isinstance(record.msg, str):
             record.msg = redact(record.msg)
+        with contextlib.suppress(TypeError, ValueError):  # a malformed record is logging's to report
+            message = record.getMessage()
+            clean = redact(message)
+            if clean != message:  # a secret spread over several arguments ("> %s: %s", header, value)
+                record.msg, record.args = clean, ()
         return True
 
 

@@ -295,4 +295,8 @@ def _open_uplink(config: EdgeConfig, metrics: EdgeMetrics, sensor_wh: tuple[int,
 
     cfg = config.uplink
     spool = Spool(spool_directory(cfg.spool_dir), max_bytes=int(cfg.spool_max_mb * 1024 * 1024))
-    return Uplink(cfg, spool, metrics, sensor_wh=sensor_wh, fovea_hw=fovea_hw)
+    try:
+        return Uplink(cfg, spool, metrics, sensor_wh=sensor_wh, fovea_hw=fovea_hw)
+    except BaseException:  # e.g. a full disk refusing the session's record: free the spool's directory
+        spool.close()
+        raise

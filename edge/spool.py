@@ -85,6 +85,11 @@ def failure_cause(exc: BaseException, directory: Path | None) -> str:
     return detail
 
 
+def _close_lock(fd: int | None) -> None:
+    if fd is not None:
+        os.close(fd)  # closing the descriptor releases the lock
+
+
 def _with_detail(cause: str, detail: str) -> str:
     return cause if detail.lower() == cause.lower() else f"{cause} ({detail})"
 
@@ -110,8 +115,7 @@ class Spool:
         self.path: Path | None = None if self.directory is None else self.directory / SPOOL_FILE
         self._lock = threading.Lock()
         # the lock file's descriptor, closed by close() or, for a spool dropped unclosed, by the collector
-        fd = self._hold(self.directory) if self.directory is not None else None
-        self._holder = weakref.finalize(self, os.close, fd) if fd is not None else weakref.finalize(self, lambda: None)
+        self._holder = weakref.finalize(self, _close_lock, self._hold(self.directory) if self.directory is not None else None)
         try:
             self._db = sqlite3.connect(str(self.path or MEMORY), check_same_thread=False, isolation_level=None)
             self._db.execute("PRAGMA journal_mode=WAL")
@@ -269,7 +273,7 @@ class Spool:
         return fd
 
     def _release(self) -> None:
-        self._holder()  # once only; closing the descriptor releases the lock (also when garbage-collected)
+        self._holder()  # runs once (or when the spool is garbage-collected unclosed)
 
     # -- internals (lock held) --------------------------------------------------------------
     @contextlib.contextmanager

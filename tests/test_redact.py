@@ -39,6 +39,7 @@ def test_a_handler_filter_redacts_every_logger_and_keeps_argument_shapes() -> No
 
     logger = logging.getLogger("test_redact_handler")
     logger.propagate = False
+    logger.setLevel(logging.DEBUG)
     handler = Collect()
     logger.addHandler(handler)
     try:
@@ -48,8 +49,9 @@ def test_a_handler_filter_redacts_every_logger_and_keeps_argument_shapes() -> No
         logger.warning("uplink connected to %s, %d to send", f"ws://h/s?key={KEY}", 13)
         logger.warning("lost: %s", ValueError(f"bad URI ws://h/s?key={KEY}"))
         logger.warning(f"ready: sending to ws://h/s?key={KEY}")
+        logger.debug("> %s: %s", "X-API-Key", KEY)  # as the websockets client logs a header
     finally:
         logger.removeHandler(handler)
     assert records == ["uplink connected to ws://h/s?key=REDACTED, 13 to send", "lost: bad URI ws://h/s?key=REDACTED",
-                       "ready: sending to ws://h/s?key=REDACTED"]
+                       "ready: sending to ws://h/s?key=REDACTED", "> X-API-Key: REDACTED"]
     assert not any(KEY in line for line in records)
