@@ -29,6 +29,8 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
+from darkread.core.redact import RedactKeys
+
 log = logging.getLogger(__name__)
 
 KEY_PREFIX = "drk"
@@ -182,26 +184,8 @@ class KeyRing:
         self._stamp = None
 
 
-_SECRET_IN_QUERY = re.compile(r"((?:^|[?&])(?:key|token|api_key)=)[^&\s\"']+")
-
-
-def redact(text: str) -> str:
-    """Hide ``?key=...`` values (uvicorn logs websocket paths with their query string)."""
-    return _SECRET_IN_QUERY.sub(r"\1REDACTED", text)
-
-
-class RedactKeys(logging.Filter):
-    """Logger filter: no key from a URL ever reaches a log line."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        if isinstance(record.args, tuple):
-            record.args = tuple(redact(a) if isinstance(a, str) else a for a in record.args)
-        if isinstance(record.msg, str):
-            record.msg = redact(record.msg)
-        return True
-
-
 def install_log_redaction() -> None:
+    """Uvicorn logs websocket paths with their query string (``?key=``): redact its loggers."""
     for name in ("uvicorn", "uvicorn.error", "uvicorn.access", "websockets", "websockets.server"):
         logger = logging.getLogger(name)
         if not any(isinstance(f, RedactKeys) for f in logger.filters):

@@ -82,7 +82,8 @@ def configure_logging(verbose: int, quiet: bool) -> None:
 
 # What bad input and a failing environment raise: darkread's own errors, files and sockets
 # (OSError), bad values and undecodable text or JSON (ValueError covers JSONDecodeError and
-# UnicodeDecodeError). Exit 1 with one line; anything else is a bug: exit 70 (EX_SOFTWARE).
+# UnicodeDecodeError). Exit 1 (or the DarkreadError's own ``exit_code``) with one line; anything
+# else is a bug: exit 70 (EX_SOFTWARE).
 USER_ERRORS: tuple[type[BaseException], ...] = (DarkreadError, OSError, ValueError)
 EXIT_ERROR = 1
 EXIT_USAGE = 2
@@ -141,6 +142,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.verbose >= 2:
             raise
         print(error_line(exc), file=sys.stderr)
+        if isinstance(exc, DarkreadError):
+            return exc.exit_code
         return EXIT_ERROR if isinstance(exc, USER_ERRORS) else EXIT_INTERNAL
 
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from darkread.edge.config import EdgeConfig, GazeConfig, PipelineConfig, SourceConfig
-from darkread.edge.errors import RunError
+from darkread.edge.errors import RunError, SpoolError, UndeliveredError
 from darkread.edge.frame import FrameResult, Infer
 from darkread.edge.gaze import GazeLookup
 from darkread.edge.head_motion import KnownHeadMotion
@@ -34,6 +34,8 @@ from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.view_fusion import ViewRecord
 from darkread.edge.voxel import VoxelConfig
 from darkread.edge.windows import Windows
+from darkread.core.errors import DarkreadError
+from darkread.core.redact import redact
 
 logger = logging.getLogger(__name__)
 
@@ -51,6 +53,8 @@ class Edge:
     pages: Any = None  # pages mode: the PageBuilder
     feeds: list[Any] = field(default_factory=list)  # live gaze feeds, started and stopped with the edge
     _metrics_server: MetricsServer | None = field(default=None, init=False)
+    left_behind: str = field(default="", init=False)  # after shutdown: what the spool still held, in words
+    undelivered: str = field(default="", init=False)  # after shutdown: why, and where those messages are
     _last_log: float = field(default_factory=time.monotonic, init=False)
 
     # -- the Service the daemon runs ---------------------------------------------------------
@@ -69,7 +73,8 @@ class Edge:
             feed.start()
         self.pipeline.start()
         target = (
-            f"sending {cfg.uplink.mode} to {cfg.uplink.url} (session {self.uplink.session_id})"
+            f"sending {cfg.uplink.mode} to {redact(cfg.uplink.url)} (session {self.uplink.session_id}, "
+            f"spool {self.uplink.spool.where})"
             if self.uplink is not None else "frames to the caller"
         )
         return (
@@ -78,12 +83,10 @@ class Edge:
         )
 
     def tick(self) -> str | None:
-        if self.pipeline.error is not None:
-            raise RunError(f"reconstruction loop failed: {self.pipeline.error}") from self.pipeline.error
-        source_error = getattr(self.source, "error", None)
-        if source_error is not None:
-            raise RunError(f"event source failed: {source_error}") from source_error
+        _raise_failure("reconstruction loop", self.pipeline.error)
+        _raise_failure("event source", getattr(self.source, "error", None))
         if self.uplink is not None and self.uplink.fatal_error:
+            _raise_failure("uplink", self.uplink.failure)
             raise RunError(self.uplink.fatal_error)
         if self.pages is not None and self.pages.due():
             self._send_page()
@@ -128,6 +131,8 @@ class Edge:
         drained = True
         if self.uplink is not None:
             drained = self.uplink.stop(drain_timeout_s=timeout_s)
+            self.left_behind = self.uplink.left_behind()
+            self.undelivered = self.uplink.undelivered(timeout_s) if not drained else ""
             self.uplink.spool.close()
         if self._metrics_server is not None:
             self._metrics_server.stop()
@@ -136,6 +141,19 @@ class Edge:
             close()
         logger.info("final: %s", self.metrics.snapshot().log_line())
         return drained
+
+    def with_left_behind(self, failure: DarkreadError) -> DarkreadError:
+        """``failure`` (what ended the run) with what the spool still held after the shutdown, so
+        the run's one error line says both; its exit status stays ``failure``'s."""
+        if not self.left_behind:
+            return failure
+        wrapped = RunError(f"{failure}; {self.left_behind}")
+        wrapped.exit_code = failure.exit_code
+        return wrapped
+
+    def undelivered_error(self) -> UndeliveredError:
+        """After a run that ended without every message acknowledged: why, and where they are."""
+        return UndeliveredError(self.undelivered or self.left_behind or "messages were left undelivered")
 
     def _send_page(self, final: bool = False) -> None:
         message = self.pages.message(self.pipeline.ring.newest_t or 0, final=final)
@@ -220,6 +238,15 @@ def build_pipeline(
     return Pipeline(source, windows, step, settings, watchdog=watchdog)
 
 
+def _raise_failure(part: str, error: BaseException | None) -> None:
+    """Raise what failed in ``part``'s thread: a SpoolError as it is (it names the spool, the cause
+    and its own exit status), anything else as a RunError saying which part failed."""
+    if isinstance(error, SpoolError):
+        raise error
+    if error is not None:
+        raise RunError(f"{part} failed: {error}") from error
+
+
 def _to_uplink(uplink: Any) -> FrameHandler:
     def submit(frame: FrameResult | ViewRecord, arrival: float) -> None:
         uplink.submit(frame.to_message(), submitted_at=arrival)
@@ -296,9 +323,13 @@ def _open_gaze(cfg: GazeConfig, calibration: Calibration, gaze_track: Any, feeds
 
 
 def _open_uplink(config: EdgeConfig, metrics: EdgeMetrics, sensor_wh: tuple[int, int], fovea_hw: tuple[int, int]) -> Any:
-    from darkread.edge.spool import Spool
+    from darkread.edge.spool import Spool, spool_directory
     from darkread.edge.uplink import Uplink
 
     cfg = config.uplink
-    spool = Spool(cfg.spool_dir or None, max_bytes=int(cfg.spool_max_mb * 1024 * 1024))
-    return Uplink(cfg, spool, metrics, sensor_wh=sensor_wh, fovea_hw=fovea_hw)
+    spool = Spool(spool_directory(cfg.spool_dir), max_bytes=int(cfg.spool_max_mb * 1024 * 1024))
+    try:
+        return Uplink(cfg, spool, metrics, sensor_wh=sensor_wh, fovea_hw=fovea_hw)
+    except BaseException:  # e.g. a full disk refusing the session's record: free the spool's directory
+        spool.close()
+        raise

@@ -9,18 +9,25 @@ import argparse
 import sys
 from typing import Any
 
+from darkread.core.redact import redact
 from darkread.edge.config import INFER_MODES
 
 RUN_HELP = """\
 Run the edge pipeline: read events (the EVK4 camera, or a recording replayed at wall-clock
 speed or faster), foveate around the gaze, reconstruct text frames with the ONNX U-Net and
 stream them to the cloud over a websocket. Frames are spooled to disk until the cloud
-acknowledges them, so network drops and restarts lose nothing.
+acknowledges them, so network drops and restarts lose nothing: by default under the user's
+state directory ($XDG_STATE_HOME/darkread/spool, else ~/.local/state/darkread/spool), one edge
+at a time; --spool :memory: keeps them in memory only (lost when the run ends unsent).
 
 Settings come from --config (TOML, see edge/systemd/edge.toml), then the environment
 (DARKREAD_EDGE_<SECTION>_<KEY>, e.g. DARKREAD_EDGE_UPLINK_API_KEY), then these options.
-A replay exits when the recording ends and the spool is drained (or --drain-timeout passes);
-exit status 3 means frames were left in the spool.
+A replay exits when the recording ends and the spool is drained (or --drain-timeout passes).
+A run that fails ends with one line "darkread: error: ..." saying what failed, and its exit
+status says which way: 1 bad input or a failed run (a recording that cannot be read, the cloud
+refused the stream), 3 the cloud did not take every message (they stay in the spool, or were
+lost with --spool :memory:), 4 the spool cannot be written (read-only or full disk, another
+edge holds it). URLs are logged with any key in them redacted.
 
 Example:
   darkread edge run --replay darkread/data/sample_recording \\
@@ -52,7 +59,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     run.add_argument("--api-key", metavar="KEY", help="cloud API key (prefer DARKREAD_EDGE_UPLINK_API_KEY)")
     run.add_argument("--mode", choices=["frames", "pages"], help="send frames (default) or pages stitched on the glasses")
-    run.add_argument("--spool", metavar="DIR", help="spool directory for unacknowledged frames (default: in memory)")
+    run.add_argument(
+        "--spool", metavar="DIR",
+        help="spool directory for unacknowledged frames (default: $XDG_STATE_HOME/darkread/spool, else "
+             "~/.local/state/darkread/spool); ':memory:' keeps them in memory only (lost at exit if unsent)",
+    )
     run.add_argument("--session", metavar="ID", help="session id (default: resume the spool's, else a new one)")
     run.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
     run.add_argument("--lossless", action="store_true", help="never skip windows: the reader waits for inference")
@@ -117,19 +128,33 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
 
 
 def _run(args: argparse.Namespace) -> int:
+    """Run the daemon; a run that did not deliver everything raises one error saying what failed
+    and what the spool still holds (the command line prints it as its last line)."""
     from darkread.edge.builder import build_edge
     from darkread.edge.config import load_config
     from darkread.edge.daemon import Daemon
     from darkread.edge.journal import use_journal_format_if_under_systemd
     from darkread.edge.notify import Notifier
+    from darkread.core.errors import DarkreadError
+    from darkread.core.redact import redact_handlers
 
     use_journal_format_if_under_systemd()
+    redact_handlers()  # every library's log lines too (websockets names the URL it connects to)
     config = load_config(args.config, overrides=overrides_from_args(args))
     notifier = Notifier()
     edge = build_edge(config, watchdog=notifier.watchdog_tick)
     if not args.quiet:
         print(streaming_line(config.uplink.url, edge.uplink.session_id), file=sys.stderr, flush=True)
-    return Daemon(edge, notifier, shutdown_timeout_s=config.uplink.drain_timeout_s).run()
+    try:
+        status = Daemon(edge, notifier, shutdown_timeout_s=config.uplink.drain_timeout_s).run()
+    except DarkreadError as exc:
+        failure = edge.with_left_behind(exc)
+        if failure is exc:
+            raise
+        raise failure from exc
+    if status != 0:
+        raise edge.undelivered_error()
+    return 0
 
 
 def live_page_url(stream_url: str, session_id: str) -> str:
@@ -140,9 +165,10 @@ def live_page_url(stream_url: str, session_id: str) -> str:
 
 
 def streaming_line(urls: str, session_id: str) -> str:
-    """What ``edge run`` says at start: the session it streams to, where, and its live page."""
+    """What ``edge run`` says at start: the session it streams to, where, and its live page (keys in
+    the URLs redacted: the line goes to the journal)."""
     from darkread.edge.uplink import split_urls
 
-    first, *others = split_urls(urls)  # at least one: the config is validated
+    first, *others = (redact(url) for url in split_urls(urls))  # at least one: the config is validated
     failover = f" (then {', '.join(others)})" if others else ""
     return f"streaming session {session_id} to {first}{failover}; live page: {live_page_url(first, session_id)}"

@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from darkread.core.redact import redact
+
 ENV_PREFIX = "DARKREAD_EDGE_"
 
 
@@ -93,7 +95,9 @@ class UplinkConfig:
     device_id: str = ""  # empty: the host name
     session_id: str = ""  # empty: resume the spool's session if frames wait in it, else a new one
     mode: str = "frames"  # "frames" (binary frames) or "pages" (stitched on the glasses)
-    spool_dir: str = ""  # empty: in memory (lost on restart)
+    # empty: on disk under the user's state directory ($XDG_STATE_HOME/darkread/spool, else
+    # ~/.local/state/darkread/spool); ":memory:" in memory only (what is unsent at exit is lost)
+    spool_dir: str = ""
     spool_max_mb: float = 256.0
     drain_timeout_s: float = 30.0
     backoff_initial_s: float = 0.2
@@ -228,7 +232,7 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError("config [uplink] url: no cloud URL given")
     for url in urls:
         if not url.startswith(("ws://", "wss://")):
-            raise ValueError(f"config [uplink] url: {url!r} is not a ws:// or wss:// URL")
+            raise ValueError(f"config [uplink] url: {redact(url)!r} is not a ws:// or wss:// URL")
     if config.uplink.mode not in {"frames", "pages"}:
         raise ValueError(f"config [uplink] mode must be 'frames' or 'pages', not {config.uplink.mode!r}")
     if config.source.kind not in {"replay", "evk4"}:

@@ -54,3 +54,17 @@ class ModelError(DarkreadError):
 
 class RunError(DarkreadError):
     """The edge daemon could not do its job; the message says why (frames stay in the spool)."""
+
+
+class UndeliveredError(RunError):
+    """The run ended with messages the cloud never acknowledged: the message says how many, why,
+    and whether they wait in the spool for the next start or were lost with an in-memory spool."""
+
+    exit_code = 3
+
+
+class SpoolError(DarkreadError):
+    """The spool cannot be opened or written (read-only or full disk, no permission, held by
+    another edge); the message names the spool and the cause. Every failed write was rolled back."""
+
+    exit_code = 4

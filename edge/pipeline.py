@@ -35,6 +35,7 @@ from darkread.edge.frame import count_in_window
 from darkread.edge.sources.base import EventSource
 from darkread.edge.steps import Pending, Step
 from darkread.edge.windows import Windows
+from darkread.core.errors import DarkreadError
 
 logger = logging.getLogger(__name__)
 
@@ -215,7 +216,10 @@ class Pipeline:
             self._loop()
         except BaseException as exc:  # surfaced to the daemon, which exits non-zero
             self.error = exc
-            logger.exception("reconstruction loop failed")
+            if isinstance(exc, DarkreadError):  # says what failed in words (a full spool disk): no traceback
+                logger.error("reconstruction loop failed: %s", exc)
+            else:
+                logger.exception("reconstruction loop failed")
 
     def _loop(self) -> None:
         period_s = self.settings.period_ms / 1e3

@@ -12,6 +12,10 @@ duplicates by seq. Nothing is lost unless the bounded spool overflows (counted a
 connect or a closed connection moves to the next one at once, and backoff starts only after
 every instance failed in a row. The next instance's welcome says what the database holds, so
 the resume point is the same whichever instance answers.
+
+URLs reach the log only redacted (``darkread.core.redact``): a ``?key=`` in them never lands in journald.
+A spool that cannot be written (a full disk) ends the connection loop with a :class:`SpoolError`
+the daemon raises; the thread never dies with a traceback.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
 from darkread.edge.config import UplinkConfig
-from darkread.edge.errors import CloudRefusedError
+from darkread.edge.errors import CloudRefusedError, SpoolError
 from darkread.edge.spool import Spool
 from darkread.edge.telemetry import EdgeMetrics
 from darkread.proto.errors import CloseCode, ProtocolError
@@ -46,6 +50,7 @@ from darkread.proto.messages import (
     decode,
     encode,
 )
+from darkread.core.redact import redact
 
 logger = logging.getLogger(__name__)
 
@@ -70,6 +75,10 @@ def placeholder(seq: int) -> bytes:
     """An empty gaze batch under ``seq``: stands in for a message the spool dropped, so the
     cloud sees contiguous seqs (it refuses gaps)."""
     return encode(Gaze(seq=seq, t_us=(), px=()))
+
+
+def _messages(n: int) -> str:
+    return f"{n} message" if n == 1 else f"{n} messages"
 
 
 def backoff_delays(initial_s: float, max_s: float, rng: random.Random) -> Iterator[float]:
@@ -114,7 +123,8 @@ class Uplink:
         self.acked_seq = -1
         self.connected = threading.Event()
         self.last_error = ""
-        self.fatal_error = ""  # set when the cloud refused the stream for good (no more retries)
+        self.fatal_error = ""  # set when the cloud refused the stream for good, or the spool failed (no more retries)
+        self.failure: BaseException | None = None  # what ended the connection loop other than the cloud (a SpoolError)
         self._submit_lock = threading.Lock()
         self._latency_lock = threading.Lock()
         self._submitted_at: dict[int, float] = {}
@@ -138,6 +148,34 @@ class Uplink:
     def url(self) -> str:
         """The cloud instance the uplink uses now (or tries next)."""
         return self.urls[self._url_index]
+
+    @property
+    def shown_url(self) -> str:
+        """:attr:`url` as logs and errors show it: any key in it redacted."""
+        return redact(self.url)
+
+    def left_behind(self) -> str:
+        """What the spool still holds, in words ("" when nothing): kept on disk for the next start,
+        or lost with an in-memory spool. Call it before the spool is closed."""
+        n, dropped = self.spool.depth, self.spool.dropped
+        evicted = f"{_messages(dropped)} {'was' if dropped == 1 else 'were'} dropped from the full spool" if dropped else ""
+        if n == 0:
+            return evicted
+        also = f" ({evicted})" if evicted else ""
+        if self.spool.in_memory:
+            return (f"{_messages(n)} {'is' if n == 1 else 'are'} lost: the spool was in memory (--spool :memory:; "
+                    f"without it they stay on disk and are sent after the next start){also}")
+        return (f"{_messages(n)} {'stays' if n == 1 else 'stay'} in the spool {self.spool.where} and "
+                f"{'is' if n == 1 else 'are'} sent after the next start{also}")
+
+    def undelivered(self, drain_timeout_s: float) -> str:
+        """Why the run ended with messages the cloud never acknowledged, and where they are."""
+        if self.connected.is_set() or self.acked_seq >= 0:
+            why = f"did not acknowledge every message within the {drain_timeout_s:g} s drain"
+        else:
+            why = "was not reached"
+        last = f" ({self.last_error})" if self.last_error else ""
+        return f"the cloud at {self.shown_url} {why}{last}: {self.left_behind()}"
 
     # -- called from other threads ---------------------------------------------------------
     def start(self) -> None:
@@ -185,7 +223,7 @@ class Uplink:
         if self._thread is not None:
             self._thread.join(timeout=max(2.0, self.settings.open_timeout_s + 1))
         if not drained:
-            logger.warning("uplink stopped with %d messages in the spool (sent after the next start)", self.spool.depth)
+            logger.warning("uplink stopped: %s", self.left_behind())
         return drained
 
     # -- the asyncio thread ------------------------------------------------------------------
@@ -202,7 +240,12 @@ class Uplink:
         self._loop = loop
         try:
             loop.run_until_complete(self._main(ready))
+        except Exception as exc:  # a bug: end the run with it (the daemon raises it) instead of a dead thread
+            logger.exception("uplink failed")
+            self.failure = exc
+            self._fail(f"uplink failed: {type(exc).__name__}: {exc}")
         finally:
+            ready.set()
             loop.close()
 
     async def _main(self, ready: threading.Event) -> None:
@@ -224,30 +267,33 @@ class Uplink:
                 if exc.response.status_code in (401, 403):
                     self._fail(f"{self.last_error}: the API key is missing, wrong or lacks the stream scope")
                 else:
-                    logger.error("%s at %s (check the URL)", self.last_error, url)
+                    logger.error("%s at %s (check the URL)", self.last_error, redact(url))
             except CloudRefusedError as exc:
                 self.last_error = str(exc)
                 if exc.code in FATAL_CODES:
                     self._fail(f"cloud refused session {self.session_id}: {exc.message}")
                 else:
-                    logger.warning("uplink to %s lost: %s", url, self.last_error)
+                    logger.warning("uplink to %s lost: %s", redact(url), self.last_error)
             except ConnectionClosed as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
                 code = exc.rcvd.code if exc.rcvd is not None else None
                 if code in FATAL_CODES:
                     self._fail(f"cloud refused session {self.session_id}: {self._cloud_error or exc.rcvd.reason}")  # type: ignore[union-attr]
                 else:
-                    logger.warning("uplink to %s lost: %s", url, self.last_error)
+                    logger.warning("uplink to %s lost: %s", redact(url), self.last_error)
                 if code in MESSAGE_REJECTED_CODES:
                     self._rejected = (code, exc.rcvd.reason)  # type: ignore[union-attr]  # dropped after the next welcome
             except (OSError, InvalidHandshake, TimeoutError, ProtocolError) as exc:
                 why = str(exc) or (f"no welcome within {self.settings.open_timeout_s:g} s (the cloud is busy or unreachable)"
                                    if isinstance(exc, TimeoutError) else "")  # fmt: skip
-                self.last_error = f"{type(exc).__name__}: {why}"
-                logger.warning("uplink to %s lost: %s", url, self.last_error)
+                self.last_error = redact(f"{type(exc).__name__}: {why}")
+                logger.warning("uplink to %s lost: %s", redact(url), self.last_error)
             except InvalidURI as exc:
-                self.last_error = str(exc)
-                logger.error("uplink URL is not valid: %s", exc)
+                self.last_error = redact(str(exc))
+                logger.error("uplink URL is not valid: %s", self.last_error)
+            except SpoolError as exc:  # a full disk: acks cannot be recorded, retrying would resend for ever
+                self.failure = exc
+                self._fail(str(exc))
             finally:
                 self.connected.clear()
             if self._stopping or self.fatal_error:
@@ -270,12 +316,13 @@ class Uplink:
             previous = self.url
             self._url_index = (self._url_index + 1) % len(self.urls)
             self.metrics.add("failovers")
-            logger.warning("uplink fails over from %s to %s", previous, self.url)
+            logger.warning("uplink fails over from %s to %s", redact(previous), self.shown_url)
 
     def _fail(self, reason: str) -> None:
-        """Stop retrying: the cloud will not take this stream. Frames stay in the spool."""
+        """Stop retrying: the cloud will not take this stream, or the spool cannot be written.
+        Frames stay in the spool; how many is said once, when the run ends."""
         self.fatal_error = reason
-        logger.error("%s; %d messages stay in the spool", reason, self.spool.depth)
+        logger.error("%s; the uplink stops", reason)
         self._drained.set()
 
     async def _sleep_or_stop(self, delay_s: float) -> None:
@@ -321,9 +368,15 @@ class Uplink:
             self.last_error = ""
             logger.info(
                 "uplink connected to %s, session %s, cloud has up to seq %d, %d to send",
-                url, self.session_id, welcome.last_acked_seq, self.spool.depth,
+                redact(url), self.session_id, welcome.last_acked_seq, self.spool.depth,
             )
-            await self._stream(ws, welcome)
+            try:
+                await self._stream(ws, welcome)
+            except SpoolError:
+                # nothing reads the cloud's acks any more: a closing handshake would wait behind them
+                # for the close timeout; the connection is given up anyway
+                ws.transport.abort()
+                raise
 
     async def _stream(self, ws: ClientConnection, welcome: Welcome) -> None:
         assert self._wake is not None and self._acked is not None

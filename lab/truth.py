@@ -19,7 +19,7 @@ import numpy as np
 from darkread.edge.io.calibration import load_calibration
 from darkread.edge.io.recording import open_recording
 from darkread.models.synth.marker_page import load_layout
-from darkread.models.synth.recording import LAYOUT_NAME, PoseTruth, load_page_ink, load_pose_truth
+from darkread.models.synth.recording import LAYOUT_NAME, load_page_ink, load_pose_truth
 from darkread.models.synth.shards import SampleMeta, write_shard
 from darkread.models.train.annotate import (
     SHARD_NAME,

@@ -18,7 +18,10 @@ Each component keeps its own errors in its own ``errors.py``::
      ├── CloudRefusedError             edge/errors.py: the cloud refused the uplink (also a ConnectionError)
      ├── ModelError                    edge/errors.py: the ONNX model is missing or has the wrong shape
      ├── RunError                      edge/errors.py: the edge ran but failed (cloud refused the stream,
-     │                                 the replay crashed, a replay made no frames)
+     │    │                            the replay crashed, a replay made no frames)
+     │    └── UndeliveredError         the run ended with messages the cloud never took (exit 3)
+     ├── SpoolError                    edge/errors.py: the spool cannot be opened or written: read-only or
+     │                                 full disk, held by another edge (names the spool and the cause; exit 4)
      ├── ImageCodecError               darkread/core/image_codec.py: an image that cannot be encoded or decoded
      ├── ProtocolError                 proto/errors.py: a wire message that cannot be accepted (close 4400)
      │    ├── MessageTooLargeError     more bytes than the receiver allows (1009)
@@ -51,7 +54,7 @@ modules, e.g. ``PostgresUnavailable`` in ``lab/fixtures/pg_server.py``.
 
 Built-in exceptions are used where their meaning fits: ``FileNotFoundError``/``OSError`` for files
 and sockets, ``ValueError`` for bad arguments. The ``darkread`` command turns all of these into one
-line on stderr and a non-zero exit (``darkread/cli.py``).
+line on stderr and a non-zero exit (``darkread/cli.py``): 1, or the error's ``exit_code``.
 """
 
 from __future__ import annotations
@@ -59,3 +62,5 @@ from __future__ import annotations
 
 class DarkreadError(Exception):
     """Base of every error darkread raises on purpose."""
+
+    exit_code: int = 1  # the ``darkread`` command's exit status for this error (a subclass may say more)

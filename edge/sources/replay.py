@@ -23,6 +23,7 @@ from darkread.edge.io.plausibility import TimeCheck
 from darkread.edge.io.raw import RawReader
 from darkread.edge.io.raw_header import read_raw_header
 from darkread.edge.sources.base import EventSink
+from darkread.core.errors import DarkreadError
 
 logger = logging.getLogger(__name__)
 
@@ -163,7 +164,10 @@ class ReplaySource:
                 sink(events)
         except BaseException as exc:  # surfaced through ``error``; the daemon exits non-zero
             self.error = exc
-            logger.exception("replay of %s failed", self.raw_path)
+            if isinstance(exc, DarkreadError):  # says what failed in words (a corrupt RAW, a full spool disk)
+                logger.error("replay of %s failed: %s", self.raw_path, exc)
+            else:
+                logger.exception("replay of %s failed", self.raw_path)
         finally:
             self._wall_s = time.perf_counter() - started
             if self.error is None and not self._stop.is_set():

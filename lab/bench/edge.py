@@ -138,7 +138,7 @@ def _run_edge(
         "source": {"kind": "replay", "path": str(recording), "speed": speed},
         "gaze": {"kind": "recording"},
         "pipeline": {"threads": 1, "infer": infer, **({"model": str(model)} if model else {})},
-        "uplink": {"url": uplink_url or "ws://127.0.0.1:1/v1/stream", "device_id": "bench"},
+        "uplink": {"url": uplink_url or "ws://127.0.0.1:1/v1/stream", "device_id": "bench", "spool_dir": ":memory:"},
         "metrics": {"log_every_s": 3600.0},
     })
     edge = build_edge(config, on_frame=on_frame)  # type: ignore[arg-type]

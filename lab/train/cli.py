@@ -17,7 +17,6 @@ DEFAULT_VAL = Path("runs/data/val")
 
 def _fit_config(args: argparse.Namespace):  # -> FitConfig
     from darkread.models.train.fit import FitConfig
-    from darkread.models.train.net import NetConfig
 
     return FitConfig(
         batch_size=args.batch_size, lr=args.lr, time_budget_s=args.minutes * 60, max_epochs=args.epochs,

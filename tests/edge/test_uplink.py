@@ -15,7 +15,10 @@ from websockets.asyncio.server import ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
+from small_disk import small_disk
+
 from darkread.edge.config import UplinkConfig
+from darkread.edge.errors import SpoolError
 from darkread.edge.spool import Spool
 from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.uplink import Uplink, backoff_delays
@@ -353,3 +356,33 @@ def test_messages_the_full_spool_evicted_are_reported_as_lost() -> None:
         spool.append(spool.allocate_seq(), b"x" * 10)
     snap = metrics.snapshot()
     assert snap.spool_depth == 4 and snap.spool_lost == 6 and "(lost 6)" in snap.log_line()
+
+
+def test_an_ack_the_full_spool_cannot_record_ends_the_uplink_cleanly(server: ProtoServer, tmp_path: Path) -> None:
+    """A full disk fails the DELETE of acknowledged messages: the uplink stops with a SpoolError the
+    daemon raises (and keeps every message), instead of a thread dead with a traceback."""
+    uncaught: list[threading.ExceptHookArgs] = []
+    previous_hook, threading.excepthook = threading.excepthook, uncaught.append
+    try:
+        with small_disk(tmp_path / "disk", 2048) as disk:
+            spool = Spool(disk.path / "spool")
+            uplink = make_uplink(settings(server.url), spool)
+            for i in range(40):  # made while offline: spooled
+                uplink.submit(frame(i))
+            disk.fill()
+            uplink.start()
+            assert wait_for(lambda: bool(uplink.fatal_error), 10), uplink.last_error
+            assert isinstance(uplink.failure, SpoolError) and "disk is full" in str(uplink.failure)
+            assert str(disk.path / "spool") in uplink.fatal_error
+            assert uplink.wait_drained(30) is False  # at once: no drain wait for an uplink that stopped
+            assert not uplink.stop(drain_timeout_s=30)
+            assert not uplink._thread.is_alive()  # type: ignore[union-attr]
+            assert spool.depth == 40 and "40 messages stay in the spool" in uplink.left_behind()
+            spool.close()
+            disk.empty_filler()
+            assert [seq for seq, _ in Spool(disk.path / "spool").pending(limit=100)] == list(range(40))
+    finally:
+        threading.excepthook = previous_hook
+    assert uncaught == []
+    stored = server.stored[uplink.session_id]
+    assert stored == list(range(len(stored)))  # what the cloud has it keeps; it drops the duplicates resent later

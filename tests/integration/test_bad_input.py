@@ -63,7 +63,7 @@ def bad_recordings(tmp_path: Path) -> dict[str, Path]:
 
 
 def run(*args: str, tmp: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "TMPDIR": str(tmp)}
+    env = {**os.environ, "TMPDIR": str(tmp), "XDG_STATE_HOME": str(tmp / "state")}  # the edge's default spool
     return subprocess.run([sys.executable, "-m", "darkread", *args], capture_output=True, text=True, timeout=180, env=env)
 
 
