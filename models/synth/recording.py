@@ -21,10 +21,10 @@ from typing import Protocol
 import numpy as np
 
 from darkread.edge.fovea import FoveaConfig
-from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
 from darkread.edge.io.calibration import save_calibration
 from darkread.edge.io.gaze_csv import write_gaze_csv
 from darkread.edge.io.raw import write_raw
+from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
 from darkread.models.synth.camera import SENSOR_WH
 from darkread.models.synth.gaze import points_from_angles, row_times_us, tracker_rows
 from darkread.models.synth.scene import Region
