@@ -55,7 +55,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      help="sensor regime: standard (what training saw), shifted (higher, more spread thresholds, a "
                           "faster photoreceptor in the dark, more shot noise, leak and hot pixels, and a font never used in training: "
                           "the stand-in for a real camera when adapting the model) or fast-photoreceptor (standard, but the "
-                          "photoreceptor keeps up in the dark: ~1 ms at 5 lux instead of 4-50 ms)")
+                          "photoreceptor keeps up in the dark: ~1 ms at 5 lux instead of 4-50 ms) or grounded (light on the chip "
+                          "through the lens, the photoreceptor and background activity of published IMX636 measurements: "
+                          "docs/sensor_model.md)")
+    rec.add_argument("--biases", default="factory", metavar="PROFILE",
+                     help="the IMX636 bias profile the sensor runs with: factory (default) or dark (lower thresholds, "
+                          "a stronger low-pass; edge/sources/evk4/bias_profiles.py); modelled in the grounded regime")
+    rec.add_argument("--f-number", type=float, default=2.4,
+                     help="the lens's f-number (default 2.4): the share of the page's light on the chip (grounded regime)")
     rec.add_argument("--markers", action="store_true",
                      help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "
                           "page.layout.json (every recording carries the simulator's true page pose per millisecond, "
@@ -90,6 +97,35 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     help="when each target shows the page: end (the window's newest event, default) or evidence "
                          "(the time, up to 60 ms earlier, its events match best: in the dark events trail the page)")
     ds.set_defaults(func=_dataset)
+
+    ev = sub.add_parser(
+        "sensor-evidence",
+        help="plot the grounded sensor model against the published IMX636 measurements (docs/sensor_model.md)",
+        description="Draw background activity vs lux beside the published EVK4 fits and latency vs chip lux beside "
+        "NIST's points; with --fit, first fit the noise constants to the published background curve and print them.",
+    )
+    ev.add_argument("--out", default="docs/sensor_model.png", help="the figure (PNG; default docs/sensor_model.png)")
+    ev.add_argument("--draws", type=int, default=12, help="sensors drawn over the band for the shaded area (default 12)")
+    ev.add_argument("--fit", action="store_true", help="fit the noise constants first (a few minutes) and print them")
+    ev.set_defaults(func=_sensor_evidence)
+
+
+def _sensor_evidence(args: argparse.Namespace) -> int:
+    from darkread.lab.synth import sensor_evidence
+
+    if args.draws < 1:
+        raise ValueError(f"--draws {args.draws}: draw at least one sensor")
+    if not args.out.lower().endswith(".png"):
+        raise ValueError(f"--out {args.out}: the figure is written as PNG (name it *.png)")
+    if args.fit:
+        print("noise fit:", sensor_evidence.fit_noise())
+    lux = [b.x for b in sensor_evidence.PUBLISHED_BACKGROUND]
+    rates = sensor_evidence.model_background(sensor_evidence.central_params(), lux)
+    for band, rate in zip(sensor_evidence.PUBLISHED_BACKGROUND, rates):
+        inside = "inside" if band.lo <= rate <= band.hi else "OUTSIDE"
+        print(f"{band.x:5g} lux: model {rate:.3f} Hz, published {band.lo:g}-{band.hi:g} ({inside})")
+    print(sensor_evidence.evidence_figure(args.out, draws=args.draws))
+    return 0
 
 
 def _dataset(args: argparse.Namespace) -> int:
@@ -133,6 +169,8 @@ def _recording(args: argparse.Namespace) -> int:
         regime=args.regime,
         markers=args.markers,
         simulator=args.simulator,
+        f_number=args.f_number,
+        bias_profile=args.biases,
     )
     if args.scanpath_file and not Path(args.scanpath_file).is_file():
         raise FileNotFoundError(f"--scanpath-file {args.scanpath_file}: no such file")

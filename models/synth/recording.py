@@ -24,10 +24,11 @@ from darkread.edge.fovea import FoveaConfig
 from darkread.edge.io.calibration import save_calibration
 from darkread.edge.io.gaze_csv import write_gaze_csv
 from darkread.edge.io.raw import write_raw
+from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
 from darkread.models.synth.camera import SENSOR_WH
 from darkread.models.synth.gaze import points_from_angles, row_times_us, tracker_rows
 from darkread.models.synth.scene import Region
-from darkread.models.synth.sensor import EventSensor, background_events, concat_events
+from darkread.models.synth.sensor import DEFAULT_F_NUMBER, EventSensor, background_events, concat_events
 from darkread.models.synth.session import Session, SessionSpec, choose_dt_us, make_session
 from darkread.models.synth.text import CORPUS_SOURCE
 
@@ -57,6 +58,8 @@ class RecordingSpec:
     regime: str = "standard"  # "shifted": a sensor and a font training never saw
     markers: bool = False  # the text printed with ArUco markers around it (page.layout.json)
     simulator: str = "darkread"  # the name of what turned the scene into events (``write_recording``'s ``simulator``)
+    f_number: float = DEFAULT_F_NUMBER  # the lens; what share of the page's light reaches the chip (regime "grounded")
+    bias_profile: str = FACTORY  # the IMX636 biases it is made with (edge/sources/evk4/bias_profiles.py)
 
 
 LAYOUT_NAME = "page.layout.json"
@@ -71,6 +74,7 @@ def session_spec(spec: RecordingSpec) -> SessionSpec:
         split=spec.split, lux=spec.lux, motion=spec.motion, kind=spec.kind, font=spec.font,
         xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
         scanpath=spec.scanpath, scanpath_file=spec.scanpath_file, regime=spec.regime, markers=spec.markers,
+        f_number=spec.f_number, bias_profile=spec.bias_profile,
     )
 
 
@@ -288,6 +292,8 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         raise ValueError("--seconds must be positive")
     if not 0.5 <= spec.lux <= 100_000:
         raise ValueError(f"--lux {spec.lux} is outside 0.5..100000")
+    if not 0.7 <= spec.f_number <= 32:
+        raise ValueError(f"--f-number {spec.f_number} is outside 0.7..32")
     t_wall = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -380,6 +386,8 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         "page": {k: round(float(v), 4) for k, v in session.extras.items()},
         "generator": "darkread.models.synth",
         "sensor_regime": spec.regime,
+        "lens_f_number": float(spec.f_number),  # only the grounded regime converts light to the chip through it
+        "biases": {"profile": spec.bias_profile, "offsets": profile_offsets(spec.bias_profile)},  # from factory
         "simulator": spec.simulator,  # what turned light into events; "sensor" holds its parameters
     }
     if session.marker_page is not None:

@@ -12,14 +12,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from darkread.edge.io.calibration import Calibration
+from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
+from darkread.models.synth.biases import apply_profile
 from darkread.models.synth.camera import random_calibration
 from darkread.models.synth.fonts import FontFace, face_by_name, faces_for, font_split
 from darkread.models.synth.gaze import Scanpath, TrackerModel, reading_scanpath
+from darkread.models.synth.marker_page import MarkerPage, MarkerPageSpec, lay_out, mm_to_px
 from darkread.models.synth.motion import MOTION_LEVELS, random_motion
 from darkread.models.synth.page import PrintedPage, reflectance, render_page
 from darkread.models.synth.scene import Scene, base_pose
-from darkread.models.synth.marker_page import MarkerPage, MarkerPageSpec, lay_out, mm_to_px
-from darkread.models.synth.sensor import SensorParams, regime_sensor_params
+from darkread.models.synth.sensor import DEFAULT_F_NUMBER, GroundedSensorParams, SensorParams, regime_sensor_params
 from darkread.models.synth.text import TEXT_KINDS, make_lines
 
 TEXTURE_OVERSAMPLING = 1.25  # texels per event pixel at the nominal pose
@@ -44,6 +46,8 @@ class SessionSpec:
     regime: str = "standard"  # "shifted": a sensor and a font training never saw (sensor.REGIMES)
     markers: bool = False  # print the text as a marker page (marker_page.py) instead of a plain page
     more_fonts: bool = False  # split "train": draw from fonts.MORE_TRAIN_FAMILIES too
+    f_number: float = DEFAULT_F_NUMBER  # the event camera's lens (the grounded regime's chip illuminance)
+    bias_profile: str = FACTORY  # the IMX636 biases (edge/sources/evk4/bias_profiles.py; modelled in "grounded")
 
 
 SCANPATHS = ("model", "human")
@@ -71,7 +75,23 @@ class Session:
 
     def with_lux(self, lux: float, rng: np.random.Generator) -> tuple[Scene, SensorParams]:
         """The same scene under another light level, with freshly drawn sensor parameters."""
-        return replace(self.scene, lux=float(lux)), regime_sensor_params(self.spec.regime, rng, lux)
+        return replace(self.scene, lux=float(lux)), session_sensor(self.spec, rng, lux)
+
+
+def session_sensor(spec: SessionSpec, rng: np.random.Generator, lux: float) -> SensorParams:
+    """The sensor of a session: its regime's draw, run with the spec's bias profile.
+
+    Biases are modelled in the grounded regime only; another regime with a profile other than
+    factory is a ValueError rather than a silent factory sensor.
+    """
+    profile_offsets(spec.bias_profile)  # an unknown profile is named before anything is drawn
+    params = regime_sensor_params(spec.regime, rng, lux, spec.f_number)
+    if isinstance(params, GroundedSensorParams):
+        return apply_profile(params, spec.bias_profile)
+    if spec.bias_profile != FACTORY:
+        raise ValueError(f"bias profile {spec.bias_profile!r}: biases are modelled in the grounded regime only "
+                         f"(--regime grounded), not in {spec.regime!r}")
+    return params
 
 
 LUX_RANGE: tuple[float, float] = (4.0, 1200.0)  # the light of a training sample, log-uniform (lux)
@@ -140,7 +160,7 @@ def make_session(spec: SessionSpec, seed: int) -> Session:
         scene=scene,
         scanpath=scanpath,
         tracker=TrackerModel.random(rng),
-        sensor=regime_sensor_params(spec.regime, rng, lux),
+        sensor=session_sensor(spec, rng, lux),
         kind=kind,
         xheight_px=xh_px,
         deg_per_texel=deg_per_texel,

@@ -18,14 +18,15 @@ from typing import Any, Protocol
 
 from usb.util import SPEED_SUPER
 
+from darkread.core.errors import DarkreadError
 from darkread.edge.errors import DeviceError
 from darkread.edge.events import Events
 from darkread.edge.sources.base import EventSink
 from darkread.edge.sources.evk4 import registers as regs
+from darkread.edge.sources.evk4.bias_profiles import check_bias_offsets
 from darkread.edge.sources.evk4.device import Evk4Device, Sleep
 from darkread.edge.sources.evk4.resync import ChunkAligner
 from darkread.edge.sources.evk4.treuzell import format_version
-from darkread.core.errors import DarkreadError
 
 log = logging.getLogger(__name__)
 
@@ -44,24 +45,6 @@ def _default_decoder() -> Decoder:
     from darkread.edge.io.evt3 import Evt3Decoder
 
     return Evt3Decoder(width=regs.WIDTH, height=regs.HEIGHT)
-
-
-def check_bias_offsets(offsets: dict[str, int]) -> None:
-    """ValueError naming the allowed range for any unknown bias or out-of-range offset."""
-    for name, offset in offsets.items():
-        spec = regs.BIASES.get(name)
-        if spec is None:
-            hint = " (diff is the reference of diff_on/diff_off and is not settable)" if name == "diff" else ""
-            raise ValueError(f"unknown bias {name!r}{hint}; settable biases: {', '.join(regs.BIASES)}")
-        if isinstance(offset, bool) or not isinstance(offset, int):
-            raise ValueError(f"bias {name} offset must be an integer, got {offset!r}")
-        lo, hi = spec.allowed
-        if not lo <= offset <= hi:
-            rlo, rhi = spec.recommended
-            raise ValueError(
-                f"bias {name} offset {offset} is outside the allowed range [{lo}, {hi}] "
-                f"(recommended [{rlo}, {rhi}]; 0 = factory value)"
-            )
 
 
 def follow_window(
