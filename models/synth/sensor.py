@@ -65,6 +65,12 @@ class SensorParams:
         """Photoreceptor cut-off (Hz) per pixel: ``cutoff_hz * I / (I + cutoff_half_lux)`` (v2e)."""
         return np.float32(self.cutoff_hz) * irradiance / (irradiance + np.float32(self.cutoff_half_lux))
 
+    def filter_gain(self, irradiance: np.ndarray, dt_us: float) -> np.ndarray:
+        """The photoreceptor low-pass's step gain per pixel, 2 pi f_c dt clipped at 1, in the float32
+        order the standard recordings were made with (the suite's events stay bit for bit the same)."""
+        gain = np.float32(2.0 * math.pi * self.cutoff_hz * dt_us * 1e-6)
+        return np.minimum(gain * irradiance / (irradiance + np.float32(self.cutoff_half_lux)), np.float32(1.0))
+
     def shot_rate_hz(self) -> float:
         """Mean shot-noise rate per pixel at this illuminance (on paper-bright pixels)."""
         return self.shot_rate_100lux_hz * (100.0 / max(self.lux, 0.1)) ** self.shot_lux_exponent
@@ -154,6 +160,9 @@ class GroundedSensorParams(SensorParams):
 
     def cutoff_of(self, irradiance: np.ndarray) -> np.ndarray:
         return photoreceptor_cutoff_hz(self.total_chip_lux(irradiance), self.k_hz_per_chip_lux, self.f_max_hz)
+
+    def filter_gain(self, irradiance: np.ndarray, dt_us: float) -> np.ndarray:
+        return np.minimum(np.float32(2.0 * math.pi * dt_us * 1e-6) * self.cutoff_of(irradiance), np.float32(1.0))
 
     def noise_sd_and_cutoff(self, irradiance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per pixel: the log-noise standard deviation and its bandwidth (Hz)."""
@@ -348,7 +357,7 @@ class EventSensor:
     def _filter(self, irradiance: np.ndarray, dt_us: float) -> np.ndarray:
         # first-order low-pass whose cut-off scales with the pixel's light (SensorParams.cutoff_of)
         i = irradiance.reshape(-1).astype(np.float32, copy=False)
-        eps = np.minimum(np.float32(2.0 * math.pi * dt_us * 1e-6) * self.params.cutoff_of(i), np.float32(1.0))
+        eps = self.params.filter_gain(i, dt_us)
         target = self._log(irradiance)
         self.lp = self.lp + eps * (target - self.lp)
         return target
