@@ -22,7 +22,6 @@ from .auth import UNAUTHORIZED
 from .origins import host_refusal, origin_refusal
 
 if TYPE_CHECKING:
-    from .auth import Principal
     from .context import AppContext
 
 NOSNIFF = (b"x-content-type-options", b"nosniff")

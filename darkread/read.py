@@ -98,16 +98,15 @@ def read_recording(
     from pydantic import SecretStr
 
     from darkread.cloud.app import create_app
+    from darkread.cloud.errors import CloudError
     from darkread.cloud.server import serve_in_thread
     from darkread.cloud.settings import Settings
     from darkread.edge.builder import build_edge
     from darkread.edge.config import load_config
     from darkread.edge.daemon import Daemon
+    from darkread.edge.errors import RunError
     from darkread.edge.io.recording import open_recording
     from darkread.edge.notify import Notifier
-
-    from darkread.cloud.errors import CloudError
-    from darkread.edge.errors import RunError
 
     if out_dir is None:  # a scratch directory that does not outlive the read
         with tempfile.TemporaryDirectory(prefix="darkread-read-", ignore_cleanup_errors=True) as scratch:

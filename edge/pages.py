@@ -12,8 +12,8 @@ import time
 from collections.abc import Callable
 
 from darkread.core.frame_record import FrameRecord
-from darkread.stitch import PageStitcher
 from darkread.proto.messages import Page, pack_mask
+from darkread.stitch import PageStitcher
 
 
 class PageBuilder:

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from darkread.core.frame_record import FrameRecord
 from darkread.edge.config import PipelineConfig
 from darkread.edge.deblur import DeblurConfig, deblur_window
 from darkread.edge.denoise import DenoiseConfig, drop_isolated
@@ -49,7 +50,6 @@ from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.view_fusion import MARGIN_PX, ViewFuser, ViewRecord
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
 from darkread.edge.voxel import VoxelConfig, voxel_grid
-from darkread.core.frame_record import FrameRecord
 
 if TYPE_CHECKING:
     from darkread.proto.messages import Frame

@@ -163,7 +163,7 @@ class SceneMotion:
             self._count += stop - start
 
     def _close_slice(self) -> None:
-        assert self._slice_end is not None  # noqa: S101
+        assert self._slice_end is not None
         cfg = self.cfg
         failed = False
         if self._count >= cfg.min_events:

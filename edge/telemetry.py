@@ -186,7 +186,7 @@ class MetricsServer:
         metrics_ref = metrics
 
         class Handler(BaseHTTPRequestHandler):
-            def do_GET(self) -> None:  # noqa: N802 (http.server naming)
+            def do_GET(self) -> None:  # http.server naming
                 if self.path.rstrip("/") != "/metrics":
                     self.send_error(404, "try /metrics")
                     return

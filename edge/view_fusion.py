@@ -46,7 +46,7 @@ class ViewRecord(FrameRecord):
     events_used: int = 0
     gaze_rad: tuple[float, float] = (0.0, 0.0)
 
-    def to_message(self, enc: str = "png"):  # noqa: ANN201 - proto stays a lazy import
+    def to_message(self, enc: str = "png"):  # proto stays a lazy import
         from darkread.proto.messages import View
 
         return View.of(self, t0_us=self.t0_us, gaze_rad=self.gaze_rad, events_used=self.events_used, enc=enc)
@@ -165,8 +165,8 @@ class ViewFuser:
         """The frame's top-left in the first frame's coordinates: where the newest frame was plus
         the sensor offset between them, corrected by correlation against the view; None when no
         trustworthy match is found."""
-        assert self._first is not None and self._last is not None and self._sum is not None  # noqa: S101
-        assert self._count is not None  # noqa: S101
+        assert self._first is not None and self._last is not None and self._sum is not None
+        assert self._count is not None
         h, w = mask.shape
         px = int(round(self._last_xy[0])) + frame.origin[0] - self._last.origin[0]
         py = int(round(self._last_xy[1])) + frame.origin[1] - self._last.origin[1]
@@ -202,7 +202,7 @@ class ViewFuser:
         pixel, as the stitcher does); what falls beyond the margin is left out. Only the canvas
         rows and columns the frame touches are resampled (a whole-pixel move of both the frame
         and the output keeps every bilinear weight, so the sums are the same)."""
-        assert self._sum is not None and self._count is not None  # noqa: S101
+        assert self._sum is not None and self._count is not None
         h, w = mask.shape
         x, y = xy[0] + self.margin, xy[1] + self.margin
         x0, y0 = max(int(np.floor(x)), 0), max(int(np.floor(y)), 0)

@@ -19,7 +19,7 @@ import numpy as np
 from darkread.edge.io.calibration import load_calibration
 from darkread.edge.io.recording import open_recording
 from darkread.models.synth.marker_page import load_layout
-from darkread.models.synth.recording import LAYOUT_NAME, PoseTruth, load_page_ink, load_pose_truth
+from darkread.models.synth.recording import LAYOUT_NAME, load_page_ink, load_pose_truth
 from darkread.models.synth.shards import SampleMeta, write_shard
 from darkread.models.train.annotate import (
     SHARD_NAME,
@@ -30,6 +30,7 @@ from darkread.models.train.annotate import (
     window_rays,
 )
 from darkread.models.train.windows import Windows, read_events, window_stack
+
 
 @dataclass(frozen=True)
 class PageTruth:
@@ -116,7 +117,7 @@ def annotate_from_truth(recording: str | Path, out: str | Path, every_ms: float 
     recording = Path(recording)
     scored = truth_windows(recording, every_ms=every_ms, max_windows=max_windows, deblur=deblur, denoise=denoise)
     windows = scored.windows
-    assert windows is not None  # noqa: S101 - truth_windows keeps them
+    assert windows is not None  # truth_windows keeps them
     if len(windows.t_end_us) == 0:
         raise AnnotationError(f"{recording}: no windows to annotate (no gaze, or too few events)")
     if scored.targets is None:

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
 from darkread.stitch.canvas import Canvas
 from darkread.stitch.config import StitchConfig
 

@@ -18,6 +18,7 @@ from typing import Literal, NamedTuple
 
 import cv2
 import numpy as np
+
 from darkread.core.frame_record import FrameRecord
 from darkread.stitch.config import StitchConfig
 from darkread.stitch.dewarp import dewarp_strip

@@ -250,7 +250,7 @@ class SessionPages:
             await self.read()
         except NoPageError:
             pass
-        except Exception as exc:  # noqa: BLE001 - a failed push must not end the session's pages
+        except Exception as exc:  # a failed push must not end the session's pages
             log.warning("session %s: live update failed: %s", self.session_id, exc)
 
     def _publish(self, reading: PageReading) -> None:

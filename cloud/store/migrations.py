@@ -50,7 +50,7 @@ def migrate(target: SchemaTarget, steps: Sequence[Step], *, backend: str) -> int
             target.apply(steps[version], version + 1)
         except StoreError:
             raise
-        except Exception as exc:  # noqa: BLE001 - driver errors of either backend become one StoreError
+        except Exception as exc:  # driver errors of either backend become one StoreError
             raise StoreError(f"{backend} schema migration {version} -> {version + 1} failed: {exc}") from exc
         log.info("%s store schema migrated to version %d", backend, version + 1)
     return before

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-import cv2
 import numpy as np
+
 from darkread.edge.errors import CalibrationError
 from darkread.edge.io.intrinsics import Intrinsics, intrinsics_from_dict
 

@@ -13,6 +13,7 @@ from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
+
 from darkread.edge.calibrate.clock import RgbFrames
 from darkread.edge.calibrate.event_image import (
     Burst,

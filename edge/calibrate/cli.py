@@ -94,6 +94,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def _start_calibration(args: argparse.Namespace, width: int = 1280, height: int = 720):
     import numpy as np
+
     from darkread.edge.io.calibration import Calibration, load_calibration
 
     capture = Path(args.capture)
@@ -204,6 +205,7 @@ def _clock_refine(args: argparse.Namespace) -> int:
 
 def _extrinsics(args: argparse.Namespace) -> int:
     import numpy as np
+
     from darkread.edge.calibrate.cameras import (
         aria_camera_from_device_calibration,
         matrix_from_list,

@@ -24,9 +24,10 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
+from darkread.core.image_codec import ImageCodecError, read_image
 from darkread.edge.calibrate.event_image import Burst
 from darkread.edge.errors import CalibrationError
-from darkread.core.image_codec import ImageCodecError, read_image
 
 logger = logging.getLogger(__name__)
 

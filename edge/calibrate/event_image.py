@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
 from darkread.edge.events import EVENT_CD_DTYPE
 
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+
 from darkread.edge.calibrate.cameras import Camera, Fisheye624Camera
 from darkread.edge.calibrate.markers import Detection, board_pose, pose_matrix
 from darkread.edge.errors import CalibrationError

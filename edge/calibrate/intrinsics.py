@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+
 from darkread.edge.calibrate.event_image import (
     Burst,
     burst_events,

@@ -16,8 +16,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from darkread.edge.errors import CalibrationError
+
 from darkread.core.json_file import read_json_file
+from darkread.edge.errors import CalibrationError
 
 BOARD_NAME = "board.json"
 KINDS = ("charuco", "grid")

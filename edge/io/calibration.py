@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
+from darkread.core.json_file import read_json_file
 from darkread.edge.errors import CalibrationError
 from darkread.edge.io.intrinsics import Intrinsics, intrinsics_from_dict, intrinsics_to_dict
-from darkread.core.json_file import read_json_file
 
 _RIGID_TOLERANCE = 1e-3
 

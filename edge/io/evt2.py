@@ -11,7 +11,6 @@ OTHERS (0xE), CONTINUED (0xF) and reserved types are skipped and counted.
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE, Events

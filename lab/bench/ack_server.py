@@ -32,7 +32,7 @@ class AckServer:
         self.server = await serve(self._handle, "127.0.0.1", 0)
         return int(self.server.sockets[0].getsockname()[1])
 
-    async def _handle(self, ws) -> None:  # noqa: ANN001
+    async def _handle(self, ws) -> None:
         from darkread.proto.messages import Ack, Welcome, decode, encode
 
         hello = decode(await ws.recv(), max_bytes=MAX_BYTES)

@@ -37,10 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from darkread.lab.bench import BenchContext, Figure
-from darkread.lab.bench.cloud import API_KEY, start_server, stop_server
 from darkread.cloud.store import SessionSpec, SqliteStore, StoredFrame
 from darkread.core.paths import SAMPLE_RECORDING
+from darkread.lab.bench import BenchContext, Figure
+from darkread.lab.bench.cloud import API_KEY, start_server, stop_server
 from darkread.proto.messages import Ack, Frame, Hello, View, Welcome, decode, encode
 
 ASK_EVERY_S = 0.5
@@ -146,7 +146,7 @@ async def stream_and_ask(base: str, session_id: str, frames: list[StoredFrame], 
             await ws.send(encode(Hello(device_id="bench", session_id=session_id, mode="frames", sensor=(1280, 720),
                                        fovea=(100, 200))))  # fmt: skip
             welcome = decode(await ws.recv(), max_bytes=1 << 20)
-            assert isinstance(welcome, Welcome)  # noqa: S101 - the service under test answers hello
+            assert isinstance(welcome, Welcome)  # the service under test answers hello
             asker = asyncio.create_task(ask_loop(http))
             wall0, t0 = time.perf_counter(), frames[0].t_us
             acked = -1
@@ -324,7 +324,7 @@ def run(ctx: BenchContext) -> list[Figure]:
         process, base = _server(ctx, f"wearers{suffix}", WEARER_OCR_THREADS)
         try:
             wearers_p95, exactly_once = _wearers(base, stream, stagger_s)
-        except Exception as exc:  # noqa: BLE001 - a failed stream is a figure (nan), not a crash of the bench
+        except Exception as exc:  # a failed stream is a figure (nan), not a crash of the bench
             ctx.notes.append(f"wearers{suffix}: a stream failed ({type(exc).__name__}: {exc}); the host is too busy for {WEARERS}")
             wearers_p95, exactly_once = float("nan"), False
         finally:

@@ -204,8 +204,8 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
 
 def run(ctx: BenchContext) -> list[Figure]:
     from darkread.cloud.store import SqliteStore
-    from darkread.lab.fixtures.pg_server import PostgresUnavailable, TemporaryPostgres
     from darkread.cloud.store.postgres import PostgresStore
+    from darkread.lab.fixtures.pg_server import PostgresUnavailable, TemporaryPostgres
 
     total = ctx.runs(6000, 1500, 100)  # frames per configuration, split over the streams
     time_limit_s = float(ctx.runs(30, 10, 10))

@@ -31,10 +31,10 @@ from typing import TypeVar
 
 import numpy as np
 
+from darkread.core.paths import SAMPLE_RECORDING
+from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
 from darkread.lab.bench import BenchContext, Figure
 from darkread.lab.bench.ack_server import AckServer
-from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
-from darkread.core.paths import SAMPLE_RECORDING
 
 SMOKE_SECONDS = 0.3
 T = TypeVar("T")
@@ -186,7 +186,7 @@ def _lossless(recording: Path, model: Path | None, repeats: int) -> dict[str, ob
     return {"pinned": pinned, "decode_s": decode_s, "modes": modes}
 
 
-def _encode_only(frame, arrival):  # noqa: ANN001, ANN202 - the uplink's work on a message, without a socket
+def _encode_only(frame, arrival):  # the uplink's work on a message, without a socket
     from darkread.proto.messages import encode
 
     encode(frame.to_message())

@@ -9,14 +9,9 @@ blocks where the shipped one has 96 and eight), alternated with the shipped one:
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from pathlib import Path
-
-import numpy as np
-
 from darkread.lab import PREVIOUS_NETWORK
 from darkread.lab.bench import BenchContext, Figure
-from darkread.models.train.latency import median_ms, onnx_latency_ms, reference_latency_ms
+from darkread.models.train.latency import onnx_latency_ms, reference_latency_ms
 
 INT8_FILENAME = "binary_unet_int8.onnx"
 

@@ -105,8 +105,8 @@ def recording_evidence(recording: str | Path, lengths: Sequence[int] = LENGTHS, 
     from darkread.edge.gaze import GazeMapper
     from darkread.edge.pipeline import clean_window
     from darkread.lab.eval.attribution import ink_found, window_truth
-    from darkread.lab.truth import load_truth_and_pose
     from darkread.lab.eval.true_motion import TrueHeadMotion
+    from darkread.lab.truth import load_truth_and_pose
     from darkread.models.train.annotate import window_rays
     from darkread.models.train.windows import read_events
 

@@ -62,7 +62,7 @@ def available_backends(names: Sequence[str] | None = None) -> list[str]:
                 ready.append(name)
             else:
                 logger.info("OCR engine %s is not available; left out of the comparison", name)
-        except Exception as exc:  # noqa: BLE001 - a misconfigured engine must not stop the evaluation
+        except Exception as exc:  # a misconfigured engine must not stop the evaluation
             logger.info("OCR engine %s left out: %s", name, exc)
     return ready
 
@@ -90,7 +90,7 @@ def conditions(recording_dir: Path) -> dict[str, Any]:
 def _guard(label: str, func: Callable[[], dict[str, Any]]) -> dict[str, Any]:
     try:
         return func()
-    except Exception as exc:  # noqa: BLE001 - one failing stage is recorded, the others still run
+    except Exception as exc:  # one failing stage is recorded, the others still run
         logger.warning("%s failed: %s", label, exc)
         logger.debug("%s", traceback.format_exc())
         return {"error": f"{type(exc).__name__}: {exc}"}
@@ -109,10 +109,10 @@ def evaluate_recording(
 ) -> dict[str, Any]:
     """Everything the report needs about one recording (errors are recorded per stage); ``rgb=False``
     leaves out the RGB baseline and the bandwidth figures (which need its snapshot)."""
-    from darkread.lab.eval.bandwidth import measure_bandwidth, page_ink_from_png
-    from darkread.core.text_metrics import error_rates
-    from darkread.lab.eval.rgb_baseline import baseline_snapshot, read_snapshot
     from darkread.core.image_codec import read_image, write_png
+    from darkread.core.text_metrics import error_rates
+    from darkread.lab.eval.bandwidth import measure_bandwidth, page_ink_from_png
+    from darkread.lab.eval.rgb_baseline import baseline_snapshot, read_snapshot
     from darkread.read import read_recording
 
     recording_dir, run_dir = Path(recording_dir), Path(run_dir)

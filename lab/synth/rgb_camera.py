@@ -37,8 +37,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
 from darkread.core.image_codec import decode_image, encode_jpeg
+from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
 
 if TYPE_CHECKING:
     from darkread.models.synth.recording import RecordingSpec

@@ -17,7 +17,6 @@ DEFAULT_VAL = Path("runs/data/val")
 
 def _fit_config(args: argparse.Namespace):  # -> FitConfig
     from darkread.models.train.fit import FitConfig
-    from darkread.models.train.net import NetConfig
 
     return FitConfig(
         batch_size=args.batch_size, lr=args.lr, time_budget_s=args.minutes * 60, max_epochs=args.epochs,
@@ -196,8 +195,8 @@ def _cmd_target(args: argparse.Namespace) -> int:
 
 
 def _cmd_annotate(args: argparse.Namespace) -> int:
-    from darkread.models.train.annotate import AnnotateConfig, annotate_recording
     from darkread.lab.truth import annotate_from_truth
+    from darkread.models.train.annotate import AnnotateConfig, annotate_recording
 
     if not Path(args.recording).is_dir():
         raise FileNotFoundError(f"{args.recording}: no such recording directory")

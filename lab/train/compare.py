@@ -23,8 +23,7 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -32,8 +31,8 @@ from typing import Any
 import numpy as np
 
 from darkread.lab.eval.provenance import model_digest
-from darkread.models.train.ink_scores import ink_counts, scores_from_counts
 from darkread.lab.truth import ScoredWindows, is_recording, truth_windows
+from darkread.models.train.ink_scores import ink_counts, scores_from_counts
 
 log = logging.getLogger(__name__)
 

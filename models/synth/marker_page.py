@@ -24,8 +24,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from darkread.edge.calibrate.markers import BoardSpec
 from darkread.core.json_file import read_json_file
+from darkread.edge.calibrate.markers import BoardSpec
 from darkread.models.synth.fonts import face_by_name
 from darkread.models.synth.page import render_page
 

@@ -15,10 +15,10 @@ from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.camera import random_calibration
 from darkread.models.synth.fonts import FontFace, face_by_name, faces_for, font_split
 from darkread.models.synth.gaze import Scanpath, TrackerModel, reading_scanpath
+from darkread.models.synth.marker_page import MarkerPage, MarkerPageSpec, lay_out, mm_to_px
 from darkread.models.synth.motion import MOTION_LEVELS, random_motion
 from darkread.models.synth.page import PrintedPage, reflectance, render_page
 from darkread.models.synth.scene import Scene, base_pose
-from darkread.models.synth.marker_page import MarkerPage, MarkerPageSpec, lay_out, mm_to_px
 from darkread.models.synth.sensor import SensorParams, regime_sensor_params
 from darkread.models.synth.text import TEXT_KINDS, make_lines
 

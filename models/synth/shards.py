@@ -17,10 +17,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from darkread.core.mask_bits import pack_rows
 from darkread.edge.config import PipelineConfig
 from darkread.edge.fovea import FoveaConfig, window_origin
 from darkread.edge.voxel import VoxelConfig, voxel_grid
-from darkread.core.mask_bits import pack_rows
 from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES, families_of, font_split
 from darkread.models.synth.scene import Region, Scene

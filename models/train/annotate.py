@@ -42,11 +42,11 @@ from typing import Any
 import cv2
 import numpy as np
 
+from darkread.edge.calibrate.event_image import count_image
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.marker_page import MarkerPage, mm_to_px
-from darkread.models.synth.shards import ncc, window_count_image
 from darkread.models.synth.recording import load_pose_truth
-from darkread.edge.calibrate.event_image import count_image
+from darkread.models.synth.shards import ncc, window_count_image
 from darkread.models.train.page_search import (
     SearchConfig,
     edge_map,

@@ -38,8 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from darkread.models.train.data import (Shard, augment, concat_shards, count_samples, labels, load_dataset, random_crop,
-                                        split_labels)
+from darkread.models.train.data import Shard, augment, concat_shards, count_samples, labels, load_dataset, random_crop, split_labels
 
 log = logging.getLogger(__name__)
 
@@ -128,8 +127,8 @@ def synthetic_windows(n: int, sources: Sequence[str | Path] = (), seed: int = 0,
         return Shard(np.concatenate([p.voxels for p in parts]), np.concatenate([p.targets for p in parts]), {})
     from tqdm import tqdm
 
-    from darkread.models.synth.shards import SAMPLES_PER_PAGE, make_samples, shard_seed
     from darkread.models.synth.session import SessionSpec
+    from darkread.models.synth.shards import SAMPLES_PER_PAGE, make_samples, shard_seed
 
     spec = SessionSpec(split="train", duration_s=4.0)
     vs, ts = [], []

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
+
 from darkread.models.train.data import (
     Shard,
     iterate_batches,

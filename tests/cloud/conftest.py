@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from darkread.cloud.app import create_app
 from darkread.cloud.ocr.base import OcrLine, OcrResult
 from darkread.cloud.server import serve_in_thread
@@ -43,7 +44,7 @@ class LiveServer:
     app: object
 
     @property
-    def context(self):  # noqa: ANN201 - the app's AppContext
+    def context(self):  # the app's AppContext
         return self.app.state.context  # type: ignore[attr-defined]
 
 

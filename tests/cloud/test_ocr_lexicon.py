@@ -5,11 +5,11 @@ import pytest
 
 pytest.importorskip("symspellpy")
 
-from darkread.cloud.ocr import create_backend  # noqa: E402
-from darkread.cloud.ocr.base import OcrLine, OcrResult  # noqa: E402
-from darkread.cloud.ocr.lexicon import LexiconCorrected, LexiconCorrector  # noqa: E402
-from darkread.cloud.settings import Settings  # noqa: E402
-from darkread.core.text_metrics import error_rates  # noqa: E402
+from darkread.cloud.ocr import create_backend
+from darkread.cloud.ocr.base import OcrLine, OcrResult
+from darkread.cloud.ocr.lexicon import LexiconCorrected, LexiconCorrector
+from darkread.cloud.settings import Settings
+from darkread.core.text_metrics import error_rates
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from PIL import Image, ImageDraw, ImageFont
 
-from darkread.cloud.ocr import create_backend
 from darkread.cloud.errors import OcrError
+from darkread.cloud.ocr import create_backend
 from darkread.cloud.ocr.base import OcrLine, reading_order
 from darkread.cloud.ocr.rapid import RapidOcrBackend
 from darkread.cloud.ocr.tesseract import TesseractBackend, lines_from_words

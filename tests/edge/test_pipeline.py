@@ -56,7 +56,7 @@ class ListSource:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
-    def start(self, sink) -> None:  # noqa: ANN001
+    def start(self, sink) -> None:
         def run() -> None:
             for chunk in self.chunks:
                 if self._stop.is_set():

@@ -110,7 +110,7 @@ class ProtoServer:
             await ws.send(encode(Ack(seq=seqs[-1])))
 
 
-def wait_for(condition, timeout_s: float = 5.0) -> bool:  # noqa: ANN001
+def wait_for(condition, timeout_s: float = 5.0) -> bool:
     deadline = time.monotonic() + timeout_s
     while not condition():
         if time.monotonic() > deadline:

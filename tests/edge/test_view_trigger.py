@@ -53,7 +53,7 @@ class Chunks:
     def __init__(self, events: Events) -> None:
         self.events = events
 
-    def start(self, sink) -> None:  # noqa: ANN001
+    def start(self, sink) -> None:
         self.sink = sink
 
     def stop(self) -> None:
@@ -93,7 +93,7 @@ def the_same_text(grid: np.ndarray) -> np.ndarray:
     return glyphs(grid.shape[1:])
 
 
-def run_on_change(gaze: ScanGaze, events: Events, infer=the_same_text, source=None, **settings: object):  # noqa: ANN001, ANN201
+def run_on_change(gaze: ScanGaze, events: Events, infer=the_same_text, source=None, **settings: object):
     """Views of one lossless replay. The frames stay in the view's window (``dither_px`` 0) unless
     asked: ``the_same_text`` sees the same words wherever the window is."""
     views: list[tuple[ViewRecord, float]] = []

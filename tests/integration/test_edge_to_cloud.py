@@ -21,11 +21,11 @@ import pytest
 from cloud_process import API_KEY, CloudProcess, free_port
 from factories import sum_bins_model
 
+from darkread.core.paths import SAMPLE_RECORDING
 from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon
 from darkread.edge.notify import Notifier
-from darkread.core.paths import SAMPLE_RECORDING
 
 pytestmark = pytest.mark.slow
 

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from darkread.edge.io.recording import open_recording
 from darkread.core.paths import SAMPLE_RECORDING
+from darkread.edge.io.recording import open_recording
 from darkread.read import read_recording
 
 pytestmark = pytest.mark.slow

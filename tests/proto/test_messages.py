@@ -177,7 +177,7 @@ def test_random_masks_round_trip(mask: np.ndarray) -> None:
     events_used=st.integers(0, 2**32 - 1),
     mask=masks,
 )
-def test_random_frames_round_trip(seq, frame_id, t_us, origin, gaze_px, gaze_rad, events_used, mask) -> None:  # noqa: ANN001
+def test_random_frames_round_trip(seq, frame_id, t_us, origin, gaze_px, gaze_rad, events_used, mask) -> None:
     shape, bits = pack_mask(mask)
     frame = Frame(seq, frame_id, t_us, origin, gaze_px, gaze_rad, events_used, shape, bits)
     decoded = decode(encode(frame), max_bytes=LIMIT)
@@ -192,7 +192,7 @@ def test_random_frames_round_trip(seq, frame_id, t_us, origin, gaze_px, gaze_rad
     lines=st.lists(st.tuples(int64, int64, int64, int64), max_size=20),
     mask=masks,
 )
-def test_random_other_messages_round_trip(t_us, stats, device_id, lines, mask) -> None:  # noqa: ANN001
+def test_random_other_messages_round_trip(t_us, stats, device_id, lines, mask) -> None:
     shape, bits = pack_mask(mask)
     for message in (
         Heartbeat(t_us=t_us, stats=stats),

@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from darkread.core.frame_record import FrameRecord
 from PIL import Image, ImageDraw, ImageFont
+
+from darkread.core.frame_record import FrameRecord
 
 PARAGRAPH = (
     "Reading in the dark is hard for cameras and easy for events. A foveated window follows the "

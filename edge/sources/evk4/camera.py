@@ -18,6 +18,7 @@ from typing import Any, Protocol
 
 from usb.util import SPEED_SUPER
 
+from darkread.core.errors import DarkreadError
 from darkread.edge.errors import DeviceError
 from darkread.edge.events import Events
 from darkread.edge.sources.base import EventSink
@@ -25,7 +26,6 @@ from darkread.edge.sources.evk4 import registers as regs
 from darkread.edge.sources.evk4.device import Evk4Device, Sleep
 from darkread.edge.sources.evk4.resync import ChunkAligner
 from darkread.edge.sources.evk4.treuzell import format_version
-from darkread.core.errors import DarkreadError
 
 log = logging.getLogger(__name__)
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from darkread.edge.events import EVENT_CD_DTYPE
-from darkread.lab.eval.evidence import (Evidence, count_image, evidence_table, ink_and_paper_scores, recording_evidence,
-                                    separability)
+from darkread.lab.eval.evidence import Evidence, count_image, evidence_table, ink_and_paper_scores, recording_evidence, separability
 
 
 def test_separability_is_the_chance_a_positive_beats_a_negative() -> None:
