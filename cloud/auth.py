@@ -25,7 +25,7 @@ import secrets
 import time
 from collections.abc import Iterable, MutableMapping
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +35,7 @@ KEY_PREFIX = "drk"
 _KEY = re.compile(rf"^{KEY_PREFIX}_([0-9a-f]{{8}})_[A-Za-z0-9_-]{{20,}}$")
 
 
-class Scope(str, Enum):
+class Scope(StrEnum):
     STREAM = "stream"
     READ = "read"
     ADMIN = "admin"

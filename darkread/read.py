@@ -206,7 +206,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="OCR backend (default: local, the embedded offline engine); remote ones read DARKREAD_* settings")
     parser.add_argument("--mode", default="frames", choices=["frames", "pages"], help="stream frames (default) or stitch on the glasses")
     parser.add_argument("--infer", default=None, choices=INFER_MODES,
-                        help="on-change (default): one fused view per fixation (a tenth of the inferences and bytes); every-window: infer every window, send every frame")
+                        help="on-change (default): one fused view per fixation (a tenth of the inferences and bytes); "
+                             "every-window: infer every window, send every frame")
     parser.add_argument("--no-lexicon", dest="lexicon", action="store_false",
                         help="report the offline engine's text as read, without the dictionary correction")
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")

@@ -241,12 +241,14 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError("config [pipeline] n_events and period_ms must be positive")
     if config.pipeline.infer not in INFER_MODES:
         raise ValueError(f"config [pipeline] infer must be 'on-change' or 'every-window', not {config.pipeline.infer!r}")
-    if min(config.pipeline.min_interval_ms, config.pipeline.settled_interval_ms, config.pipeline.view_every_ms) <= 0 or config.pipeline.min_events <= 0:
+    intervals = (config.pipeline.min_interval_ms, config.pipeline.settled_interval_ms, config.pipeline.view_every_ms)
+    if min(intervals) <= 0 or config.pipeline.min_events <= 0:
         raise ValueError("config [pipeline] min_interval_ms, settled_interval_ms, view_every_ms and min_events must be positive")
     if config.pipeline.fuse not in FUSE_MODES:
         raise ValueError(f"config [pipeline] fuse must be 'probability' or 'mask', not {config.pipeline.fuse!r}")
     if not 0 < config.pipeline.renew_fraction <= 1:
-        raise ValueError(f"config [pipeline] renew_fraction is a share of a window's events: above 0, at most 1, not {config.pipeline.renew_fraction:g}")
+        raise ValueError("config [pipeline] renew_fraction is a share of a window's events: above 0, at most 1, "
+                         f"not {config.pipeline.renew_fraction:g}")
     if config.pipeline.dither_px < 0 or config.pipeline.settle_max_doubt <= 0:
         raise ValueError("config [pipeline] dither_px must be >= 0 (0: a view's frames all in its window) and settle_max_doubt positive")
     return config

@@ -1,4 +1,5 @@
-"""Pages mode: frames (or, in the on-change mode, the fixations' views) are stitched on the glasses and only the page goes up (``[uplink] mode = "pages"``).
+"""Pages mode: frames (or, in the on-change mode, the fixations' views) are stitched on the glasses
+and only the page goes up (``[uplink] mode = "pages"``).
 
 The reconstruction thread adds each frame; the daemon's tick asks for the page every
 ``page_every_s`` and at shutdown. Stitching itself is the shared, pure stitcher; this module only

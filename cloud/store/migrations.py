@@ -3,7 +3,8 @@
 A backend's schema is a tuple of steps: ``steps[i]`` takes a database from version i to i + 1,
 an SQL script (statements split on ``;``) or a function of the connection for a step that must
 look first. At start-up ``migrate`` reads the version the database is at, refuses one from a
-newer darkread, and runs every pending step in its own transaction, recording the new version inside that transaction so a failed step leaves the previous version.
+newer darkread, and runs every pending step in its own transaction, recording the new version
+inside that transaction so a failed step leaves the previous version.
 Where the version lives and how a transaction is opened is the backend's ``SchemaTarget``
 (SQLite: ``PRAGMA user_version``; PostgreSQL: a ``schema_version`` table under an advisory
 lock, so instances starting together migrate once).

@@ -219,7 +219,8 @@ def switches_from_triggers(triggers: np.ndarray, *, channel: int | None = None, 
     return trig["t"].astype(np.float64), rising if rising_means_shown else ~rising
 
 
-def _cost(offset: float, switch_event: np.ndarray, shown_after: np.ndarray, frames_t: np.ndarray, exposure: np.ndarray, measured: np.ndarray) -> float:
+def _cost(offset: float, switch_event: np.ndarray, shown_after: np.ndarray, frames_t: np.ndarray, exposure: np.ndarray,
+          measured: np.ndarray) -> float:
     pred = predicted_fractions(switch_event - offset, shown_after, frames_t, exposure)
     return float(np.mean((pred - measured) ** 2))
 

@@ -123,7 +123,8 @@ class HomographyResult:
         return cv2.perspectiveTransform(pts, self.H_event_rgb).reshape(-1, 2)
 
 
-def page_homography(event_det: Detection, rgb_det: Detection, *, rgb_camera: Camera | None = None, event_camera: Intrinsics | None = None) -> HomographyResult:
+def page_homography(event_det: Detection, rgb_det: Detection, *, rgb_camera: Camera | None = None,
+                    event_camera: Intrinsics | None = None) -> HomographyResult:
     """Homography from matched marker corners (by id) of a flat page; undistorts when cameras are given."""
     common, ie, ir = np.intersect1d(event_det.ids, rgb_det.ids, return_indices=True)
     if common.size < 4:

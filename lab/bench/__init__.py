@@ -8,12 +8,8 @@ for the smallest inputs and a single repetition: every figure is produced, none 
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
 
 # Benchmark modules, in the order of the data flow.
 BENCH_MODULES: tuple[str, ...] = (

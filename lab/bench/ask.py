@@ -264,7 +264,8 @@ def reading_cpu(ctx: BenchContext, frames: list[StoredFrame], kind: str) -> tupl
 
 
 def _load() -> str:
-    return "load average %.1f %.1f %.1f" % os.getloadavg()
+    one, five, fifteen = os.getloadavg()
+    return f"load average {one:.1f} {five:.1f} {fifteen:.1f}"
 
 
 def run(ctx: BenchContext) -> list[Figure]:

@@ -181,6 +181,10 @@ def attribute_recording(recording: Path, read_dir: Path, read_page: Callable[[np
     )
 
 
+def _mean(rows: Sequence[Attribution], key: str) -> float:
+    return float(np.mean([getattr(row, key) for row in rows]))
+
+
 def attribution_table(rows: Sequence[Attribution]) -> str:
     """Mean figures per lux and motion (markdown)."""
     groups: dict[tuple[float, str], list[Attribution]] = defaultdict(list)
@@ -194,14 +198,12 @@ def attribution_table(rows: Sequence[Attribution]) -> str:
         "|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for (lux, motion), members in sorted(groups.items(), key=lambda kv: (-kv[0][0], order.get(kv[0][1], 9))):
-        def mean(key: str) -> float:
-            return float(np.mean([getattr(m, key) for m in members]))
-
         label = f"**{motion}**" if motion == "all" else motion
         known = [m.cer_true_motion for m in members if m.cer_true_motion is not None]
         true_motion = f"{100 * float(np.mean(known)):.1f}%" if len(known) == len(members) else "–"
-        lines.append(f"| {lux:g} | {label} | {len(members)} | {100 * mean('cer_stitched'):.1f}% | {true_motion} | {100 * mean('cer_placed'):.1f}% | "
-                     f"{100 * mean('cer_ideal'):.1f}% | {100 * mean('frame_recall'):.0f}% | {100 * mean('frame_precision'):.0f}% |")
+        pct = {key: 100 * _mean(members, key) for key in ("cer_stitched", "cer_placed", "cer_ideal", "frame_recall", "frame_precision")}
+        lines.append(f"| {lux:g} | {label} | {len(members)} | {pct['cer_stitched']:.1f}% | {true_motion} | {pct['cer_placed']:.1f}% | "
+                     f"{pct['cer_ideal']:.1f}% | {pct['frame_recall']:.0f}% | {pct['frame_precision']:.0f}% |")
     return "\n".join(lines)
 
 

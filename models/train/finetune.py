@@ -276,7 +276,8 @@ def finetune(
         raise FinetuneError("--synthetic all takes every window of --synthetic-dir: give the directories")
     wanted = sum(count_samples(d) for d in synthetic_dirs) if synthetic is None else synthetic + cfg.monitor_windows
     syn = synthetic_windows(wanted, synthetic_dirs, seed=cfg.seed + 1, progress=progress)
-    syn_monitor, syn_train = syn.select(np.arange(min(cfg.monitor_windows, len(syn)))), syn.select(np.arange(min(cfg.monitor_windows, len(syn)), len(syn)))
+    monitored = min(cfg.monitor_windows, len(syn))
+    syn_monitor, syn_train = syn.select(np.arange(monitored)), syn.select(np.arange(monitored, len(syn)))
     pools = {"annotated_training_windows": annotated, "synthetic_held_out": syn_monitor}
     before = _monitor(model, pools, cfg.monitor_windows)
     anchor = frozen(copy.deepcopy(model)) if cfg.anchor_weight > 0 else None

@@ -184,7 +184,7 @@ def test_the_sensor_roi_spans_a_views_dithered_windows() -> None:
     source = RoiChunks(events)
     views, _ = run_on_change(gaze, events, source=source, dither_px=20, sensor_roi=True, scene_motion=False)
     assert views and source.rois
-    for x0, y0, w, h in source.rois:
+    for _x0, y0, w, h in source.rois:
         assert (w, h) == (200, 140) and y0 == 360 - 50 - 20  # the window 20 px up to 20 px down
 
 

@@ -20,7 +20,7 @@ from websockets.asyncio.client import connect
 from darkread.proto.errors import CloseCode
 from darkread.proto.messages import Error, Frame, Hello, Welcome, decode, encode, pack_mask
 
-from .test_edge_to_cloud import API_KEY, Cloud, free_port, recording  # noqa: F401  # fixture
+from .test_edge_to_cloud import API_KEY, Cloud, free_port
 
 pytestmark = pytest.mark.slow
 

@@ -29,7 +29,7 @@ def spec(session_id: str, mode: str = "frames", device: str = "g") -> SessionSpe
     return SessionSpec(session_id, device, mode, (1280, 720), (100, 200))
 
 
-def frame(seq: int) -> FrameRecord:
+def frame(seq: int) -> StoredFrame:
     mask = np.zeros((100, 200), np.uint8)
     mask[seq % 100, :] = 1
     mask[:, seq % 200] = 1

@@ -38,8 +38,10 @@ def test_ink_pixels_with_events_on_them_separate_from_paper() -> None:
 
 
 def test_the_table_groups_by_lux_and_motion() -> None:
-    row = lambda lux, motion, s: Evidence(f"{lux}{motion}", lux, motion, 3, {"measured/1600": s, "exact/1600": s + 0.1},
-                                          {"measured/1600": s / 2, "exact/1600": 0.0})
+    def row(lux: float, motion: str, s: float) -> Evidence:
+        return Evidence(f"{lux}{motion}", lux, motion, 3, {"measured/1600": s, "exact/1600": s + 0.1},
+                        {"measured/1600": s / 2, "exact/1600": 0.0})
+
     lines = evidence_table([row(10.0, "still", 0.8), row(10.0, "walking", 0.6), row(5.0, "still", 0.5)], lengths=(1600,))
     assert lines[0].count("|") == 7 and "| 10 | **all** | 2 | 0.700 | 0.800 | 35% |" in lines
     assert lines.index("| 10 | **all** | 2 | 0.700 | 0.800 | 35% |") < lines.index("| 5 | still | 1 | 0.500 | 0.600 | 25% |")

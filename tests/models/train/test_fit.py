@@ -22,7 +22,7 @@ def _tiny_config(**overrides) -> FitConfig:
 def test_a_few_steps_reduce_the_loss(fake_dataset, tmp_path: Path) -> None:
     root = fake_dataset(shards=1, per_shard=40)
     losses: list[float] = []
-    fit(root, tmp_path / "run", _tiny_config(max_epochs=3), progress=False, on_step=lambda s, l: losses.append(l))
+    fit(root, tmp_path / "run", _tiny_config(max_epochs=3), progress=False, on_step=lambda _step, loss: losses.append(loss))
     assert len(losses) >= 20
     assert np.mean(losses[-4:]) < 0.8 * np.mean(losses[:4])
 
