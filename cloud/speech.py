@@ -161,7 +161,7 @@ def synthesize_wav(text: str, voice: Voice, *, executable: str = "espeak-ng", ti
     timer.start()
     try:
         riff, truncated = _read_wav(process, text.encode(), max_seconds)
-        stderr = process.stderr.read() if process.stderr else b""  # type: ignore[union-attr]
+        stderr = process.stderr.read() if process.stderr else b""
         returncode = process.wait()
     finally:
         timer.cancel()
@@ -193,7 +193,7 @@ def _read_wav(process: subprocess.Popen[bytes], text: bytes, max_seconds: float 
         return (riff or None), False
     rate, channels, width = _format(riff)
     limit = None if max_seconds is None else WAV_HEADER_BYTES + int(max_seconds * rate) * channels * width
-    while chunk := process.stdout.read1(_READ_BYTES):
+    while chunk := process.stdout.read1(_READ_BYTES):  # type: ignore[attr-defined]  # a BufferedReader (bufsize -1); typeshed says IO[bytes]
         riff += chunk
         if limit is not None and len(riff) >= limit:
             del riff[limit:]

@@ -574,7 +574,7 @@ class Pipeline:
         lasted = self._fixation is not None and t_end - self._fixation >= self.gate.cfg.min_fixation_ms * 1e3
         if not len(self.fuser) and lasted and self._origin is not None:  # (not a landing the classifier revised)
             window = self._view_window(t_end)
-            if window is not None:
+            if window is not None and self._fixation is not None:
                 self._infer_into_view(window[0], window[1], t_end, self._fixation, arrival)
         if len(self.fuser):
             self._send_view(arrival)

@@ -23,7 +23,7 @@ import socket
 import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Awaitable, Iterator
 
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
@@ -253,7 +253,7 @@ class Uplink:
             if self._stopping or self.fatal_error:
                 break
             connected = self._connected_since is not None
-            lasted = connected and time.monotonic() - self._connected_since >= self.settings.stable_connection_s
+            lasted = self._connected_since is not None and time.monotonic() - self._connected_since >= self.settings.stable_connection_s
             if lasted:
                 # a connection that worked for a while: the next outage starts from a short delay again
                 delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
@@ -377,8 +377,8 @@ class Uplink:
             raise TimeoutError(f"no ack for {self.settings.ack_timeout_s:g} s with {cursor - self.acked_seq} "
                                "messages in flight")
 
-    async def _wait_any(self, receiver: asyncio.Task[None], awaitable: object, timeout_s: float) -> None:
-        waiter = asyncio.ensure_future(awaitable)  # type: ignore[arg-type]
+    async def _wait_any(self, receiver: asyncio.Task[None], awaitable: Awaitable[object], timeout_s: float) -> None:
+        waiter = asyncio.ensure_future(awaitable)
         try:
             await asyncio.wait({receiver, waiter}, timeout=timeout_s, return_when=asyncio.FIRST_COMPLETED)
         finally:

@@ -65,8 +65,8 @@ def threshold(levels: np.ndarray, n_levels: int = N_LEVELS) -> np.ndarray:
 def doubt(probability: np.ndarray) -> float:
     """How unsure the network was of a frame: pixels between 0.2 and 0.8 per pixel above one half."""
     p = np.asarray(probability)
-    unsure = np.count_nonzero((p > 0.2) & (p < 0.8))
-    return unsure / max(np.count_nonzero(p > 0.5), 1)
+    unsure = int(np.count_nonzero((p > 0.2) & (p < 0.8)))
+    return unsure / max(int(np.count_nonzero(p > 0.5)), 1)
 
 
 def _crop(layer: np.ndarray, x0: int, y0: int, w: int, h: int) -> np.ndarray:

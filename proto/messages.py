@@ -548,8 +548,9 @@ def encode(message: Message) -> bytes:
     return msgpack.packb(payload, use_bin_type=True)
 
 
-def decode(data: bytes, *, max_bytes: int) -> Message:
-    """msgpack bytes -> a message; raises only ``ProtocolError`` subclasses on bad input."""
+def decode(data: bytes | str, *, max_bytes: int) -> Message:
+    """msgpack bytes -> a message; raises only ``ProtocolError`` subclasses on bad input (a text
+    websocket message among them)."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise MalformedMessageError(f"expected a binary message, got {type(data).__name__}")
     if len(data) > max_bytes:

@@ -20,7 +20,7 @@ from .records import StoreError
 
 log = logging.getLogger(__name__)
 
-Step = str | Callable[[Any], None]  # an SQL script, or a function of the backend's connection
+Step = str | Callable[[Any], object]  # an SQL script, or a function of the backend's connection
 
 
 class SchemaTarget(Protocol):

@@ -24,8 +24,11 @@ from darkread.edge.io.intrinsics import Intrinsics, intrinsics_from_dict
 
 
 class Camera(Protocol):
-    width: int
-    height: int
+    @property
+    def width(self) -> int: ...
+
+    @property
+    def height(self) -> int: ...
 
     def project(self, points_camera: np.ndarray) -> np.ndarray: ...
 

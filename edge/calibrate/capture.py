@@ -95,7 +95,7 @@ def paired_views(
             logger.info("no RGB frame fully inside the shown interval at %.0f us", on)
             continue
         rgb_det = None
-        for k in sorted(inside, key=lambda i: abs(i - inside.mean())):
+        for k in sorted(inside.tolist(), key=lambda i: abs(i - inside.mean())):
             rgb_det = detect_board(frames.images[k], spec)
             if rgb_det is not None:
                 break

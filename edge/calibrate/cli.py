@@ -207,6 +207,7 @@ def _extrinsics(args: argparse.Namespace) -> int:
     import numpy as np
 
     from darkread.edge.calibrate.cameras import (
+        Camera,
         aria_camera_from_device_calibration,
         matrix_from_list,
         pose_from_aria_json,
@@ -237,13 +238,14 @@ def _extrinsics(args: argparse.Namespace) -> int:
     if args.homography_only:
         event_det, rgb_det = page_view(data.events, bursts, frames, calib.gaze_to_event_time_offset_us, spec,
                                        data.width, data.height)
-        result = page_homography(event_det, rgb_det)
+        homography = page_homography(event_det, rgb_det)
         logger.warning("homography fallback: valid only for points on this page; calibration.json is not changed")
-        return _finish(args, result.to_dict())
+        return _finish(args, homography.to_dict())
     pairs = paired_views(data.events, bursts, frames, calib.gaze_to_event_time_offset_us, spec, data.width, data.height)
     if not pairs:
         raise CalibrationError("the board was not found in both cameras at the same time (run `calibrate clock` first?)")
     event_camera = calib.intrinsics()
+    rgb_camera: Camera
     if args.aria_calibration:
         if not args.t_device_cpf:
             raise CalibrationError("--aria-calibration needs --T-device-cpf (the CPF pose in the device frame)")

@@ -121,8 +121,8 @@ def pose_segments(images: Sequence[np.ndarray], *, min_overlap: float = 0.8) -> 
     masks = [cv2.threshold(im, 0, 1, cv2.THRESH_BINARY + cv2.THRESH_OTSU)[1].astype(bool) for im in stack]
     ids = np.zeros(len(masks), dtype=np.int64)
     for i in range(1, len(masks)):
-        union = np.count_nonzero(masks[i] | masks[i - 1])
-        overlap = np.count_nonzero(masks[i] & masks[i - 1]) / max(union, 1)
+        union = int(np.count_nonzero(masks[i] | masks[i - 1]))
+        overlap = int(np.count_nonzero(masks[i] & masks[i - 1])) / max(union, 1)
         ids[i] = ids[i - 1] + (overlap < min_overlap)
     return ids
 
@@ -285,12 +285,12 @@ def fit_offset(
     pred = predicted_fractions(switch_event - offset, shown_after, t, e)
     mixed = (pred > 0.02) & (pred < 0.98)
     # jackknife over switches: drop one switch and the frames within a period of it
-    estimates = []
+    left_out = []
     for k in range(switch_event.size):
         keep_sw = np.arange(switch_event.size) != k
         near = np.abs(t - (switch_event[k] - offset)) < period + e
-        estimates.append(refine(switch_event[keep_sw], shown_after[keep_sw], t[~near], e[~near], m[~near], offset, period / 4))
-    estimates = np.asarray(estimates)
+        left_out.append(refine(switch_event[keep_sw], shown_after[keep_sw], t[~near], e[~near], m[~near], offset, period / 4))
+    estimates = np.asarray(left_out)
     n = estimates.size
     jack = float(np.sqrt((n - 1) / n * np.sum((estimates - estimates.mean()) ** 2)))
     return ClockResult(

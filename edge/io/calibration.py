@@ -7,7 +7,7 @@ where it sits on the glasses and the clock offset to the gaze.
 from __future__ import annotations
 
 import json
-from dataclasses import astuple, dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -83,7 +83,7 @@ def load_calibration(path: str | Path) -> Calibration:
         raise CalibrationError(f"{path}: rgb_camera must be a JSON object")
 
     return Calibration(
-        *astuple(camera),
+        **{f.name: getattr(camera, f.name) for f in fields(camera)},
         T_event_cpf=_matrix4(_get(doc, "T_event_cpf", "", path), "T_event_cpf", path),
         gaze_to_event_time_offset_us=offset,
         rgb_camera=rgb,

@@ -35,8 +35,8 @@ def make_ocr_backend(name: str) -> Any:
     from darkread.cloud.settings import Settings
 
     if name.endswith(RAW_SUFFIX):
-        return create_backend(Settings(ocr_backend=name.removesuffix(RAW_SUFFIX), ocr_lexicon=False))  # type: ignore[arg-type]
-    return create_backend(Settings(ocr_backend=name))  # type: ignore[arg-type]
+        return create_backend(Settings(ocr_backend=name.removesuffix(RAW_SUFFIX), ocr_lexicon=False))
+    return create_backend(Settings(ocr_backend=name))
 
 
 def remote_configured(name: str) -> bool:
@@ -164,10 +164,14 @@ def evaluate_recording(
         if not page_png:
             raise RuntimeError("no stitched page to read")
         page = read_image(page_png)
+
+        def read_with(name: str) -> dict[str, Any]:
+            return {"text": engine(name).read(page).text}
+
         out = {}
         for name in compare:
             started = time.perf_counter()
-            text = _guard(f"{name} on the page", lambda name=name: {"text": engine(name).read(page).text})
+            text = _guard(f"{name} on the page", partial(read_with, name))
             if "text" in text:
                 rates = error_rates(reference, text["text"])
                 text.update(cer=rates.cer, wer=rates.wer, seconds=round(time.perf_counter() - started, 2))

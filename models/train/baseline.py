@@ -32,7 +32,7 @@ def activity(voxels: np.ndarray) -> np.ndarray:
 
 
 def _smooth(image: np.ndarray, median: int, blur: int) -> np.ndarray:
-    out = image.astype(np.float32)
+    out: np.ndarray = image.astype(np.float32)
     if median > 1:
         out = cv2.medianBlur(out, median)
     if blur > 1:
