@@ -107,9 +107,9 @@ class KeyRecord:
                 "sha256": self.sha256, "created_s": self.created_s}
 
     @classmethod
-    def from_json(cls, item: dict[str, object]) -> KeyRecord:
-        return cls(str(item["id"]), str(item["device"]), parse_scopes(",".join(item["scopes"])),  # type: ignore[arg-type]
-                   str(item["sha256"]), float(item.get("created_s", 0.0)))  # type: ignore[arg-type]
+    def from_json(cls, item: dict[str, Any]) -> KeyRecord:
+        return cls(str(item["id"]), str(item["device"]), parse_scopes(",".join(item["scopes"])),
+                   str(item["sha256"]), float(item.get("created_s", 0.0)))
 
 
 class KeyRing:

@@ -61,7 +61,7 @@ class AppContext:
 
 
 def get_context(request: Request) -> AppContext:
-    return request.app.state.context  # type: ignore[no-any-return]
+    return request.app.state.context
 
 
 _header_key = APIKeyHeader(name="X-API-Key", auto_error=False, description="a darkread API key")

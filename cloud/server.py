@@ -7,15 +7,21 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import TypedDict
 
 import uvicorn
 from fastapi import FastAPI
 
 from .errors import ServiceStartError
 
+
+class WebsocketOptions(TypedDict):
+    ws_per_message_deflate: bool
+
+
 # Masks and views arrive compressed (zlib, PNG: proto/codecs.py); permessage-deflate on top of them
 # costs CPU on both ends for a few bytes, so the service never negotiates it.
-WEBSOCKET_OPTIONS = {"ws_per_message_deflate": False}
+WEBSOCKET_OPTIONS: WebsocketOptions = {"ws_per_message_deflate": False}
 
 
 @dataclass(frozen=True)

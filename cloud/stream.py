@@ -222,7 +222,7 @@ class StreamConnection:
 
 def session_spec(hello: Hello) -> SessionSpec:
     """What the store keeps of a hello: the session, its owner (device and stream) and geometry."""
-    return SessionSpec(hello.session_id, hello.device_id, hello.mode, tuple(hello.sensor), tuple(hello.fovea),
+    return SessionSpec(hello.session_id, hello.device_id, hello.mode, (hello.sensor[0], hello.sensor[1]), (hello.fovea[0], hello.fovea[1]),
                        stream_id=hello.stream_id or "")  # fmt: skip
 
 
@@ -261,7 +261,8 @@ async def stream_endpoint(websocket: WebSocket) -> None:
         try:
             await connection.receiver
         except asyncio.CancelledError:
-            if not connection.taken_over or asyncio.current_task().cancelling():  # type: ignore[union-attr]
+            task = asyncio.current_task()  # (this coroutine's: never None here)
+            if not connection.taken_over or (task is not None and task.cancelling()):
                 raise
             await outbox.put(_Close(CloseCode.TAKEN_OVER, "a newer connection of this stream took the session over"))
     finally:

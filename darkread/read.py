@@ -119,12 +119,12 @@ def read_recording(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     api_key = secrets.token_urlsafe(16)
-    settings = Settings(data_dir=out / "cloud", api_key=SecretStr(api_key), ocr_backend=backend,  # type: ignore[arg-type]
+    settings = Settings(data_dir=out / "cloud", api_key=SecretStr(api_key), ocr_backend=backend,
                         ocr_lexicon=lexicon, ask_catch_up_s=drain_timeout_s)  # the answer covers every frame
     stages: dict[str, float] = {}
     with serve_in_thread(create_app(settings)) as server:
         stages["cloud_start"] = time.perf_counter() - started
-        overrides = {
+        overrides: dict[str, dict[str, Any]] = {
             "source": {"kind": "replay", "path": str(recording.path if recording.path.is_dir() else recording.raw_path), "speed": 0.0},
             "gaze": {"kind": "recording"},
             "pipeline": {"lossless": True, "infer": infer or default_infer_mode(), **({"model": str(model)} if model else {})},

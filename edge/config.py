@@ -15,7 +15,10 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from darkread.proto.messages import Mode
 
 ENV_PREFIX = "DARKREAD_EDGE_"
 
@@ -92,7 +95,7 @@ class UplinkConfig:
     api_key: str = ""
     device_id: str = ""  # empty: the host name
     session_id: str = ""  # empty: resume the spool's session if frames wait in it, else a new one
-    mode: str = "frames"  # "frames" (binary frames) or "pages" (stitched on the glasses)
+    mode: Mode = "frames"  # "frames" (binary frames) or "pages" (stitched on the glasses)
     spool_dir: str = ""  # empty: in memory (lost on restart)
     spool_max_mb: float = 256.0
     drain_timeout_s: float = 30.0

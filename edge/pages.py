@@ -48,5 +48,5 @@ class PageBuilder:
         if page.image.size == 0 or not page.image.any():
             return None
         shape, bits = pack_mask(page.image)
-        lines = tuple(tuple(map(int, box)) for box in page.lines)
+        lines = tuple((int(x0), int(y0), int(x1), int(y1)) for x0, y0, x1, y1 in page.lines)
         return Page(seq=0, page_id=0, t_us=int(t_us), shape=shape, bits=bits, lines=lines, enc="g4")  # v3: CCITT G4, the smallest

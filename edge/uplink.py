@@ -233,13 +233,13 @@ class Uplink:
                     logger.warning("uplink to %s lost: %s", url, self.last_error)
             except ConnectionClosed as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
-                code = exc.rcvd.code if exc.rcvd is not None else None
+                code, reason = (exc.rcvd.code, exc.rcvd.reason) if exc.rcvd is not None else (None, "")
                 if code in FATAL_CODES:
-                    self._fail(f"cloud refused session {self.session_id}: {self._cloud_error or exc.rcvd.reason}")  # type: ignore[union-attr]
+                    self._fail(f"cloud refused session {self.session_id}: {self._cloud_error or reason}")
                 else:
                     logger.warning("uplink to %s lost: %s", url, self.last_error)
-                if code in MESSAGE_REJECTED_CODES:
-                    self._rejected = (code, exc.rcvd.reason)  # type: ignore[union-attr]  # dropped after the next welcome
+                if code is not None and code in MESSAGE_REJECTED_CODES:
+                    self._rejected = (code, reason)  # dropped after the next welcome
             except (OSError, InvalidHandshake, TimeoutError, ProtocolError) as exc:
                 why = str(exc) or (f"no welcome within {self.settings.open_timeout_s:g} s (the cloud is busy or unreachable)"
                                    if isinstance(exc, TimeoutError) else "")  # fmt: skip
@@ -298,7 +298,7 @@ class Uplink:
             hello = Hello(
                 device_id=self.device_id,
                 session_id=self.session_id,
-                mode=s.mode,  # type: ignore[arg-type]
+                mode=s.mode,
                 sensor=self.sensor_wh,
                 fovea=self.fovea_hw,
                 resume_from_seq=self.acked_seq if self.acked_seq >= 0 else None,

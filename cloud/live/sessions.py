@@ -23,7 +23,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncGenerator, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -368,7 +368,7 @@ class LivePages:
             for wait in waits:
                 wait.cancel()
 
-    async def events(self, session_id: str) -> AsyncIterator[dict[str, Any]]:
+    async def events(self, session_id: str) -> AsyncGenerator[dict[str, Any], None]:
         pages = self.get(session_id)
         queue = pages.subscribe()
         try:

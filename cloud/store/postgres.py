@@ -201,7 +201,7 @@ class _PostgresSchema:
                 step(self.conn)
             else:
                 for statement in statements(step):
-                    self.conn.execute(statement)  # type: ignore[call-overload]
+                    self.conn.execute(statement)
             self.conn.execute("DELETE FROM schema_version")
             self.conn.execute("INSERT INTO schema_version (version) VALUES (%s)", (new_version,))
 
@@ -454,7 +454,7 @@ class PostgresStore:
         self._check_open()
         try:
             async with self.pool.connection() as conn:
-                cursor = await conn.execute(query, args)  # type: ignore[arg-type]
+                cursor = await conn.execute(query, args)
                 return await cursor.fetchall()
         except _DB_ERRORS as exc:
             raise StoreError(f"read failed: {_first_line(exc)}") from exc

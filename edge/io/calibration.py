@@ -37,7 +37,7 @@ class Calibration(Intrinsics):
             self.T_event_cpf, other.T_event_cpf
         )
 
-    __hash__ = None  # type: ignore[assignment]
+    __hash__ = None  # type: ignore[assignment]  # unhashable, as its equality compares arrays; mypy wants a method here
 
     def cpf_to_event(self, points_cpf: np.ndarray) -> np.ndarray:
         """(N, 3) CPF points -> (N, 3) event-camera-frame points."""

@@ -33,9 +33,10 @@ class AckServer:
         return int(self.server.sockets[0].getsockname()[1])
 
     async def _handle(self, ws) -> None:
-        from darkread.proto.messages import Ack, Welcome, decode, encode
+        from darkread.proto.messages import Ack, Hello, Welcome, decode, encode
 
         hello = decode(await ws.recv(), max_bytes=MAX_BYTES)
+        assert isinstance(hello, Hello)  # the uplink opens with hello
         self.hellos.append(hello)
         seqs = self.stored.setdefault(hello.session_id, [])
         last = seqs[-1] if seqs else -1

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -101,8 +102,9 @@ def repeated(frames: list[StoredFrame], count: int, first_seq: int = 0) -> list[
 def to_wire(frame: StoredFrame) -> bytes:
     """The stored record as the glasses sent it: a fused view with its levels (it may be larger
     than the fovea), or a binary frame."""
-    extra = {"seq": frame.seq, "gaze_rad": frame.gaze_rad, "events_used": frame.events_used}
-    return encode(Frame.of(frame, **extra) if frame.levels is None else View.of(frame, **extra))
+    if frame.levels is None:
+        return encode(Frame.of(frame, seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used))
+    return encode(View.of(frame, seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used))
 
 
 def preload(data_dir: Path, session_id: str, frames: list[StoredFrame]) -> None:
@@ -193,7 +195,7 @@ async def _wait_rebuilt(base: str, session_id: str, timeout_s: float) -> float:
     return time.perf_counter() - started
 
 
-def _server(ctx: BenchContext, name: str, ocr_threads: int = ASK_OCR_THREADS) -> tuple[object, str]:
+def _server(ctx: BenchContext, name: str, ocr_threads: int = ASK_OCR_THREADS) -> tuple[subprocess.Popen[bytes], str]:
     """The service in its own process, once /readyz says its OCR engines are loaded."""
     import httpx
 
@@ -236,7 +238,7 @@ def from_scratch_ms(frames: list[StoredFrame]) -> tuple[float, float]:
     from darkread.cloud.settings import Settings
     from darkread.stitch import stitch_page
 
-    ocr = create_backend(Settings(_env_file=None))  # type: ignore[call-arg]
+    ocr = create_backend(Settings(_env_file=None))
     ocr.ready()
     started = time.perf_counter()
     page = stitch_page(frames)
@@ -253,10 +255,10 @@ def reading_cpu(ctx: BenchContext, frames: list[StoredFrame], kind: str) -> tupl
     name = f"cpu-{kind}"
     process, base = _server(ctx, name)
     try:
-        cpu0 = cpu_seconds(process.pid)  # type: ignore[attr-defined]
+        cpu0 = cpu_seconds(process.pid)
         asyncio.run(stream_and_ask(base, name, stream, WEARER_ASK_EVERY_S))
         asyncio.run(_wait_rebuilt(base, name, timeout_s=600))  # questions do not wait for stitching: the CPU must
-        cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000  # type: ignore[attr-defined]
+        cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000
     finally:
         stop_server(process)
     reading_s = (stream[-1].t_us - stream[0].t_us) / 1e6
@@ -297,10 +299,10 @@ def run(ctx: BenchContext) -> list[Figure]:
         process, base = _server(ctx, name)
         try:
             rebuild_s = asyncio.run(_wait_rebuilt(base, name, timeout_s=1800)) if size > len(frames) else 0.0
-            cpu0 = cpu_seconds(process.pid)  # type: ignore[attr-defined]
+            cpu0 = cpu_seconds(process.pid)
             latencies = asyncio.run(stream_and_ask(base, name, live, ASK_EVERY_S))
             behind_s = asyncio.run(_wait_rebuilt(base, name, timeout_s=600))  # every frame stitched, its CPU counted
-            cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000  # type: ignore[attr-defined]
+            cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000
         finally:
             stop_server(process)
         ctx.notes.append(f"ask {size}: {len(latencies)} answers, max {max(latencies):.0f} ms, pages rebuilt from "

@@ -143,7 +143,7 @@ def ink_found(predicted: np.ndarray, target: np.ndarray, tolerance_px: int = TOL
     """(true ink found, true ink, predicted ink near true ink, predicted ink), within ``tolerance_px``."""
     kernel = np.ones((2 * tolerance_px + 1, 2 * tolerance_px + 1), np.uint8)
     pred, true = predicted.astype(np.uint8), target.astype(np.uint8)
-    near_pred, near_true = cv2.dilate(pred, kernel), cv2.dilate(true, kernel)
+    near_pred, near_true = np.asarray(cv2.dilate(pred, kernel), np.uint8), np.asarray(cv2.dilate(true, kernel), np.uint8)
     return (int((true & near_pred).sum()), int(true.sum()), int((pred & near_true).sum()), int(pred.sum()))
 
 
@@ -166,7 +166,7 @@ def attribute_recording(recording: Path, read_dir: Path, read_page: Callable[[np
         rays = window_rays(truth.calibration, origin, frame.mask.shape)
         ideal.append(window_truth(truth, rays, frame.mask.shape, H))
         placements.append(place_window(truth, rays, origin, frame.mask.shape, H))
-    counts = np.array([ink_found(m, i) for m, i in zip(masks, ideal, strict=True)] or [[0, 0, 0, 0]], np.int64).sum(axis=0)
+    counts = np.array([ink_found(m, i) for m, i in zip(masks, ideal, strict=True)] or [(0, 0, 0, 0)], np.int64).sum(axis=0)
     reference = (recording / "text.txt").read_text(encoding="utf-8")
 
     def cer(page: np.ndarray) -> float:

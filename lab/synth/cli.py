@@ -93,6 +93,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _dataset(args: argparse.Namespace) -> int:
+    from darkread.models.synth.session import LUX_RANGE
     from darkread.models.synth.shards import build_dataset
 
     manifest = build_dataset(
@@ -105,7 +106,7 @@ def _dataset(args: argparse.Namespace) -> int:
         shard_size=args.shard_size,
         target_time=args.target_time,
         more_fonts=args.more_fonts,
-        **({"lux_range": (args.lux[0], args.lux[1])} if args.lux else {}),
+        lux_range=(args.lux[0], args.lux[1]) if args.lux else LUX_RANGE,
     )
     print(f"{manifest['samples']} samples in {len(manifest['shards'])} shards -> {args.out} "
           f"({manifest['samples_per_s']} samples/s)")

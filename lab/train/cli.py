@@ -48,7 +48,7 @@ def _net_config(args: argparse.Namespace):  # -> NetConfig
     head = getattr(args, "head", None) or base.head
     widths = tuple(getattr(args, "widths", None) or base.widths)
     blocks = tuple(getattr(args, "blocks", None) or base.blocks)
-    return NetConfig(widths=widths, blocks=blocks, head=head)  # type: ignore[arg-type]
+    return NetConfig(widths=widths, blocks=blocks, head=head)
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:

@@ -162,7 +162,7 @@ class EventSensor:
         self.hot_idx = rng.choice(n, size=n_hot, replace=False) if n_hot else np.zeros(0, dtype=np.int64)
         self.hot_rate = rng.uniform(0.3, 1.0, n_hot) * params.hot_rate_hz
         self.ref = np.zeros(n, dtype=np.float32)
-        self.lp = np.zeros(n, dtype=np.float32)
+        self.lp: np.ndarray = np.zeros(n, dtype=np.float32)
         self.last_t = np.full(n, -1e18)
         self.t = 0.0
         self._ready = False
@@ -327,7 +327,7 @@ def concat_events(parts: list[np.ndarray]) -> np.ndarray:
     if not parts:
         return empty_events()
     out = np.empty(sum(p.size for p in parts), dtype=EVENT_CD_DTYPE)
-    for name in EVENT_CD_DTYPE.names:
+    for name in EVENT_CD_DTYPE.names or ():
         np.concatenate([p[name] for p in parts], out=out[name])
     return out
 

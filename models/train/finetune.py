@@ -118,7 +118,7 @@ def synthetic_windows(n: int, sources: Sequence[str | Path] = (), seed: int = 0,
     if n <= 0:
         return Shard(np.zeros((0, 4, 100, 200), np.float16), np.zeros((0, 100, 200), np.uint8), {})
     if sources:
-        parts = []
+        parts: list[Shard] = []
         for source in sources:
             left = n - sum(len(p) for p in parts)
             if left <= 0:
@@ -131,7 +131,8 @@ def synthetic_windows(n: int, sources: Sequence[str | Path] = (), seed: int = 0,
     from darkread.models.synth.shards import SAMPLES_PER_PAGE, make_samples, shard_seed
 
     spec = SessionSpec(split="train", duration_s=4.0)
-    vs, ts = [], []
+    vs: list[np.ndarray] = []
+    ts: list[np.ndarray] = []
     with tqdm(total=n, desc="synthetic windows", unit="window", disable=not progress) as bar:
         page = 0
         while sum(len(v) for v in vs) < n:
