@@ -82,7 +82,7 @@ class TesseractBackend:
         except OcrError:
             return False
         try:
-            import pytesseract  # noqa: F401
+            import pytesseract  # noqa: F401  # imported only to learn whether it is installed
         except ImportError:
             return False
         return shutil.which("tesseract") is not None

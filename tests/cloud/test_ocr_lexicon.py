@@ -101,11 +101,11 @@ def test_wrapper_corrects_text_and_lines_and_keeps_the_engine_reachable() -> Non
     assert [line.text for line in result.lines] == result.text.split("\n")
     assert result.lines[1].box == (0, 10, 50, 18) and result.lines[1].confidence == 0.9
     assert wrapped.ready() and wrapped.name == "engine+lexicon"
-    wrapped.close()  # type: ignore[attr-defined]
+    wrapped.close()
     assert engine.closed
 
 
 def test_settings_switch_the_correction() -> None:
-    on = create_backend(Settings(_env_file=None, ocr_backend="tesseract"))  # type: ignore[call-arg]
-    off = create_backend(Settings(_env_file=None, ocr_backend="tesseract", ocr_lexicon=False))  # type: ignore[call-arg]
+    on = create_backend(Settings(_env_file=None, ocr_backend="tesseract"))
+    off = create_backend(Settings(_env_file=None, ocr_backend="tesseract", ocr_lexicon=False))
     assert isinstance(on, LexiconCorrected) and not isinstance(off, LexiconCorrected)

@@ -5,6 +5,7 @@ import threading
 import time
 import urllib.request
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -28,9 +29,9 @@ def ink_where_events(voxel: np.ndarray) -> np.ndarray:
     return (np.abs(voxel).sum(axis=0) > 0).astype(np.uint8)
 
 
-def every_window(**settings: object) -> PipelineConfig:
+def every_window(**settings: Any) -> PipelineConfig:
     """This module tests the every-window loop (a frame per n_events); on-change: test_view_trigger.py."""
-    return PipelineConfig(infer="every-window", **settings)  # type: ignore[arg-type]
+    return PipelineConfig(infer="every-window", **settings)
 
 
 class FixedGaze:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from darkread.edge.config import PipelineConfig
@@ -93,13 +95,13 @@ def the_same_text(grid: np.ndarray) -> np.ndarray:
     return glyphs(grid.shape[1:])
 
 
-def run_on_change(gaze: ScanGaze, events: Events, infer=the_same_text, source=None, **settings: object):
+def run_on_change(gaze: ScanGaze, events: Events, infer=the_same_text, source=None, **settings: Any):
     """Views of one lossless replay. The frames stay in the view's window (``dither_px`` 0) unless
     asked: ``the_same_text`` sees the same words wherever the window is."""
     views: list[tuple[ViewRecord, float]] = []
     source = source or Chunks(events)
     settings = {"dither_px": 0, **settings}
-    config = PipelineConfig(lossless=True, infer="on-change", **settings)  # type: ignore[arg-type]
+    config = PipelineConfig(lossless=True, infer="on-change", **settings)
     metrics = EdgeMetrics()
     pipeline = Pipeline(source, gaze, infer, lambda v, t: views.append((v, t)), config, metrics=metrics)
     pipeline.start()

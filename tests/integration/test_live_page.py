@@ -76,7 +76,7 @@ def browser(tmp_path: Path) -> Iterator[Any]:
 
 @pytest.fixture
 def cloud(tmp_path: Path) -> Iterator[Any]:
-    settings = Settings(_env_file=None, data_dir=tmp_path / "cloud", api_key=SecretStr(API_KEY))  # type: ignore[call-arg]
+    settings = Settings(_env_file=None, data_dir=tmp_path / "cloud", api_key=SecretStr(API_KEY))
     with serve_in_thread(create_app(settings)) as server:
         yield server
 

@@ -365,7 +365,7 @@ def test_numbered_is_replace_of_the_seq_alone(kind: str, seq: int) -> None:
 @pytest.mark.parametrize("seq", [-1, 2**63, "3", 1.5, True])
 def test_numbered_refuses_a_wild_seq(seq: object) -> None:
     with pytest.raises(InvalidFieldError):
-        EXAMPLES["frame"].numbered(seq)  # type: ignore[arg-type]
+        EXAMPLES["frame"].numbered(seq)  # type: ignore[arg-type]  # a wrong type, on purpose
 
 
 def test_the_scene_motion_is_an_optional_field_of_frames_and_views() -> None:
