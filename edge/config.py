@@ -65,7 +65,7 @@ class PipelineConfig:
     # light a window spans 20-50 ms and a moving head smears its strokes over 4-10 px
     deblur: bool = True
     # drop a dim-light window's isolated events, shot noise, before its voxel grid (edge.denoise):
-    # at 5-10 lux a quarter to half of them have no event on the pixels around them
+    # in dim light many of them have no event on the pixels around them (docs/denoise.md)
     denoise: bool = True
     # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
     # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
@@ -74,7 +74,7 @@ class PipelineConfig:
     settled_interval_ms: float = 400.0  # ... and per this much once a frame agreed with it (the view is sent first: one more frame adds little)
     settled_score: float = 0.85  # agreed: the frame registered onto its view at least this well (its match score) ...
     # ... and the network was this sure of it (view_fusion.doubt at most this): doubtful frames (dim light,
-    # small text) agree and are still noisy, so their views take every frame (10 lux 42.5 -> 39.9 %, 100 lux 3.7 -> 3.0 %)
+    # small text) agree and are still noisy, so their views take every frame (what it gains: docs/views.md)
     settle_max_doubt: float = 1.1
     renew_fraction: float = 0.5  # on-change: infer again once this share of n_events is new (windows overlap by the rest:
     # in dim light the frames that do not agree are what the page is averaged from; 1.0 read 10 and 5 lux worse) ...

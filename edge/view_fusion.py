@@ -28,7 +28,7 @@ from darkread.stitch.register import register_frame
 N_LEVELS = 8  # the mean of up to ~7 frames to within half a step; few levels compress well in a PNG
 SEARCH_RADIUS_PX = 12  # head drift between two frames of a fixation (50-100 ms apart), beyond the sensor's offset
 MIN_SCORE = 0.8  # a weaker match: the frame starts a new view (the stitcher places it on its own) rather than blur this one
-# (0.6 let low-light frames that matched noise blur their views: 10 lux read at 60 % CER, not 18 %)
+# (0.6 let low-light frames that matched noise blur their views: docs/views.md)
 MARGIN_PX = 32  # the fused canvas reaches this far beyond the first frame's window (head drift in a fixation)
 # a frame whose network doubts more than this (pixels of probability 0.2-0.8 per ink pixel) is
 # averaged in as its mask: measured 1.1-1.5 at 100 lux, ~1.55 at 30, ~2 at 10, 2-3 at 5 lux, where
