@@ -10,9 +10,9 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
+from prometheus_client import make_asgi_app
 from starlette.types import ASGIApp, Receive, Send
 from starlette.types import Scope as Scope_
-from prometheus_client import make_asgi_app
 
 from darkread import __version__
 
@@ -21,9 +21,9 @@ from .auth import KeyRing, Scope, install_log_redaction
 from .context import AppContext
 from .errors import StoreError
 from .guard import RequestGuard
-from .prometheus import Metrics
-from .ocr import OcrBackend, create_backend
 from .live import LiveConfig, LivePages, PagingConfig
+from .ocr import OcrBackend, create_backend
+from .prometheus import Metrics
 from .routes import api, public
 from .settings import Settings, get_settings
 from .store import open_store
@@ -86,7 +86,7 @@ async def _sweep_forever(context: AppContext) -> None:
         await asyncio.sleep(interval)
         try:
             await expire_sessions(context)
-        except Exception as exc:  # noqa: BLE001 - the sweep retries next time
+        except Exception as exc:  # the sweep retries next time
             log.warning("session sweep failed: %s", exc)
 
 

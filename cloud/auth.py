@@ -25,7 +25,7 @@ import secrets
 import time
 from collections.abc import Iterable, MutableMapping
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +37,7 @@ KEY_PREFIX = "drk"
 _KEY = re.compile(rf"^{KEY_PREFIX}_([0-9a-f]{{8}})_[A-Za-z0-9_-]{{20,}}$")
 
 
-class Scope(str, Enum):
+class Scope(StrEnum):
     STREAM = "stream"
     READ = "read"
     ADMIN = "admin"
@@ -109,9 +109,9 @@ class KeyRecord:
                 "sha256": self.sha256, "created_s": self.created_s}
 
     @classmethod
-    def from_json(cls, item: dict[str, object]) -> KeyRecord:
-        return cls(str(item["id"]), str(item["device"]), parse_scopes(",".join(item["scopes"])),  # type: ignore[arg-type]
-                   str(item["sha256"]), float(item.get("created_s", 0.0)))  # type: ignore[arg-type]
+    def from_json(cls, item: dict[str, Any]) -> KeyRecord:
+        return cls(str(item["id"]), str(item["device"]), parse_scopes(",".join(item["scopes"])),
+                   str(item["sha256"]), float(item.get("created_s", 0.0)))
 
 
 class KeyRing:

@@ -8,6 +8,11 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from darkread.cloud.auth import KeyRing
+    from darkread.cloud.settings import Settings
 
 from darkread.cloud.ocr.base import OCR_BACKENDS
 
@@ -23,7 +28,7 @@ service picks up added and revoked keys without a restart.
 """
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(subparsers: argparse._SubParsersAction) -> None:
     cloud = subparsers.add_parser(
         "cloud",
         help="the cloud service (websocket ingest, stitching, OCR)",
@@ -72,13 +77,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     revoke.set_defaults(func=_keys_revoke)
 
 
-def _settings(args: argparse.Namespace) -> object:
+def _settings(args: argparse.Namespace) -> Settings:
     """Settings from the environment and options; a bad value is one line and exit 2."""
     from pydantic import ValidationError
 
     from darkread.cloud.settings import Settings
 
-    overrides: dict[str, object] = {}
+    overrides: dict[str, Any] = {}  # option values, as argparse parsed them
     for option, field in (("data_dir", "data_dir"), ("api_key", "api_key"), ("database_url", "database_url"),
                           ("ocr", "ocr_backend")):  # fmt: skip
         value = getattr(args, option, None)
@@ -87,7 +92,7 @@ def _settings(args: argparse.Namespace) -> object:
     if getattr(args, "insecure", False):
         overrides["insecure"] = True
     try:
-        return Settings(**overrides)  # type: ignore[arg-type]
+        return Settings(**overrides)
     except ValidationError as exc:
         first = exc.errors()[0]
         raise _UsageError(f"{'.'.join(map(str, first['loc'])) or 'settings'}: {first['msg']}") from None
@@ -111,14 +116,14 @@ def _serve(args: argparse.Namespace) -> int:
         settings = _settings(args)
     except _UsageError as exc:
         return _fail(str(exc))
-    has_keys = settings.api_key is not None or bool(KeyRing(settings.keys_path()))  # type: ignore[attr-defined]
+    has_keys = settings.api_key is not None or bool(KeyRing(settings.keys_path()))
     if not has_keys and not is_loopback(args.host) and not args.insecure:
         return _fail(
             f"refusing to serve {args.host} without an API key: set DARKREAD_API_KEY (an admin key) or add device "
             "keys with `darkread cloud keys add --device ID --scope stream,read`; or bind 127.0.0.1, or pass "
             "--insecure on a closed network"
         )
-    api_key = settings.api_key  # type: ignore[attr-defined]
+    api_key = settings.api_key
     if api_key is not None and len(api_key.get_secret_value()) < MIN_API_KEY_CHARS and not is_loopback(args.host):
         return _fail(
             f"refusing to serve {args.host} with a {len(api_key.get_secret_value())}-character API key: beyond "
@@ -131,47 +136,47 @@ def _serve(args: argparse.Namespace) -> int:
     from darkread.cloud import datadir
     from darkread.cloud.app import create_app
     from darkread.cloud.errors import DataDirError
-    from darkread.cloud.server import UVICORN_LOGGING, WEBSOCKET_OPTIONS
+    from darkread.cloud.server import WEBSOCKET_OPTIONS
 
     try:  # before uvicorn: a bad data dir is one line, not a start-up traceback
-        datadir.check_data_dir(settings.data_dir)  # type: ignore[attr-defined]
-        held = datadir.acquire(settings.data_dir)  # type: ignore[attr-defined]
+        datadir.check_data_dir(settings.data_dir)
+        held = datadir.acquire(settings.data_dir)
     except DataDirError as exc:
         print(f"darkread: error: {exc}", file=sys.stderr)
         return 1
-    if settings.database_url is not None:  # type: ignore[attr-defined]
+    if settings.database_url is not None:
         from darkread.cloud.errors import StoreError
         from darkread.cloud.store.postgres import migrate_database
 
         try:  # a wrong URL or password: one line (without the password), before uvicorn starts
-            migrate_database(settings.database_url.get_secret_value())  # type: ignore[attr-defined]
+            migrate_database(settings.database_url.get_secret_value())
         except StoreError as exc:
             datadir.release(held)
             print(f"darkread: error: {exc}", file=sys.stderr)
             return 1
-    app = create_app(settings)  # type: ignore[arg-type]
+    app = create_app(settings)
     # uvicorn refuses larger websocket messages itself (close 1009); leave room so that our own
     # check answers first with an error message naming the limit.
     uvicorn.run(
         app,
         host=args.host,
         port=args.port,
-        ws_max_size=settings.max_message_bytes + 64 * 1024,  # type: ignore[attr-defined]
+        ws_max_size=settings.max_message_bytes + 64 * 1024,
         log_level=logging.getLevelName(logging.getLogger().getEffectiveLevel()).lower(),  # follows -v / -q
         access_log=False,
-        timeout_graceful_shutdown=settings.shutdown_timeout_s,  # type: ignore[attr-defined]
-        **UVICORN_LOGGING,
+        timeout_graceful_shutdown=settings.shutdown_timeout_s,  # type: ignore[arg-type]  # uvicorn says int; it waits with asyncio, a float works
+        log_config=None,  # uvicorn logs through darkread's handler (one format)
         **WEBSOCKET_OPTIONS,
     )
     datadir.release(held)
     return 0
 
 
-def _keyring(args: argparse.Namespace) -> object:
+def _keyring(args: argparse.Namespace) -> KeyRing:
     from darkread.cloud.auth import KeyRing
 
     settings = _settings(args)
-    return KeyRing(settings.keys_path())  # type: ignore[attr-defined]
+    return KeyRing(settings.keys_path())
 
 
 def _keys_add(args: argparse.Namespace) -> int:
@@ -182,10 +187,10 @@ def _keys_add(args: argparse.Namespace) -> int:
         ring = _keyring(args)
     except (ValueError, _UsageError) as exc:
         return _fail(str(exc))
-    key = ring.add(args.device, scopes)  # type: ignore[attr-defined]
+    key = ring.add(args.device, scopes)
     print(key)
     print(f"key for device {args.device!r} ({', '.join(sorted(s.value for s in scopes))}) added to "
-          f"{ring.path}; it is shown only now", file=sys.stderr)  # type: ignore[attr-defined]
+          f"{ring.path}; it is shown only now", file=sys.stderr)
     return 0
 
 
@@ -193,7 +198,7 @@ def _keys_list(args: argparse.Namespace) -> int:
     import time
 
     try:
-        records = _keyring(args).records()  # type: ignore[attr-defined]
+        records = _keyring(args).records()
     except (ValueError, _UsageError) as exc:
         return _fail(str(exc))
     for record in records:
@@ -204,7 +209,7 @@ def _keys_list(args: argparse.Namespace) -> int:
 
 def _keys_revoke(args: argparse.Namespace) -> int:
     try:
-        revoked = _keyring(args).revoke(args.key_id)  # type: ignore[attr-defined]
+        revoked = _keyring(args).revoke(args.key_id)
     except (ValueError, _UsageError) as exc:
         return _fail(str(exc))
     if not revoked:

@@ -11,8 +11,7 @@ from typing import TYPE_CHECKING, Any
 from fastapi import HTTPException, Request, Security, status
 from fastapi.security import APIKeyHeader, APIKeyQuery
 
-from .auth import ENVIRONMENT_ADMIN, LOOPBACK_DEVELOPER, KeyRing, Principal, Scope, is_loopback
-from .auth import UNAUTHORIZED, principal_of
+from .auth import ENVIRONMENT_ADMIN, LOOPBACK_DEVELOPER, UNAUTHORIZED, KeyRing, Principal, Scope, is_loopback, principal_of
 from .limits import PerKeyCap, RateLimiter, SingleFlight
 from .live import LivePages
 from .prometheus import Metrics
@@ -62,7 +61,7 @@ class AppContext:
 
 
 def get_context(request: Request) -> AppContext:
-    return request.app.state.context  # type: ignore[no-any-return]
+    return request.app.state.context
 
 
 _header_key = APIKeyHeader(name="X-API-Key", auto_error=False, description="a darkread API key")

@@ -362,7 +362,7 @@ async def _read(context: AppContext, info: SessionInfo, page: int | None) -> Ask
 
 
 def _rate_limit(context: AppContext, principal: Principal, bucket: str = "") -> None:
-    assert context.limiter is not None  # noqa: S101 - set in AppContext.__post_init__
+    assert context.limiter is not None  # set in AppContext.__post_init__
     wait_s = context.limiter.take(f"{principal.key_id}/{bucket}" if bucket else principal.key_id)
     if wait_s > 0:
         context.metrics.ask_errors.labels(reason="rate_limited").inc()

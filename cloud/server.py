@@ -7,19 +7,21 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import TypedDict
 
 import uvicorn
 from fastapi import FastAPI
 
 from .errors import ServiceStartError
 
+
+class WebsocketOptions(TypedDict):
+    ws_per_message_deflate: bool
+
+
 # Masks and views arrive compressed (zlib, PNG: proto/codecs.py); permessage-deflate on top of them
 # costs CPU on both ends for a few bytes, so the service never negotiates it.
-WEBSOCKET_OPTIONS = {"ws_per_message_deflate": False}
-# uvicorn's loggers go through darkread's handler (``darkread.cli.configure_logging``): one format
-# for every line, instead of uvicorn's own "INFO:     ..." lines beside darkread's.
-UVICORN_LOGGING = {"log_config": None}
-
+WEBSOCKET_OPTIONS: WebsocketOptions = {"ws_per_message_deflate": False}
 
 @dataclass(frozen=True)
 class RunningServer:
@@ -42,7 +44,8 @@ def serve_in_thread(
 ) -> Iterator[RunningServer]:
     """Start uvicorn with ``app`` (port 0 = a free one), yield once it listens, stop on exit."""
     config = uvicorn.Config(app, host=host, port=port, log_level="warning", ws_max_size=ws_max_size, lifespan="on",
-                            **UVICORN_LOGGING, **WEBSOCKET_OPTIONS)  # fmt: skip
+                            log_config=None,  # uvicorn logs through darkread's handler: one format for every line
+                            **WEBSOCKET_OPTIONS)  # fmt: skip
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="darkread-cloud", daemon=True)
     thread.start()

@@ -12,8 +12,8 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from darkread.proto.messages import DEFAULT_MAX_MESSAGE_BYTES
 
-from .origins import normalise_origin
 from .ocr.base import OcrBackendName
+from .origins import normalise_origin
 from .speech import VOICE_NAME_PATTERN, Voice
 
 OCR_PROMPT = (
@@ -75,7 +75,9 @@ class Settings(BaseSettings):
         0.0, ge=0, description="skip frames this close in time to the last stitched one at the same gaze (0 = stitch all)"
     )
     stitch_threads: int = Field(2, ge=1, description="threads stitching frames into pages (all sessions)")
-    ocr_threads: int = Field(1, ge=1, description="threads rendering and reading pages (all sessions), each with its own offline OCR engine: up to one per core")
+    ocr_threads: int = Field(
+        1, ge=1, description="threads rendering and reading pages (all sessions), each with its own offline OCR engine: up to one per core"
+    )
 
     # OCR. "local" is the embedded rapidocr engine.
     ocr_backend: OcrBackendName = "local"

@@ -146,7 +146,7 @@ def synthesize_wav(text: str, voice: Voice, *, executable: str = "espeak-ng", ti
     there). Blocking: run it on the speech threads."""
     command = [engine_path(executable), "-v", voice.espeak_name, "-s", str(voice.rate_wpm), "--stdout"]
     try:
-        process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # noqa: S603
+        process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     except OSError as exc:
         raise SpeechUnavailableError(f"speech engine {executable!r} could not run: {exc.strerror}") from None
     with contextlib.suppress(OSError):  # synthesis yields the CPU to the service's own work (store reads, asks)
@@ -161,7 +161,7 @@ def synthesize_wav(text: str, voice: Voice, *, executable: str = "espeak-ng", ti
     timer.start()
     try:
         riff, truncated = _read_wav(process, text.encode(), max_seconds)
-        stderr = process.stderr.read() if process.stderr else b""  # type: ignore[union-attr]
+        stderr = process.stderr.read() if process.stderr else b""
         returncode = process.wait()
     finally:
         timer.cancel()
@@ -182,7 +182,7 @@ def synthesize_wav(text: str, voice: Voice, *, executable: str = "espeak-ng", ti
 
 def _read_wav(process: subprocess.Popen[bytes], text: bytes, max_seconds: float | None) -> tuple[bytearray | None, bool]:
     """The engine's WAV read into one buffer; stops (and stops the engine) at ``max_seconds``."""
-    assert process.stdin is not None and process.stdout is not None  # noqa: S101 - both are pipes
+    assert process.stdin is not None and process.stdout is not None  # both are pipes
     try:  # a part's text is a few kB: it fits the pipe, so writing first cannot wait on our reading
         process.stdin.write(text)
         process.stdin.close()
@@ -193,7 +193,7 @@ def _read_wav(process: subprocess.Popen[bytes], text: bytes, max_seconds: float 
         return (riff or None), False
     rate, channels, width = _format(riff)
     limit = None if max_seconds is None else WAV_HEADER_BYTES + int(max_seconds * rate) * channels * width
-    while chunk := process.stdout.read1(_READ_BYTES):
+    while chunk := process.stdout.read1(_READ_BYTES):  # type: ignore[attr-defined]  # a BufferedReader (bufsize -1); typeshed says IO[bytes]
         riff += chunk
         if limit is not None and len(riff) >= limit:
             del riff[limit:]

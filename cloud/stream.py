@@ -126,7 +126,7 @@ class StreamConnection:
         """Become the session's live connection: refuse another stream, take over from our own."""
         live = self.context.live.get(hello.session_id)
         if live is not None and live is not self:
-            assert live.hello is not None  # noqa: S101 - only connections past hello are live
+            assert live.hello is not None  # only connections past hello are live
             if (live.hello.device_id, live.hello.stream_id) != (hello.device_id, hello.stream_id):
                 raise SessionBusyError(f"session {hello.session_id!r} is being streamed by another connection")
             live.taken_over = True
@@ -189,7 +189,7 @@ class StreamConnection:
         self.high_water = max(self.high_water, seq)
 
     def _on_streaming(self, message: Message) -> _Pending | None:
-        assert self.hello is not None  # noqa: S101 - state invariant, not input validation
+        assert self.hello is not None  # state invariant, not input validation
         store, session_id = self.context.store, self.hello.session_id
         needs = content_version(message)
         if self.hello.v < needs:
@@ -222,7 +222,7 @@ class StreamConnection:
 
 def session_spec(hello: Hello) -> SessionSpec:
     """What the store keeps of a hello: the session, its owner (device and stream) and geometry."""
-    return SessionSpec(hello.session_id, hello.device_id, hello.mode, tuple(hello.sensor), tuple(hello.fovea),
+    return SessionSpec(hello.session_id, hello.device_id, hello.mode, (hello.sensor[0], hello.sensor[1]), (hello.fovea[0], hello.fovea[1]),
                        stream_id=hello.stream_id or "")  # fmt: skip
 
 
@@ -261,7 +261,8 @@ async def stream_endpoint(websocket: WebSocket) -> None:
         try:
             await connection.receiver
         except asyncio.CancelledError:
-            if not connection.taken_over or asyncio.current_task().cancelling():  # type: ignore[union-attr]
+            task = asyncio.current_task()  # (this coroutine's: never None here)
+            if not connection.taken_over or (task is not None and task.cancelling()):
                 raise
             await outbox.put(_Close(CloseCode.TAKEN_OVER, "a newer connection of this stream took the session over"))
     finally:
@@ -301,7 +302,7 @@ async def _receive_loop(
             log.info("closing stream (%d): %s", exc.close_code, exc)
             await outbox.put(_Close(int(exc.close_code), str(exc)))
             return
-        except Exception as exc:  # noqa: BLE001 - any failure of the store path ends this connection
+        except Exception as exc:  # any failure of the store path ends this connection
             await outbox.put(_Close(CloseCode.INTERNAL_ERROR, store_failure(connection.context, "message", exc)))
             return
         if outgoing is not None:
@@ -318,7 +319,7 @@ async def _send_loop(websocket: WebSocket, outbox: asyncio.Queue[_Outgoing | Non
         if isinstance(item, _Pending):
             try:
                 result = await item.result
-            except Exception as exc:  # noqa: BLE001 - not only StoreError: IntegrityError, OSError, ...
+            except Exception as exc:  # not only StoreError: IntegrityError, OSError, ...
                 if connection.state is not StreamState.CLOSED:
                     connection.state = StreamState.CLOSED  # the receiver hands nothing more to the store
                     reply = _Close(CloseCode.INTERNAL_ERROR, store_failure(context, item.kind, exc))

@@ -104,17 +104,16 @@ def read_recording(
     from pydantic import SecretStr
 
     from darkread.cloud.app import create_app
+    from darkread.cloud.errors import CloudError
     from darkread.cloud.server import serve_in_thread
     from darkread.cloud.settings import Settings
     from darkread.edge.builder import build_edge
     from darkread.edge.config import load_config
     from darkread.edge.daemon import Daemon
-    from darkread.edge.io.recording import open_recording
-    from darkread.edge.notify import Notifier
-
-    from darkread.cloud.errors import CloudError
     from darkread.edge.errors import RunError
     from darkread.edge.inspect import fovea_event_fraction
+    from darkread.edge.io.recording import open_recording
+    from darkread.edge.notify import Notifier
 
     if out_dir is None:  # a scratch directory that does not outlive the read
         with tempfile.TemporaryDirectory(prefix="darkread-read-", ignore_cleanup_errors=True) as scratch:
@@ -131,12 +130,12 @@ def read_recording(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     api_key = secrets.token_urlsafe(16)
-    settings = Settings(data_dir=out / "cloud", api_key=SecretStr(api_key), ocr_backend=backend,  # type: ignore[arg-type]
+    settings = Settings(data_dir=out / "cloud", api_key=SecretStr(api_key), ocr_backend=backend,
                         ocr_lexicon=lexicon, ask_catch_up_s=drain_timeout_s)  # the answer covers every frame
     stages: dict[str, float] = {}
     with serve_in_thread(create_app(settings)) as server:
         stages["cloud_start"] = time.perf_counter() - started
-        overrides = {
+        overrides: dict[str, dict[str, Any]] = {
             "source": {"kind": "replay", "path": str(recording.path if recording.path.is_dir() else recording.raw_path), "speed": 0.0,
                        "gaze_csv": str(recording.gaze_path), "calibration": str(calibration or "")},
             "gaze": {"kind": "recording"},
@@ -231,7 +230,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="OCR backend (default: local, the embedded offline engine); remote ones read DARKREAD_* settings")
     parser.add_argument("--mode", default="frames", choices=["frames", "pages"], help="stream frames (default) or stitch on the glasses")
     parser.add_argument("--infer", default=None, choices=INFER_MODES,
-                        help="on-change (default): one fused view per fixation (a tenth of the inferences and bytes); every-window: infer every window, send every frame")
+                        help="on-change (default): one fused view per fixation (a tenth of the inferences and bytes); "
+                             "every-window: infer every window, send every frame")
     parser.add_argument("--no-lexicon", dest="lexicon", action="store_false",
                         help="report the offline engine's text as read, without the dictionary correction")
     parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")

@@ -28,7 +28,7 @@ def cell_tables(width: int, height: int, cell_px: int, pad: int = 0, row_stride:
 
 
 @compiled
-def add_cell_counts(x, y, start, stop, column_of, row_of, out):  # noqa: ANN001, ANN201  # pragma: no cover - compiled
+def add_cell_counts(x, y, start, stop, column_of, row_of, out):  # pragma: no cover - compiled
     """Add events ``start:stop`` of (``x``, ``y``) to ``out`` (flat counts, any number type) at ``row_of[y] +
     column_of[x]`` (``cell_tables``); a coordinate past a table's end counts as its last entry."""
     last_x, last_y = column_of.shape[0] - 1, row_of.shape[0] - 1
@@ -37,7 +37,7 @@ def add_cell_counts(x, y, start, stop, column_of, row_of, out):  # noqa: ANN001,
 
 
 @compiled
-def voters(x, y, t, x0, y0, width, height, t_first, t_last):  # noqa: ANN001, ANN201  # pragma: no cover - compiled
+def voters(x, y, t, x0, y0, width, height, t_first, t_last):  # pragma: no cover - compiled
     """(how many, earliest time) of the events inside the region [x0, x0 + width) x [y0, y0 + height)
     with ``t_first <= t <= t_last``; the time is ``t_last`` when there are none."""
     n = 0
@@ -51,7 +51,7 @@ def voters(x, y, t, x0, y0, width, height, t_first, t_last):  # noqa: ANN001, AN
 
 
 @compiled
-def slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, t_ref, span, oldest, images, counts, age_sums):  # noqa: ANN001, ANN201, PLR0913  # pragma: no cover - compiled
+def slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, t_ref, span, oldest, images, counts, age_sums):  # pragma: no cover - compiled
     """Count the events of [``t_first``, ``t_last``] inside the region at (``x0``, ``y0``) as wide
     and high as the tables (``cell_tables`` from its corner) into ``images`` [slices, plane] by
     their age (``(t_ref - t) / span``, 0 newest): slice ``int(age * (slices / oldest))``, clipped
@@ -71,7 +71,7 @@ def slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, t_ref, spa
 
 
 @compiled
-def voxel_sums(x, y, p, t, x0, y0, bins, width, height, sums, marked, touched):  # noqa: ANN001, ANN201, PLR0913  # pragma: no cover - compiled
+def voxel_sums(x, y, p, t, x0, y0, bins, width, height, sums, marked, touched):  # pragma: no cover - compiled
     """Add the E2VID voxel weights of the events (all inside the window at ``x0``, ``y0``) into
     ``sums`` (float64, ``bins * plane``, zero and unmarked in ``marked`` where untouched): polarity +-1, time scaled to [0,
     bins - 1] and each event shared between its two neighbouring bins (one bin: its pixel). The

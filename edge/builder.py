@@ -17,6 +17,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from darkread.core.errors import DarkreadError
+from darkread.core.redact import redact
 from darkread.edge.config import EdgeConfig, GazeConfig, PipelineConfig, SourceConfig
 from darkread.edge.errors import RunError, SpoolError, UndeliveredError
 from darkread.edge.frame import FrameResult, Infer
@@ -34,8 +36,6 @@ from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.view_fusion import ViewRecord
 from darkread.edge.voxel import VoxelConfig
 from darkread.edge.windows import Windows
-from darkread.core.errors import DarkreadError
-from darkread.core.redact import redact
 
 logger = logging.getLogger(__name__)
 

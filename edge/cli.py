@@ -130,13 +130,13 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
 def _run(args: argparse.Namespace) -> int:
     """Run the daemon; a run that did not deliver everything raises one error saying what failed
     and what the spool still holds (the command line prints it as its last line)."""
+    from darkread.core.errors import DarkreadError
+    from darkread.core.redact import redact_handlers
     from darkread.edge.builder import build_edge
     from darkread.edge.config import load_config
     from darkread.edge.daemon import Daemon
     from darkread.edge.journal import use_journal_format_if_under_systemd
     from darkread.edge.notify import Notifier
-    from darkread.core.errors import DarkreadError
-    from darkread.core.redact import redact_handlers
 
     use_journal_format_if_under_systemd()
     redact_handlers()  # every library's log lines too (websockets names the URL it connects to)

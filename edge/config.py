@@ -15,7 +15,10 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from darkread.proto.messages import Mode
 
 from darkread.core.redact import redact
 
@@ -64,7 +67,7 @@ class PipelineConfig:
     # light a window spans 20-50 ms and a moving head smears its strokes over 4-10 px
     deblur: bool = True
     # drop a dim-light window's isolated events, shot noise, before its voxel grid (edge.denoise):
-    # at 5-10 lux a quarter to half of them have no event on the pixels around them
+    # in dim light many of them have no event on the pixels around them (docs/denoise.md)
     denoise: bool = True
     # when to infer: "on-change" (during fixations, when the view changed; frames fused into one
     # view per fixation) or "every-window" (every n_events new foveated events, frames sent as they are)
@@ -73,7 +76,7 @@ class PipelineConfig:
     settled_interval_ms: float = 400.0  # ... and per this much once a frame agreed with it (the view is sent first: one more frame adds little)
     settled_score: float = 0.85  # agreed: the frame registered onto its view at least this well (its match score) ...
     # ... and the network was this sure of it (view_fusion.doubt at most this): doubtful frames (dim light,
-    # small text) agree and are still noisy, so their views take every frame (10 lux 42.5 -> 39.9 %, 100 lux 3.7 -> 3.0 %)
+    # small text) agree and are still noisy, so their views take every frame (what it gains: docs/views.md)
     settle_max_doubt: float = 1.1
     renew_fraction: float = 0.5  # on-change: infer again once this share of n_events is new (windows overlap by the rest:
     # in dim light the frames that do not agree are what the page is averaged from; 1.0 read 10 and 5 lux worse) ...
@@ -94,7 +97,7 @@ class UplinkConfig:
     api_key: str = ""
     device_id: str = ""  # empty: the host name
     session_id: str = ""  # empty: resume the spool's session if frames wait in it, else a new one
-    mode: str = "frames"  # "frames" (binary frames) or "pages" (stitched on the glasses)
+    mode: Mode = "frames"  # "frames" (binary frames) or "pages" (stitched on the glasses)
     # empty: on disk under the user's state directory ($XDG_STATE_HOME/darkread/spool, else
     # ~/.local/state/darkread/spool); ":memory:" in memory only (what is unsent at exit is lost)
     spool_dir: str = ""
@@ -245,12 +248,14 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError("config [pipeline] n_events and period_ms must be positive")
     if config.pipeline.infer not in INFER_MODES:
         raise ValueError(f"config [pipeline] infer must be 'on-change' or 'every-window', not {config.pipeline.infer!r}")
-    if min(config.pipeline.min_interval_ms, config.pipeline.settled_interval_ms, config.pipeline.view_every_ms) <= 0 or config.pipeline.min_events <= 0:
+    intervals = (config.pipeline.min_interval_ms, config.pipeline.settled_interval_ms, config.pipeline.view_every_ms)
+    if min(intervals) <= 0 or config.pipeline.min_events <= 0:
         raise ValueError("config [pipeline] min_interval_ms, settled_interval_ms, view_every_ms and min_events must be positive")
     if config.pipeline.fuse not in FUSE_MODES:
         raise ValueError(f"config [pipeline] fuse must be 'probability' or 'mask', not {config.pipeline.fuse!r}")
     if not 0 < config.pipeline.renew_fraction <= 1:
-        raise ValueError(f"config [pipeline] renew_fraction is a share of a window's events: above 0, at most 1, not {config.pipeline.renew_fraction:g}")
+        raise ValueError("config [pipeline] renew_fraction is a share of a window's events: above 0, at most 1, "
+                         f"not {config.pipeline.renew_fraction:g}")
     if config.pipeline.dither_px < 0 or config.pipeline.settle_max_doubt <= 0:
         raise ValueError("config [pipeline] dither_px must be >= 0 (0: a view's frames all in its window) and settle_max_doubt positive")
     return config

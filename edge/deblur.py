@@ -87,12 +87,12 @@ def smear_of(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int
     b = cfg.bin_px  # counted in b x b cells: a quarter of the transforms, the peak still found to a fraction of a cell
     pad = -(-r // b) + 1
     shape = (cv2.getOptimalDFTSize(-(-height // b) + 2 * pad), cv2.getOptimalDFTSize(-(-width // b) + 2 * pad))
-    images = np.zeros((k_n, shape[0] * shape[1]), np.float32)
+    flat_images = np.zeros((k_n, shape[0] * shape[1]), np.float32)
     counts, age_sums = np.zeros(k_n, np.int64), np.zeros(k_n, np.float64)
     # (by age, each event in one of k_n slices; counted in one compiled pass: edge.binning)
     column_of, row_of = cell_tables(width, height, b, pad, row_stride=shape[1])
-    slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, int(t_ref_us), float(span_us), oldest, images, counts, age_sums)
-    images = images.reshape(k_n, *shape)
+    slice_counts(x, y, t, x0, y0, column_of, row_of, t_first, t_last, int(t_ref_us), float(span_us), oldest, flat_images, counts, age_sums)
+    images = flat_images.reshape(k_n, *shape)
     mean_age = age_sums / np.maximum(counts, 1)
     spectra = [cv2.dft(image) for image in images]  # (real, packed)
     if cfg.blur_px > 0:  # each image blurred, in the spectrum (a product there, not a pass over the image)

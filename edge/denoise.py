@@ -1,9 +1,9 @@
 """A window's isolated events dropped in dim light: shot noise out, strokes kept.
 
 In the dark most of a window's events are shot noise: a pixel fires now and then whatever it
-sees, independently of its neighbours, while a moving edge fires along a line. At 10 and 5 lux a
-quarter to nearly half of a window's events have no other event on the 8 pixels around them over
-the window's span; in bright light 1-5 % do. A network given only the events with a neighbour
+sees, independently of its neighbours, while a moving edge fires along a line. At 10 and 5 lux
+many of a window's events have no other event on the 8 pixels around them over the window's
+span; in bright light few do (docs/denoise.md has the shares). A network given only the events with a neighbour
 sees the strokes against a clean background instead of a snow of dots (what a background-activity
 filter does in event cameras, here over the window as a whole: its events are already moved back
 along the head's motion by ``edge.deblur``, so an edge's events lie together).
@@ -13,9 +13,8 @@ however often. The filter runs only on a noisy window (``min_isolated_share`` of
 isolated): in bright light the few isolated events are the fine ends of strokes, and taking them
 out of small letters cost more than it gave.
 
-Measured on the evaluation suite's recordings, read end to end in the default on-change mode with
-and without the filter (same code otherwise, docs/denoise.md): mean CER 10 lux 37.7 -> 32.7 %,
-5 lux 62.6 -> 56.9 %, 30 lux 5.3 -> 4.5 %, 100 lux 2.8 -> 2.8 %, 1000 lux 4.9 -> 4.6 %. Pure: numpy and OpenCV.
+What it gains and costs, measured on the evaluation suite read end to end with and without it,
+is in docs/denoise.md. Pure: numpy and OpenCV.
 """
 
 from __future__ import annotations

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from darkread.core.frame_record import FrameRecord
 from darkread.edge.deblur import DeblurConfig, deblur_window
 from darkread.edge.denoise import DenoiseConfig, drop_isolated
 from darkread.edge.events import Events
@@ -22,7 +23,6 @@ from darkread.edge.fovea import FoveaConfig, in_window
 from darkread.edge.gaze import GazeSample
 from darkread.edge.head_motion import KnownHeadMotion
 from darkread.edge.voxel import VoxelConfig, voxel_grid
-from darkread.core.frame_record import FrameRecord
 
 if TYPE_CHECKING:
     from darkread.proto.messages import Frame

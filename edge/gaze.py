@@ -81,7 +81,7 @@ def gaze_sample(calibration: Calibration, yaw: float, pitch: float, depth: float
 
 def rows_between(
     t_us: np.ndarray, yaw: np.ndarray, pitch: np.ndarray, t0: int, t1: int, times: list[int] | None = None
-) -> tuple[np.ndarray, ...]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rows with ``t0 < t <= t1`` of time-sorted arrays (views, no copies).
 
     ``times`` (``t_us`` as a list) finds them by ``bisect``: the on-change mode asks every 5 ms of

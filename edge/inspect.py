@@ -235,7 +235,7 @@ def _progress(*, enabled: bool, name: str) -> Any:
 
 
 def _report(path: Path, header: Any, s: EventSummary, width: int, height: int) -> dict[str, Any]:
-    duration_us = (s.t_last_us - s.t_first_us) if s.events else 0
+    duration_us = (s.t_last_us - s.t_first_us) if s.events and s.t_first_us is not None and s.t_last_us is not None else 0
     return {
         "path": str(path),
         "format": str(header.format),

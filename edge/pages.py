@@ -1,4 +1,5 @@
-"""Pages mode: frames (or, in the on-change mode, the fixations' views) are stitched on the glasses and only the page goes up (``[uplink] mode = "pages"``).
+"""Pages mode: frames (or, in the on-change mode, the fixations' views) are stitched on the glasses
+and only the page goes up (``[uplink] mode = "pages"``).
 
 The reconstruction thread adds each frame; the daemon's tick asks for the page every
 ``page_every_s`` and at shutdown. Stitching itself is the shared, pure stitcher; this module only
@@ -12,8 +13,8 @@ import time
 from collections.abc import Callable
 
 from darkread.core.frame_record import FrameRecord
-from darkread.stitch import PageStitcher
 from darkread.proto.messages import Page, pack_mask
+from darkread.stitch import PageStitcher
 
 
 class PageBuilder:
@@ -47,5 +48,5 @@ class PageBuilder:
         if page.image.size == 0 or not page.image.any():
             return None
         shape, bits = pack_mask(page.image)
-        lines = tuple(tuple(map(int, box)) for box in page.lines)
+        lines = tuple((int(x0), int(y0), int(x1), int(y1)) for x0, y0, x1, y1 in page.lines)
         return Page(seq=0, page_id=0, t_us=int(t_us), shape=shape, bits=bits, lines=lines, enc="g4")  # v3: CCITT G4, the smallest

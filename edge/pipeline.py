@@ -28,6 +28,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from darkread.core.errors import DarkreadError
 from darkread.edge.config import PipelineConfig
 from darkread.edge.events import Events
 from darkread.edge.fovea import in_window
@@ -35,7 +36,6 @@ from darkread.edge.frame import count_in_window
 from darkread.edge.sources.base import EventSource
 from darkread.edge.steps import Pending, Step
 from darkread.edge.windows import Windows
-from darkread.core.errors import DarkreadError
 
 logger = logging.getLogger(__name__)
 

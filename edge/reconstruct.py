@@ -125,7 +125,7 @@ class Reconstructor:
         written into a buffer of ours (onnxruntime's I/O binding). A caller that bins straight into
         it (``voxel_grid(..., out=rec.input_window)``) spares the grid's allocation and the
         session's input and output copies per window."""
-        assert self._single is not None  # noqa: S101
+        assert self._single is not None
         self.input_window = np.zeros(self.input_shape, np.float32)
         self._output_window = np.zeros((1, 1, *self.input_shape[1:]), np.float32)
         binding = self._single.io_binding()
@@ -135,7 +135,7 @@ class Reconstructor:
 
     def _run_window(self) -> np.ndarray:
         """Logits [H, W] of ``input_window`` (a view of the output buffer: the next window overwrites it)."""
-        assert self._single is not None  # noqa: S101
+        assert self._single is not None
         self._single.run_with_iobinding(self._binding)
         return self._output_window[0, 0]
 

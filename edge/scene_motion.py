@@ -35,7 +35,7 @@ from darkread.stitch.register import parabola_vertex
 
 CELL_PX = 8  # 1280x720 -> 160x90 cells: sub-cell correlation is still well inside the stitcher's search radius
 SLICE_US = 20_000  # a walking head moves 2-8 px in this time: under a cell, so slices still look alike
-# (40 ms slices halve the correlations but read 31 hard recordings at 29.3 % mean CER, not 27.6 %;
+# (40 ms slices halve the correlations but read the hard recordings worse, docs/head_motion.md;
 # 16 px cells drifted by 20 px on a still page under noise)
 MIN_EVENTS = 200  # a slice with fewer counted events holds no motion worth measuring (a still head)
 MIN_PEAK_SD = 4.0  # a correlation peak less than this many standard deviations above the surface: noise, not a shift
@@ -48,7 +48,7 @@ STRIDE = 1  # every event is counted: in the dark every eighth left 2,000 events
 KEEP_SLICES = 500  # 10 s of offsets: frames ask about the last few hundred milliseconds
 TRUST_US = 100_000  # an offset is reported only if no slice this long before it had events but no peak
 # (at 10 lux half the slices found no peak and the rest wandered: on a still real-reader page the offset
-# drifted 200 px and every-window read 8.3 % CER instead of 0.9 %; unknown motion is no motion)
+# drifted 200 px and the page read far worse, docs/head_motion.md; unknown motion is no motion)
 
 
 @dataclass(frozen=True)
@@ -163,7 +163,7 @@ class SceneMotion:
             self._count += stop - start
 
     def _close_slice(self) -> None:
-        assert self._slice_end is not None  # noqa: S101
+        assert self._slice_end is not None
         cfg = self.cfg
         failed = False
         if self._count >= cfg.min_events:

@@ -83,7 +83,8 @@ class Snapshot:
             f"views {r['views']:.1f}/s inferences {r['frames']:.1f}/s "
             f"CPU {self.cpu_per_reading_s:.3f} s per reading s infer p50 {self.inference_ms_p50:.1f} p99 {self.inference_ms_p99:.1f} ms "
             f"wire p50 {self.latency_ms_p50:.1f} p99 {self.latency_ms_p99:.1f} ms "
-            f"deblurred {self.totals['frames_deblurred']} denoised {self.totals['frames_denoised']} skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
+            f"deblurred {self.totals['frames_deblurred']} denoised {self.totals['frames_denoised']} "
+            f"skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
             f"spool {self.spool_depth} (lost {self.spool_lost}) "
             f"sent {r['bytes_sent']/1e3:.1f} kB/s ({self.bandwidth_vs_raw():.1%} of raw events, "
             f"{self.bandwidth_vs_rgb():.1%} of one RGB frame per second)"
@@ -186,7 +187,7 @@ class MetricsServer:
         metrics_ref = metrics
 
         class Handler(BaseHTTPRequestHandler):
-            def do_GET(self) -> None:  # noqa: N802 (http.server naming)
+            def do_GET(self) -> None:  # http.server naming
                 if self.path.rstrip("/") != "/metrics":
                     self.send_error(404, "try /metrics")
                     return

@@ -27,11 +27,12 @@ import socket
 import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Awaitable, Iterator
 
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
+from darkread.core.redact import redact
 from darkread.edge.config import UplinkConfig
 from darkread.edge.errors import CloudRefusedError, SpoolError
 from darkread.edge.spool import Spool
@@ -50,7 +51,6 @@ from darkread.proto.messages import (
     decode,
     encode,
 )
-from darkread.core.redact import redact
 
 logger = logging.getLogger(__name__)
 
@@ -276,9 +276,9 @@ class Uplink:
                     logger.warning("uplink to %s lost: %s", redact(url), self.last_error)
             except ConnectionClosed as exc:
                 self.last_error = f"{type(exc).__name__}: {exc}"
-                code = exc.rcvd.code if exc.rcvd is not None else None
+                code, reason = (exc.rcvd.code, exc.rcvd.reason) if exc.rcvd is not None else (None, "")
                 if code in FATAL_CODES:
-                    self._fail(f"cloud refused session {self.session_id}: {self._cloud_error or exc.rcvd.reason}")  # type: ignore[union-attr]
+                    self._fail(f"cloud refused session {self.session_id}: {self._cloud_error or reason}")
                 else:
                     logger.warning("uplink to %s lost: %s", redact(url), self.last_error)
                 if code in MESSAGE_REJECTED_CODES:
@@ -299,7 +299,7 @@ class Uplink:
             if self._stopping or self.fatal_error:
                 break
             connected = self._connected_since is not None
-            lasted = connected and time.monotonic() - self._connected_since >= self.settings.stable_connection_s
+            lasted = self._connected_since is not None and time.monotonic() - self._connected_since >= self.settings.stable_connection_s
             if lasted:
                 # a connection that worked for a while: the next outage starts from a short delay again
                 delays = backoff_delays(self.settings.backoff_initial_s, self.settings.backoff_max_s, self._rng)
@@ -345,7 +345,7 @@ class Uplink:
             hello = Hello(
                 device_id=self.device_id,
                 session_id=self.session_id,
-                mode=s.mode,  # type: ignore[arg-type]
+                mode=s.mode,
                 sensor=self.sensor_wh,
                 fovea=self.fovea_hw,
                 resume_from_seq=self.acked_seq if self.acked_seq >= 0 else None,
@@ -430,8 +430,8 @@ class Uplink:
             raise TimeoutError(f"no ack for {self.settings.ack_timeout_s:g} s with {cursor - self.acked_seq} "
                                "messages in flight")
 
-    async def _wait_any(self, receiver: asyncio.Task[None], awaitable: object, timeout_s: float) -> None:
-        waiter = asyncio.ensure_future(awaitable)  # type: ignore[arg-type]
+    async def _wait_any(self, receiver: asyncio.Task[None], awaitable: Awaitable[object], timeout_s: float) -> None:
+        waiter = asyncio.ensure_future(awaitable)
         try:
             await asyncio.wait({receiver, waiter}, timeout=timeout_s, return_when=asyncio.FIRST_COMPLETED)
         finally:

@@ -28,7 +28,7 @@ from darkread.stitch.register import register_frame
 N_LEVELS = 8  # the mean of up to ~7 frames to within half a step; few levels compress well in a PNG
 SEARCH_RADIUS_PX = 12  # head drift between two frames of a fixation (50-100 ms apart), beyond the sensor's offset
 MIN_SCORE = 0.8  # a weaker match: the frame starts a new view (the stitcher places it on its own) rather than blur this one
-# (0.6 let low-light frames that matched noise blur their views: 10 lux read at 60 % CER, not 18 %)
+# (0.6 let low-light frames that matched noise blur their views: docs/views.md)
 MARGIN_PX = 32  # the fused canvas reaches this far beyond the first frame's window (head drift in a fixation)
 # a frame whose network doubts more than this (pixels of probability 0.2-0.8 per ink pixel) is
 # averaged in as its mask: measured 1.1-1.5 at 100 lux, ~1.55 at 30, ~2 at 10, 2-3 at 5 lux, where
@@ -46,7 +46,7 @@ class ViewRecord(FrameRecord):
     events_used: int = 0
     gaze_rad: tuple[float, float] = (0.0, 0.0)
 
-    def to_message(self, enc: str = "png"):  # noqa: ANN201 - proto stays a lazy import
+    def to_message(self, enc: str = "png"):  # proto stays a lazy import
         from darkread.proto.messages import View
 
         return View.of(self, t0_us=self.t0_us, gaze_rad=self.gaze_rad, events_used=self.events_used, enc=enc)
@@ -65,8 +65,8 @@ def threshold(levels: np.ndarray, n_levels: int = N_LEVELS) -> np.ndarray:
 def doubt(probability: np.ndarray) -> float:
     """How unsure the network was of a frame: pixels between 0.2 and 0.8 per pixel above one half."""
     p = np.asarray(probability)
-    unsure = np.count_nonzero((p > 0.2) & (p < 0.8))
-    return unsure / max(np.count_nonzero(p > 0.5), 1)
+    unsure = int(np.count_nonzero((p > 0.2) & (p < 0.8)))
+    return unsure / max(int(np.count_nonzero(p > 0.5)), 1)
 
 
 def _crop(layer: np.ndarray, x0: int, y0: int, w: int, h: int) -> np.ndarray:
@@ -165,8 +165,8 @@ class ViewFuser:
         """The frame's top-left in the first frame's coordinates: where the newest frame was plus
         the sensor offset between them, corrected by correlation against the view; None when no
         trustworthy match is found."""
-        assert self._first is not None and self._last is not None and self._sum is not None  # noqa: S101
-        assert self._count is not None  # noqa: S101
+        assert self._first is not None and self._last is not None and self._sum is not None
+        assert self._count is not None
         h, w = mask.shape
         px = int(round(self._last_xy[0])) + frame.origin[0] - self._last.origin[0]
         py = int(round(self._last_xy[1])) + frame.origin[1] - self._last.origin[1]
@@ -202,7 +202,7 @@ class ViewFuser:
         pixel, as the stitcher does); what falls beyond the margin is left out. Only the canvas
         rows and columns the frame touches are resampled (a whole-pixel move of both the frame
         and the output keeps every bilinear weight, so the sums are the same)."""
-        assert self._sum is not None and self._count is not None  # noqa: S101
+        assert self._sum is not None and self._count is not None
         h, w = mask.shape
         x, y = xy[0] + self.margin, xy[1] + self.margin
         x0, y0 = max(int(np.floor(x)), 0), max(int(np.floor(y)), 0)

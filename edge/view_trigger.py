@@ -25,6 +25,7 @@ from darkread.edge.config import PipelineConfig
 from darkread.edge.gaze import GazeLookup
 from darkread.edge.gaze_events import EventKind, GazeEventClassifier, GazeEventConfig, GazeStatus
 
+
 class GazeGate:
     """The classifier fed from a gaze lookup's rows as the event clock advances."""
 

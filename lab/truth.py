@@ -31,6 +31,7 @@ from darkread.models.train.annotate import (
 )
 from darkread.models.train.windows import Windows, read_events, window_stack
 
+
 @dataclass(frozen=True)
 class PageTruth:
     """What the simulator knows of a recording: the page ink raster, its scale and the pose over time."""
@@ -116,7 +117,7 @@ def annotate_from_truth(recording: str | Path, out: str | Path, every_ms: float 
     recording = Path(recording)
     scored = truth_windows(recording, every_ms=every_ms, max_windows=max_windows, deblur=deblur, denoise=denoise)
     windows = scored.windows
-    assert windows is not None  # noqa: S101 - truth_windows keeps them
+    assert windows is not None  # truth_windows keeps them
     if len(windows.t_end_us) == 0:
         raise AnnotationError(f"{recording}: no windows to annotate (no gaze, or too few events)")
     if scored.targets is None:

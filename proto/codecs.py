@@ -20,7 +20,7 @@ import struct
 import zlib
 
 import numpy as np
-from PIL import Image
+from PIL import Image, TiffImagePlugin
 
 from darkread.core.image_codec import ImageCodecError, decode_image, encode_png, encode_png_bilevel
 from darkread.core.mask_bits import pack_bits, packed_length, unpack_bits
@@ -83,6 +83,7 @@ def encode_g4(shape: tuple[int, int], bits: bytes) -> bytes:
     Image.fromarray(ink).save(out, "TIFF", compression="group4", strip_size=max(1, ink.size))  # one strip
     tiff_bytes = out.getvalue()
     with Image.open(io.BytesIO(tiff_bytes)) as tiff:
+        assert isinstance(tiff, TiffImagePlugin.TiffImageFile)  # written as a TIFF just above
         offsets, counts = tiff.tag_v2[_TIFF_TAGS["offsets"]], tiff.tag_v2[_TIFF_TAGS["byte_counts"]]
     if len(offsets) != 1:
         raise RuntimeError(f"Pillow wrote {len(offsets)} G4 strips, not one (Pillow too old for strip_size?)")

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Any, ClassVar, Literal, TypeAlias
 
 import msgpack
@@ -240,6 +240,7 @@ class _Checked:
     """Validation at construction: an invalid message can neither be built nor decoded."""
 
     TYPE: ClassVar[str]
+    __dataclass_fields__: ClassVar[dict[str, Field[Any]]]  # every message is a dataclass
 
     def _to_wire(self, payload: dict[str, Any]) -> None:
         """Turn the in-memory form of a field into its wire form (compression), in place."""
@@ -249,8 +250,8 @@ class _Checked:
         """The inverse of ``_to_wire`` on decoded values, in place; raises ``ProtocolError``."""
 
     def __post_init__(self) -> None:
-        values = {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
-        for name, value in _check_fields(type(self), values).items():  # type: ignore[arg-type]
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        for name, value in _check_fields(type(self), values).items():
             object.__setattr__(self, name, value)
 
     def numbered(self, seq: int) -> Any:
@@ -516,7 +517,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 }
 
 
-def _check_fields(cls: type[Message], values: Mapping[str, Any]) -> dict[str, Any]:
+def _check_fields(cls: type[_Checked], values: Mapping[str, Any]) -> dict[str, Any]:
     checked: dict[str, Any] = {}
     for spec in fields(cls):
         name = f"{cls.TYPE}.{spec.name}"
@@ -548,8 +549,9 @@ def encode(message: Message) -> bytes:
     return msgpack.packb(payload, use_bin_type=True)
 
 
-def decode(data: bytes, *, max_bytes: int) -> Message:
-    """msgpack bytes -> a message; raises only ``ProtocolError`` subclasses on bad input."""
+def decode(data: bytes | str, *, max_bytes: int) -> Message:
+    """msgpack bytes -> a message; raises only ``ProtocolError`` subclasses on bad input (a text
+    websocket message among them)."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise MalformedMessageError(f"expected a binary message, got {type(data).__name__}")
     if len(data) > max_bytes:

@@ -25,7 +25,7 @@ class Canvas:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return next(iter(self.layers.values())).shape  # type: ignore[return-value]
+        return next(iter(self.layers.values())).shape
 
     @property
     def box(self) -> tuple[int, int, int, int]:

@@ -46,7 +46,7 @@ class StitchConfig:
                             sweep it missed by half a window; 0 turns it off.
       scene_gap_ms          ... for a frame this long after the last registered one: frames a few
                             milliseconds apart follow the head better by their own corrections (the
-                            scene's motion is good to ~15 %), the scene bridges the gaps.
+                            scene's motion is coarser, docs/head_motion.md), the scene bridges the gaps.
       wide_search_px        a frame whose best match lies on the rim of the search window, or scores
                             ``weak_match_drop`` below the recent matches' median, is searched again
                             this far around the prediction (the head moved more than predicted, and
@@ -123,9 +123,8 @@ class StitchConfig:
                             which a hard threshold of bold U-Net strokes loses (e/o, a/o, i/l).
       ink_percentile        ... or where it reaches this percentile of the page's probability above
       faint_ink             this, when that is lower (dim light: frames that each find half the strokes
-      min_ink_level         average to grey), but not below this; the ink threshold scales alike.
-                            The suite (on-change): 5 lux 56.4 -> 53.3 % CER, 10 lux 34.6 -> 34.9 %,
-                            30-1000 lux unchanged in the mean.
+      min_ink_level         average to grey), but not below this; the ink threshold scales alike
+                            (what it changed: stitch/README.md).
     """
 
     sweep_min_px: float = 140.0

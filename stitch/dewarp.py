@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
 from darkread.stitch.canvas import Canvas
 from darkread.stitch.config import StitchConfig
 
@@ -67,9 +68,9 @@ def estimate_line_warp(
     corners = cv2.goodFeaturesToTrack(ref8, maxCorners=300, qualityLevel=0.02, minDistance=4, mask=overlap * 255)
     if corners is None or len(corners) < cfg.dewarp_min_points:
         return None
-    lk = {"winSize": (15, 15), "maxLevel": 2, "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)}
-    fwd, st1, _ = cv2.calcOpticalFlowPyrLK(ref8, strip8, corners, None, **lk)
-    back, st2, _ = cv2.calcOpticalFlowPyrLK(strip8, ref8, fwd, None, **lk)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+    fwd, st1, _ = cv2.calcOpticalFlowPyrLK(ref8, strip8, corners, None, winSize=(15, 15), maxLevel=2, criteria=criteria)
+    back, st2, _ = cv2.calcOpticalFlowPyrLK(strip8, ref8, fwd, None, winSize=(15, 15), maxLevel=2, criteria=criteria)
     good = (
         (st1.ravel() == 1)
         & (st2.ravel() == 1)

@@ -6,6 +6,7 @@ from collections.abc import Sequence
 
 import cv2
 import numpy as np
+
 from darkread.core.frame_record import FrameRecord
 from darkread.stitch.canvas import Canvas
 from darkread.stitch.config import StitchConfig

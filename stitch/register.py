@@ -143,8 +143,8 @@ def register_frame(
         rotated = cv2.warpAffine(blurred, frame_transform((h, w), angle), (w, h), flags=cv2.INTER_LINEAR)
         return np.ascontiguousarray(rotated[y0:y1, x0:x1])
 
-    peaks = {i: _match(search, turned(angle), radius) for i, angle in enumerate(angles_deg)}
-    peaks = {i: (float(scores.max()), scores) for i, scores in peaks.items()}
+    matches = {i: _match(search, turned(angle), radius) for i, angle in enumerate(angles_deg)}
+    peaks = {i: (float(scores.max()), scores) for i, scores in matches.items()}
     best = max(peaks, key=lambda i: peaks[i][0])
     scores = peaks[best][1]
     angle = float(angles_deg[best])

@@ -16,6 +16,7 @@ from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
+
 from darkread.core.frame_record import FrameRecord
 from darkread.stitch.config import StitchConfig
 

@@ -18,6 +18,7 @@ from typing import Literal, NamedTuple
 
 import cv2
 import numpy as np
+
 from darkread.core.frame_record import FrameRecord
 from darkread.stitch.config import StitchConfig
 from darkread.stitch.dewarp import dewarp_strip
@@ -236,7 +237,7 @@ class PageStitcher:
         if frame.scene_px is None:
             self._anchors.clear()  # the head's motion was not measured: the offsets before and after do not chain
         gap_us = frame.t_us - self._corrections[-1][0] if self._corrections else 0
-        if use_scene and self._anchors and gap_us >= cfg.scene_gap_ms * 1e3:
+        if use_scene and frame.scene_px is not None and self._anchors and gap_us >= cfg.scene_gap_ms * 1e3:
             correction = predict_from_scene(self._anchors, frame.scene_px)
         else:
             correction = predict_correction(self._corrections, frame.t_us)
@@ -406,7 +407,7 @@ class PageStitcher:
         boxes, images = [], []
         for band in sorted({c for c in claims if c >= 0}):
             top, bottom, _ = bands[band]
-            span = main_column_span(image[top:bottom].any(axis=0), self.cfg.line_gap_px)
+            span = main_column_span(np.asarray(image[top:bottom].any(axis=0)), self.cfg.line_gap_px)
             if span is None:
                 continue
             boxes.append((span[0], top, span[1], bottom))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+
 from darkread.stitch.canvas import Canvas
 from darkread.stitch.config import StitchConfig
 from darkread.stitch.register import frame_transform

@@ -49,7 +49,7 @@ class CloudProcess:
         env = dict(os.environ, DARKREAD_API_KEY=self.api_key, DARKREAD_ASK_CATCH_UP_S="60", **self.env)
         if self.database_url:
             env["DARKREAD_DATABASE_URL"] = self.database_url
-        log = open(self.log_path, "ab") if self.log_path else subprocess.DEVNULL  # noqa: SIM115 - closed below
+        log = open(self.log_path, "ab") if self.log_path else subprocess.DEVNULL  # closed below
         try:
             self.process = subprocess.Popen(
                 [sys.executable, "-m", "darkread", "-q", "cloud", "serve", "--host", "127.0.0.1",
@@ -61,7 +61,7 @@ class CloudProcess:
                 log.close()  # the child has its own copy
 
     def wait_ready(self, timeout_s: float = 30) -> None:
-        assert self.process is not None  # noqa: S101 - launch() first
+        assert self.process is not None  # launch() first
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
@@ -75,7 +75,7 @@ class CloudProcess:
 
     def memory_mb(self) -> tuple[float, float]:
         """(resident set now, its peak so far) in MB, from /proc."""
-        assert self.process is not None  # noqa: S101 - launch() first
+        assert self.process is not None  # launch() first
         fields = dict(line.split(":", 1) for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines())
         return int(fields["VmRSS"].split()[0]) / 1024, int(fields["VmHWM"].split()[0]) / 1024
 

@@ -71,13 +71,13 @@ def synthetic_recording(root: Path, n_events: int = 30_000, box_xywh: tuple[int,
     return root
 
 
-def pixel_at(lookup, t_event_us: int) -> tuple[float, float] | None:  # noqa: ANN001
+def pixel_at(lookup, t_event_us: int) -> tuple[float, float] | None:
     """The gaze pixel a ``GazeLookup`` gives at an event time (None without a gaze on the sensor)."""
     sample = lookup.at(t_event_us)
     return None if sample is None else sample.pixel
 
 
-def angles_at(lookup, t_event_us: int) -> tuple[float, float] | None:  # noqa: ANN001
+def angles_at(lookup, t_event_us: int) -> tuple[float, float] | None:
     """The gaze angles (yaw, pitch) a ``GazeLookup`` gives at an event time."""
     sample = lookup.at(t_event_us)
     return None if sample is None else sample.angles
@@ -85,8 +85,8 @@ def angles_at(lookup, t_event_us: int) -> tuple[float, float] | None:  # noqa: A
 
 def pangram_session(motion: str, lux: float = 1000.0):
     """A short synthetic reading of a two-line pangram (seed 5, DejaVu Sans, x-height 11 px)."""
-    from darkread.models.synth.recording import RecordingSpec
     from darkread.lab.synth.rgb_camera import session_for
+    from darkread.models.synth.recording import RecordingSpec
 
     spec = RecordingSpec(lux=lux, motion=motion, kind="pangram", seconds=2.0, seed=5, font="DejaVu Sans",
                          xheight_px=11.0, n_lines=2, line_chars=24)

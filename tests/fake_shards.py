@@ -1,4 +1,5 @@
-"""Shared by tests/models/train and tests/lab/train (their conftest.py bring its fixtures): tiny fake shards in the synthetic-dataset format: learnable, so a few steps must lower the loss."""
+"""Shared by tests/models/train and tests/lab/train (their conftest.py bring its fixtures): tiny fake
+shards in the synthetic-dataset format: learnable, so a few steps must lower the loss."""
 
 from __future__ import annotations
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from darkread.cli import EXIT_ERROR, EXIT_INTERNAL, EXIT_USAGE, error_line
-from darkread.edge.errors import CalibrationError
 from darkread.core.errors import DarkreadError
+from darkread.edge.errors import CalibrationError
 
 SAMPLE = Path(__file__).resolve().parents[1] / "darkread" / "data" / "sample_recording"
 

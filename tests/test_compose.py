@@ -26,7 +26,7 @@ SCHEMA = Path(__file__).parent / "data" / "compose_spec.json"
 
 @pytest.fixture(scope="module")
 def compose() -> dict[str, Any]:
-    return yaml.safe_load((ROOT / "docker-compose.yml").read_text())  # type: ignore[no-any-return]
+    return yaml.safe_load((ROOT / "docker-compose.yml").read_text())
 
 
 def darkread_commands(compose: dict[str, Any]) -> dict[str, list[str]]:

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from darkread.cloud.store import StoredFrame
-from darkread.edge.frame import FrameResult
 from darkread.core.frame_record import FrameRecord
+from darkread.edge.frame import FrameResult
 from darkread.proto.messages import Frame, decode, encode
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from darkread.lab.jobs import run_jobs
 
 

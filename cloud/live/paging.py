@@ -122,7 +122,7 @@ class Paginator:
         if not self.pages or self._break_pending:
             self._start(record.seq, "break" if self.pages else "first")
         page = self.pages[-1]
-        assert page.stitcher is not None  # noqa: S101 - the last page is live
+        assert page.stitcher is not None  # the last page is live
         if page.version and page.stitcher.canvas_pixels > self.cfg.max_page_pixels:
             page = self._start(record.seq, "size")
         self._feed(page, record.seq, frame)
@@ -153,7 +153,7 @@ class Paginator:
         page.stitcher = None
 
     def _feed(self, page: LivePage, seq: int, frame: FrameRecord) -> None:
-        assert page.stitcher is not None  # noqa: S101
+        assert page.stitcher is not None
         placements = page.stitcher.add(frame)  # decides earlier frames (first in, first out)
         self._undecided.append((seq, frame))
         page.last_seq = seq

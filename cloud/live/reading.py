@@ -25,7 +25,6 @@ from ..ocr.base import OcrBackend, OcrLine, OcrResult
 from ..ocr.lexicon import LexiconCorrected, LexiconCorrector
 from .paging import Box, RenderedPage
 
-
 BORDER_PX = 8  # white margin around a line crop: detection misreads glyphs touching the edge (i/I)
 
 

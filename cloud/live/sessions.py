@@ -23,7 +23,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncGenerator, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -250,7 +250,7 @@ class SessionPages:
             await self.read()
         except NoPageError:
             pass
-        except Exception as exc:  # noqa: BLE001 - a failed push must not end the session's pages
+        except Exception as exc:  # a failed push must not end the session's pages
             log.warning("session %s: live update failed: %s", self.session_id, exc)
 
     def _publish(self, reading: PageReading) -> None:
@@ -368,7 +368,7 @@ class LivePages:
             for wait in waits:
                 wait.cancel()
 
-    async def events(self, session_id: str) -> AsyncIterator[dict[str, Any]]:
+    async def events(self, session_id: str) -> AsyncGenerator[dict[str, Any], None]:
         pages = self.get(session_id)
         queue = pages.subscribe()
         try:

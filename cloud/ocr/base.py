@@ -62,12 +62,12 @@ def reading_order(lines: list[OcrLine]) -> list[OcrLine]:
     boxed = [line for line in lines if line.box is not None]
     if not boxed:
         return list(lines)
-    if all(line.quad is not None for line in boxed):
+    quads = [(quad, line) for line in boxed if (quad := line.quad) is not None]
+    if len(quads) == len(boxed):
         slope = _median_slope(boxed)
-        return _rows([(_across_text(line.quad, slope), _quad_height(line.quad), line.quad[0][0], line)  # type: ignore[arg-type]
-                      for line in boxed])
-    return _rows([((line.box[1] + line.box[3]) / 2, max(1, line.box[3] - line.box[1]), line.box[0], line)  # type: ignore[index]
-                  for line in boxed])
+        return _rows([(_across_text(quad, slope), _quad_height(quad), quad[0][0], line) for quad, line in quads])
+    return _rows([((box[1] + box[3]) / 2, max(1, box[3] - box[1]), box[0], line)
+                  for line in boxed if (box := line.box) is not None])
 
 
 def _median_slope(lines: list[OcrLine]) -> float:

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
+
 from darkread.core.image_codec import encode_png
 
 from ..errors import OcrError, OcrUnavailableError

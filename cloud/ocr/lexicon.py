@@ -51,8 +51,7 @@ logger = logging.getLogger(__name__)
 
 _TOKEN = re.compile(r"^(?P<lead>[^A-Za-z]*)(?P<word>[A-Za-z]+)(?P<trail>(?:'[A-Za-z]{1,2})?[^A-Za-z]*)$")  # author's
 # (s and e: small closed glyphs a dim reconstruction fills in alike, "foundere of our true",
-# "formal and slavieh": on the stored pages of the suite 100 lux 3.0 -> 2.7 %, 30-lux paragraphs
-# 1.5 -> 1.1 % CER; clean prose lines changed 0.9 -> 1.1 %)
+# "formal and slavieh"; what the group gains and costs: cloud/README.md, OCR engines)
 _CONFUSABLE_GROUPS = ("eoac", "ilt", "nu", "hb", "rt", "vy", "se")
 CONFUSABLE: frozenset[tuple[str, str]] = frozenset(
     (a, b) for group in _CONFUSABLE_GROUPS for a in group for b in group if a != b

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import httpx
 import numpy as np
+
 from darkread.core.image_codec import encode_png
 
 from ..errors import OcrError, OcrUnavailableError

@@ -101,7 +101,7 @@ class RapidOcrBackend:
         for quad, text, score in zip(output.boxes, output.txts, output.scores, strict=True):
             xs, ys = np.asarray(quad)[:, 0], np.asarray(quad)[:, 1]
             box = (int(xs.min()), int(ys.min()), int(np.ceil(xs.max())), int(np.ceil(ys.max())))
-            corners = tuple((float(x), float(y)) for x, y in np.asarray(quad, dtype=np.float64)[:4])
-            lines.append(OcrLine(text=str(text), box=box, confidence=float(score), quad=corners))  # type: ignore[arg-type]
+            c0, c1, c2, c3 = ((float(x), float(y)) for x, y in np.asarray(quad, dtype=np.float64)[:4])
+            lines.append(OcrLine(text=str(text), box=box, confidence=float(score), quad=(c0, c1, c2, c3)))
         ordered = reading_order(lines)
         return OcrResult(text=join_lines(ordered), lines=ordered)

@@ -82,7 +82,7 @@ class TesseractBackend:
         except OcrError:
             return False
         try:
-            import pytesseract  # noqa: F401
+            import pytesseract  # noqa: F401  # imported only to learn whether it is installed
         except ImportError:
             return False
         return shutil.which("tesseract") is not None
@@ -127,6 +127,7 @@ class TesseractBackend:
             text = (item.GetUTF8Text(level) or "").strip()
             box = item.BoundingBox(level)
             if text and box is not None:
-                lines.append(OcrLine(text=text, box=tuple(int(v) for v in box), confidence=item.Confidence(level) / 100))
+                x0, y0, x1, y1 = box
+                lines.append(OcrLine(text=text, box=(int(x0), int(y0), int(x1), int(y1)), confidence=item.Confidence(level) / 100))
         ordered = reading_order(lines)
         return OcrResult(text=join_lines(ordered), lines=ordered)

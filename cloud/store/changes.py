@@ -34,5 +34,5 @@ class ChangeFeed:
         for listener in list(self._listeners):
             try:
                 listener(session_id, last_seq)
-            except Exception:  # noqa: BLE001 - one broken listener must not stop ingest
+            except Exception:  # one broken listener must not stop ingest
                 log.exception("store change listener failed for session %s", session_id)

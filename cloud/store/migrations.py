@@ -3,7 +3,8 @@
 A backend's schema is a tuple of steps: ``steps[i]`` takes a database from version i to i + 1,
 an SQL script (statements split on ``;``) or a function of the connection for a step that must
 look first. At start-up ``migrate`` reads the version the database is at, refuses one from a
-newer darkread, and runs every pending step in its own transaction, recording the new version inside that transaction so a failed step leaves the previous version.
+newer darkread, and runs every pending step in its own transaction, recording the new version
+inside that transaction so a failed step leaves the previous version.
 Where the version lives and how a transaction is opened is the backend's ``SchemaTarget``
 (SQLite: ``PRAGMA user_version``; PostgreSQL: a ``schema_version`` table under an advisory
 lock, so instances starting together migrate once).
@@ -19,7 +20,7 @@ from .records import StoreError
 
 log = logging.getLogger(__name__)
 
-Step = str | Callable[[Any], None]  # an SQL script, or a function of the backend's connection
+Step = str | Callable[[Any], object]  # an SQL script, or a function of the backend's connection
 
 
 class SchemaTarget(Protocol):
@@ -50,7 +51,7 @@ def migrate(target: SchemaTarget, steps: Sequence[Step], *, backend: str) -> int
             target.apply(steps[version], version + 1)
         except StoreError:
             raise
-        except Exception as exc:  # noqa: BLE001 - driver errors of either backend become one StoreError
+        except Exception as exc:  # driver errors of either backend become one StoreError
             raise StoreError(f"{backend} schema migration {version} -> {version + 1} failed: {exc}") from exc
         log.info("%s store schema migrated to version %d", backend, version + 1)
     return before

@@ -151,7 +151,7 @@ def _insert_sql(table: str) -> str:
     names = ", ".join(name for name, _ in _COLUMNS[table])
     arrays = ", ".join(f"%s::{kind}[]" for _, kind in _COLUMNS[table])
     return (
-        f"INSERT INTO {table} ({names}) SELECT * FROM unnest({arrays})"  # noqa: S608 - names are ours
+        f"INSERT INTO {table} ({names}) SELECT * FROM unnest({arrays})"  # names are ours
         " ON CONFLICT DO NOTHING RETURNING session_id, seq"
     )
 
@@ -166,7 +166,7 @@ _ADVANCE = f"""
     UPDATE sessions s SET last_seq = batch.top, updated_s = %s
     FROM batch WHERE s.session_id = batch.session_id AND s.last_seq < batch.top
     RETURNING s.session_id, s.last_seq, pg_notify('{CHANNEL}', %s || ' ' || s.last_seq || ' ' || s.session_id)::text
-"""  # noqa: S608 - the channel is ours
+"""  # the channel is ours
 _SESSIONS = """
     SELECT s.session_id, device_id, mode, sensor_w, sensor_h, fovea_h, fovea_w, created_s, updated_s, last_seq,
         (SELECT count(*) FROM frames f WHERE f.session_id = s.session_id),
@@ -201,7 +201,7 @@ class _PostgresSchema:
                 step(self.conn)
             else:
                 for statement in statements(step):
-                    self.conn.execute(statement)  # type: ignore[call-overload]
+                    self.conn.execute(statement)
             self.conn.execute("DELETE FROM schema_version")
             self.conn.execute("INSERT INTO schema_version (version) VALUES (%s)", (new_version,))
 
@@ -312,7 +312,7 @@ class _BatchWriter:
     async def _commit(self, batch: list[_Insert]) -> None:
         try:
             outcomes, last_seqs = await self._transaction(batch)
-        except Exception as exc:  # noqa: BLE001 - whatever failed, the writer lives on and every caller hears of it
+        except Exception as exc:  # whatever failed, the writer lives on and every caller hears of it
             log.error("PostgreSQL commit of %d records failed: %s", len(batch), _first_line(exc))
             for job in batch:
                 if not job.done.done():
@@ -454,7 +454,7 @@ class PostgresStore:
         self._check_open()
         try:
             async with self.pool.connection() as conn:
-                cursor = await conn.execute(query, args)  # type: ignore[arg-type]
+                cursor = await conn.execute(query, args)
                 return await cursor.fetchall()
         except _DB_ERRORS as exc:
             raise StoreError(f"read failed: {_first_line(exc)}") from exc

@@ -312,7 +312,7 @@ class SqliteStore:
     async def delete_session(self, session_id: str) -> bool:
         def work(conn: sqlite3.Connection) -> bool:
             for table in _SEQUENCED:
-                conn.execute(f"DELETE FROM {table} WHERE session_id = ?", (session_id,))  # noqa: S608
+                conn.execute(f"DELETE FROM {table} WHERE session_id = ?", (session_id,))
             return conn.execute("DELETE FROM sessions WHERE session_id = ?", (session_id,)).rowcount > 0
 
         existed = bool(await self._writer.submit(work))

@@ -104,7 +104,7 @@ class GroupCommitWriter:
                 conn.execute("SAVEPOINT job")
                 try:
                     value = work(conn)
-                except Exception as exc:  # noqa: BLE001 - the error belongs to the job's caller
+                except Exception as exc:  # the error belongs to the job's caller
                     conn.execute("ROLLBACK TO job")
                     results.append((done, None, exc))
                 else:

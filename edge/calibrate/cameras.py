@@ -18,13 +18,17 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+
 from darkread.edge.errors import CalibrationError
 from darkread.edge.io.intrinsics import Intrinsics, intrinsics_from_dict
 
 
 class Camera(Protocol):
-    width: int
-    height: int
+    @property
+    def width(self) -> int: ...
+
+    @property
+    def height(self) -> int: ...
 
     def project(self, points_camera: np.ndarray) -> np.ndarray: ...
 

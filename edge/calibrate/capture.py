@@ -13,6 +13,7 @@ from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
+
 from darkread.edge.calibrate.clock import RgbFrames
 from darkread.edge.calibrate.event_image import (
     Burst,
@@ -94,7 +95,7 @@ def paired_views(
             logger.info("no RGB frame fully inside the shown interval at %.0f us", on)
             continue
         rgb_det = None
-        for k in sorted(inside, key=lambda i: abs(i - inside.mean())):
+        for k in sorted(inside.tolist(), key=lambda i: abs(i - inside.mean())):
             rgb_det = detect_board(frames.images[k], spec)
             if rgb_det is not None:
                 break

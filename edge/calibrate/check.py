@@ -18,6 +18,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 from darkread.edge.calibrate.clock import ActivityCounter, RefineResult, refine_offset
 from darkread.edge.calibrate.event_image import count_image, denoise
 from darkread.edge.errors import CalibrationError

@@ -94,6 +94,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def _start_calibration(args: argparse.Namespace, width: int = 1280, height: int = 720):
     import numpy as np
+
     from darkread.edge.io.calibration import Calibration, load_calibration
 
     capture = Path(args.capture)
@@ -204,7 +205,9 @@ def _clock_refine(args: argparse.Namespace) -> int:
 
 def _extrinsics(args: argparse.Namespace) -> int:
     import numpy as np
+
     from darkread.edge.calibrate.cameras import (
+        Camera,
         aria_camera_from_device_calibration,
         matrix_from_list,
         pose_from_aria_json,
@@ -235,13 +238,14 @@ def _extrinsics(args: argparse.Namespace) -> int:
     if args.homography_only:
         event_det, rgb_det = page_view(data.events, bursts, frames, calib.gaze_to_event_time_offset_us, spec,
                                        data.width, data.height)
-        result = page_homography(event_det, rgb_det)
+        homography = page_homography(event_det, rgb_det)
         logger.warning("homography fallback: valid only for points on this page; calibration.json is not changed")
-        return _finish(args, result.to_dict())
+        return _finish(args, homography.to_dict())
     pairs = paired_views(data.events, bursts, frames, calib.gaze_to_event_time_offset_us, spec, data.width, data.height)
     if not pairs:
         raise CalibrationError("the board was not found in both cameras at the same time (run `calibrate clock` first?)")
     event_camera = calib.intrinsics()
+    rgb_camera: Camera
     if args.aria_calibration:
         if not args.t_device_cpf:
             raise CalibrationError("--aria-calibration needs --T-device-cpf (the CPF pose in the device frame)")

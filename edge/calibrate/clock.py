@@ -24,9 +24,10 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
+from darkread.core.image_codec import ImageCodecError, read_image
 from darkread.edge.calibrate.event_image import Burst
 from darkread.edge.errors import CalibrationError
-from darkread.core.image_codec import ImageCodecError, read_image
 
 logger = logging.getLogger(__name__)
 
@@ -120,8 +121,8 @@ def pose_segments(images: Sequence[np.ndarray], *, min_overlap: float = 0.8) -> 
     masks = [cv2.threshold(im, 0, 1, cv2.THRESH_BINARY + cv2.THRESH_OTSU)[1].astype(bool) for im in stack]
     ids = np.zeros(len(masks), dtype=np.int64)
     for i in range(1, len(masks)):
-        union = np.count_nonzero(masks[i] | masks[i - 1])
-        overlap = np.count_nonzero(masks[i] & masks[i - 1]) / max(union, 1)
+        union = int(np.count_nonzero(masks[i] | masks[i - 1]))
+        overlap = int(np.count_nonzero(masks[i] & masks[i - 1])) / max(union, 1)
         ids[i] = ids[i - 1] + (overlap < min_overlap)
     return ids
 
@@ -218,7 +219,8 @@ def switches_from_triggers(triggers: np.ndarray, *, channel: int | None = None, 
     return trig["t"].astype(np.float64), rising if rising_means_shown else ~rising
 
 
-def _cost(offset: float, switch_event: np.ndarray, shown_after: np.ndarray, frames_t: np.ndarray, exposure: np.ndarray, measured: np.ndarray) -> float:
+def _cost(offset: float, switch_event: np.ndarray, shown_after: np.ndarray, frames_t: np.ndarray, exposure: np.ndarray,
+          measured: np.ndarray) -> float:
     pred = predicted_fractions(switch_event - offset, shown_after, frames_t, exposure)
     return float(np.mean((pred - measured) ** 2))
 
@@ -283,12 +285,12 @@ def fit_offset(
     pred = predicted_fractions(switch_event - offset, shown_after, t, e)
     mixed = (pred > 0.02) & (pred < 0.98)
     # jackknife over switches: drop one switch and the frames within a period of it
-    estimates = []
+    left_out = []
     for k in range(switch_event.size):
         keep_sw = np.arange(switch_event.size) != k
         near = np.abs(t - (switch_event[k] - offset)) < period + e
-        estimates.append(refine(switch_event[keep_sw], shown_after[keep_sw], t[~near], e[~near], m[~near], offset, period / 4))
-    estimates = np.asarray(estimates)
+        left_out.append(refine(switch_event[keep_sw], shown_after[keep_sw], t[~near], e[~near], m[~near], offset, period / 4))
+    estimates = np.asarray(left_out)
     n = estimates.size
     jack = float(np.sqrt((n - 1) / n * np.sum((estimates - estimates.mean()) ** 2)))
     return ClockResult(

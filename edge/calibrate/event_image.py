@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
 from darkread.edge.events import EVENT_CD_DTYPE
 
 
@@ -107,7 +108,7 @@ def latency_image(
     rank[np.argsort(latency, kind="stable")] = np.arange(latency.size) / latency.size
     flat = np.zeros(width * height)
     flat[fired] = np.clip(1.0 - rank / 0.95, 0.0, 1.0)
-    level = flat.astype(np.float32).reshape(height, width)
+    level: np.ndarray = flat.astype(np.float32).reshape(height, width)
     if median_px > 1:
         level = cv2.medianBlur(level, median_px)
     if blur_sigma_px > 0:

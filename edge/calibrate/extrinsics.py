@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+
 from darkread.edge.calibrate.cameras import Camera, Fisheye624Camera
 from darkread.edge.calibrate.markers import Detection, board_pose, pose_matrix
 from darkread.edge.errors import CalibrationError
@@ -122,7 +123,8 @@ class HomographyResult:
         return cv2.perspectiveTransform(pts, self.H_event_rgb).reshape(-1, 2)
 
 
-def page_homography(event_det: Detection, rgb_det: Detection, *, rgb_camera: Camera | None = None, event_camera: Intrinsics | None = None) -> HomographyResult:
+def page_homography(event_det: Detection, rgb_det: Detection, *, rgb_camera: Camera | None = None,
+                    event_camera: Intrinsics | None = None) -> HomographyResult:
     """Homography from matched marker corners (by id) of a flat page; undistorts when cameras are given."""
     common, ie, ir = np.intersect1d(event_det.ids, rgb_det.ids, return_indices=True)
     if common.size < 4:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+
 from darkread.edge.calibrate.event_image import (
     Burst,
     burst_events,
@@ -92,7 +93,7 @@ def calibrate_intrinsics(
     img = [d.image_points.reshape(-1, 1, 2).astype(np.float32) for d in used]
     flags = cv2.CALIB_FIX_K3 | (cv2.CALIB_ZERO_TANGENT_DIST if zero_tangential else 0)
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
-    rms, K, dist, rvecs, tvecs, std_intrinsics, _, _ = cv2.calibrateCameraExtended(
+    rms, K, dist, rvecs, tvecs, std_intrinsics, _, _ = cv2.calibrateCameraExtended(  # type: ignore[call-overload]  # OpenCV takes None for the initial camera matrix and distortion, its stubs do not
         obj, img, (width, height), None, None, flags=flags, criteria=criteria
     )
     dist = np.asarray(dist, dtype=np.float64).reshape(-1)

@@ -16,8 +16,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from darkread.edge.errors import CalibrationError
+
 from darkread.core.json_file import read_json_file
+from darkread.edge.errors import CalibrationError
 
 BOARD_NAME = "board.json"
 KINDS = ("charuco", "grid")
@@ -63,10 +64,13 @@ class BoardSpec:
 
     def board(self) -> cv2.aruco.Board:
         if self.kind == "charuco":
-            return cv2.aruco.CharucoBoard((self.squares_x, self.squares_y), self.square_m, self.marker_m, self.aruco_dictionary())
+            return self.charuco_board()
         return cv2.aruco.GridBoard(
             (self.squares_x, self.squares_y), self.marker_m, self.square_m - self.marker_m, self.aruco_dictionary()
         )
+
+    def charuco_board(self) -> cv2.aruco.CharucoBoard:
+        return cv2.aruco.CharucoBoard((self.squares_x, self.squares_y), self.square_m, self.marker_m, self.aruco_dictionary())
 
     def image(self, px_per_m: float) -> np.ndarray:
         """The pattern as uint8 (0 = black, 255 = white), no margin: pixel (i, j) covers board
@@ -126,24 +130,27 @@ def detect_board(image: np.ndarray, spec: BoardSpec, *, min_corners: int = 6) ->
     """Corners of ``spec`` in a grey image (uint8), or None when too few are found."""
     if image.ndim == 3:
         image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    board = spec.board()
     if spec.kind == "charuco":
-        detector = cv2.aruco.CharucoDetector(board)
+        charuco = spec.charuco_board()
+        detector = cv2.aruco.CharucoDetector(charuco)
         detector.setDetectorParameters(detector_parameters())
-        corners, ids, marker_corners, marker_ids = detector.detectBoard(image)
+        corners, corner_ids, marker_corners, marker_ids = detector.detectBoard(image)
         n_markers = 0 if marker_ids is None else len(marker_ids)
-        if ids is None or len(ids) < min_corners:
+        if corner_ids is None or len(corner_ids) < min_corners:
             return None
-        ids = ids.reshape(-1)
-        object_points = board.getChessboardCorners()[ids].astype(np.float32)
-        return Detection(object_points, corners.reshape(-1, 2).astype(np.float32), ids.astype(np.int64), n_markers)
-    detector = cv2.aruco.ArucoDetector(spec.aruco_dictionary(), detector_parameters())
-    marker_corners, marker_ids, _ = detector.detectMarkers(image)
+        found = np.asarray(corner_ids).reshape(-1)
+        object_points = np.asarray(charuco.getChessboardCorners())[found].astype(np.float32)
+        return Detection(object_points, corners.reshape(-1, 2).astype(np.float32), found.astype(np.int64), n_markers)
+    board = spec.board()
+    aruco = cv2.aruco.ArucoDetector(spec.aruco_dictionary(), detector_parameters())
+    marker_corners, marker_ids, _ = aruco.detectMarkers(image)
     if marker_ids is None or 4 * len(marker_ids) < min_corners:
         return None
-    known = {int(i): k for k, i in enumerate(board.getIds().reshape(-1))}
+    known = {int(i): k for k, i in enumerate(np.asarray(board.getIds()).reshape(-1))}
     objects = board.getObjPoints()
-    obj, img, ids = [], [], []
+    obj: list[np.ndarray] = []
+    img: list[np.ndarray] = []
+    ids: list[np.ndarray] = []
     for corners, marker_id in zip(marker_corners, marker_ids.reshape(-1)):
         k = known.get(int(marker_id))
         if k is None:

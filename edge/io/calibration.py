@@ -7,15 +7,15 @@ where it sits on the glasses and the clock offset to the gaze.
 from __future__ import annotations
 
 import json
-from dataclasses import astuple, dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from darkread.core.json_file import read_json_file
 from darkread.edge.errors import CalibrationError
 from darkread.edge.io.intrinsics import Intrinsics, intrinsics_from_dict, intrinsics_to_dict
-from darkread.core.json_file import read_json_file
 
 _RIGID_TOLERANCE = 1e-3
 
@@ -37,7 +37,7 @@ class Calibration(Intrinsics):
             self.T_event_cpf, other.T_event_cpf
         )
 
-    __hash__ = None  # type: ignore[assignment]
+    __hash__ = None  # type: ignore[assignment]  # unhashable, as its equality compares arrays; mypy wants a method here
 
     def cpf_to_event(self, points_cpf: np.ndarray) -> np.ndarray:
         """(N, 3) CPF points -> (N, 3) event-camera-frame points."""
@@ -83,7 +83,7 @@ def load_calibration(path: str | Path) -> Calibration:
         raise CalibrationError(f"{path}: rgb_camera must be a JSON object")
 
     return Calibration(
-        *astuple(camera),
+        **{f.name: getattr(camera, f.name) for f in fields(camera)},
         T_event_cpf=_matrix4(_get(doc, "T_event_cpf", "", path), "T_event_cpf", path),
         gaze_to_event_time_offset_us=offset,
         rgb_camera=rgb,

@@ -11,6 +11,7 @@ OTHERS (0xE), CONTINUED (0xF) and reserved types are skipped and counted.
 
 from __future__ import annotations
 
+from typing import Any
 
 import numpy as np
 
@@ -109,9 +110,9 @@ class Evt2Decoder(WordStreamDecoder):
         return out
 
 
-def decode_evt2(data: bytes, width: int = 640, height: int = 480, **kw: object) -> tuple[Events, Triggers]:
+def decode_evt2(data: bytes, width: int = 640, height: int = 480, **kw: Any) -> tuple[Events, Triggers]:
     """Decode a whole EVT 2.0 byte string (data only, no header)."""
-    decoder = Evt2Decoder(width, height, **kw)  # type: ignore[arg-type]
+    decoder = Evt2Decoder(width, height, **kw)
     events, triggers = decoder.decode(data)
     decoder.finish()
     return events, triggers

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import functools
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 
@@ -129,9 +130,9 @@ def _decode_words_jit(
     return events, triggers
 
 
-def decode_evt3(data: bytes, width: int = 1280, height: int = 720, **kw: object) -> tuple[Events, Triggers]:
+def decode_evt3(data: bytes, width: int = 1280, height: int = 720, **kw: Any) -> tuple[Events, Triggers]:
     """Decode a whole EVT 3.0 byte string (data only, no header)."""
-    decoder = Evt3Decoder(width, height, **kw)  # type: ignore[arg-type]
+    decoder = Evt3Decoder(width, height, **kw)
     events, triggers = decoder.decode(data)
     decoder.finish()
     return events, triggers

@@ -37,7 +37,7 @@ def _bounds(words: np.ndarray) -> tuple[int, int]:  # pragma: no cover - compile
 
 
 @compiled
-def _decode(words, state, counters, width, height, ev64, tr16, tr64):  # noqa: ANN001  # pragma: no cover
+def _decode(words, state, counters, width, height, ev64, tr16, tr64):  # pragma: no cover
     """Decode ``words`` into flat views of the records (EVENT_CD: x | y << 16 | p << 32 and t in the
     two i64 slots of each 16 bytes; TRIGGER: p, id at u16 slots 0 and 8, t at i64 slot 1 of 24 bytes);
     returns the numbers of events and triggers written."""

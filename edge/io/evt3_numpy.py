@@ -194,7 +194,7 @@ def decode_words(
     return _drop_invalid(events, stats, width, height), triggers
 
 
-def _single_events(words: np.ndarray, x_idx: np.ndarray, state_at) -> Events:  # noqa: ANN001
+def _single_events(words: np.ndarray, x_idx: np.ndarray, state_at) -> Events:
     out = np.zeros(len(x_idx), dtype=EVENT_CD_DTYPE)
     _fill_singles(out, slice(None), words[x_idx], *state_at(x_idx))
     return out
@@ -206,7 +206,7 @@ def _fill_singles(out: Events, slots: np.ndarray | slice, x_val: np.ndarray, t: 
     out["t"][slots], out["y"][slots] = t, y
 
 
-def _mixed_events(words, types, x_idx, v_idx, v_base, v_pol, state_at, stats, width) -> Events:  # noqa: ANN001
+def _mixed_events(words, types, x_idx, v_idx, v_base, v_pol, state_at, stats, width) -> Events:
     """Single and vector events in stream order."""
     v_word = words[v_idx]
     is_12 = (v_word >> 12) == VECT_12
@@ -246,7 +246,7 @@ def _drop_invalid(out: Events, stats: DecodeStats, width: int, height: int) -> E
     return out
 
 
-def _triggers(words, trig_idx, state_at, stats) -> Triggers:  # noqa: ANN001
+def _triggers(words, trig_idx, state_at, stats) -> Triggers:
     val = words[trig_idx]
     out = np.zeros(len(trig_idx), dtype=TRIGGER_DTYPE)
     out["p"], out["id"] = val & 1, (val >> 8) & 0xF

@@ -60,7 +60,7 @@ class Intrinsics:
             return None
         return self._distorted_pixel(x / z, y / z)
 
-    def _distorted_pixel(self, x, y):  # noqa: ANN001, ANN202 - floats or arrays alike
+    def _distorted_pixel(self, x, y):  # floats or arrays alike
         """Normalised image coordinates -> pixel through the radtan model (one formula for both paths)."""
         k1, k2, p1, p2 = self.distortion
         r2 = x * x + y * y

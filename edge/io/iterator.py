@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 
 import numpy as np
 
@@ -89,8 +89,9 @@ class EventsIterator:
             buf = buf[np.searchsorted(buf["t"], start) :] if buf["t"][0] < start else buf
             if not len(buf):
                 continue
-            last, done = int(buf["t"][-1]), stop is not None and buf["t"][-1] >= stop
-            end = stop if done else last  # windows ending at or before `end` are complete
+            last = int(buf["t"][-1])
+            done = stop is not None and last >= stop
+            end = last if stop is None else min(last, stop)  # windows ending at or before `end` are complete
             n_windows = -(-(end - start) // self.delta_t) if done else max(0, (end - start) // self.delta_t)
             pending = yield from self._windows(buf, start, n_windows, stop)
             start += n_windows * self.delta_t
@@ -100,7 +101,7 @@ class EventsIterator:
             last = int(pending["t"][-1])
             yield from self._windows(pending, start, (last - start) // self.delta_t + 1, stop)
 
-    def _windows(self, buf: Events, start: int, count: int, stop: int | None) -> Iterator[Events]:
+    def _windows(self, buf: Events, start: int, count: int, stop: int | None) -> Generator[Events, None, Events]:
         """Yield ``count`` windows from ``start``; returns the events after them."""
         ends = start + self.delta_t * np.arange(1, count + 1, dtype=np.int64)
         if stop is not None:
@@ -123,8 +124,8 @@ class EventsIterator:
             t = buf["t"]
             if t[0] < start:
                 buf = buf[np.searchsorted(t, start) :]
-            done = stop is not None and len(buf) and buf["t"][-1] >= stop
-            if done:
+            done = stop is not None and len(buf) > 0 and buf["t"][-1] >= stop
+            if done and stop is not None:
                 buf = buf[: np.searchsorted(buf["t"], stop)]
             whole = len(buf) // self.n_events * self.n_events
             for begin in range(0, whole, self.n_events):
@@ -152,7 +153,7 @@ class PacedReplay:
         slices: Iterable[Events],
         speed: float | None = 1.0,
         clock: Callable[[], float] = time.monotonic,
-        sleep: Callable[[float], None] = time.sleep,
+        sleep: Callable[[float], object] = time.sleep,
     ) -> None:
         if speed is not None and speed <= 0:
             raise ValueError(f"speed must be positive or None, got {speed}")

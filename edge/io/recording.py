@@ -45,7 +45,7 @@ class Recording:
             self._gaze = read_gaze_csv(self.gaze_path)
         return self._gaze
 
-    def reader(self, **kwargs: Any):  # noqa: ANN201 - RawReader, imported lazily
+    def reader(self, **kwargs: Any):  # RawReader, imported lazily
         """A chunked reader of ``events.raw`` (``darkread.edge.io.raw.RawReader``)."""
         from darkread.edge.io.raw import RawReader
 

@@ -236,7 +236,7 @@ class AriaGen2GazeFeed:
 
     def __init__(self, live: LiveGaze, port: int = 6768) -> None:
         try:
-            from aria import stream_receiver  # type: ignore[import-not-found]
+            from aria import stream_receiver
         except ImportError as exc:
             raise DeviceError(ARIA_SDK_HINT) from exc
         self.live = live

@@ -16,6 +16,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from darkread.core.errors import DarkreadError
 from darkread.edge.events import Events, select_events
 from darkread.edge.fovea import in_window
 from darkread.edge.io.iterator import EventsIterator, PacedReplay
@@ -23,7 +24,6 @@ from darkread.edge.io.plausibility import TimeCheck
 from darkread.edge.io.raw import RawReader
 from darkread.edge.io.raw_header import read_raw_header
 from darkread.edge.sources.base import EventSink
-from darkread.core.errors import DarkreadError
 
 logger = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ from darkread.edge.windows import Windows
 class EveryWindowStep:
     """A frame per window of ``n_events`` new events inside it (or per ``period_ms`` with fewer)."""
 
-    replay_grid_us = None  # lossless: a step after each chunk that completes a window (or ends a period)
+    replay_grid_us: int | None = None  # lossless: a step after each chunk that completes a window (or ends a period)
 
     def __init__(self, windows: Windows, settings: PipelineConfig, on_frame: FrameHandler) -> None:
         self.windows = windows

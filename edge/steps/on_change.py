@@ -29,7 +29,7 @@ the same views, whatever the replay's chunking."""
 class OnChangeStep:
     """One view per fixation, fused from the frames that changed it."""
 
-    replay_grid_us = LOSSLESS_STEP_US
+    replay_grid_us: int | None = LOSSLESS_STEP_US
 
     def __init__(self, windows: Windows, settings: PipelineConfig, on_frame: FrameHandler) -> None:
         self.windows = windows

@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-
 # Benchmark modules, in the order of the data flow.
 BENCH_MODULES: tuple[str, ...] = (
     "darkread.lab.bench.decode",

@@ -32,10 +32,11 @@ class AckServer:
         self.server = await serve(self._handle, "127.0.0.1", 0)
         return int(self.server.sockets[0].getsockname()[1])
 
-    async def _handle(self, ws) -> None:  # noqa: ANN001
-        from darkread.proto.messages import Ack, Welcome, decode, encode
+    async def _handle(self, ws) -> None:
+        from darkread.proto.messages import Ack, Hello, Welcome, decode, encode
 
         hello = decode(await ws.recv(), max_bytes=MAX_BYTES)
+        assert isinstance(hello, Hello)  # the uplink opens with hello
         self.hellos.append(hello)
         seqs = self.stored.setdefault(hello.session_id, [])
         last = seqs[-1] if seqs else -1

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -37,10 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
-from darkread.lab.bench import BenchContext, Figure
-from darkread.lab.bench.cloud import API_KEY, start_server, stop_server
 from darkread.cloud.store import SessionSpec, SqliteStore, StoredFrame
 from darkread.core.paths import SAMPLE_RECORDING
+from darkread.lab.bench import BenchContext, Figure
+from darkread.lab.bench.cloud import API_KEY, start_server, stop_server
 from darkread.proto.messages import Ack, Frame, Hello, View, Welcome, decode, encode
 
 ASK_EVERY_S = 0.5
@@ -127,8 +128,9 @@ def repeated(frames: list[StoredFrame], count: int, first_seq: int = 0) -> list[
 def to_wire(frame: StoredFrame) -> bytes:
     """The stored record as the glasses sent it: a fused view with its levels (it may be larger
     than the fovea), or a binary frame."""
-    extra = {"seq": frame.seq, "gaze_rad": frame.gaze_rad, "events_used": frame.events_used}
-    return encode(Frame.of(frame, **extra) if frame.levels is None else View.of(frame, **extra))
+    if frame.levels is None:
+        return encode(Frame.of(frame, seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used))
+    return encode(View.of(frame, seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used))
 
 
 def preload(data_dir: Path, session_id: str, frames: list[StoredFrame]) -> None:
@@ -172,7 +174,7 @@ async def stream_and_ask(base: str, session_id: str, frames: list[StoredFrame], 
             await ws.send(encode(Hello(device_id="bench", session_id=session_id, mode="frames", sensor=(1280, 720),
                                        fovea=(100, 200))))  # fmt: skip
             welcome = decode(await ws.recv(), max_bytes=1 << 20)
-            assert isinstance(welcome, Welcome)  # noqa: S101 - the service under test answers hello
+            assert isinstance(welcome, Welcome)  # the service under test answers hello
             asker = asyncio.create_task(ask_loop(http))
             wall0, t0 = time.perf_counter(), frames[0].t_us
             acked = -1
@@ -219,7 +221,7 @@ async def _wait_rebuilt(base: str, session_id: str, timeout_s: float) -> float:
     return time.perf_counter() - started
 
 
-def _server(ctx: BenchContext, name: str, ocr_threads: int = ASK_OCR_THREADS) -> tuple[object, str]:
+def _server(ctx: BenchContext, name: str, ocr_threads: int = ASK_OCR_THREADS) -> tuple[subprocess.Popen[bytes], str]:
     """The service in its own process, once /readyz says its OCR engines are loaded."""
     import httpx
 
@@ -262,7 +264,7 @@ def from_scratch_ms(frames: list[StoredFrame]) -> tuple[float, float]:
     from darkread.cloud.settings import Settings
     from darkread.stitch import stitch_page
 
-    ocr = create_backend(Settings(_env_file=None))  # type: ignore[call-arg]
+    ocr = create_backend(Settings(_env_file=None))
     ocr.ready()
     started = time.perf_counter()
     page = stitch_page(frames)
@@ -279,10 +281,10 @@ def reading_cpu(ctx: BenchContext, frames: list[StoredFrame], kind: str) -> tupl
     name = f"cpu-{kind}"
     process, base = _server(ctx, name)
     try:
-        cpu0 = cpu_seconds(process.pid)  # type: ignore[attr-defined]
+        cpu0 = cpu_seconds(process.pid)
         asyncio.run(stream_and_ask(base, name, stream, WEARER_ASK_EVERY_S))
         asyncio.run(_wait_rebuilt(base, name, timeout_s=600))  # questions do not wait for stitching: the CPU must
-        cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000  # type: ignore[attr-defined]
+        cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000
     finally:
         stop_server(process)
     reading_s = (stream[-1].t_us - stream[0].t_us) / 1e6
@@ -290,7 +292,8 @@ def reading_cpu(ctx: BenchContext, frames: list[StoredFrame], kind: str) -> tupl
 
 
 def _load() -> str:
-    return "load average %.1f %.1f %.1f" % os.getloadavg()
+    one, five, fifteen = os.getloadavg()
+    return f"load average {one:.1f} {five:.1f} {fifteen:.1f}"
 
 
 def run(ctx: BenchContext) -> list[Figure]:
@@ -323,10 +326,10 @@ def run(ctx: BenchContext) -> list[Figure]:
         process, base = _server(ctx, name)
         try:
             rebuild_s = asyncio.run(_wait_rebuilt(base, name, timeout_s=1800)) if size > len(frames) else 0.0
-            cpu0 = cpu_seconds(process.pid)  # type: ignore[attr-defined]
+            cpu0 = cpu_seconds(process.pid)
             latencies = asyncio.run(stream_and_ask(base, name, live, ASK_EVERY_S))
             behind_s = asyncio.run(_wait_rebuilt(base, name, timeout_s=600))  # every frame stitched, its CPU counted
-            cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000  # type: ignore[attr-defined]
+            cpu_ms = (cpu_seconds(process.pid) - cpu0) * 1000
         finally:
             stop_server(process)
         ctx.notes.append(f"ask {size}: {len(latencies)} answers, max {max(latencies):.0f} ms, pages rebuilt from "
@@ -351,7 +354,7 @@ def run(ctx: BenchContext) -> list[Figure]:
         process, base = _server(ctx, f"wearers{suffix}", WEARER_OCR_THREADS)
         try:
             wearers_p95, exactly_once = _wearers(base, stream, stagger_s)
-        except Exception as exc:  # noqa: BLE001 - a failed stream is a figure (nan), not a crash of the bench
+        except Exception as exc:  # a failed stream is a figure (nan), not a crash of the bench
             ctx.notes.append(f"wearers{suffix}: a stream failed ({type(exc).__name__}: {exc}); the host is too busy for {WEARERS}")
             wearers_p95, exactly_once = float("nan"), False
         finally:

@@ -129,7 +129,8 @@ def _store_alone(open_store: Callable[[], Awaitable[SessionStore]], count: int) 
     from darkread.cloud.stream import stored_frame
     from darkread.proto.messages import decode as decode_message
 
-    frames = [stored_frame(decode_message(data, max_bytes=1 << 20)) for data in _frame_bytes(count)]  # type: ignore[arg-type]
+    messages = [decode_message(data, max_bytes=1 << 20) for data in _frame_bytes(count)]
+    frames = [stored_frame(message) for message in messages if isinstance(message, Frame)]
 
     async def write() -> float:
         from darkread.cloud.store import SessionSpec
@@ -169,7 +170,7 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
     from darkread.lab.bench.replays import count_stored_in, run_replays
 
     database_url = pg.create_database("replays")
-    instances = [list(start_server(ctx.scratch / f"replay-{name}", database_url)) for name in "ab"]
+    instances = [start_server(ctx.scratch / f"replay-{name}", database_url) for name in "ab"]
     killed_at: list[float] = []
 
     def kill_and_restart_a() -> None:
@@ -177,7 +178,7 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
         process.send_signal(signal.SIGKILL)
         process.wait(timeout=10)
         killed_at.append(time.monotonic())
-        instances[0] = list(start_server(ctx.scratch / "replay-a", database_url, port=port))
+        instances[0] = start_server(ctx.scratch / "replay-a", database_url, port=port)
 
     sessions, seconds = ctx.runs(50, 50, 4), float(ctx.runs(60, 15, 2))
     logging.getLogger("darkread.edge.uplink").setLevel(logging.ERROR)  # 25 failovers, one line each
@@ -204,8 +205,8 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
 
 def run(ctx: BenchContext) -> list[Figure]:
     from darkread.cloud.store import SqliteStore
-    from darkread.lab.fixtures.pg_server import PostgresUnavailable, TemporaryPostgres
     from darkread.cloud.store.postgres import PostgresStore
+    from darkread.lab.fixtures.pg_server import PostgresUnavailable, TemporaryPostgres
 
     total = ctx.runs(6000, 1500, 100)  # frames per configuration, split over the streams
     time_limit_s = float(ctx.runs(30, 10, 10))

@@ -13,10 +13,10 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from darkread.lab.bench import BenchContext, Figure
 from darkread.edge.io.evt3 import decode_evt3, encode_evt3
 from darkread.edge.io.raw import RawReader
 from darkread.edge.io.raw_header import RawHeader, format_raw_header, parse_raw_header
+from darkread.lab.bench import BenchContext, Figure
 
 FILES = {
     "gen41_hd": "real_events/gen41_hd_evt3__expelliarmus_evt3_sample.raw",
@@ -43,8 +43,9 @@ def _inputs(ctx: BenchContext) -> dict[str, Path]:
         found = {name: path for name, path in found.items() if path.is_file()}
         if found:
             return found
-    from darkread.edge.events import make_events  # synthetic fallback: 500k events over 2 s
     import numpy as np
+
+    from darkread.edge.events import make_events  # synthetic fallback: 500k events over 2 s
 
     rng = np.random.default_rng(0)
     n = 20_000 if ctx.smoke else 500_000
@@ -61,7 +62,7 @@ def _inputs(ctx: BenchContext) -> dict[str, Path]:
     return {"synthetic": path}
 
 
-def _decode_figures(name: str, header: RawHeader, payload: bytes, repeat: int, evt3) -> tuple[list[Figure], dict]:  # noqa: ANN001
+def _decode_figures(name: str, header: RawHeader, payload: bytes, repeat: int, evt3) -> tuple[list[Figure], dict]:
     events, _ = decode_evt3(payload, header.width, header.height)
     n = len(events)
     ours = evt3_time = float("inf")

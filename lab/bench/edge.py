@@ -27,17 +27,41 @@ import os
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypedDict, TypeVar
 
 import numpy as np
 
+from darkread.core.paths import SAMPLE_RECORDING
+from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
 from darkread.lab.bench import BenchContext, Figure
 from darkread.lab.bench.ack_server import AckServer
-from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
-from darkread.core.paths import SAMPLE_RECORDING
+
+if TYPE_CHECKING:
+    from darkread.edge.frame import FrameResult
+    from darkread.edge.sources.replay import ReplaySource
+    from darkread.edge.steps import FrameHandler
+    from darkread.edge.telemetry import EdgeMetrics
+    from darkread.edge.view_fusion import ViewRecord
 
 SMOKE_SECONDS = 0.3
 T = TypeVar("T")
+
+
+class ModeRun(TypedDict):
+    """One mode's best lossless replay."""
+
+    wall_s: float
+    cpu_s: float
+    recording_s: float
+    events_out: float
+    frames: int
+    views: int
+
+
+class LosslessRuns(TypedDict):
+    pinned: bool
+    decode_s: float
+    modes: dict[str, ModeRun]
 
 
 def _recording(ctx: BenchContext) -> Path | None:
@@ -123,9 +147,9 @@ def _decode_only_cpu_s(raw_path: Path) -> float:
 
 
 def _run_edge(
-    recording: Path, model: Path | None, speed: float, on_frame: object = None, uplink_url: str = "",
+    recording: Path, model: Path | None, speed: float, on_frame: FrameHandler | None = None, uplink_url: str = "",
     infer: str = "on-change",
-) -> tuple[float, float, object, object]:
+) -> tuple[float, float, ReplaySource, EdgeMetrics]:
     """(wall s, process CPU s, source, metrics) of one replay through the edge ``build_edge`` wires.
 
     ``speed`` 0 replays as fast as possible (lossless); ``on_frame`` takes the frames instead of
@@ -133,6 +157,7 @@ def _run_edge(
     """
     from darkread.edge.builder import build_edge
     from darkread.edge.config import load_config
+    from darkread.edge.sources.replay import ReplaySource
 
     config = load_config(None, environ={}, overrides={
         "source": {"kind": "replay", "path": str(recording), "speed": speed},
@@ -141,16 +166,18 @@ def _run_edge(
         "uplink": {"url": uplink_url or "ws://127.0.0.1:1/v1/stream", "device_id": "bench", "spool_dir": ":memory:"},
         "metrics": {"log_every_s": 3600.0},
     })
-    edge = build_edge(config, on_frame=on_frame)  # type: ignore[arg-type]
+    edge = build_edge(config, on_frame=on_frame)
+    source = edge.source
+    assert isinstance(source, ReplaySource)  # the config above asks for a replay
     started, cpu_started = time.perf_counter(), time.process_time()
     edge.startup(wait_connected_s=5.0)
-    edge.source.wait()
+    source.wait()
     edge.pipeline.stop()
     wall, cpu = time.perf_counter() - started, time.process_time() - cpu_started
     edge.shutdown(5.0)
     if edge.pipeline.error is not None:
         raise RuntimeError(f"edge loop failed: {edge.pipeline.error}")
-    return wall, cpu, edge.source, edge.metrics
+    return wall, cpu, source, edge.metrics
 
 
 def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
@@ -171,11 +198,11 @@ def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
     return RGB_FRAME_BYTES_ESTIMATE, "estimated"
 
 
-def _lossless(recording: Path, model: Path | None, repeats: int) -> dict[str, object]:
+def _lossless(recording: Path, model: Path | None, repeats: int) -> LosslessRuns:
     """The decode-only reference and each mode's best lossless replay on one pinned core (plain numbers)."""
     with _one_core() as pinned:
         decode_s = min(_decode_only_cpu_s(recording / "events.raw") for _ in range(repeats))
-        modes = {}
+        modes: dict[str, ModeRun] = {}
         for mode in INFER_MODES:
             wall, cpu, source, metrics = min(
                 (_run_edge(recording, model, 0.0, on_frame=_encode_only, infer=mode) for _ in range(repeats)), key=lambda r: r[1]
@@ -186,7 +213,7 @@ def _lossless(recording: Path, model: Path | None, repeats: int) -> dict[str, ob
     return {"pinned": pinned, "decode_s": decode_s, "modes": modes}
 
 
-def _encode_only(frame, arrival):  # noqa: ANN001, ANN202 - the uplink's work on a message, without a socket
+def _encode_only(frame: FrameResult | ViewRecord, arrival: float) -> None:  # the uplink's work on a message, without a socket
     from darkread.proto.messages import encode
 
     encode(frame.to_message())
@@ -236,9 +263,9 @@ def run(ctx: BenchContext) -> list[Figure]:
     sent_kb_s = {mode: m.totals["bytes_sent"] / 1e3 / span_s for mode, m in paced.items()}
     raw_kb_s = (recording / "events.raw").stat().st_size / 1e3 / span_s
     rgb_bytes, rgb_how = _rgb_frame_bytes(recording)
-    view_latency = np.fromiter(paced["on-change"].latency_ms, float)
-    latency = np.fromiter(paced["every-window"].latency_ms, float)
-    inference = np.fromiter(paced["every-window"].inference_ms, float)
+    view_latency = np.fromiter(paced["on-change"].latency_ms, np.float64)
+    latency = np.fromiter(paced["every-window"].latency_ms, np.float64)
+    inference = np.fromiter(paced["every-window"].inference_ms, np.float64)
     rate = meta.get("event_rate_hz", lossless[default]["events_out"] / max(span_s, 1e-9))
     decode_ref = f"decode only {span_s / decode_s:.0f}x"
     infer_ref = f"inference alone p50 {np.percentile(inference, 50):.2f} ms, p99 {np.percentile(inference, 99):.2f} ms"

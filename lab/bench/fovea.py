@@ -15,12 +15,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from darkread.lab.bench import BenchContext, Figure
-from darkread.models.train.latency import best_median_s
-from darkread.edge.events import EVENT_CD_DTYPE
 from darkread.edge.config import PipelineConfig
+from darkread.edge.events import EVENT_CD_DTYPE
 from darkread.edge.fovea import FoveaConfig, crop
 from darkread.edge.voxel import VoxelConfig, voxel_grid
+from darkread.lab.bench import BenchContext, Figure
+from darkread.models.train.latency import best_median_s
 
 SLICE_EVENTS = 10_000
 X0, Y0 = 540, 310

@@ -9,8 +9,6 @@ blocks where the shipped one has 96 and eight), alternated with the shipped one:
 
 from __future__ import annotations
 
-
-
 from darkread.lab import PREVIOUS_NETWORK
 from darkread.lab.bench import BenchContext, Figure
 from darkread.models.train.latency import onnx_latency_ms, reference_latency_ms

@@ -12,10 +12,14 @@ import re
 import textwrap
 import time
 import unicodedata
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from darkread.lab.bench import BenchContext, Figure
+
+if TYPE_CHECKING:
+    from darkread.cloud.ocr.base import OcrBackend
 
 PARAGRAPH = (
     "Reading in the dark is hard for cameras and easy for events. A foveated window follows the gaze "
@@ -35,7 +39,7 @@ def render_page(x_height_px: int, width_chars: int = 52, text: str = PARAGRAPH) 
         font = ImageFont.load_default(size=size)
     lines = textwrap.wrap(text, width_chars)
     pitch = int(x_height_px * 3)
-    width = max(font.getbbox(line)[2] for line in lines) + 40
+    width = int(max(font.getbbox(line)[2] for line in lines)) + 40
     image = Image.new("L", (width, pitch * len(lines) + 40), 255)
     draw = ImageDraw.Draw(image)
     for i, line in enumerate(lines):
@@ -53,14 +57,14 @@ def cer(reference: str, hypothesis: str) -> float:
     return float(jiwer.cer(normalise(reference), normalise(hypothesis) or " "))
 
 
-def _time_engine(engine: object, image: np.ndarray, repeats: int) -> tuple[float, str]:
+def _time_engine(engine: OcrBackend, image: np.ndarray, repeats: int) -> tuple[float, str]:
     """Median ms of ``repeats`` reads after a warm-up read (``repeats`` 0: the warm-up read itself)."""
     started = time.perf_counter()
-    text = engine.read(image).text  # type: ignore[attr-defined]  # warm-up (model load)
+    text = engine.read(image).text  # warm-up (model load)
     times = [time.perf_counter() - started] if repeats == 0 else []
     for _ in range(repeats):
         started = time.perf_counter()
-        text = engine.read(image).text  # type: ignore[attr-defined]
+        text = engine.read(image).text
         times.append(time.perf_counter() - started)
     return float(np.median(times)) * 1000, text
 
@@ -72,7 +76,7 @@ def run(ctx: BenchContext) -> list[Figure]:
     repeats = ctx.runs(5, 2, 0)
     text = PARAGRAPH.split(". ")[0] + "." if ctx.smoke else PARAGRAPH
     stock = RapidOcrBackend(params={"Det.limit_type": "min", "Det.limit_side_len": 736})
-    engines = {"rapidocr": RapidOcrBackend(), "tesseract": TesseractBackend()}
+    engines: dict[str, OcrBackend] = {"rapidocr": RapidOcrBackend(), "tesseract": TesseractBackend()}
     for name in [name for name, engine in engines.items() if not engine.ready()]:
         ctx.notes.append(f"ocr: {name} is not installed, skipped")
         del engines[name]

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from darkread.edge.spool import Spool
 from darkread.edge.config import UplinkConfig
+from darkread.edge.spool import Spool
 from darkread.edge.uplink import Uplink
 from darkread.proto.messages import Frame, pack_mask
 

@@ -70,8 +70,8 @@ def answer_text(words: int) -> str:
 
 def _speak_in_a_child(text: str, runs: int, mode: str) -> dict[str, float]:
     child = subprocess.run([sys.executable, "-c", _CHILD, str(runs), mode], input=text, capture_output=True, text=True,
-                           check=True, timeout=600)  # noqa: S603  # fmt: skip
-    return json.loads(child.stdout)  # type: ignore[no-any-return]
+                           check=True, timeout=600)  # fmt: skip
+    return json.loads(child.stdout)
 
 
 def run(ctx: BenchContext) -> list[Figure]:

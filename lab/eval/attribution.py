@@ -143,7 +143,7 @@ def ink_found(predicted: np.ndarray, target: np.ndarray, tolerance_px: int = TOL
     """(true ink found, true ink, predicted ink near true ink, predicted ink), within ``tolerance_px``."""
     kernel = np.ones((2 * tolerance_px + 1, 2 * tolerance_px + 1), np.uint8)
     pred, true = predicted.astype(np.uint8), target.astype(np.uint8)
-    near_pred, near_true = cv2.dilate(pred, kernel), cv2.dilate(true, kernel)
+    near_pred, near_true = np.asarray(cv2.dilate(pred, kernel), np.uint8), np.asarray(cv2.dilate(true, kernel), np.uint8)
     return (int((true & near_pred).sum()), int(true.sum()), int((pred & near_true).sum()), int(pred.sum()))
 
 
@@ -166,7 +166,7 @@ def attribute_recording(recording: Path, read_dir: Path, read_page: Callable[[np
         rays = window_rays(truth.calibration, origin, frame.mask.shape)
         ideal.append(window_truth(truth, rays, frame.mask.shape, H))
         placements.append(place_window(truth, rays, origin, frame.mask.shape, H))
-    counts = np.array([ink_found(m, i) for m, i in zip(masks, ideal, strict=True)] or [[0, 0, 0, 0]], np.int64).sum(axis=0)
+    counts = np.array([ink_found(m, i) for m, i in zip(masks, ideal, strict=True)] or [(0, 0, 0, 0)], np.int64).sum(axis=0)
     reference = (recording / "text.txt").read_text(encoding="utf-8")
 
     def cer(page: np.ndarray) -> float:
@@ -179,6 +179,10 @@ def attribute_recording(recording: Path, read_dir: Path, read_page: Callable[[np
         cer_ideal=cer(compose(ideal, placements, truth.ink.shape)),
         frame_recall=float(counts[0] / max(1, counts[1])), frame_precision=float(counts[2] / max(1, counts[3])),
     )
+
+
+def _mean(rows: Sequence[Attribution], key: str) -> float:
+    return float(np.mean([getattr(row, key) for row in rows]))
 
 
 def attribution_table(rows: Sequence[Attribution]) -> str:
@@ -194,14 +198,12 @@ def attribution_table(rows: Sequence[Attribution]) -> str:
         "|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for (lux, motion), members in sorted(groups.items(), key=lambda kv: (-kv[0][0], order.get(kv[0][1], 9))):
-        def mean(key: str) -> float:
-            return float(np.mean([getattr(m, key) for m in members]))
-
         label = f"**{motion}**" if motion == "all" else motion
         known = [m.cer_true_motion for m in members if m.cer_true_motion is not None]
         true_motion = f"{100 * float(np.mean(known)):.1f}%" if len(known) == len(members) else "–"
-        lines.append(f"| {lux:g} | {label} | {len(members)} | {100 * mean('cer_stitched'):.1f}% | {true_motion} | {100 * mean('cer_placed'):.1f}% | "
-                     f"{100 * mean('cer_ideal'):.1f}% | {100 * mean('frame_recall'):.0f}% | {100 * mean('frame_precision'):.0f}% |")
+        pct = {key: 100 * _mean(members, key) for key in ("cer_stitched", "cer_placed", "cer_ideal", "frame_recall", "frame_precision")}
+        lines.append(f"| {lux:g} | {label} | {len(members)} | {pct['cer_stitched']:.1f}% | {true_motion} | {pct['cer_placed']:.1f}% | "
+                     f"{pct['cer_ideal']:.1f}% | {pct['frame_recall']:.0f}% | {pct['frame_precision']:.0f}% |")
     return "\n".join(lines)
 
 

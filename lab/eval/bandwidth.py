@@ -136,13 +136,13 @@ def measure_bandwidth(
     ``bytes_sent``); without them the frame count is estimated as one frame per 1600 foveated
     events. ``page_ink`` is the stitched page; without it the page figure is 0.
     """
+    from darkread.edge.config import PipelineConfig
+    from darkread.edge.fovea import foveate_along_gaze
     from darkread.edge.gaze import GazeMapper
     from darkread.edge.io.evt3_encode import encode_evt3
     from darkread.edge.io.gaze_csv import read_gaze_csv
     from darkread.edge.io.raw import read_raw
     from darkread.edge.io.recording import open_recording
-    from darkread.edge.config import PipelineConfig
-    from darkread.edge.fovea import foveate_along_gaze
 
     recording = open_recording(recording_dir)
     raw = read_raw(recording.raw_path)

@@ -79,7 +79,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
         description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]\n       darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]",
+        usage="darkread eval SUITE_DIR [options]\n"
+              "       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n"
+              "       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n"
+              "       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]\n"
+              "       darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")

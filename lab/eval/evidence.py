@@ -105,8 +105,8 @@ def recording_evidence(recording: str | Path, lengths: Sequence[int] = LENGTHS, 
     from darkread.edge.frame import clean_window
     from darkread.edge.gaze import GazeMapper
     from darkread.lab.eval.attribution import ink_found, window_truth
-    from darkread.lab.truth import load_truth_and_pose
     from darkread.lab.eval.true_motion import TrueHeadMotion
+    from darkread.lab.truth import load_truth_and_pose
     from darkread.models.train.annotate import window_rays
     from darkread.models.train.windows import read_events
 
@@ -122,7 +122,7 @@ def recording_evidence(recording: str | Path, lengths: Sequence[int] = LENGTHS, 
     shape_hw = (fovea.height, fovea.width)
     longest = max(lengths)
     times = np.arange(int(events["t"][0]) + FIRST_WINDOW_US, int(events["t"][-1]), int(every_ms * 1000))[:max_windows]
-    pooled = {_key(e, n): ([], []) for e in ESTIMATES for n in lengths}
+    pooled: dict[str, tuple[list[np.ndarray], list[np.ndarray]]] = {_key(e, n): ([], []) for e in ESTIMATES for n in lengths}
     found = {_key(e, n): np.zeros(2, np.int64) for e in ESTIMATES for n in lengths}
     scored = 0
     for t in times:

@@ -132,7 +132,7 @@ def plot_examples(
     """One row per lux level: the RGB snapshot crop next to the page darkread stitched (same scene);
     a ``kind`` recording with ``motion`` where there is one."""
     chosen = []
-    for lux, group in sorted(group_by(results, "lux").items(), key=lambda kv: -float(kv[0] or 0)):
+    for _lux, group in sorted(group_by(results, "lux").items(), key=lambda kv: -float(kv[0] or 0)):
         pick = ([r for r in group if r.motion == motion and r.kind == kind]
                 or [r for r in group if r.motion == motion] or group)
         r = pick[0]

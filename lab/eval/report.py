@@ -65,7 +65,7 @@ def relative_paths(value: Any, suite_dir: Path, key: str | None = None) -> Any:
     return value
 
 
-def _results_json(results: Sequence[RecordingResult], suite_dir: Path | None) -> str:
+def _results_json(results: Sequence[RecordingResult], suite_dir: str | Path | None) -> str:
     raws = [r.raw for r in results]
     return json.dumps(raws if suite_dir is None else relative_paths(raws, Path(suite_dir).resolve()), indent=1)
 

@@ -115,7 +115,7 @@ class Bandwidth:
             float(doc["duration_s"]), int(doc["events"]), int(doc["events_foveated"]), int(doc["evt3_bytes"]),
             int(doc["foveated_evt3_bytes"]), int(doc["frame_stream_bytes"]), int(doc["page_bytes"]),
             bool(doc.get("frames_measured")), {k: int(v) for k, v in doc["rgb"].items()},
-            tuple(doc["rgb_wh"]) if doc.get("rgb_wh") else None,  # type: ignore[arg-type]
+            tuple(doc["rgb_wh"]) if doc.get("rgb_wh") else None,
         )
 
 
@@ -144,7 +144,9 @@ class RecordingResult:
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> RecordingResult:
-        backends_doc = doc.get("backends") if isinstance(doc.get("backends"), Mapping) else {}
+        backends_doc = doc.get("backends")
+        if not isinstance(backends_doc, Mapping):
+            backends_doc = {}
         backends = {name: read for name, value in backends_doc.items() if name != "error"
                     if (read := Read.from_dict(value)) is not None}
         return cls(

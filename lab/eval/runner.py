@@ -35,8 +35,8 @@ def make_ocr_backend(name: str) -> Any:
     from darkread.cloud.settings import Settings
 
     if name.endswith(RAW_SUFFIX):
-        return create_backend(Settings(ocr_backend=name.removesuffix(RAW_SUFFIX), ocr_lexicon=False))  # type: ignore[arg-type]
-    return create_backend(Settings(ocr_backend=name))  # type: ignore[arg-type]
+        return create_backend(Settings(ocr_backend=name.removesuffix(RAW_SUFFIX), ocr_lexicon=False))
+    return create_backend(Settings(ocr_backend=name))
 
 
 def remote_configured(name: str) -> bool:
@@ -62,7 +62,7 @@ def available_backends(names: Sequence[str] | None = None) -> list[str]:
                 ready.append(name)
             else:
                 logger.info("OCR engine %s is not available; left out of the comparison", name)
-        except Exception as exc:  # noqa: BLE001 - a misconfigured engine must not stop the evaluation
+        except Exception as exc:  # a misconfigured engine must not stop the evaluation
             logger.info("OCR engine %s left out: %s", name, exc)
     return ready
 
@@ -90,7 +90,7 @@ def conditions(recording_dir: Path) -> dict[str, Any]:
 def _guard(label: str, func: Callable[[], dict[str, Any]]) -> dict[str, Any]:
     try:
         return func()
-    except Exception as exc:  # noqa: BLE001 - one failing stage is recorded, the others still run
+    except Exception as exc:  # one failing stage is recorded, the others still run
         logger.warning("%s failed: %s", label, exc)
         logger.debug("%s", traceback.format_exc())
         return {"error": f"{type(exc).__name__}: {exc}"}
@@ -109,10 +109,10 @@ def evaluate_recording(
 ) -> dict[str, Any]:
     """Everything the report needs about one recording (errors are recorded per stage); ``rgb=False``
     leaves out the RGB baseline and the bandwidth figures (which need its snapshot)."""
-    from darkread.lab.eval.bandwidth import measure_bandwidth, page_ink_from_png
-    from darkread.core.text_metrics import error_rates
-    from darkread.lab.eval.rgb_baseline import baseline_snapshot, read_snapshot
     from darkread.core.image_codec import read_image, write_png
+    from darkread.core.text_metrics import error_rates
+    from darkread.lab.eval.bandwidth import measure_bandwidth, page_ink_from_png
+    from darkread.lab.eval.rgb_baseline import baseline_snapshot, read_snapshot
     from darkread.read import read_recording
 
     recording_dir, run_dir = Path(recording_dir), Path(run_dir)
@@ -164,10 +164,14 @@ def evaluate_recording(
         if not page_png:
             raise RuntimeError("no stitched page to read")
         page = read_image(page_png)
+
+        def read_with(name: str) -> dict[str, Any]:
+            return {"text": engine(name).read(page).text}
+
         out = {}
         for name in compare:
             started = time.perf_counter()
-            text = _guard(f"{name} on the page", lambda name=name: {"text": engine(name).read(page).text})
+            text = _guard(f"{name} on the page", partial(read_with, name))
             if "text" in text:
                 rates = error_rates(reference, text["text"])
                 text.update(cer=rates.cer, wer=rates.wer, seconds=round(time.perf_counter() - started, 2))

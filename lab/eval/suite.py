@@ -215,7 +215,8 @@ def make_suite(
     entries = select_entries(small=small, match=match, subset=subset, simulator=simulator, font=font, regime=regime)
     entries = entries[:only]
     (out / SUITE_NAME).write_text(
-        json.dumps({"small": small, "subset": subset, "simulator": simulator, "regime": regime, "font": font, "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        json.dumps({"small": small, "subset": subset, "simulator": simulator, "regime": regime, "font": font,
+                    "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )
     bar = tqdm(total=len(entries), desc="recordings", unit="rec", disable=not progress)

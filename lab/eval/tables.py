@@ -165,7 +165,7 @@ def bandwidth_table(results: Sequence[RecordingResult], beside: Sequence[Recordi
     rgb_formats = [("raw", "RGB snapshot, uncompressed (8-bit x 3)"), ("png", "RGB snapshot, PNG")]
     rgb_formats += [(f"jpeg{q}", f"RGB snapshot, JPEG q{q}") for q in JPEG_QUALITIES]
     for key, label in rgb_formats:
-        size = med(lambda b, k=key: b.rgb.get(k))
+        size = median(b.rgb.get(key) for b in rows)
         lines.append(f"| {label} | {_bytes(size)} | – | {_ratio(png / size) if png and size else '–'} |")
     streams: list[tuple[Callable[[Bandwidth], int], str, bool, Sequence[Bandwidth]]] = [
         (lambda b: b.evt3_bytes, "all events, EVT3", True, rows),
@@ -191,10 +191,10 @@ def bandwidth_table(results: Sequence[RecordingResult], beside: Sequence[Recordi
     for mode, bw in by_mode:
         stream = STREAMS.get(mode, ("the stream",))[0]
         for fmt, name, paper in (("png", "PNG", f"~{PAPER_FRAMES_VS_RGB:.0f}x"), ("jpeg80", "JPEG q80", "")):
-            ratio = med(lambda b, f=fmt: b.rgb[f] / (b.frame_stream_bytes / b.duration_s) if b.frame_stream_bytes else None, bw)
+            ratio = median(b.rgb[fmt] / (b.frame_stream_bytes / b.duration_s) if b.frame_stream_bytes else None for b in bw)
             lines.append(f"| one RGB image ({name}) / one second of {stream} (`{mode}`) | {_ratio(ratio)} | {paper} |")
         for fmt, name, paper in (("png", "PNG", f"~{PAPER_PAGE_VS_RGB:.0f}x"), ("jpeg80", "JPEG q80", "")):
-            ratio = med(lambda b, f=fmt: b.rgb[f] / b.page_bytes if b.page_bytes else None, bw)
+            ratio = median(b.rgb[fmt] / b.page_bytes if b.page_bytes else None for b in bw)
             lines.append(f"| one RGB image ({name}) / stitched page (`{mode}`) | {_ratio(ratio)} | {paper} |")
     measured = sum(1 for _, bw in by_mode for b in bw if b.frames_measured)
     lines += [

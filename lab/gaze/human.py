@@ -136,7 +136,7 @@ def load_eyelink_asc(path: str | Path) -> RawGaze:
         elif line.startswith("MSG") and "REGION CHAR" in line:
             m = _REGION.match(line)
             if m:
-                chars.append((m.group(1), *(float(m.group(k)) for k in range(2, 6))))
+                chars.append((m.group(1), float(m.group(2)), float(m.group(3)), float(m.group(4)), float(m.group(5))))
         elif line.startswith("END") and "RES" in line:
             p = line.split()
             res = (float(p[-2]), float(p[-1]))

@@ -98,7 +98,7 @@ def fixation_lines(x: np.ndarray, y: np.ndarray, start_ms: np.ndarray, end_ms: n
 def eyekit_available() -> str | None:
     """None when eyekit (and the cairo library under it) imports, else why not."""
     try:
-        import eyekit  # noqa: F401
+        import eyekit  # noqa: F401  # imported only to learn whether it is installed
     except (ImportError, OSError) as exc:
         return f"eyekit is not usable here ({exc}); install darkread[gaze] (and libcairo2)"
     return None

@@ -53,8 +53,8 @@ def oz_onset_scores(raw: human.RawGaze, rate_hz: float, seeds: range = range(5),
         t_ms, x, y = human.resample_rows(raw, rate_hz, np.random.default_rng([int(rate_hz), seed]), noise)
         events = classify_gaze(np.rint(t_ms * 1000).astype(np.int64), x, y, cfg.for_rate(rate_hz))
         scores.append(onset_f1(fixations(events)["t0_us"] / 1000.0, raw.fixations[:, 0]))
-    return OnsetScore(*(float(np.mean([getattr(s, k) for s in scores])) for k in ("f1", "precision", "recall")),
-                      int(np.mean([s.found for s in scores])), scores[0].true)
+    mean = {k: float(np.mean([getattr(s, k) for s in scores])) for k in ("f1", "precision", "recall")}
+    return OnsetScore(mean["f1"], mean["precision"], mean["recall"], int(np.mean([s.found for s in scores])), scores[0].true)
 
 
 def method_name(method: str | tuple[str, ...]) -> str:

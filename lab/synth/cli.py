@@ -6,6 +6,8 @@ import argparse
 import logging
 from pathlib import Path
 
+import numpy as np
+
 log = logging.getLogger(__name__)
 
 MOTIONS = ("still", "normal", "walking")
@@ -120,7 +122,7 @@ def _sensor_evidence(args: argparse.Namespace) -> int:
     if args.fit:
         print("noise fit:", sensor_evidence.fit_noise())
     lux = [b.x for b in sensor_evidence.PUBLISHED_BACKGROUND]
-    rates = sensor_evidence.model_background(sensor_evidence.central_params(), lux)
+    rates = sensor_evidence.model_background(sensor_evidence.central_params(), np.array(lux))
     for band, rate in zip(sensor_evidence.PUBLISHED_BACKGROUND, rates):
         inside = "inside" if band.lo <= rate <= band.hi else "OUTSIDE"
         print(f"{band.x:5g} lux: model {rate:.3f} Hz, published {band.lo:g}-{band.hi:g} ({inside})")
@@ -129,6 +131,7 @@ def _sensor_evidence(args: argparse.Namespace) -> int:
 
 
 def _dataset(args: argparse.Namespace) -> int:
+    from darkread.models.synth.session import LUX_RANGE
     from darkread.models.synth.shards import build_dataset
 
     manifest = build_dataset(
@@ -141,7 +144,7 @@ def _dataset(args: argparse.Namespace) -> int:
         shard_size=args.shard_size,
         target_time=args.target_time,
         more_fonts=args.more_fonts,
-        **({"lux_range": (args.lux[0], args.lux[1])} if args.lux else {}),
+        lux_range=(args.lux[0], args.lux[1]) if args.lux else LUX_RANGE,
     )
     print(f"{manifest['samples']} samples in {len(manifest['shards'])} shards -> {args.out} "
           f"({manifest['samples_per_s']} samples/s)")

@@ -72,8 +72,8 @@ class HesimUnavailable(RuntimeError):
 def hesim_missing() -> str | None:
     """Why the second simulator cannot run here (None when it can)."""
     try:
-        import hesim3d  # noqa: F401  (imports torch, h5py, mcap, its compiled core)
-    except Exception as exc:  # noqa: BLE001 - any import failure means "not usable", said in one line
+        import hesim3d  # noqa: F401  # imported only to learn whether it loads (torch, h5py, mcap, its compiled core)
+    except Exception as exc:  # any import failure means "not usable", said in one line
         return f"hesim-3d is not usable ({type(exc).__name__}: {exc}); {INSTALL_HINT}"
     return None
 

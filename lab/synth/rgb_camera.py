@@ -37,8 +37,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
 from darkread.core.image_codec import decode_image, encode_jpeg
+from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
 
 if TYPE_CHECKING:
     from darkread.models.synth.recording import RecordingSpec
@@ -179,7 +179,7 @@ def expose(
     """Reflectance [h, w] -> the 8-bit sRGB image [h, w, 3] the camera delivers."""
     import cv2
 
-    reflect = np.asarray(reflectance, dtype=np.float32)
+    reflect: np.ndarray = np.asarray(reflectance, dtype=np.float32)
     if camera.lens_psf_sigma_px > 0:
         reflect = cv2.GaussianBlur(reflect, (0, 0), camera.lens_psf_sigma_px, borderType=cv2.BORDER_REFLECT)
     mean_e = camera.electrons_per_lux_s * lux * exposure.exposure_s * reflect.astype(np.float64)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -62,13 +63,14 @@ NIST_LATENCY: tuple[Band, ...] = (
 # The published lux is the illuminance of what the camera looks at (a monitor's face, a white card):
 # reflectance 1 at the paper's f/2.4 (GroundedSensorParams' default lens).
 PUBLISHED_REFLECTANCE = 1.0
-FACTORY = dict(c_on=0.23, c_off=0.23, c_sigma=0.04, refractory_us=150.0, leak_rate_hz=0.06, leak_decades=0.35,
+FACTORY: dict[str, Any] = dict(c_on=0.23, c_off=0.23, c_sigma=0.04, refractory_us=150.0, leak_rate_hz=0.06, leak_decades=0.35,
                hot_pixel_fraction=0.0)
 
 
 def central_params(**noise: float) -> GroundedSensorParams:
     """The grounded sensor at the centre of its draws (factory thresholds, central K and noise fit)."""
-    return GroundedSensorParams(lux=5.0, **FACTORY, **{**NOISE_FIT, **noise})
+    changes: dict[str, Any] = {**FACTORY, **NOISE_FIT, **noise}
+    return replace(GroundedSensorParams(lux=5.0), **changes)
 
 
 def model_background(params: GroundedSensorParams, lux: np.ndarray, *, pixels: int = 256, seconds: float = 10.0,
@@ -106,7 +108,7 @@ def fit_noise(*, pixels: int = 128, seconds: float = 5.0, max_evaluations: int =
 
 def latency_s(k_hz_per_chip_lux: float, f_max_hz: float, chip_lux: np.ndarray) -> np.ndarray:
     """The photoreceptor's time constant 1 / (2 pi f_c): NIST's first-order fit equates it with latency."""
-    return 1.0 / (2.0 * math.pi * photoreceptor_cutoff_hz(np.asarray(chip_lux, dtype=np.float64), k_hz_per_chip_lux, f_max_hz))
+    return 1.0 / (2.0 * math.pi * np.asarray(photoreceptor_cutoff_hz(np.asarray(chip_lux, dtype=np.float64), k_hz_per_chip_lux, f_max_hz)))
 
 
 def background_band(lux: np.ndarray, draws: int, *, pixels: int = 128, seconds: float = 5.0) -> np.ndarray:

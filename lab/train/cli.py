@@ -48,7 +48,7 @@ def _net_config(args: argparse.Namespace):  # -> NetConfig
     head = getattr(args, "head", None) or base.head
     widths = tuple(getattr(args, "widths", None) or base.widths)
     blocks = tuple(getattr(args, "blocks", None) or base.blocks)
-    return NetConfig(widths=widths, blocks=blocks, head=head)  # type: ignore[arg-type]
+    return NetConfig(widths=widths, blocks=blocks, head=head)
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -195,8 +195,8 @@ def _cmd_target(args: argparse.Namespace) -> int:
 
 
 def _cmd_annotate(args: argparse.Namespace) -> int:
-    from darkread.models.train.annotate import AnnotateConfig, annotate_recording
     from darkread.lab.truth import annotate_from_truth
+    from darkread.models.train.annotate import AnnotateConfig, annotate_recording
 
     if not Path(args.recording).is_dir():
         raise FileNotFoundError(f"{args.recording}: no such recording directory")
@@ -471,5 +471,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = train.add_subparsers(dest="train_command", metavar="STEP")
     train.set_defaults(func=lambda _args: (train.print_help(), 2)[1])
-    for add in (_add_fit, _add_export, _add_evaluate, _add_finetune, _add_compare, _add_placebo, _add_rehearsal, _add_target, _add_annotate, _add_calibrate, _add_all):
+    for add in (_add_fit, _add_export, _add_evaluate, _add_finetune, _add_compare, _add_placebo, _add_rehearsal, _add_target,
+                _add_annotate, _add_calibrate, _add_all):
         add(sub)

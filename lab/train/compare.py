@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 
 from darkread.lab.eval.provenance import model_digest
-from darkread.models.train.ink_scores import ink_counts, scores_from_counts
 from darkread.lab.truth import ScoredWindows, is_recording, truth_windows
+from darkread.models.train.ink_scores import ink_counts, scores_from_counts
 
 log = logging.getLogger(__name__)
 

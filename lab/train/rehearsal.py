@@ -41,9 +41,9 @@ def _one(indexed: tuple[int, RecordingSpec], work: Path, out: Path, every_ms: fl
     """Simulate session ``index`` (``indexed``: index and spec), label its windows from the truth,
     keep only the shard (a process task)."""
     index, spec = indexed
+    from darkread.lab.truth import annotate_from_truth
     from darkread.models.synth.recording import write_recording
     from darkread.models.train.annotate import SHARD_NAME
-    from darkread.lab.truth import annotate_from_truth
 
     recording, labelled = work / f"s{spec.seed}", work / f"s{spec.seed}_windows"
     write_recording(recording, spec, progress=False)

@@ -172,7 +172,7 @@ class TrackerModel:
     @staticmethod
     def random(rng: np.random.Generator) -> TrackerModel:
         return TrackerModel(
-            bias_rad=tuple(np.radians(rng.normal(0.0, 0.9, 2))),  # type: ignore[arg-type]
+            bias_rad=tuple(np.radians(rng.normal(0.0, 0.9, 2))),
             slow_sd_rad=math.radians(rng.uniform(0.3, 0.7)),
             fast_sd_rad=math.radians(rng.uniform(0.2, 0.5)),
             latency_us=float(rng.uniform(5_000, 20_000)),

@@ -24,8 +24,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from darkread.edge.calibrate.markers import BoardSpec
 from darkread.core.json_file import read_json_file
+from darkread.edge.calibrate.markers import BoardSpec
 from darkread.models.synth.fonts import face_by_name
 from darkread.models.synth.page import render_page
 
@@ -183,8 +183,8 @@ def _lay_out_cached(spec: MarkerPageSpec) -> MarkerPage:
             px, py = int(round(left_mm * s)), int(round(top_mm * s))
             image = cv2.aruco.generateImageMarker(dictionary, marker_id, side_px, borderBits=1)
             ink[py : py + side_px, px : px + side_px] = 1.0 - image.astype(np.float32) / 255.0
-            l, t, r, b = px / s, py / s, (px + side_px) / s, (py + side_px) / s
-            markers[marker_id] = np.array([[l, t], [r, t], [r, b], [l, b]], dtype=np.float64)
+            left, top, right, bottom = px / s, py / s, (px + side_px) / s, (py + side_px) / s
+            markers[marker_id] = np.array([[left, top], [right, top], [right, bottom], [left, bottom]], dtype=np.float64)
             marker_id += 1
     glyphs = []
     for line_no, boxes in enumerate(text.glyph_boxes):

@@ -29,7 +29,8 @@ class PrintedPage:
     line_y: np.ndarray  # [n_lines] texel row of each line's x-height centre
     char_x: list[np.ndarray] = field(default_factory=list)  # per line: texel column of each character centre
     text_box: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)  # x0, y0, x1, y1 of the text, texels
-    glyph_boxes: list[list[tuple[str, float, float, float, float]]] = field(default_factory=list)  # per line: (char, x0, y0, x1, y1) texels, ink extent
+    # per line: (char, x0, y0, x1, y1) texels, ink extent
+    glyph_boxes: list[list[tuple[str, float, float, float, float]]] = field(default_factory=list)
 
     @property
     def text(self) -> str:

@@ -65,6 +65,11 @@ class SensorParams:
         """Photoreceptor cut-off (Hz) per pixel: ``cutoff_hz * I / (I + cutoff_half_lux)`` (v2e)."""
         return np.float32(self.cutoff_hz) * irradiance / (irradiance + np.float32(self.cutoff_half_lux))
 
+    def noise_sd_and_cutoff(self, irradiance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The log-noise process's standard deviation and bandwidth per pixel: only a law with
+        ``noise_process`` has one (the standard law's background activity is a rate)."""
+        raise NotImplementedError(f"{type(self).__name__} models background activity as a rate, not a process")
+
     def filter_gain(self, irradiance: np.ndarray, dt_us: float) -> np.ndarray:
         """The photoreceptor low-pass's step gain per pixel, 2 pi f_c dt clipped at 1, in the float32
         order the standard recordings were made with (the suite's events stay bit for bit the same)."""
@@ -153,13 +158,13 @@ class GroundedSensorParams(SensorParams):
     noise_process = True
 
     def total_chip_lux(self, irradiance: np.ndarray) -> np.ndarray:
-        return chip_lux(irradiance, self.f_number, self.transmission) + np.float32(self.dark_chip_lux)
+        return np.asarray(chip_lux(irradiance, self.f_number, self.transmission)) + np.float32(self.dark_chip_lux)
 
     def log_intensity(self, irradiance: np.ndarray) -> np.ndarray:
         return np.log(self.total_chip_lux(irradiance))
 
     def cutoff_of(self, irradiance: np.ndarray) -> np.ndarray:
-        return photoreceptor_cutoff_hz(self.total_chip_lux(irradiance), self.k_hz_per_chip_lux, self.f_max_hz)
+        return np.asarray(photoreceptor_cutoff_hz(self.total_chip_lux(irradiance), self.k_hz_per_chip_lux, self.f_max_hz))
 
     def filter_gain(self, irradiance: np.ndarray, dt_us: float) -> np.ndarray:
         return np.minimum(np.float32(2.0 * math.pi * dt_us * 1e-6) * self.cutoff_of(irradiance), np.float32(1.0))
@@ -168,7 +173,7 @@ class GroundedSensorParams(SensorParams):
         """Per pixel: the log-noise standard deviation and its bandwidth (Hz)."""
         e = self.total_chip_lux(irradiance)
         ceiling = 1.0 / (1.0 / self.noise_max_hz + 1.0 / self.f_max_hz)  # the noise passes the signal's ceiling too
-        band = photoreceptor_cutoff_hz(e, self.noise_k_hz_per_chip_lux, ceiling)
+        band = np.asarray(photoreceptor_cutoff_hz(e, self.noise_k_hz_per_chip_lux, ceiling))
         return np.sqrt(np.float32(math.pi) * band / (np.float32(self.noise_electrons_per_s) * e)), band
 
     def background_rate_hz(self) -> float:
@@ -269,7 +274,10 @@ def grounded_sensor_params(rng: np.random.Generator, lux: float, f_number: float
         f_number=float(f_number),
         k_hz_per_chip_lux=_log_uniform(rng, *K_BAND_HZ_PER_CHIP_LUX),
         f_max_hz=_log_uniform(rng, *F_MAX_BAND_HZ),
-        **noise,
+        noise_k_hz_per_chip_lux=noise["noise_k_hz_per_chip_lux"],
+        noise_max_hz=noise["noise_max_hz"],
+        noise_electrons_per_s=noise["noise_electrons_per_s"],
+        dark_chip_lux=noise["dark_chip_lux"],
     )
 
 
@@ -309,7 +317,7 @@ class EventSensor:
         self.hot_idx = rng.choice(n, size=n_hot, replace=False) if n_hot else np.zeros(0, dtype=np.int64)
         self.hot_rate = rng.uniform(0.3, 1.0, n_hot) * params.hot_rate_hz
         self.ref = np.zeros(n, dtype=np.float32)
-        self.lp = np.zeros(n, dtype=np.float32)
+        self.lp: np.ndarray = np.zeros(n, dtype=np.float32)
         self.noise = np.zeros(n, dtype=np.float32)  # the noise signal on the log response (grounded)
         self.last_t = np.full(n, -1e18)
         self.t = 0.0
@@ -518,7 +526,7 @@ def concat_events(parts: list[np.ndarray]) -> np.ndarray:
     if not parts:
         return empty_events()
     out = np.empty(sum(p.size for p in parts), dtype=EVENT_CD_DTYPE)
-    for name in EVENT_CD_DTYPE.names:
+    for name in EVENT_CD_DTYPE.names or ():
         np.concatenate([p[name] for p in parts], out=out[name])
     return out
 

@@ -17,10 +17,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from darkread.core.mask_bits import pack_rows
 from darkread.edge.config import PipelineConfig
 from darkread.edge.fovea import FoveaConfig, window_origin
 from darkread.edge.voxel import VoxelConfig, voxel_grid
-from darkread.core.mask_bits import pack_rows
 from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES, families_of, font_split
 from darkread.models.synth.scene import Region, Scene
@@ -211,7 +211,7 @@ def write_shard(path: Path, voxels: np.ndarray, targets: np.ndarray, metas: list
     extra = {} if ignore is None else {"ignore": pack_rows(np.asarray(ignore, np.uint8))}
     np.savez_compressed(
         path,
-        **extra,
+        **extra,  # type: ignore[arg-type]  # numpy's stub lets **arrays reach allow_pickle: bool; these are array names
         voxels=voxels.astype(np.float16),
         targets=pack_rows(targets),
         target_shape=np.array(targets.shape[1:], dtype=np.int32),
@@ -239,7 +239,9 @@ def build_shard(args: tuple[Path, int, int, int, str, bool, tuple[float, float],
     out_dir, index, count, base_seed, split, held_out, lux_range, target_time, more_fonts = args
     t0 = time.perf_counter()
     spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0, more_fonts=more_fonts)
-    parts_v, parts_t, metas = [], [], []
+    parts_v: list[np.ndarray] = []
+    parts_t: list[np.ndarray] = []
+    metas: list[SampleMeta] = []
     page = 0
     while len(metas) < count:
         k = min(SAMPLES_PER_PAGE, count - len(metas))

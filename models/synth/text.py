@@ -65,7 +65,7 @@ def paragraphs_for(split: str) -> tuple[str, ...]:
 
 @lru_cache(maxsize=3)
 def words_for(split: str) -> tuple[str, ...]:
-    words = set()
+    words: set[str] = set()
     for paragraph in paragraphs_for(split):
         words.update(w for w in re.findall(r"[A-Za-z]+", paragraph) if len(w) >= 1)
     return tuple(sorted(words))

@@ -42,11 +42,11 @@ from typing import Any
 import cv2
 import numpy as np
 
+from darkread.edge.calibrate.event_image import count_image
 from darkread.edge.io.calibration import Calibration
 from darkread.models.synth.marker_page import MarkerPage, mm_to_px
-from darkread.models.synth.shards import ncc, window_count_image
 from darkread.models.synth.recording import load_pose_truth
-from darkread.edge.calibrate.event_image import count_image
+from darkread.models.synth.shards import ncc, window_count_image
 from darkread.models.train.page_search import (
     SearchConfig,
     edge_map,
@@ -248,7 +248,7 @@ def render_coverage(page_ink: np.ndarray, ink_px_per_mm: float, H: np.ndarray, r
     my = uv[:, 1].reshape(hw)
     cov = cv2.remap(page_ink, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
     if shift_px != (0.0, 0.0):
-        m = np.float32([[1, 0, shift_px[0]], [0, 1, shift_px[1]]])
+        m = np.array([[1, 0, shift_px[0]], [0, 1, shift_px[1]]], dtype=np.float32)
         cov = cv2.warpAffine(cov, m, (hw[1], hw[0]), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
     return cov
 
@@ -357,11 +357,11 @@ def refine_pose(H: np.ndarray, events: np.ndarray, page: MarkerPage, ink: np.nda
     x = events["x"].astype(np.int64) - x0
     y = events["y"].astype(np.int64) - y0
     keep = (x >= 0) & (x < bw) & (y >= 0) & (y < bh)
-    counts = np.bincount(y[keep] * bw + x[keep], minlength=bw * bh).astype(np.float32).reshape(bh, bw)
+    counts: np.ndarray = np.bincount(y[keep] * bw + x[keep], minlength=bw * bh).astype(np.float32).reshape(bh, bw)
     counts = cv2.GaussianBlur(counts, (0, 0), 1.0)
     warp = np.eye(3, dtype=np.float32)
     try:
-        cc, warp = cv2.findTransformECC(template, counts, warp, cv2.MOTION_HOMOGRAPHY,
+        cc, warp = cv2.findTransformECC(template, counts, warp, cv2.MOTION_HOMOGRAPHY,  # type: ignore[call-overload]  # OpenCV takes no mask (None), its stubs do not
                                         (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, iterations, 1e-5), None, 5)
     except cv2.error:  # no convergence (too few events, featureless view)
         return None
@@ -419,7 +419,7 @@ def detect_track(events: np.ndarray, page: MarkerPage, calib: Calibration, cfg: 
                 rms.append(fit[1])
                 n_marker_poses += 1
         from_markers = seed is not None
-        if seed is None and tracking:
+        if seed is None and tracking and last is not None:
             seed = last[1]
         span_ms = cfg.refine_events_ms
         from_search = False
@@ -441,7 +441,7 @@ def detect_track(events: np.ndarray, page: MarkerPage, calib: Calibration, cfg: 
             continue
         lo, hi = np.searchsorted(events["t"], [t - span_ms * 1e3, t])
         # a page search is good to a few per cent of the page's size (its scale and angle steps)
-        jump = max(12.0, 0.04 * page.size_mm[0] * match.px_per_mm) if from_search else 12.0
+        jump = max(12.0, 0.04 * page.size_mm[0] * match.px_per_mm) if from_search and match is not None else 12.0
         refined = refine_pose(seed, events[lo:hi], page, ink, cfg.ink_px_per_mm, calib, rays, max_jump_px=jump)
         if refined is None or refined[1] < cfg.min_cc:
             continue

@@ -32,7 +32,7 @@ def activity(voxels: np.ndarray) -> np.ndarray:
 
 
 def _smooth(image: np.ndarray, median: int, blur: int) -> np.ndarray:
-    out = image.astype(np.float32)
+    out: np.ndarray = image.astype(np.float32)
     if median > 1:
         out = cv2.medianBlur(out, median)
     if blur > 1:
@@ -52,7 +52,8 @@ def predict(voxels: np.ndarray, params: BaselineParams) -> np.ndarray:
     return (smoothed_activity(voxels, params.median, params.blur) > params.threshold).astype(np.uint8)
 
 
-def tune(voxels: np.ndarray, targets: np.ndarray, medians: tuple[int, ...] = (1, 3, 5), blurs: tuple[int, ...] = (1, 3, 5, 7)) -> tuple[BaselineParams, float]:
+def tune(voxels: np.ndarray, targets: np.ndarray, medians: tuple[int, ...] = (1, 3, 5),
+         blurs: tuple[int, ...] = (1, 3, 5, 7)) -> tuple[BaselineParams, float]:
     """Grid search of kernel sizes and threshold for the best pooled ink F1 on ``voxels``/``targets``.
 
     All thresholds of one kernel pair are scored at once from cumulative histograms of the ink

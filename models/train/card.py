@@ -67,6 +67,7 @@ def render_card(info: dict[str, Any]) -> str:
     timing_lines = "\n".join(f"| {k} | {float(v) / 60:.1f} |" for k, v in timings.items())
     font_rows = report.get("by_font", [])
     train_fonts = info.get("train_fonts") or []
+    calibration = f"calibrated on {info.get('calibration_windows', '?')} training voxel grids"
     return f"""# Model card: binary text reconstruction U-Net (`binary_unet.onnx`)
 
 Voxel grid of the last 1600 foveated events (E2VID definition, 4 bins, 100x200, normalised over
@@ -78,7 +79,7 @@ Used by `darkread.edge.reconstruct.Reconstructor`. {headline}
 | file | what | size |
 |---|---|---|
 | `binary_unet.onnx` | fp32, opset 17, dynamic batch axis, BatchNorm folded | {info.get('size_fp32_kb', 0):.0f} kB |
-| `binary_unet_int8.onnx` | static int8 QDQ (per-channel int8 weights, uint8 activations), calibrated on {info.get('calibration_windows', '?')} training voxel grids | {info.get('size_int8_kb', 0):.0f} kB |
+| `binary_unet_int8.onnx` | static int8 QDQ (per-channel int8 weights, uint8 activations), {calibration} | {info.get('size_int8_kb', 0):.0f} kB |
 
 ## Architecture
 

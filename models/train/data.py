@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
 from darkread.core.mask_bits import unpack_rows
 from darkread.models.synth.shards import METADATA_KEYS
 

@@ -12,6 +12,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+
 from darkread.models.train.baseline import BaselineParams
 from darkread.models.train.baseline import predict as baseline_predict
 from darkread.models.train.data import Shard, iterate_batches, load_dataset, shard_paths
@@ -24,8 +25,9 @@ LUX_LEVELS: tuple[float, ...] = (1000, 100, 30, 10, 5)
 
 def predict_onnx(model_path: str | Path, voxels: np.ndarray, batch_size: int = 32, progress: bool = False) -> np.ndarray:
     """uint8 ink masks of ``voxels`` through the edge Reconstructor."""
-    from darkread.edge.reconstruct import Reconstructor
     from tqdm import tqdm
+
+    from darkread.edge.reconstruct import Reconstructor
 
     rec = Reconstructor(model_path, threads=1, warmup=1)
     out = np.zeros((len(voxels), *voxels.shape[-2:]), np.uint8)

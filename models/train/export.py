@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
 from darkread.models.train.net import INPUT_SHAPE, BinaryUNet
 
 log = logging.getLogger(__name__)

@@ -38,8 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from darkread.models.train.data import (Shard, augment, concat_shards, count_samples, labels, load_dataset, random_crop,
-                                        split_labels)
+from darkread.models.train.data import Shard, augment, concat_shards, count_samples, labels, load_dataset, random_crop, split_labels
 
 log = logging.getLogger(__name__)
 
@@ -119,7 +118,7 @@ def synthetic_windows(n: int, sources: Sequence[str | Path] = (), seed: int = 0,
     if n <= 0:
         return Shard(np.zeros((0, 4, 100, 200), np.float16), np.zeros((0, 100, 200), np.uint8), {})
     if sources:
-        parts = []
+        parts: list[Shard] = []
         for source in sources:
             left = n - sum(len(p) for p in parts)
             if left <= 0:
@@ -128,11 +127,12 @@ def synthetic_windows(n: int, sources: Sequence[str | Path] = (), seed: int = 0,
         return Shard(np.concatenate([p.voxels for p in parts]), np.concatenate([p.targets for p in parts]), {})
     from tqdm import tqdm
 
-    from darkread.models.synth.shards import SAMPLES_PER_PAGE, make_samples, shard_seed
     from darkread.models.synth.session import SessionSpec
+    from darkread.models.synth.shards import SAMPLES_PER_PAGE, make_samples, shard_seed
 
     spec = SessionSpec(split="train", duration_s=4.0)
-    vs, ts = [], []
+    vs: list[np.ndarray] = []
+    ts: list[np.ndarray] = []
     with tqdm(total=n, desc="synthetic windows", unit="window", disable=not progress) as bar:
         page = 0
         while sum(len(v) for v in vs) < n:
@@ -277,7 +277,8 @@ def finetune(
         raise FinetuneError("--synthetic all takes every window of --synthetic-dir: give the directories")
     wanted = sum(count_samples(d) for d in synthetic_dirs) if synthetic is None else synthetic + cfg.monitor_windows
     syn = synthetic_windows(wanted, synthetic_dirs, seed=cfg.seed + 1, progress=progress)
-    syn_monitor, syn_train = syn.select(np.arange(min(cfg.monitor_windows, len(syn)))), syn.select(np.arange(min(cfg.monitor_windows, len(syn)), len(syn)))
+    monitored = min(cfg.monitor_windows, len(syn))
+    syn_monitor, syn_train = syn.select(np.arange(monitored)), syn.select(np.arange(monitored, len(syn)))
     pools = {"annotated_training_windows": annotated, "synthetic_held_out": syn_monitor}
     before = _monitor(model, pools, cfg.monitor_windows)
     anchor = frozen(copy.deepcopy(model)) if cfg.anchor_weight > 0 else None

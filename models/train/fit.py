@@ -14,10 +14,12 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 import torch
 import torch.nn.functional as F
+
 from darkread.models.train.data import (
     Shard,
     iterate_batches,
@@ -33,6 +35,16 @@ log = logging.getLogger(__name__)
 
 LAST_CHECKPOINT = "last.pt"
 BEST_CHECKPOINT = "best.pt"
+
+
+class FitState(TypedDict):
+    """Where a run is: kept in every checkpoint, so a resumed run goes on from it."""
+
+    step: int
+    epoch: int
+    elapsed_s: float
+    best_f1: float
+    history: list[dict[str, float]]
 
 
 @dataclass
@@ -216,14 +228,15 @@ def fit(
     if init_checkpoint is not None:
         model.load_state_dict(load_initial_weights(init_checkpoint, NetConfig.from_dict(config.net)).state_dict())
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    state: dict[str, object] = {"step": 0, "epoch": 0, "elapsed_s": 0.0, "best_f1": -1.0, "history": []}
+    state: FitState = {"step": 0, "epoch": 0, "elapsed_s": 0.0, "best_f1": -1.0, "history": []}
     last = out / LAST_CHECKPOINT
     if resume and last.exists():
         data = torch.load(last, map_location="cpu", weights_only=False)
         model.load_state_dict(data["model"])
         optimizer.load_state_dict(data["optimizer"])
-        state = {k: data[k] for k in state}
-        rng = np.random.default_rng([config.seed, int(state["step"])])  # type: ignore[list-item]
+        state = FitState(step=data["step"], epoch=data["epoch"], elapsed_s=data["elapsed_s"], best_f1=data["best_f1"],
+                         history=data["history"])
+        rng = np.random.default_rng([config.seed, int(state["step"])])
         if data.get("fit_config", {}).get("freeze_batchnorm") and not config.freeze_batchnorm:
             config = replace(config, freeze_batchnorm=True)  # a run that began from an exported network stays frozen
         log.info("resumed from %s at step %s, %.0f s used", last, state["step"], state["elapsed_s"])
@@ -243,38 +256,38 @@ def fit(
         (out / "history.json").write_text(json.dumps({**payload}, indent=1, default=float))
 
     def progress_fraction(epoch_done: float) -> float:
-        return max(float(state["elapsed_s"]) / config.time_budget_s, epoch_done / config.max_epochs)  # type: ignore[arg-type]
+        return max(float(state["elapsed_s"]) / config.time_budget_s, epoch_done / config.max_epochs)
 
     def validate() -> None:
         scores = evaluate_model(model, held_out.voxels, held_out.targets)
-        scores.update(step=int(state["step"]), epoch=float(state["epoch"]), elapsed_s=float(state["elapsed_s"]))  # type: ignore[arg-type]
-        state["history"].append(scores)  # type: ignore[union-attr]
-        better = scores["f1"] > float(state["best_f1"])  # type: ignore[arg-type]
+        scores.update(step=int(state["step"]), epoch=float(state["epoch"]), elapsed_s=float(state["elapsed_s"]))
+        state["history"].append(scores)
+        better = scores["f1"] > float(state["best_f1"])
         if better:
             state["best_f1"] = scores["f1"]
         log.info("validation: %s", {k: round(v, 4) for k, v in scores.items()})
         checkpoint(extra_best=better)
 
     done = False
-    while not done and int(state["epoch"]) < config.max_epochs:  # type: ignore[call-overload]
-        epoch = int(state["epoch"])  # type: ignore[call-overload]
+    while not done and int(state["epoch"]) < config.max_epochs:
+        epoch = int(state["epoch"])
         training_mode(model, freeze_batchnorm=config.freeze_batchnorm)
         started = time.monotonic()
-        base_elapsed = float(state["elapsed_s"])  # type: ignore[arg-type]
+        base_elapsed = float(state["elapsed_s"])
         last_save = started
         bar = tqdm(desc=f"epoch {epoch + 1}", unit="batch", disable=not progress, leave=False)
         running = None
         paths = shard_paths(train_dir)  # a dataset still being written grows between epochs
         for x_np, y_np in iterate_batches(paths, config.batch_size, rng, augmentation=config.augmentation):
             if config.crop is not None:
-                x_np, y_np = random_crop(x_np, y_np, tuple(config.crop), rng)  # type: ignore[arg-type]
+                x_np, y_np = random_crop(x_np, y_np, (config.crop[0], config.crop[1]), rng)
             state["elapsed_s"] = base_elapsed + time.monotonic() - started
             frac = progress_fraction(float(epoch))
             if frac >= 1.0:
                 done = True
                 break
             for group in optimizer.param_groups:
-                group["lr"] = schedule(frac, int(state["step"]), config)  # type: ignore[call-overload]
+                group["lr"] = schedule(frac, int(state["step"]), config)
             x = torch.from_numpy(x_np)
             y = torch.from_numpy(y_np.astype(np.float32))[:, None]
             logits = model(x)
@@ -286,13 +299,13 @@ def fit(
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
-            state["step"] = int(state["step"]) + 1  # type: ignore[call-overload]
+            state["step"] = int(state["step"]) + 1
             value = float(loss.detach())
             running = value if running is None else 0.95 * running + 0.05 * value
             bar.update(1)
             bar.set_postfix(loss=f"{running:.4f}", lr=f"{optimizer.param_groups[0]['lr']:.2e}")
             if on_step is not None:
-                on_step(int(state["step"]), value)  # type: ignore[call-overload]
+                on_step(int(state["step"]), value)
             if time.monotonic() - last_save > config.checkpoint_every_s:
                 checkpoint()
                 last_save = time.monotonic()
@@ -302,7 +315,7 @@ def fit(
             state["epoch"] = epoch + 1
         validate()
         training_mode(model, freeze_batchnorm=config.freeze_batchnorm)
-    summary = {
+    summary: dict[str, object] = {
         "steps": state["step"],
         "epochs": state["epoch"],
         "elapsed_s": state["elapsed_s"],

@@ -12,7 +12,9 @@ round-trips exactly (100 is not divisible by 8).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -44,12 +46,13 @@ class NetConfig:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
     @classmethod
-    def from_dict(cls, data: dict[str, object]) -> NetConfig:
+    def from_dict(cls, data: Mapping[str, Any]) -> NetConfig:
+        """From a checkpoint's or a run's JSON."""
         values = dict(data)
-        values["widths"] = tuple(int(w) for w in values["widths"])  # type: ignore[union-attr]
-        values["blocks"] = tuple(int(b) for b in values["blocks"])  # type: ignore[union-attr]
+        values["widths"] = tuple(int(w) for w in values["widths"])
+        values["blocks"] = tuple(int(b) for b in values["blocks"])
         values.setdefault("head", "full")  # (checkpoints from before the choice: all full)
-        return cls(**values)  # type: ignore[arg-type]
+        return cls(**values)
 
 
 def conv_bn_relu(cin: int, cout: int, stride: int = 1) -> nn.Sequential:

@@ -37,7 +37,7 @@ def load_onnx_model(path: str | Path) -> Any:
 
     try:
         return onnx.load(str(path))
-    except (OSError, onnx.onnx_cpp2py_export.checker.ValidationError) as exc:  # type: ignore[attr-defined]
+    except (OSError, onnx.onnx_cpp2py_export.checker.ValidationError) as exc:
         raise OnnxWeightsError(f"{path}: not a readable ONNX model ({exc})") from None
     except Exception as exc:  # protobuf DecodeError and friends: a file that is not ONNX at all
         raise OnnxWeightsError(f"{path}: not an ONNX model ({type(exc).__name__})") from None
@@ -103,6 +103,7 @@ def load_onnx_weights(model: BinaryUNet, path: str | Path, shared_only: bool = F
             conv.weight.copy_(torch.from_numpy(np.array(weight)))
             b = np.zeros(weight.shape[0], np.float32) if bias is None else bias
             if bn is not None:
+                assert bn.running_mean is not None and bn.running_var is not None  # our BatchNorm2d layers track running statistics
                 bn.running_mean.zero_()
                 bn.running_var.fill_(1.0)
                 bn.weight.fill_(float(np.sqrt(1.0 + bn.eps)))
@@ -138,7 +139,8 @@ def onnx_config(path: str | Path) -> NetConfig:
             break  # a 1x1 after no depthwise one: the decoder's first projection
     if len(widths) != 4:
         raise OnnxWeightsError(f"{path}: {len(widths)} scales found, the network has 4; not this architecture")
-    return NetConfig(widths=tuple(widths), blocks=tuple(blocks), in_channels=int(nodes[0][1].shape[1]),  # type: ignore[arg-type]
+    return NetConfig(widths=(widths[0], widths[1], widths[2], widths[3]), blocks=(blocks[0], blocks[1], blocks[2]),
+                     in_channels=int(nodes[0][1].shape[1]),
                      head="shuffle" if convs[-1][3] == 4 else "full")
 
 

@@ -14,6 +14,7 @@ fronto-parallel and small on the sensor); the refinement that follows models bot
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -121,7 +122,7 @@ def _near(best: tuple, s: float, a: float) -> bool:
     return abs(np.log(s / best[1])) < 0.25 and abs(a - best[2]) <= 5.0
 
 
-def _elsewhere(scores: np.ndarray, loc: tuple[int, int], radius: int) -> float:
+def _elsewhere(scores: np.ndarray, loc: Sequence[int], radius: int) -> float:
     """The best score away from ``loc`` (outside a square of ``radius``)."""
     x, y = loc
     masked = scores.copy()

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from darkread.models.train.fit import BEST_CHECKPOINT, FitConfig, fit, load_model
 
 log = logging.getLogger(__name__)

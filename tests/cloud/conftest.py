@@ -6,9 +6,11 @@ from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+
 from darkread.cloud.app import create_app
 from darkread.cloud.ocr.base import OcrLine, OcrResult
 from darkread.cloud.server import serve_in_thread
@@ -43,8 +45,8 @@ class LiveServer:
     app: object
 
     @property
-    def context(self):  # noqa: ANN201 - the app's AppContext
-        return self.app.state.context  # type: ignore[attr-defined]
+    def context(self):  # the app's AppContext
+        return self.app.state.context
 
 
 @pytest.fixture
@@ -68,14 +70,14 @@ def api_key() -> str:
 
 @pytest.fixture
 def make_settings(tmp_path: Path) -> Callable[..., Settings]:
-    def make(**overrides: object) -> Settings:
+    def make(**overrides: Any) -> Settings:
         # a question waits for every frame stored before it (a loaded CI host stitches slowly)
-        values: dict[str, object] = {
+        values: dict[str, Any] = {
             "data_dir": tmp_path / "data", "api_key": API_KEY, "max_message_bytes": 65536, "ask_catch_up_s": 60.0,
             "ask_rate_per_min": 6000.0, "ask_burst": 100,  # wearers asking every few seconds (limits: test_ask_limits)
         }  # fmt: skip
         values.update(overrides)
-        return Settings(_env_file=None, **values)  # type: ignore[arg-type, call-arg]
+        return Settings(_env_file=None, **values)
 
     return make
 

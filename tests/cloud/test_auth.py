@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import json
 import os
 import socket
 import subprocess
@@ -14,14 +13,12 @@ from pathlib import Path
 from typing import Any
 
 import httpx
-import pytest
+import numpy as np
 from websockets.asyncio.client import connect
 
 from darkread.cloud.auth import KeyRing, Scope
 from darkread.proto.errors import CloseCode
 from darkread.proto.messages import Ack, Error, Frame, Hello, Welcome, decode, encode, pack_mask
-
-import numpy as np
 
 ADMIN = "test-key-7f3a"  # the conftest server's DARKREAD_API_KEY: an admin key
 LIMIT = 1 << 22

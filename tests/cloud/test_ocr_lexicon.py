@@ -5,11 +5,11 @@ import pytest
 
 pytest.importorskip("symspellpy")
 
-from darkread.cloud.ocr import create_backend  # noqa: E402
-from darkread.cloud.ocr.base import OcrLine, OcrResult  # noqa: E402
-from darkread.cloud.ocr.lexicon import LexiconCorrected, LexiconCorrector  # noqa: E402
-from darkread.cloud.settings import Settings  # noqa: E402
-from darkread.core.text_metrics import error_rates  # noqa: E402
+from darkread.cloud.ocr import create_backend
+from darkread.cloud.ocr.base import OcrLine, OcrResult
+from darkread.cloud.ocr.lexicon import LexiconCorrected, LexiconCorrector
+from darkread.cloud.settings import Settings
+from darkread.core.text_metrics import error_rates
 
 
 @pytest.fixture(scope="module")
@@ -101,11 +101,11 @@ def test_wrapper_corrects_text_and_lines_and_keeps_the_engine_reachable() -> Non
     assert [line.text for line in result.lines] == result.text.split("\n")
     assert result.lines[1].box == (0, 10, 50, 18) and result.lines[1].confidence == 0.9
     assert wrapped.ready() and wrapped.name == "engine+lexicon"
-    wrapped.close()  # type: ignore[attr-defined]
+    wrapped.close()
     assert engine.closed
 
 
 def test_settings_switch_the_correction() -> None:
-    on = create_backend(Settings(_env_file=None, ocr_backend="tesseract"))  # type: ignore[call-arg]
-    off = create_backend(Settings(_env_file=None, ocr_backend="tesseract", ocr_lexicon=False))  # type: ignore[call-arg]
+    on = create_backend(Settings(_env_file=None, ocr_backend="tesseract"))
+    off = create_backend(Settings(_env_file=None, ocr_backend="tesseract", ocr_lexicon=False))
     assert isinstance(on, LexiconCorrected) and not isinstance(off, LexiconCorrected)

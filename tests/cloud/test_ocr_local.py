@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from PIL import Image, ImageDraw, ImageFont
 
-from darkread.cloud.ocr import create_backend
 from darkread.cloud.errors import OcrError
+from darkread.cloud.ocr import create_backend
 from darkread.cloud.ocr.base import OcrLine, reading_order
 from darkread.cloud.ocr.rapid import RapidOcrBackend
 from darkread.cloud.ocr.tesseract import TesseractBackend, lines_from_words
@@ -42,7 +42,9 @@ def test_rapidocr_reads_a_clean_line_at_x_height_10(rapid: RapidOcrBackend) -> N
     result = rapid.read(image)
     assert " ".join(result.text.split()) == SENTENCE
     assert len(result.lines) == 1
-    x0, y0, x1, y1 = result.lines[0].box  # type: ignore[misc]
+    box = result.lines[0].box
+    assert box is not None
+    x0, y0, x1, y1 = box
     assert x0 <= 25 and x1 >= image.shape[1] - 25 and y0 <= 22 and y1 >= image.shape[0] - 22
     assert result.lines[0].confidence is not None and result.lines[0].confidence > 0.8
 
@@ -80,7 +82,7 @@ def test_engines_read_in_parallel_threads_and_each_right() -> None:
 
 
 def test_the_service_makes_one_engine_per_ocr_thread() -> None:
-    backend = create_backend(Settings(_env_file=None, ocr_threads=3, ocr_lexicon=False))  # type: ignore[call-arg]
+    backend = create_backend(Settings(_env_file=None, ocr_threads=3, ocr_lexicon=False))
     assert isinstance(backend, RapidOcrBackend) and backend.engines == 3
     with pytest.raises(ValueError, match="at least 1"):
         RapidOcrBackend(engines=0)
@@ -151,22 +153,22 @@ def test_reading_order_is_top_to_bottom_then_left_to_right() -> None:
 
 
 def test_backend_selection(tmp_path: object) -> None:
-    assert create_backend(Settings(_env_file=None, ocr_backend="local")).name == "rapidocr+lexicon"  # type: ignore[call-arg]
-    assert create_backend(Settings(_env_file=None, ocr_backend="tesseract")).name == "tesseract+lexicon"  # type: ignore[call-arg]
-    raw = Settings(_env_file=None, ocr_backend="local", ocr_lexicon=False)  # type: ignore[call-arg]
+    assert create_backend(Settings(_env_file=None, ocr_backend="local")).name == "rapidocr+lexicon"
+    assert create_backend(Settings(_env_file=None, ocr_backend="tesseract")).name == "tesseract+lexicon"
+    raw = Settings(_env_file=None, ocr_backend="local", ocr_lexicon=False)
     assert create_backend(raw).name == "rapidocr"
     with pytest.raises(OcrError, match="GOOGLE_API_KEY"):
-        create_backend(Settings(_env_file=None, ocr_backend="google"))  # type: ignore[call-arg]
-    openai = create_backend(Settings(_env_file=None, ocr_backend="openai", openai_base_url="http://127.0.0.1:9/v1"))  # type: ignore[call-arg]
+        create_backend(Settings(_env_file=None, ocr_backend="google"))
+    openai = create_backend(Settings(_env_file=None, ocr_backend="openai", openai_base_url="http://127.0.0.1:9/v1"))
     assert openai.name == "openai" and not openai.ready()
-    openai.close()  # type: ignore[attr-defined]
+    openai.close()  # type: ignore[attr-defined]  # the OpenAI engine has close(), the OcrBackend protocol does not
 
 
 def _tilted(text: str, x0: float, y0: float, length: float, slope: float = 0.12, height: float = 14.0) -> OcrLine:
     """A text line starting at (x0, y0) (top-left), running ``length`` px along a tilted baseline."""
     quad = ((x0, y0), (x0 + length, y0 + slope * length), (x0 + length, y0 + slope * length + height), (x0, y0 + height))
     xs, ys = [p[0] for p in quad], [p[1] for p in quad]
-    return OcrLine(text, (int(min(xs)), int(min(ys)), int(max(xs)) + 1, int(max(ys)) + 1), 0.9, quad)  # type: ignore[arg-type]
+    return OcrLine(text, (int(min(xs)), int(min(ys)), int(max(xs)) + 1, int(max(ys)) + 1), 0.9, quad)
 
 
 def test_reading_order_follows_a_tilted_page_line_by_line() -> None:

@@ -128,7 +128,8 @@ def openai_app(state: dict[str, Any]) -> FastAPI:
     @app.get("/v1/models")
     async def models(request: Request) -> JSONResponse:
         if request.headers.get("authorization") != f"Bearer {OPENAI_KEY}":
-            return JSONResponse({"error": {"message": "Incorrect API key provided", "type": "invalid_request_error", "code": "invalid_api_key"}}, status_code=401)
+            error = {"message": "Incorrect API key provided", "type": "invalid_request_error", "code": "invalid_api_key"}
+            return JSONResponse({"error": error}, status_code=401)
         return JSONResponse({"object": "list", "data": [{"id": "vlm-1", "object": "model"}]})
 
     @app.post("/v1/chat/completions")

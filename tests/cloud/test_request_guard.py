@@ -19,9 +19,9 @@ from typing import Any
 from urllib.parse import urlsplit
 
 import httpx
-import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus
+from websockets.typing import Origin
 
 from darkread.proto.messages import Welcome, decode, encode
 
@@ -145,7 +145,7 @@ def test_without_a_key_only_loopback_names_and_origins(make_settings: Any, run_s
 
         async def evil_websocket() -> str:
             try:
-                async with connect(server.ws_url, origin="http://evil.example", max_size=None) as ws:  # type: ignore[arg-type]
+                async with connect(server.ws_url, origin=Origin("http://evil.example"), max_size=None) as ws:
                     await ws.send(encode(hello("planted")))
                     return type(decode(await ws.recv(), max_bytes=LIMIT)).__name__
             except InvalidStatus as exc:

@@ -15,7 +15,7 @@ def test_environment_variables_are_read(monkeypatch: pytest.MonkeyPatch, tmp_pat
     monkeypatch.setenv("DARKREAD_API_KEY", "s3cret")
     monkeypatch.setenv("DARKREAD_OCR_BACKEND", "openai")
     monkeypatch.setenv("DARKREAD_OPENAI_TOKEN_PARAM", "max_tokens")
-    settings = Settings(_env_file=None)  # type: ignore[call-arg]
+    settings = Settings(_env_file=None)
     assert settings.data_dir == tmp_path and settings.ocr_backend == "openai"
     assert settings.api_key is not None and settings.api_key.get_secret_value() == "s3cret"
     assert settings.openai_token_param == "max_tokens"
@@ -25,14 +25,14 @@ def test_environment_variables_are_read(monkeypatch: pytest.MonkeyPatch, tmp_pat
 def test_empty_key_is_an_error_not_no_key(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("DARKREAD_API_KEY", "")
     with pytest.raises(ValidationError, match="empty"):
-        Settings(_env_file=None)  # type: ignore[call-arg]
+        Settings(_env_file=None)
     monkeypatch.setenv("DARKREAD_OPENAI_API_KEY", "")
     monkeypatch.delenv("DARKREAD_API_KEY")
-    assert Settings(_env_file=None).openai_api_key is None  # type: ignore[call-arg]
+    assert Settings(_env_file=None).openai_api_key is None
 
 
 @pytest.mark.parametrize(("name", "value"), [("DARKREAD_OCR_BACKEND", "easyocr"), ("DARKREAD_MAX_MESSAGE_BYTES", "10")])
 def test_invalid_values_are_refused(monkeypatch: pytest.MonkeyPatch, name: str, value: str) -> None:
     monkeypatch.setenv(name, value)
     with pytest.raises(ValidationError):
-        Settings(_env_file=None)  # type: ignore[call-arg]
+        Settings(_env_file=None)

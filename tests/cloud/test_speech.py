@@ -68,12 +68,12 @@ def test_streamed_wav_header_is_rewritten_with_the_true_sizes() -> None:
 
 
 def test_voice_settings_are_checked_where_configured() -> None:
-    settings = Settings(_env_file=None, speech_language="en-gb", speech_voice="", speech_rate_wpm=200)  # type: ignore[call-arg]
+    settings = Settings(_env_file=None, speech_language="en-gb", speech_voice="", speech_rate_wpm=200)
     assert settings.voice() == Voice("en-gb", "", 200) and settings.voice().espeak_name == "en-gb"
     assert Voice("en-us", "f2").espeak_name == "en-us+f2"
     for bad in ({"speech_voice": "-w /etc/x"}, {"speech_language": "en us"}, {"speech_rate_wpm": 20}):
         with pytest.raises(ValidationError):
-            Settings(_env_file=None, **bad)  # type: ignore[arg-type, call-arg]
+            Settings(_env_file=None, **bad)
 
 
 # -- the engine ------------------------------------------------------------------------------------

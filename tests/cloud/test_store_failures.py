@@ -8,7 +8,7 @@ import time
 from typing import Any
 
 from darkread.proto.errors import CloseCode
-from darkread.proto.messages import Ack, encode
+from darkread.proto.messages import encode
 
 from .test_stream import frame
 from .test_stream_ownership import closed_with, open_ws, send_acked
@@ -23,7 +23,7 @@ def test_an_integrity_error_closes_within_a_second_and_the_stream_resumes(server
         with sqlite3.connect(server.settings.data_dir / "darkread.sqlite3") as db:  # e.g. a second writer
             columns = "frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used, rows, cols, bits"
             db.execute(f"INSERT INTO frames (session_id, seq, {columns}) SELECT session_id, 3, {columns}"
-                       " FROM frames WHERE session_id = 'clash' AND seq = 0")  # noqa: S608 - a fixed column list
+                       " FROM frames WHERE session_id = 'clash' AND seq = 0")  # a fixed column list
         sent = time.monotonic()
         await ws.send(encode(frame(3)))
         code, message = await closed_with(ws)
@@ -51,8 +51,9 @@ def test_an_integrity_error_closes_within_a_second_and_the_stream_resumes(server
 
 
 def test_an_os_error_writing_a_page_closes_the_connection(server: LiveServer) -> None:
-    from darkread.proto.messages import Page, pack_mask
     import numpy as np
+
+    from darkread.proto.messages import Page, pack_mask
 
     (server.settings.data_dir / "pages").mkdir(exist_ok=True)
     (server.settings.data_dir / "pages" / "blocked").write_text("a file where the folder goes")

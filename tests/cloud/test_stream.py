@@ -186,10 +186,10 @@ def test_pipelined_frames_are_acked_in_order(server: LiveServer) -> None:
         async with ws:
             for seq in range(100):
                 await ws.send(encode(frame(seq)))
-            return [decode(await ws.recv(), max_bytes=LIMIT).seq for _ in range(100)]  # type: ignore[union-attr]
+            return [decode(await ws.recv(), max_bytes=LIMIT).seq for _ in range(100)]  # type: ignore[union-attr]  # every answer is an ack
 
     assert asyncio.run(scenario()) == list(range(100))
-    assert asyncio.run(server.context.store.session("sess-pipe")).frames == 100  # type: ignore[union-attr]
+    assert asyncio.run(server.context.store.session("sess-pipe")).frames == 100
 
 
 def test_resume_reports_last_stored_seq_and_duplicates_are_reacked_not_stored(server: LiveServer) -> None:

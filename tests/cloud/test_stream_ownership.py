@@ -11,7 +11,7 @@ from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed
 
 from darkread.proto.errors import CloseCode
-from darkread.proto.messages import Ack, Error, Welcome, decode, encode
+from darkread.proto.messages import Error, Welcome, decode, encode
 
 from .test_stream import API_KEY, LIMIT, frame, hello
 

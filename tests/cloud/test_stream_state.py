@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import msgpack
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -14,6 +15,7 @@ from hypothesis import strategies as st
 from darkread.cloud.auth import ENVIRONMENT_ADMIN, KeyRing
 from darkread.cloud.context import AppContext
 from darkread.cloud.live import LivePages
+from darkread.cloud.ocr.base import OcrResult
 from darkread.cloud.prometheus import Metrics
 from darkread.cloud.settings import Settings
 from darkread.cloud.store import SqliteStore
@@ -25,7 +27,7 @@ from darkread.proto.messages import Ack, Hello, Welcome, encode
 class NoOcr:
     name = "none"
 
-    def read(self, image: object) -> object:
+    def read(self, image: np.ndarray) -> OcrResult:
         raise AssertionError("not used")
 
     def ready(self) -> bool:
@@ -36,9 +38,9 @@ class NoOcr:
 def context(tmp_path_factory: pytest.TempPathFactory) -> Iterator[AppContext]:
     data = Path(tmp_path_factory.mktemp("state"))
     store = SqliteStore(data)
-    settings = Settings(_env_file=None, data_dir=data, max_message_bytes=4096)  # type: ignore[call-arg]
-    pages = LivePages(store, NoOcr())  # type: ignore[arg-type]
-    yield AppContext(settings=settings, store=store, metrics=Metrics(), ocr=NoOcr(), pages=pages,  # type: ignore[arg-type]
+    settings = Settings(_env_file=None, data_dir=data, max_message_bytes=4096)
+    pages = LivePages(store, NoOcr())
+    yield AppContext(settings=settings, store=store, metrics=Metrics(), ocr=NoOcr(), pages=pages,
                      keys=KeyRing(data / "keys.json"))
     asyncio.run(pages.close())
     asyncio.run(store.close())

@@ -24,7 +24,7 @@ class NotifySocket:
         while True:
             try:
                 out.append(self.sock.recv(4096).decode())
-            except (TimeoutError, socket.timeout):
+            except TimeoutError:
                 return out
 
 

@@ -9,17 +9,17 @@ import numpy as np
 import pytest
 from factories import sum_bins_model, synthetic_recording
 
-from darkread.lab.bench.ack_server import AckServer
 from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon
-from darkread.proto.messages import PROTOCOL_VERSION
 from darkread.edge.errors import ModelError
 from darkread.edge.notify import Notifier
 from darkread.edge.spool import Spool
+from darkread.lab.bench.ack_server import AckServer
+from darkread.proto.messages import PROTOCOL_VERSION
 
 
-def replay_config(recording: Path, model: Path, url: str, spool: Path, infer: str = "every-window", **uplink: object):  # noqa: ANN201
+def replay_config(recording: Path, model: Path, url: str, spool: Path, infer: str = "every-window", **uplink: object):
     return load_config(None, environ={}, overrides={
         "source": {"kind": "replay", "path": str(recording), "speed": 0.0},
         "pipeline": {"model": str(model), "infer": infer},
@@ -115,8 +115,8 @@ def test_a_failed_build_closes_what_it_opened(tmp_path: Path) -> None:
 
 
 def test_pages_are_built_from_frames_and_sent_when_due() -> None:
-    from darkread.edge.pages import PageBuilder
     from darkread.edge.frame import FrameResult
+    from darkread.edge.pages import PageBuilder
 
     now = [0.0]
     pages = PageBuilder(every_s=5.0, clock=lambda: now[0])

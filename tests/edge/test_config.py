@@ -121,7 +121,7 @@ def test_edge_run_options_become_config_overrides(tmp_path: Path) -> None:
     assert config.source.speed == 2.0 and config.gaze.kind == "udp" and config.gaze.udp_port == 7100
 
 
-def test_fuse_must_name_what_a_view_averages(tmp_path) -> None:  # noqa: ANN001
+def test_fuse_must_name_what_a_view_averages(tmp_path) -> None:
     from darkread.edge.config import load_config
 
     path = tmp_path / "edge.toml"

@@ -5,22 +5,22 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from factories import moving_strokes
 
 from darkread.edge.deblur import DeblurConfig, deblur, deblur_window, estimate_smear, region_of, smear_of
 from darkread.edge.fovea import FoveaConfig, in_window, window_events
-from factories import moving_strokes
 
 SENSOR = (1280, 720)
 ORIGIN = (540, 310)  # moving_strokes draws around this window
 SHAPE = (100, 200)
 
 
-def window_of(events):  # noqa: ANN001, ANN201
+def window_of(events):
     """The window's newest 1600 events, as the pipeline takes them."""
     return window_events(events, ORIGIN, FoveaConfig(height=SHAPE[0], width=SHAPE[1]), 1600)
 
 
-def sharpness(events) -> float:  # noqa: ANN001
+def sharpness(events) -> float:
     """Sum of squared counts per pixel: events piled on fewer pixels score higher."""
     counts = np.bincount(events["y"].astype(np.int64) * SENSOR[0] + events["x"])
     return float((counts.astype(np.float64) ** 2).sum() / max(events.shape[0], 1))
@@ -28,7 +28,7 @@ def sharpness(events) -> float:  # noqa: ANN001
 
 @pytest.mark.parametrize("velocity", [(300.0, 0.0), (-150.0, 200.0), (0.0, -250.0)])
 @pytest.mark.parametrize("noise_share", [0.0, 0.5])
-def test_the_smear_of_a_moving_page_is_found_to_within_a_pixel(velocity, noise_share) -> None:  # noqa: ANN001
+def test_the_smear_of_a_moving_page_is_found_to_within_a_pixel(velocity, noise_share) -> None:
     events = moving_strokes(velocity, noise_share=noise_share)
     window = window_of(events)
     t_ref, span = int(window["t"][-1]), float(window["t"][-1] - window["t"][0])
@@ -91,7 +91,7 @@ def test_the_region_stays_on_the_sensor() -> None:
 
 
 @pytest.mark.parametrize("bad", [{"slices": 1}, {"step_px": 0.0}, {"max_shift_px": 0}, {"margin_px": -1}, {"bin_px": 0}])
-def test_bad_settings_are_refused(bad) -> None:  # noqa: ANN001
+def test_bad_settings_are_refused(bad) -> None:
     with pytest.raises(ValueError, match="DeblurConfig"):
         DeblurConfig(**bad)
 
@@ -120,7 +120,7 @@ def test_events_after_the_reference_time_do_not_break_the_search() -> None:
 
 
 @pytest.mark.parametrize("velocity", [(300.0, 100.0), (0.0, 0.0)])
-def test_the_smear_of_the_fields_is_the_smear_of_the_events(velocity) -> None:  # noqa: ANN001
+def test_the_smear_of_the_fields_is_the_smear_of_the_events(velocity) -> None:
     """``smear_of`` (coordinates and times of the region's events) is ``estimate_smear`` without the record copy."""
     events = moving_strokes(velocity, noise_share=0.3)
     window = window_of(events)

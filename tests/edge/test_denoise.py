@@ -5,20 +5,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from factories import make_events, moving_strokes
 
 from darkread.edge.denoise import DenoiseConfig, drop_isolated, isolated
 from darkread.edge.fovea import FoveaConfig, window_events
-from factories import make_events, moving_strokes
 
 ORIGIN = (540, 310)  # moving_strokes draws around this window
 SHAPE = (100, 200)
 
 
-def window_of(events):  # noqa: ANN001, ANN201
+def window_of(events):
     return window_events(events, ORIGIN, FoveaConfig(height=SHAPE[0], width=SHAPE[1]), 1600)
 
 
-def strokes_and_noise(noise_share: float, seed: int = 0):  # noqa: ANN201
+def strokes_and_noise(noise_share: float, seed: int = 0):
     """A still page's window with ``noise_share`` uniform noise, and which of its events are stroke events."""
     strokes = window_of(moving_strokes((0.0, 0.0), seed=seed))
     rng = np.random.default_rng(seed + 1)

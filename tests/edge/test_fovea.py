@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from factories import random_events
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from factories import random_events
 
 from darkread.edge.events import make_events
 from darkread.edge.fovea import (

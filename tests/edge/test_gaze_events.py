@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from darkread.edge.gaze_events import (
     EVENT_DTYPE,
     EventKind,

@@ -117,7 +117,7 @@ def test_udp_port_in_use_is_a_device_error() -> None:
 
 def test_aria_without_sdk_says_how_to_install() -> None:
     try:
-        import aria.stream_receiver  # type: ignore[import-not-found]  # noqa: F401
+        import aria.stream_receiver  # noqa: F401  # imported only to learn whether it is installed
     except ImportError:
         with pytest.raises(DeviceError, match="projectaria-client-sdk"):
             AriaGen2GazeFeed(LiveGaze(calibration()))

@@ -8,12 +8,12 @@ import hashlib
 import numpy as np
 import pytest
 
+from darkread.core.paths import SAMPLE_RECORDING
 from darkread.edge.builder import build_edge, build_pipeline
 from darkread.edge.config import load_config
 from darkread.edge.reconstruct import default_model_path
 from darkread.edge.sources.replay import ReplaySource
 from darkread.edge.view_fusion import ViewRecord
-from darkread.core.paths import SAMPLE_RECORDING
 
 pytestmark = pytest.mark.skipif(
     not (SAMPLE_RECORDING / "events.raw").is_file() or not default_model_path().is_file(),

@@ -5,17 +5,18 @@ import threading
 import time
 import urllib.request
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from factories import moving_strokes, random_events, sum_bins_model
 
+from darkread.edge.builder import build_pipeline
 from darkread.edge.config import PipelineConfig
 from darkread.edge.events import EVENT_CD_DTYPE, Events, empty_events
 from darkread.edge.fovea import FoveaConfig, window_events, window_origin
-from darkread.edge.gaze import GazeSample
-from darkread.edge.builder import build_pipeline
 from darkread.edge.frame import FrameResult, count_in_window, make_frame
+from darkread.edge.gaze import GazeSample
 from darkread.edge.sources.base import EventSource
 from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.voxel import VoxelConfig
@@ -29,9 +30,9 @@ def ink_where_events(voxel: np.ndarray) -> np.ndarray:
     return (np.abs(voxel).sum(axis=0) > 0).astype(np.uint8)
 
 
-def every_window(**settings: object) -> PipelineConfig:
+def every_window(**settings: Any) -> PipelineConfig:
     """This module tests the every-window loop (a frame per n_events); on-change: test_view_trigger.py."""
-    return PipelineConfig(infer="every-window", **settings)  # type: ignore[arg-type]
+    return PipelineConfig(infer="every-window", **settings)
 
 
 class FixedGaze:
@@ -57,7 +58,7 @@ class ListSource:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
-    def start(self, sink) -> None:  # noqa: ANN001
+    def start(self, sink) -> None:
         def run() -> None:
             for chunk in self.chunks:
                 if self._stop.is_set():

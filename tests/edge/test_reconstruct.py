@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from darkread.edge.errors import ModelError
 from darkread.edge.reconstruct import Reconstructor, default_model_path
 from darkread.lab import FULL_NETWORK, PREVIOUS_NETWORK
@@ -179,6 +180,7 @@ def test_a_bad_stored_temperature_is_one_clear_error(random_model: Path, tmp_pat
     import shutil
 
     import onnx
+
     from darkread.edge.reconstruct import INK_TEMPERATURE_KEY
 
     model = onnx.load(shutil.copy(random_model, tmp_path / "bad.onnx"))

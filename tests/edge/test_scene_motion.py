@@ -41,7 +41,7 @@ def moving_pattern(velocity_px_s: tuple[float, float], seconds: float = 0.6, see
 
 
 @pytest.mark.parametrize("velocity", [(150.0, 0.0), (-80.0, 120.0), (0.0, -250.0)])
-def test_a_moving_pattern_is_followed_to_within_a_sixth_of_its_motion(velocity) -> None:  # noqa: ANN001
+def test_a_moving_pattern_is_followed_to_within_a_sixth_of_its_motion(velocity) -> None:
     events = moving_pattern(velocity)
     scene = SceneMotion(SENSOR)
     scene.push(events)
@@ -86,7 +86,7 @@ def test_before_any_event_there_is_no_offset_and_the_history_is_bounded() -> Non
     assert scene.at(0) is None
     scene.push(moving_pattern((50.0, 0.0), seconds=1.2))  # 1,200 slices: more than are kept
     assert scene.at(1_190_000) is not None
-    assert scene._times.shape[0] <= 1_000  # noqa: SLF001 - the bound is the point of this test
+    assert scene._times.shape[0] <= 1_000  # the bound is the point of this test
 
 
 def test_noise_without_a_scene_gives_no_offset_rather_than_a_wandering_one() -> None:

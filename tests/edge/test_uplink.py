@@ -8,14 +8,14 @@ import socket
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from small_disk import small_disk
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
-
-from small_disk import small_disk
 
 from darkread.edge.config import UplinkConfig
 from darkread.edge.errors import SpoolError
@@ -108,12 +108,12 @@ class ProtoServer:
             if self.drop_after is not None and count >= self.drop_after:
                 ws.transport.abort()  # network drop: the last ack never leaves
                 return
-            if stalls and count > self.stall_after:  # type: ignore[operator]
+            if stalls and self.stall_after is not None and count > self.stall_after:
                 continue  # the connection stays open, the acks stop
             await ws.send(encode(Ack(seq=seqs[-1])))
 
 
-def wait_for(condition, timeout_s: float = 5.0) -> bool:  # noqa: ANN001
+def wait_for(condition, timeout_s: float = 5.0) -> bool:
     deadline = time.monotonic() + timeout_s
     while not condition():
         if time.monotonic() > deadline:
@@ -132,10 +132,10 @@ def frame(frame_id: int) -> Frame:
     )
 
 
-def settings(url: str, **kwargs: object) -> UplinkConfig:
-    base = dict(url=url, api_key=KEY, device_id="glasses-1", backoff_initial_s=0.02, backoff_max_s=0.1)
+def settings(url: str, **kwargs: Any) -> UplinkConfig:
+    base: dict[str, Any] = dict(url=url, api_key=KEY, device_id="glasses-1", backoff_initial_s=0.02, backoff_max_s=0.1)
     base.update(kwargs)
-    return UplinkConfig(**base)  # type: ignore[arg-type]
+    return UplinkConfig(**base)
 
 
 def make_uplink(config: UplinkConfig, spool: Spool, metrics: EdgeMetrics | None = None) -> Uplink:
@@ -301,7 +301,7 @@ def test_backoff_restarts_small_after_a_stable_connection(server: ProtoServer) -
         delays.append(delay_s)
         await sleep(delay_s)
 
-    uplink._sleep_or_stop = recording_sleep  # type: ignore[method-assign]
+    uplink._sleep_or_stop = recording_sleep  # type: ignore[method-assign]  # the test records the back-off delays
     uplink.start()
     assert wait_for(lambda: len(delays) >= 4)  # outage 1: the delays grow
     server.start()

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from darkread.edge.view_fusion import N_LEVELS, ViewFuser, quantise, threshold
 from darkread.core.frame_record import FrameRecord
+from darkread.edge.view_fusion import N_LEVELS, ViewFuser, quantise, threshold
 from darkread.proto.messages import View, decode, encode
 
 

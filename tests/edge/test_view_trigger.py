@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from darkread.edge.builder import build_pipeline
@@ -53,7 +55,7 @@ class Chunks:
     def __init__(self, events: Events) -> None:
         self.events = events
 
-    def start(self, sink) -> None:  # noqa: ANN001
+    def start(self, sink) -> None:
         self.sink = sink
 
     def stop(self) -> None:
@@ -93,13 +95,13 @@ def the_same_text(grid: np.ndarray) -> np.ndarray:
     return glyphs(grid.shape[1:])
 
 
-def run_on_change(gaze: ScanGaze, events: Events, infer=the_same_text, source=None, **settings: object):  # noqa: ANN001, ANN201
+def run_on_change(gaze: ScanGaze, events: Events, infer=the_same_text, source=None, **settings: Any):
     """Views of one lossless replay. The frames stay in the view's window (``dither_px`` 0) unless
     asked: ``the_same_text`` sees the same words wherever the window is."""
     views: list[tuple[ViewRecord, float]] = []
     source = source or Chunks(events)
     settings = {"dither_px": 0, **settings}
-    config = PipelineConfig(lossless=True, infer="on-change", **settings)  # type: ignore[arg-type]
+    config = PipelineConfig(lossless=True, infer="on-change", **settings)
     metrics = EdgeMetrics()
     pipeline = build_pipeline(source, gaze, infer, lambda v, t: views.append((v, t)), config, metrics=metrics)
     pipeline.start()
@@ -184,7 +186,7 @@ def test_the_sensor_roi_spans_a_views_dithered_windows() -> None:
     source = RoiChunks(events)
     views, _ = run_on_change(gaze, events, source=source, dither_px=20, sensor_roi=True, scene_motion=False)
     assert views and source.rois
-    for x0, y0, w, h in source.rois:
+    for _x0, y0, w, h in source.rois:
         assert (w, h) == (200, 140) and y0 == 360 - 50 - 20  # the window 20 px up to 20 px down
 
 

@@ -15,10 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from factories import sum_bins_model as tiny_model
 
 from darkread.core.paths import SAMPLE_RECORDING
-
-from factories import sum_bins_model as tiny_model
 
 pytestmark = pytest.mark.slow
 

@@ -22,7 +22,6 @@ from speech_measure import require_espeak
 
 from darkread.cloud.auth import KeyRing, Scope
 from darkread.cloud.server import serve_in_thread
-
 from tests.cloud.test_ocr_remote import OPENAI_KEY, openai_app
 from tests.cloud.test_request_guard import raw_request
 from tests.cloud.test_speech_bounds import long_text, stream_page

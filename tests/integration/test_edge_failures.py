@@ -22,7 +22,7 @@ from cloud_process import API_KEY, free_port
 from factories import sum_bins_model
 from small_disk import small_disk
 
-from .test_edge_to_cloud import Cloud, recording  # noqa: F401 - fixture
+from .test_edge_to_cloud import Cloud
 
 pytestmark = pytest.mark.slow
 

@@ -26,7 +26,6 @@ from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon
 from darkread.edge.notify import Notifier
-from darkread.core.paths import SAMPLE_RECORDING
 
 pytestmark = pytest.mark.slow
 
@@ -35,13 +34,6 @@ class Cloud(CloudProcess):
     def stored_seqs(self, session_id: str) -> list[int]:
         with sqlite3.connect(self.data_dir / "darkread.sqlite3") as db:
             return [seq for (seq,) in db.execute("SELECT seq FROM frames WHERE session_id = ? ORDER BY seq", (session_id,))]
-
-
-@pytest.fixture
-def recording(request: pytest.FixtureRequest) -> Path:
-    if (SAMPLE_RECORDING / "events.raw").is_file():
-        return SAMPLE_RECORDING
-    return request.getfixturevalue("shared_sample_recording")
 
 
 def test_cloud_killed_mid_stream_every_frame_delivered_once(tmp_path: Path, recording: Path) -> None:

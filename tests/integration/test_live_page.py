@@ -27,9 +27,9 @@ from pydantic import SecretStr
 from darkread.cloud.app import create_app
 from darkread.cloud.server import serve_in_thread
 from darkread.cloud.settings import Settings
-from darkread.edge.io.recording import open_recording
-from darkread.core.text_metrics import error_rates
 from darkread.core.paths import SAMPLE_RECORDING
+from darkread.core.text_metrics import error_rates
+from darkread.edge.io.recording import open_recording
 
 pytestmark = pytest.mark.slow
 
@@ -76,7 +76,7 @@ def browser(tmp_path: Path) -> Iterator[Any]:
 
 @pytest.fixture
 def cloud(tmp_path: Path) -> Iterator[Any]:
-    settings = Settings(_env_file=None, data_dir=tmp_path / "cloud", api_key=SecretStr(API_KEY))  # type: ignore[call-arg]
+    settings = Settings(_env_file=None, data_dir=tmp_path / "cloud", api_key=SecretStr(API_KEY))
     with serve_in_thread(create_app(settings)) as server:
         yield server
 

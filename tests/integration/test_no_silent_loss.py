@@ -14,14 +14,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from factories import sum_bins_model as tiny_model
 from websockets.asyncio.client import connect
 
 from darkread.proto.errors import CloseCode
 from darkread.proto.messages import Error, Frame, Hello, Welcome, decode, encode, pack_mask
 
-from factories import sum_bins_model as tiny_model
-
-from .test_edge_to_cloud import API_KEY, Cloud, free_port, recording  # noqa: F401 - fixture
+from .test_edge_to_cloud import API_KEY, Cloud, free_port
 
 pytestmark = pytest.mark.slow
 

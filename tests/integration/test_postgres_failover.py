@@ -18,13 +18,13 @@ import psycopg
 import pytest
 from cloud_process import API_KEY, CloudProcess
 
+from darkread.core.paths import SAMPLE_RECORDING
+from darkread.core.text_metrics import error_rates
 from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon
-from darkread.edge.notify import Notifier
 from darkread.edge.io.recording import open_recording
-from darkread.core.text_metrics import error_rates
-from darkread.core.paths import SAMPLE_RECORDING
+from darkread.edge.notify import Notifier
 
 pytestmark = [pytest.mark.slow, pytest.mark.postgres]
 
@@ -45,7 +45,7 @@ def ask(cloud: CloudProcess, session_id: str) -> dict[str, object]:
         headers={"X-API-Key": API_KEY, "Content-Type": "application/json"},
     )  # fmt: skip
     with urllib.request.urlopen(request, timeout=120) as response:
-        return json.loads(response.read())  # type: ignore[no-any-return]
+        return json.loads(response.read())
 
 
 def test_an_instance_killed_mid_stream_the_other_serves_the_whole_session(tmp_path: Path, postgres_url: str) -> None:
@@ -99,7 +99,7 @@ def test_an_instance_killed_mid_stream_the_other_serves_the_whole_session(tmp_pa
         rates = error_rates(reference, str(answer["text"]))
         assert rates.cer <= MAX_CER, f"B read {answer['text']!r} (CER {rates.cer:.1%}), expected {reference!r}"
         assert answer.get("frames_pending") is not True  # B had stitched every stored frame
-        print(  # noqa: T201 - the figures the issue asks for
+        print(  # the figures the issue asks for
             f"\nfailover: {len(sent)} frames sent, A killed after ack {killed_after}, {len(stored)} stored once each,"
             f" B read CER {rates.cer:.1%}: {answer['text']!r}"
         )

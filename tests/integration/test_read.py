@@ -19,9 +19,9 @@ import pytest
 from speech_measure import require_espeak, transcribe
 
 from darkread.cloud.speech import spoken_text
+from darkread.core.paths import SAMPLE_RECORDING
 from darkread.edge.inspect import inspect_path
 from darkread.edge.io.recording import open_recording
-from darkread.core.paths import SAMPLE_RECORDING
 from darkread.read import read_recording
 
 pytestmark = pytest.mark.slow

@@ -177,7 +177,7 @@ def test_random_masks_round_trip(mask: np.ndarray) -> None:
     events_used=st.integers(0, 2**32 - 1),
     mask=masks,
 )
-def test_random_frames_round_trip(seq, frame_id, t_us, origin, gaze_px, gaze_rad, events_used, mask) -> None:  # noqa: ANN001
+def test_random_frames_round_trip(seq, frame_id, t_us, origin, gaze_px, gaze_rad, events_used, mask) -> None:
     shape, bits = pack_mask(mask)
     frame = Frame(seq, frame_id, t_us, origin, gaze_px, gaze_rad, events_used, shape, bits)
     decoded = decode(encode(frame), max_bytes=LIMIT)
@@ -192,7 +192,7 @@ def test_random_frames_round_trip(seq, frame_id, t_us, origin, gaze_px, gaze_rad
     lines=st.lists(st.tuples(int64, int64, int64, int64), max_size=20),
     mask=masks,
 )
-def test_random_other_messages_round_trip(t_us, stats, device_id, lines, mask) -> None:  # noqa: ANN001
+def test_random_other_messages_round_trip(t_us, stats, device_id, lines, mask) -> None:
     shape, bits = pack_mask(mask)
     for message in (
         Heartbeat(t_us=t_us, stats=stats),
@@ -365,7 +365,7 @@ def test_numbered_is_replace_of_the_seq_alone(kind: str, seq: int) -> None:
 @pytest.mark.parametrize("seq", [-1, 2**63, "3", 1.5, True])
 def test_numbered_refuses_a_wild_seq(seq: object) -> None:
     with pytest.raises(InvalidFieldError):
-        EXAMPLES["frame"].numbered(seq)  # type: ignore[arg-type]
+        EXAMPLES["frame"].numbered(seq)  # type: ignore[arg-type]  # a wrong type, on purpose
 
 
 def test_the_scene_motion_is_an_optional_field_of_frames_and_views() -> None:

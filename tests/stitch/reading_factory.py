@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from darkread.core.frame_record import FrameRecord
 from PIL import Image, ImageDraw, ImageFont
+
+from darkread.core.frame_record import FrameRecord
 
 PARAGRAPH = (
     "Reading in the dark is hard for cameras and easy for events. A foveated window follows the "
@@ -98,7 +99,7 @@ def render_page(
     coverage = np.asarray(small, dtype=np.float32) / 255.0
     mask = (coverage >= 0.5).astype(np.uint8)
     boxes = []
-    for x0, x1, yc in centres:
+    for _x0, _x1, yc in centres:
         band = mask[int(yc - pitch / 2) : int(yc + pitch / 2)]
         rows = np.flatnonzero(band.any(axis=1))
         cols = np.flatnonzero(band.any(axis=0))

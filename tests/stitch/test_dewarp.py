@@ -3,6 +3,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+
 from darkread.stitch import StitchConfig
 from darkread.stitch.canvas import Canvas
 from darkread.stitch.dewarp import (

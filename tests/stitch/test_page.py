@@ -3,6 +3,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+
 from darkread.stitch import StitchConfig, StitchedPage
 from darkread.stitch.page import (
     assign_lines,
@@ -18,7 +19,7 @@ from darkread.stitch.page import (
 def test_text_bands_find_every_line_including_a_short_last_one(rendered_page) -> None:
     bands = text_bands(rendered_page.mask)
     assert len(bands) == len(rendered_page.text_lines)
-    for (top, bottom, centre), (x0, y0, x1, y1), (_, _, yc) in zip(
+    for (top, bottom, centre), (_x0, y0, _x1, y1), (_, _, yc) in zip(
         bands, rendered_page.line_boxes, rendered_page.line_centres
     ):
         assert abs(centre - yc) < 3

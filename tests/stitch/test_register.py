@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from darkread.stitch import register_frame
 
 
@@ -54,6 +55,7 @@ def test_reference_of_the_wrong_size_is_refused(rendered_page) -> None:
 @pytest.mark.parametrize("roll", [-1.2, 0.7])
 def test_recovers_a_small_rotation_of_the_frame(rendered_page, roll: float) -> None:
     import cv2
+
     from darkread.stitch.register import frame_transform
 
     r = 8

@@ -2,9 +2,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from reading_factory import ScanParams, simulate_reading
+
 from darkread.core.frame_record import FrameRecord
 from darkread.stitch import LineSegmenter, StitchConfig, segment_lines
-from reading_factory import ScanParams, simulate_reading
 
 
 def _frames(gaze: list[tuple[float, float]]) -> list[FrameRecord]:

@@ -4,6 +4,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from reading_factory import ink_f1_aligned, simulate_reading
+
 from darkread.core.frame_record import FrameRecord
 from darkread.stitch import (
     PageStitcher,
@@ -11,7 +13,6 @@ from darkread.stitch import (
     naive_page,
     stitch_page,
 )
-from reading_factory import ink_f1_aligned, simulate_reading
 
 
 def test_stitched_page_matches_the_truth(rendered_page, stitched) -> None:

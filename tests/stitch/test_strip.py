@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from darkread.stitch import StitchConfig
 from darkread.stitch.canvas import Canvas
 from darkread.stitch.strip import STRIP_LAYERS, accumulate, row_taper

@@ -181,7 +181,7 @@ class Evk4Camera:
                 f"{variant & 3}; this driver supports only the IMX636 (id 0x{regs.IMX636_SENSOR_ID:08X}, variant 0)"
             )
 
-    def start(self, sink: EventSink, raw_sink: Callable[[bytes], None] | None = None) -> None:
+    def start(self, sink: EventSink, raw_sink: Callable[[bytes], object] | None = None) -> None:
         """Open if needed, start the drain and decode threads, then start the sensor.
 
         ``raw_sink`` (optional) receives every USB chunk as read, on the drain thread, before
@@ -264,7 +264,7 @@ class Evk4Camera:
 
     # --- threads ------------------------------------------------------------------------------
 
-    def _drain_loop(self, device: Evk4Device, raw_sink: Callable[[bytes], None] | None) -> None:
+    def _drain_loop(self, device: Evk4Device, raw_sink: Callable[[bytes], object] | None) -> None:
         offset = 0  # position of the next byte in the sensor's stream, dropped bytes included
         while not self._stop_event.is_set():
             try:

@@ -21,6 +21,7 @@ from collections import deque
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import usb.backend
 import usb.core
@@ -91,16 +92,16 @@ class FakeEvk4:
         self._lock = threading.Lock()
 
     @classmethod
-    def from_events(cls, events: Events, **kwargs: object) -> FakeEvk4:
+    def from_events(cls, events: Events, **kwargs: Any) -> FakeEvk4:
         """A board that serves ``events`` encoded as EVT3."""
         from darkread.edge.io.evt3 import encode_evt3
 
-        return cls(recording=encode_evt3(events), **kwargs)  # type: ignore[arg-type]
+        return cls(recording=encode_evt3(events), **kwargs)
 
     @classmethod
-    def from_raw(cls, path: str | Path, **kwargs: object) -> FakeEvk4:
+    def from_raw(cls, path: str | Path, **kwargs: Any) -> FakeEvk4:
         """A board that serves the EVT3 payload of a Prophesee RAW file."""
-        return cls(recording=strip_raw_header(Path(path).read_bytes()), **kwargs)  # type: ignore[arg-type]
+        return cls(recording=strip_raw_header(Path(path).read_bytes()), **kwargs)
 
     # --- observable state ---------------------------------------------------------------------
 

@@ -24,7 +24,7 @@ Factory bias values used by the fake device: neuromorphic-drivers
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple, Union
+from typing import NamedTuple
 
 # --- USB identity -----------------------------------------------------------------------------
 
@@ -79,7 +79,7 @@ class Delay(NamedTuple):
     us: int
 
 
-Operation = Union[Write, Field, Delay]
+Operation = Write | Field | Delay
 RegisterSequence = tuple[Operation, ...]
 
 # --- detection --------------------------------------------------------------------------------

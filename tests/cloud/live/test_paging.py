@@ -11,9 +11,9 @@ from page_readings import LINES, CountingOcr, reading_frames
 from darkread.cloud.live import LineReader, Paginator, PagingConfig
 from darkread.cloud.live.reading import BORDER_PX
 from darkread.cloud.ocr.base import OcrLine, OcrResult
-from darkread.stitch.page import text_bands
 from darkread.cloud.store import StoredFrame
 from darkread.cloud.stream import stored_frame
+from darkread.stitch.page import text_bands
 
 OTHER_LINES = ["a second page of text comes", "after the first one was read", "by the same pair of glasses"]
 

@@ -29,7 +29,7 @@ def spec(session_id: str, mode: str = "frames", device: str = "g") -> SessionSpe
     return SessionSpec(session_id, device, mode, (1280, 720), (100, 200))
 
 
-def frame(seq: int) -> FrameRecord:
+def frame(seq: int) -> StoredFrame:
     mask = np.zeros((100, 200), np.uint8)
     mask[seq % 100, :] = 1
     mask[:, seq % 200] = 1
@@ -146,7 +146,7 @@ async def test_pages_gaze_and_page_breaks_share_the_session_seq(store: SessionSt
     assert info is not None and info.pages == 2 and info.frames == 0 and info.last_seq == 3
 
 
-async def test_everything_survives_a_restart(open_store) -> None:  # noqa: ANN001 - the fixture's opener
+async def test_everything_survives_a_restart(open_store) -> None:  # the fixture's opener
     first = await open_store()
     await first.open_session(spec("s"))
     await first.add_frame("s", frame(0))
@@ -184,7 +184,7 @@ async def test_delete_removes_everything_of_one_session(store: SessionStore) -> 
     assert await store.latest_page("keep") is not None
 
 
-async def test_an_open_store_answers_ping_and_a_closed_one_refuses_writes(open_store) -> None:  # noqa: ANN001
+async def test_an_open_store_answers_ping_and_a_closed_one_refuses_writes(open_store) -> None:
     store = await open_store()
     assert await store.ping() is True
     await store.close()

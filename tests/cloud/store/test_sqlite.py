@@ -23,7 +23,7 @@ def anyio_backend() -> str:
     return "asyncio"
 
 
-def frame(seq: int) -> FrameRecord:
+def frame(seq: int) -> StoredFrame:
     return StoredFrame(seq, seq * 100, np.eye(100, 200, dtype=np.uint8), (0, 0), (1.0, 2.0), seq=seq, events_used=1600)
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+
 from darkread.lab.fixtures.calibration_capture import (
     FlashCapture,
     FlashCaptureSpec,

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+
 from darkread.edge.calibrate.cameras import (
     Fisheye624Camera,
     aria_camera_from_device_calibration,

@@ -5,12 +5,12 @@ import json
 
 import numpy as np
 import pytest
-from darkread.edge.calibrate.extrinsics import rotation_deg
-from darkread.edge.io.calibration import load_calibration, save_calibration
-from darkread.models.synth.camera import rotation_xyz
-from darkread.lab.fixtures.calibration_capture import write_flash_capture
 
 from darkread.cli import main
+from darkread.edge.calibrate.extrinsics import rotation_deg
+from darkread.edge.io.calibration import load_calibration, save_calibration
+from darkread.lab.fixtures.calibration_capture import write_flash_capture
+from darkread.models.synth.camera import rotation_xyz
 
 
 def test_clock_command_writes_the_offset(still_capture, still_capture_dir, tmp_path, capsys):

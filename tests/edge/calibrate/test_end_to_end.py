@@ -10,7 +10,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from darkread.edge.io.intrinsics import Intrinsics
+
 from darkread.edge.calibrate.capture import paired_views
 from darkread.edge.calibrate.clock import (
     RgbFrames,
@@ -21,6 +21,7 @@ from darkread.edge.calibrate.clock import (
 from darkread.edge.calibrate.event_image import find_bursts
 from darkread.edge.calibrate.extrinsics import extrinsics_from_views, rotation_deg
 from darkread.edge.calibrate.intrinsics import calibrate_intrinsics, detect_views
+from darkread.edge.io.intrinsics import Intrinsics
 
 
 def _frames(capture, max_side=None):
@@ -92,6 +93,7 @@ def test_pose_from_both_cameras(posed_capture, intrinsics):
 @pytest.mark.slow
 def test_pose_through_an_aria_fisheye_rgb_camera(tmp_path, capsys):
     """RGB frames rendered through a Fisheye624 lens; poses from unprojected rays (library and CLI)."""
+    from darkread.cli import main
     from darkread.edge.calibrate.cameras import Fisheye624Camera
     from darkread.edge.io.calibration import load_calibration, save_calibration
     from darkread.lab.fixtures.calibration_capture import (
@@ -99,8 +101,6 @@ def test_pose_through_an_aria_fisheye_rgb_camera(tmp_path, capsys):
         simulate_flash_capture,
         write_flash_capture,
     )
-
-    from darkread.cli import main
 
     fisheye = Fisheye624Camera(1024, 1024, (650.0, 511.5, 511.5, 0.35, -0.3, 0.1, 0.2, -0.4, 0.2,
                                             1e-4, -2e-4, 1e-4, -1e-5, 2e-4, -3e-5))

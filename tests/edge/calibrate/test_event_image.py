@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from darkread.edge.calibrate.event_image import (
     burst_events,
     count_image,

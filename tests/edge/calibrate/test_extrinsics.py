@@ -2,8 +2,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from darkread.edge.calibrate.cameras import Fisheye624Camera
-from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
 from darkread.edge.calibrate.extrinsics import (
     average_poses,
     extrinsics_from_views,
@@ -12,6 +12,7 @@ from darkread.edge.calibrate.extrinsics import (
 )
 from darkread.edge.calibrate.markers import BoardSpec, Detection, pose_matrix
 from darkread.edge.errors import CalibrationError
+from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
 
 FISHEYE = (610.0, 1440.0, 1440.0, 0.40, -0.45, 0.12, 0.70, -1.50, 0.80, 1e-4, -2e-4, 1e-4, -1e-5, 2e-4, -3e-5)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -17,12 +18,12 @@ def make_calibration(**overrides: object) -> Calibration:
     T = np.eye(4)
     T[:3, :3] = np.diag([-1.0, -1.0, 1.0])  # CPF (x left, y up) -> camera (x right, y down)
     T[:3, 3] = [-0.03, 0.01, 0.0]
-    fields = dict(
+    fields: dict[str, Any] = dict(
         width=1280, height=720, fx=1403.1, fy=1404.4, cx=643.1, cy=356.5,
         distortion=(-0.045, 0.024, -0.00066, -0.00043), T_event_cpf=T, gaze_to_event_time_offset_us=-1234,
     )
     fields.update(overrides)
-    return Calibration(**fields)  # type: ignore[arg-type]
+    return Calibration(**fields)
 
 
 def test_projection_equals_cv2_project_points() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,7 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from darkread.edge.errors import CorruptRawError
-from darkread.edge.io.evt3 import Evt3Decoder, decode_evt3
+from darkread.edge.events import TRIGGER_DTYPE, empty_events, make_events
+from darkread.edge.io.evt3 import Evt3Decoder, decode_evt3, encode_evt3
+from darkread.edge.io.raw import read_raw, write_raw
 
 
 def w(kind: int, payload: int) -> int:
@@ -185,12 +188,6 @@ def test_chunked_decode_equals_whole_decode_on_random_words(cuts: list[int], see
 
 
 # --- encoder -------------------------------------------------------------------------------------
-
-from pathlib import Path  # noqa: E402
-
-from darkread.edge.events import TRIGGER_DTYPE, empty_events, make_events  # noqa: E402
-from darkread.edge.io.evt3 import encode_evt3  # noqa: E402
-from darkread.edge.io.raw import read_raw, write_raw  # noqa: E402
 
 
 def random_stream(seed: int, n: int, t0: int, max_gap: int, run_share: float, width: int = 1280) -> np.ndarray:

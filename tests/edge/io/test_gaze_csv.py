@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from darkread.edge.errors import GazeCsvError
+from darkread.edge.gaze import gaze_point_cpf
 from darkread.edge.io.gaze_csv import (
     VERGENCE_COLUMNS,
     elevation_to_projection_pitch,
@@ -15,7 +16,6 @@ from darkread.edge.io.gaze_csv import (
     spherical_directions,
     write_gaze_csv,
 )
-from darkread.edge.gaze import gaze_point_cpf
 
 ARIA_FILES = {
     "gen1/mps_sample/eye_gaze/eyegaze.csv": ("gen1_v1", 123),

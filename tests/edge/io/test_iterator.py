@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from factories import random_events
 
 from darkread.edge.events import EVENT_CD_DTYPE, empty_events, make_events

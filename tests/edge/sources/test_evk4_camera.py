@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+from typing import Any
 
 import pytest
 
@@ -24,10 +25,10 @@ class SilentDecoder:
         raise AssertionError(f"unexpected {len(chunk)} bytes of event data")
 
 
-def camera_on(fake: FakeEvk4, **kwargs: object) -> Evk4Camera:
+def camera_on(fake: FakeEvk4, **kwargs: Any) -> Evk4Camera:
     kwargs.setdefault("sleep", lambda seconds: None)
     kwargs.setdefault("decoder_factory", SilentDecoder)
-    return Evk4Camera(backend=FakeUsbBackend([fake]), **kwargs)  # type: ignore[arg-type]
+    return Evk4Camera(backend=FakeUsbBackend([fake]), **kwargs)
 
 
 def simulate(sequence: regs.RegisterSequence, registers: dict[int, int]) -> list[tuple[int, int]]:

@@ -6,6 +6,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -58,8 +59,8 @@ def event_keys(events: Events) -> np.ndarray:
     return (((t << 11) | x) << 10 | y) << 1 | p
 
 
-def camera_on(fake: FakeEvk4, **kwargs: object) -> Evk4Camera:
-    return Evk4Camera(backend=FakeUsbBackend([fake]), sleep=lambda s: None, **kwargs)  # type: ignore[arg-type]
+def camera_on(fake: FakeEvk4, **kwargs: Any) -> Evk4Camera:
+    return Evk4Camera(backend=FakeUsbBackend([fake]), sleep=lambda s: None, **kwargs)
 
 
 @pytest.mark.parametrize("chunk_bytes", [4099, 65536])

@@ -7,10 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from factories import random_events
+
 from darkread.edge.io.calibration import Calibration, save_calibration
 from darkread.edge.io.gaze_csv import write_gaze_csv
 from darkread.edge.io.raw import write_raw
-from factories import random_events
 
 TINY_CENTRE = (640.0, 360.0)  # principal point = where a straight-ahead gaze lands
 TINY_SECONDS = 0.05

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+
 from darkread.edge.io.calibration import Calibration
 from darkread.lab.eval.attribution import Attribution, attribution_table, compose, ink_found, place_window, window_truth
 from darkread.lab.truth import PageTruth

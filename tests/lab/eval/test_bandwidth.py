@@ -6,10 +6,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from darkread.edge.io.evt3_encode import encode_evt3
-from darkread.proto.messages import Frame, encode, pack_mask
 
 from darkread.edge.fovea import foveate_along_gaze
+from darkread.edge.io.evt3_encode import encode_evt3
 from darkread.lab.eval.bandwidth import (
     Bandwidth,
     frame_message_bytes,
@@ -17,6 +16,7 @@ from darkread.lab.eval.bandwidth import (
     measure_bandwidth,
     page_message_bytes,
 )
+from darkread.proto.messages import Frame, encode, pack_mask
 
 
 def _inside(events: np.ndarray, x0: int, y0: int) -> np.ndarray:

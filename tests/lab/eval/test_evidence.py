@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from darkread.edge.events import EVENT_CD_DTYPE
-from darkread.lab.eval.evidence import (Evidence, count_image, evidence_table, ink_and_paper_scores, recording_evidence,
-                                    separability)
+from darkread.lab.eval.evidence import Evidence, count_image, evidence_table, ink_and_paper_scores, recording_evidence, separability
 
 
 def test_separability_is_the_chance_a_positive_beats_a_negative() -> None:
@@ -38,8 +38,10 @@ def test_ink_pixels_with_events_on_them_separate_from_paper() -> None:
 
 
 def test_the_table_groups_by_lux_and_motion() -> None:
-    row = lambda lux, motion, s: Evidence(f"{lux}{motion}", lux, motion, 3, {"measured/1600": s, "exact/1600": s + 0.1},
-                                          {"measured/1600": s / 2, "exact/1600": 0.0})
+    def row(lux: float, motion: str, s: float) -> Evidence:
+        return Evidence(f"{lux}{motion}", lux, motion, 3, {"measured/1600": s, "exact/1600": s + 0.1},
+                        {"measured/1600": s / 2, "exact/1600": 0.0})
+
     lines = evidence_table([row(10.0, "still", 0.8), row(10.0, "walking", 0.6), row(5.0, "still", 0.5)], lengths=(1600,))
     assert lines[0].count("|") == 7 and "| 10 | **all** | 2 | 0.700 | 0.800 | 35% |" in lines
     assert lines.index("| 10 | **all** | 2 | 0.700 | 0.800 | 35% |") < lines.index("| 5 | still | 1 | 0.500 | 0.600 | 25% |")

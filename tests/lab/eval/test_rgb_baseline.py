@@ -7,12 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from darkread.lab.synth.rgb_camera import take_snapshot
-from darkread.models.synth.session import Session
 from factories import under_light
 
 from darkread.core.text_metrics import error_rates
 from darkread.lab.eval.rgb_baseline import read_snapshot
+from darkread.lab.synth.rgb_camera import take_snapshot
+from darkread.models.synth.session import Session
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
 
 from darkread.lab.eval.suite import (
     FONTS,
@@ -18,6 +17,7 @@ from darkread.lab.eval.suite import (
     make_suite,
     suite_entries,
 )
+from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
 
 
 @pytest.mark.parametrize("small", [True, False])

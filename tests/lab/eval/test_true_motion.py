@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from darkread.edge.events import EVENT_CD_DTYPE
 from darkread.edge.head_motion import KnownHeadMotion
 from darkread.edge.io.calibration import Calibration
-from darkread.lab.truth import PageTruth
 from darkread.lab.eval.true_motion import NoTruthError, TrueHeadMotion
+from darkread.lab.truth import PageTruth
 from darkread.models.train.annotate import project_page
 
 SPEED_MM_PER_S = 20.0  # the page slides right this fast: 20 mm/s -> 80 px/s at 4 px/mm seen from 350 mm

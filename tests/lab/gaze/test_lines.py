@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+
 from darkread.lab.gaze import human
-from darkread.lab.gaze.lines import STITCHER, eyekit_available, fixation_lines, product_lines
+from darkread.lab.gaze.lines import STITCHER, eyekit_available, product_lines
 
 needs_eyekit = pytest.mark.skipif(eyekit_available() is not None, reason=str(eyekit_available()))
 

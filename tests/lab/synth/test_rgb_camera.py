@@ -6,8 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from darkread.models.synth.recording import RecordingSpec
-from darkread.models.synth.session import Session
 from factories import under_light
 
 from darkread.lab.synth.rgb_camera import (
@@ -20,6 +18,8 @@ from darkread.lab.synth.rgb_camera import (
     take_snapshot,
     to_grey,
 )
+from darkread.models.synth.recording import RecordingSpec
+from darkread.models.synth.session import Session
 
 CAMERA = RgbCameraModel()
 

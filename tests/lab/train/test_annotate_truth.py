@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from darkread.lab.truth import annotate_from_truth, truth_windows
 from darkread.models.train.annotate import SHARD_NAME, SUMMARY_NAME, AnnotationError
-from darkread.lab.truth import annotate_from_truth
-from darkread.lab.truth import truth_windows
 from darkread.models.train.data import load_dataset
 
 

@@ -49,11 +49,10 @@ def test_compare_scores_each_model_on_a_shard_directory(tmp_path, two_models, sh
 
 def test_a_plain_synthetic_page_is_scored_against_the_simulators_own_ink(tmp_path, two_models) -> None:
     """A recording without markers carries its truth too: every window's target is the simulator's ink mask."""
-    from darkread.models.synth.recording import RecordingSpec, session_spec, write_recording
+    from darkread.lab.truth import truth_windows
+    from darkread.models.synth.recording import RecordingSpec, load_pose_truth, session_spec, write_recording
     from darkread.models.synth.scene import Region
     from darkread.models.synth.session import make_session
-    from darkread.models.synth.recording import load_pose_truth
-    from darkread.lab.truth import truth_windows
 
     spec = RecordingSpec(lux=100.0, motion="normal", kind="words", seconds=0.45, seed=11, xheight_px=10.0, n_lines=3,
                          line_chars=22, regime="shifted")

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from darkread.models.train.calibrate import store_ink_temperature, stored_ink_temperature
-from darkread.lab.train.placebo import perturbed, write_placebo
 from darkread_cli import assert_one_error_line, darkread
+
+from darkread.lab.train.placebo import perturbed, write_placebo
+from darkread.models.train.calibrate import store_ink_temperature, stored_ink_temperature
 
 
 @pytest.fixture(scope="module")

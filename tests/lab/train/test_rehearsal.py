@@ -6,10 +6,10 @@ import json
 
 import numpy as np
 import pytest
-
-from darkread.models.train.finetune import synthetic_windows
-from darkread.lab.train.rehearsal import make_rehearsal, rehearsal_specs
 from darkread_cli import assert_one_error_line, darkread
+
+from darkread.lab.train.rehearsal import make_rehearsal, rehearsal_specs
+from darkread.models.train.finetune import synthetic_windows
 
 
 def test_sessions_cover_lux_and_motion_in_the_standard_regime() -> None:

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+
 from darkread.models.synth.fonts import face_by_name
 from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath, replay_scanpath
 from darkread.models.synth.page import render_page

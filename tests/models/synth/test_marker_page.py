@@ -39,9 +39,9 @@ def test_layout_markers_and_glyphs_sit_where_the_ink_is():
     dictionary = SPEC.dictionary_obj()
     for marker_id, corners in page.markers.items():
         assert corners.shape == (4, 2)
-        (l, t), (r, b) = corners[0], corners[2]
-        assert r - l == pytest.approx(SPEC.marker_mm, abs=0.1) and b - t == pytest.approx(SPEC.marker_mm, abs=0.1)
-        patch = page.ink[round(t * s) : round(b * s), round(l * s) : round(r * s)]
+        (left, top), (right, bottom) = corners[0], corners[2]
+        assert right - left == pytest.approx(SPEC.marker_mm, abs=0.1) and bottom - top == pytest.approx(SPEC.marker_mm, abs=0.1)
+        patch = page.ink[round(top * s) : round(bottom * s), round(left * s) : round(right * s)]
         # the drawn marker is the dictionary's marker of that id (decodes back to it)
         grey = np.pad(np.round(255 * (1 - patch)).astype(np.uint8), 20, constant_values=255)
         _, ids, _ = cv2.aruco.ArucoDetector(dictionary).detectMarkers(grey)

@@ -3,13 +3,12 @@ from __future__ import annotations
 import json
 
 import numpy as np
-
-from darkread.models.train.data import iter_shards, load_dataset
-from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES, faces_for
-from darkread.models.synth.session import SessionSpec
 import pytest
 
+from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES, faces_for
+from darkread.models.synth.session import SessionSpec
 from darkread.models.synth.shards import EVIDENCE_LAGS_MS, best_lag, build_dataset, ink_edges, make_samples
+from darkread.models.train.data import iter_shards, load_dataset
 
 
 def test_samples_are_deterministic_for_a_seed():
@@ -96,6 +95,7 @@ def test_a_reversed_lux_range_is_refused(tmp_path):
 
 def test_more_fonts_adds_the_computer_modern_families_to_training_sets_only(tmp_path):
     import pytest
+
     from darkread.models.synth.fonts import MORE_TRAIN_FAMILIES
 
     more = faces_for("train_more")
@@ -112,6 +112,7 @@ def test_more_fonts_adds_the_computer_modern_families_to_training_sets_only(tmp_
 
 def test_a_sets_font_split_is_named_once_for_sessions_and_manifests():
     import pytest
+
     from darkread.models.synth.fonts import SHIFTED_FAMILIES, families_of, font_split
 
     assert font_split("train") == "train" and font_split("train", more_fonts=True) == "train_more"

@@ -9,13 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-pytestmark = pytest.mark.slow  # a 0.6 s synthetic recording: ~20 s of simulation on a shared 2-core machine
+from darkread_cli import assert_one_error_line, darkread
 
 from darkread.models.synth.marker_page import MarkerPageSpec, lay_out, load_layout, save_layout
 from darkread.models.train.data import load_shard
 from darkread.models.train.windows import read_events, window_stack
-from darkread_cli import assert_one_error_line, darkread
+
+pytestmark = pytest.mark.slow  # a 0.6 s synthetic recording: ~20 s of simulation on a shared 2-core machine
 
 
 @pytest.fixture(scope="module")

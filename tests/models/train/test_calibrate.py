@@ -28,7 +28,7 @@ def test_log_loss_and_reliability_by_hand() -> None:
     assert table[0] == (0.0, 0.5, 2) and table[9] == (0.9, 1.0, 2) and np.isnan(table[5][1])
 
 
-def test_a_truncated_shard_is_one_line_naming_it(tmp_path) -> None:  # noqa: ANN001
+def test_a_truncated_shard_is_one_line_naming_it(tmp_path) -> None:
     import subprocess
     import sys
 

@@ -1,6 +1,8 @@
 from __future__ import annotations
 
 import numpy as np
+
+from darkread.core.mask_bits import pack_rows, unpack_rows
 from darkread.models.train.data import (
     augment,
     is_validation_seed,
@@ -9,7 +11,6 @@ from darkread.models.train.data import (
     load_shard,
     shard_paths,
 )
-from darkread.core.mask_bits import pack_rows, unpack_rows
 
 
 def test_packed_targets_round_trip() -> None:

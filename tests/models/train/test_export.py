@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import onnx
 import torch
+
 from darkread.edge.reconstruct import Reconstructor
 from darkread.models.train.export import OPSET, export_onnx, quantize_int8
 from darkread.models.train.net import BinaryUNet

@@ -7,14 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from darkread_cli import assert_one_error_line, darkread
 
 from darkread.edge.reconstruct import Reconstructor
-from darkread.models.train.export import export_onnx
 from darkread.models.train.data import Shard
-from darkread.models.train.finetune import (FinetuneError, TuneConfig, finetune, lr_at, spread_indices, trainable_parameters,
-                                            tune)
+from darkread.models.train.export import export_onnx
+from darkread.models.train.finetune import FinetuneError, TuneConfig, finetune, lr_at, spread_indices, trainable_parameters, tune
 from darkread.models.train.net import BinaryUNet
-from darkread_cli import assert_one_error_line, darkread
 
 TINY = TuneConfig(steps=3, batch_size=4, warmup_steps=1, crop=(32, 64), monitor_windows=4, threads=1)
 

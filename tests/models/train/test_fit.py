@@ -4,6 +4,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+
 from darkread.models.train.fit import FitConfig, fit, load_model
 from darkread.models.train.net import NetConfig
 
@@ -21,7 +22,7 @@ def _tiny_config(**overrides) -> FitConfig:
 def test_a_few_steps_reduce_the_loss(fake_dataset, tmp_path: Path) -> None:
     root = fake_dataset(shards=1, per_shard=40)
     losses: list[float] = []
-    fit(root, tmp_path / "run", _tiny_config(max_epochs=3), progress=False, on_step=lambda s, l: losses.append(l))
+    fit(root, tmp_path / "run", _tiny_config(max_epochs=3), progress=False, on_step=lambda _step, loss: losses.append(loss))
     assert len(losses) >= 20
     assert np.mean(losses[-4:]) < 0.8 * np.mean(losses[:4])
 
@@ -51,10 +52,11 @@ def test_several_training_sets_are_interleaved_shard_by_shard(fake_dataset) -> N
 def test_a_fit_from_an_exported_network_starts_where_it_left_off(fake_dataset, tmp_path: Path) -> None:
     """--init model.onnx: the folded BatchNorms stay frozen, so the first validation equals the ONNX net's."""
     import torch
+
+    from darkread.models.train.data import load_dataset
     from darkread.models.train.export import export_onnx
     from darkread.models.train.fit import evaluate_model, load_initial_weights
     from darkread.models.train.net import BinaryUNet
-    from darkread.models.train.data import load_dataset
 
     net = NetConfig(widths=(4, 8, 16, 16), blocks=(1, 1, 1))
     torch.manual_seed(3)
@@ -84,6 +86,7 @@ def test_a_fit_from_an_exported_network_starts_where_it_left_off(fake_dataset, t
 
 def test_init_from_a_missing_file_is_one_clear_error(fake_dataset, tmp_path: Path) -> None:
     import pytest
+
     from darkread.models.train.fit import load_initial_weights
 
     with pytest.raises(FileNotFoundError, match="--init .*no such file"):
@@ -104,6 +107,7 @@ def test_init_from_a_missing_file_is_one_clear_error(fake_dataset, tmp_path: Pat
 def test_distilling_a_teacher_brings_the_student_to_its_ink_probability(fake_dataset, tmp_path: Path) -> None:
     """--teacher: with the whole loss on the teacher, the student ends closer to what the teacher gives."""
     import torch
+
     from darkread.models.train.data import load_dataset
     from darkread.models.train.export import export_onnx
     from darkread.models.train.net import BinaryUNet

@@ -11,6 +11,7 @@ import pytest
 from darkread.models.synth.shards import SampleMeta, write_shard
 from darkread.models.train.data import IGNORE_LABEL, augment, labels, load_dataset, load_shard, random_crop, split_labels
 
+
 def meta(n: int) -> list[SampleMeta]:
     return [SampleMeta(lux=10.0, motion="normal", kind="marker_page", font="f", xheight_px=9.0, seed=i, x0=0, y0=0,
                        t_end_us=i, n_events=1600) for i in range(n)]

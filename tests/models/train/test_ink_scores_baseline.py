@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from darkread.models.train.baseline import BaselineParams, activity, predict, tune
 from darkread.models.train.ink_scores import ink_scores
 

@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+
 from darkread.models.train.net import (
     INPUT_SHAPE,
     BinaryUNet,

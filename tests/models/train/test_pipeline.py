@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from darkread.edge.reconstruct import Reconstructor
 from darkread.models.train.fit import FitConfig, fit
 from darkread.models.train.net import NetConfig
