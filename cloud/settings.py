@@ -69,6 +69,10 @@ class Settings(BaseSettings):
     ocr_lexicon: bool = Field(
         True, description="correct offline engines' misread glyphs (e/o, i/l) with an English word list"
     )
+    ocr_language: Literal["en"] = Field(
+        "en", description="the language of the pages: offline engines read only its characters, and the "
+        "correction uses its word lists and language model (English is the only one so far)",
+    )
     ocr_timeout_s: float = Field(60.0, gt=0)
     ask_timeout_s: float = Field(90.0, gt=0, description="an ask (stitching + OCR) answers 503 after this long")
     ask_rate_per_min: float = Field(30.0, gt=0, description="asks and page.png per key per minute (sustained)")
