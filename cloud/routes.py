@@ -10,7 +10,7 @@ import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import asdict, dataclass
-from typing import Annotated, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
 from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
@@ -21,6 +21,7 @@ from darkread.image_codec import encode_png
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .auth import Principal, Scope
+from .confidence import REASONS, LineRead, PageConditions, judge_lines, load_model, page_reasons, spoken_answer
 from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
 from .speech import WAV_MEDIA_TYPE, wants_wav
@@ -59,7 +60,10 @@ class AskRequest(BaseModel):
 class LineModel(BaseModel):
     text: str
     box: tuple[int, int, int, int] | None = Field(None, description="x0, y0, x1, y1 in page pixels")
-    confidence: float | None = None
+    confidence: float | None = Field(None, description="probability the line reads right (calibrated; a remote engine's own score)")
+    status: Literal["read", "unclear"] = Field("read", description="unclear: too unsure to say; the spoken answer does not guess at it")
+    reasons: list[str] = Field([], description="what would help an unclear line: too_dark, too_much_motion, too_small, look_again")
+    evidence: dict[str, float] = Field({}, description="what the confidence was judged from")
 
 
 class AskResponse(BaseModel):
@@ -72,6 +76,9 @@ class AskResponse(BaseModel):
     frames_pending: bool = Field(False, description="frames stored before the question were still being stitched")
     latency_ms: float = Field(description="time from the question to the answer")
     lines: list[LineModel]
+    unclear_lines: int = Field(0, description="lines too unsure to say")
+    reasons: list[str] = Field([], description="what would help the unclear lines, most common first")
+    spoken: str = Field("", description="what the spoken answer says: the lines read, the unclear ones as such, and what would help")
     question: str
     truncated: bool = Field(False, description="the engine stopped early (token limit); text is incomplete")
 
@@ -300,7 +307,9 @@ async def speak_line(
     if line >= len(answer.lines):
         raise HTTPException(status.HTTP_404_NOT_FOUND,
                             detail=f"{answer.page_id} has {len(answer.lines)} lines read so far, no line {line}")  # fmt: skip
-    one = answer.model_copy(update={"text": answer.lines[line].text, "lines": [answer.lines[line]]})
+    chosen = answer.lines[line]
+    said = chosen.text if chosen.status == "read" else " ".join(["One line unclear.", *(REASONS[r] for r in chosen.reasons[:1])])
+    one = answer.model_copy(update={"text": chosen.text, "lines": [chosen], "spoken": said})
     response = await speak(context.settings, one, session_id)
     response.headers["X-Line"] = str(line)
     response.headers["X-Line-Count"] = str(len(answer.lines))
@@ -330,20 +339,42 @@ async def _read(context: AppContext, info: SessionInfo, page: int | None) -> Ask
     if info.mode == "pages":
         glasses = await _glasses_page(context, info)
         result = await _ocr(context, lambda: asyncio.to_thread(context.ocr.read, glasses.image))
-        lines = [LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines]
+        read = [LineRead(line.text, line.text, line.box, line.char_scores) for line in result.lines]
         return AskResponse(text=result.text, backend=context.ocr.name, page_id=glasses.page_id, latency_ms=0.0,
-                           lines=lines, question="", truncated=result.truncated)  # fmt: skip
+                           question="", truncated=result.truncated,
+                           **_judged(context, read, [line.confidence for line in result.lines], glasses.image))  # fmt: skip
     try:
         live = await _ocr(context, lambda: context.pages.ask(info.session_id, page, upto_seq=info.last_seq))
     except NoPageError as exc:
         raise _no_page(exc) from None
-    reading = live.reading
+    reading, rendered = live.reading, live.page
+    motion = rendered.motion
+    conditions = PageConditions(motion.frame_rate_hz(), motion.head_speed_px_s()) if motion is not None else PageConditions()
+    read = [LineRead(line.text, line.raw_text or line.text, line.box, line.char_scores) for line in reading.lines]
+    judged = _judged(context, read, [line.confidence for line in reading.lines], rendered.grey, rendered.views, conditions)
     return AskResponse(
         text=reading.text, backend=context.ocr.name, page_id=_page_id(reading.index, reading.version),
         page=reading.index, version=reading.version, lines_read=reading.lines_read,
-        frames_pending=live.frames_pending, latency_ms=0.0, question="", truncated=reading.truncated,
-        lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in reading.lines],
+        frames_pending=live.frames_pending, latency_ms=0.0, question="", truncated=reading.truncated, **judged,
     )  # fmt: skip
+
+
+def _judged(context: AppContext, read: list[LineRead], scores: list[float | None], grey: np.ndarray,
+            views: np.ndarray | None = None, conditions: PageConditions = PageConditions()) -> dict[str, Any]:
+    """The lines with their calibrated confidence and status, and the answer to speak."""
+    corrector = getattr(context.ocr, "corrector", None)
+    model = load_model(str(context.settings.line_confidence_model) if context.settings.line_confidence_model else None)
+    judgements = judge_lines(read, grey, model, known=corrector.known if corrector is not None else None,
+                             views=views, conditions=conditions)
+    lines = [
+        LineModel(text=line.text, box=line.box, confidence=score) if j is None else
+        LineModel(text=line.text, box=line.box, confidence=j.confidence, status=j.status, reasons=list(j.reasons),
+                  evidence={k: round(v, 4) for k, v in j.evidence.items()})
+        for line, j, score in zip(read, judgements, scores)
+    ]
+    unclear = [j for j in judgements if j is not None and j.status == "unclear"]
+    return {"lines": lines, "unclear_lines": len(unclear), "reasons": list(page_reasons(unclear)),
+            "spoken": spoken_answer([(line.text, j) for line, j in zip(read, judgements)])}
 
 
 def _rate_limit(context: AppContext, principal: Principal, bucket: str = "") -> None:

@@ -30,7 +30,7 @@ def require_speech_engine(settings: Settings) -> None:
 async def speak(settings: Settings, answer: AskResponse, session_id: str) -> Response:
     """The answer's text spoken as a RIFF WAV; what was read travels in headers (page, engine)."""
     started = time.perf_counter()
-    text = spoken_text(answer.text)
+    text = spoken_text(answer.spoken or answer.text)
     try:
         riff = await asyncio.to_thread(
             synthesize, text, settings.voice(), executable=settings.speech_engine, timeout_s=settings.speech_timeout_s

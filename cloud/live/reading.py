@@ -16,7 +16,7 @@ correction runs over the whole text afterwards, so words still see their neighbo
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -26,6 +26,7 @@ from ..ocr.lexicon import LexiconCorrected, LexiconCorrector
 from .paging import Box, RenderedPage
 
 
+_Text = tuple[str, float | None, tuple[float, ...] | None]  # a band's text, mean confidence, characters' probabilities
 BORDER_PX = 8  # white margin around a line crop: detection misreads glyphs touching the edge (i/I)
 
 
@@ -35,6 +36,8 @@ class ReadLine:
     text: str
     confidence: float | None
     read_at_version: int  # the page version whose pixels this text was read from
+    char_scores: tuple[float, ...] | None = None  # each character's probability, when the engine reports them
+    raw_text: str = ""  # as the engine read it, before the correction
 
 
 @dataclass(frozen=True)
@@ -55,6 +58,7 @@ class _Known:
     text: str
     confidence: float | None
     version: int
+    char_scores: tuple[float, ...] | None = None
 
 
 def _same_ink(a: np.ndarray, b: np.ndarray, size_tol_px: int, diff_tol: float, shift_px: int = 1) -> bool:
@@ -100,24 +104,24 @@ class LineReader:
         if changed:
             texts, truncated = self._read_changed(page, changed)
             for i in changed:
-                text, confidence = texts[i]
-                matches[i] = _Known(inks[i].copy(), text, confidence, page.version)
+                text, confidence, chars = texts[i]
+                matches[i] = _Known(inks[i].copy(), text, confidence, page.version, chars)
         known = [match for match in matches if match is not None]
-        lines = [ReadLine(box, m.text, m.confidence, m.version) for box, m in zip(page.bands, known) if m.text]
+        lines = [ReadLine(box, m.text, m.confidence, m.version, m.char_scores, m.text) for box, m in zip(page.bands, known) if m.text]
         fresh = len(changed)
         self._known = known  # only the lines of the newest version are kept
         raw = "\n".join(line.text for line in lines)
         text = self.corrector.correct(raw) if self.corrector is not None and raw else raw
         corrected = text.split("\n") if text else []
         if len(corrected) == len(lines):
-            lines = [ReadLine(ln.box, t, ln.confidence, ln.read_at_version) for ln, t in zip(lines, corrected)]
+            lines = [replace(ln, text=t) for ln, t in zip(lines, corrected)]
         reading = PageReading(page.index, page.version, tuple(lines), text, fresh, truncated)
         self.readings[page.version] = reading
         while len(self.readings) > self.keep_versions:
             del self.readings[min(self.readings)]
         return reading
 
-    def _read_changed(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
+    def _read_changed(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, _Text], bool]:
         """Text and mean confidence of each changed band, and whether the engine stopped early:
         each band's own crop first; if a crop read nothing, every changed band is read again in
         place (the more of the page's layout the detector sees, the more it finds: on two pages
@@ -127,11 +131,11 @@ class LineReader:
         empty = [i for i in changed if not texts[i][0]]
         if empty:
             in_place, stopped = self._read_in_place(page, changed)
-            texts.update({i: in_place[i] for i in empty if in_place.get(i, ("", None))[0]})
+            texts.update({i: in_place[i] for i in empty if in_place.get(i, ("", None, None))[0]})
             truncated |= stopped
         return texts, truncated
 
-    def _read_in_place(self, page: RenderedPage, bands: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
+    def _read_in_place(self, page: RenderedPage, bands: list[int]) -> tuple[dict[int, _Text], bool]:
         """The given bands read together, each where it is on the page and the rest of the page
         white; each text found goes to the band its box lies in. Nothing from an engine that
         reports no boxes."""
@@ -148,22 +152,25 @@ class LineReader:
                 found[_band_of(line.box, page.bands, bands)].append(line)
         return {i: _joined(band_lines) for i, band_lines in found.items()}, result.truncated
 
-    def _read_crops(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
+    def _read_crops(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, _Text], bool]:
         """The changed bands one crop at a time."""
         texts, truncated = {}, False
         for i in changed:
             x0, y0, x1, y1 = page.bands[i]
             result = self.engine.read(_bordered(page.grey[y0:y1, x0:x1]))
-            text, confidence = _joined(result.lines)
-            texts[i] = (text or result.text.strip(), confidence)
+            text, confidence, chars = _joined(result.lines)
+            texts[i] = (text or result.text.strip(), confidence, chars)
             truncated |= result.truncated
         return texts, truncated
 
 
-def _joined(lines: list[OcrLine]) -> tuple[str, float | None]:
-    """One line's text from the pieces the engine found in it, and their mean confidence."""
+def _joined(lines: list[OcrLine]) -> _Text:
+    """One line's text from the pieces the engine found in it, their mean confidence and their
+    characters' probabilities."""
     scores = [line.confidence for line in lines if line.confidence is not None]
-    return " ".join(line.text.strip() for line in lines if line.text.strip()), float(np.mean(scores)) if scores else None
+    chars = [p for line in lines if line.text.strip() and line.char_scores for p in line.char_scores]
+    return (" ".join(line.text.strip() for line in lines if line.text.strip()), float(np.mean(scores)) if scores else None,
+            tuple(chars) if chars else None)
 
 
 def _bordered(image: np.ndarray) -> np.ndarray:
