@@ -67,6 +67,8 @@ class ReadResult:
     cer: float | None = None
     wer: float | None = None
     speech_wav: str | None = None
+    answer_lines: list[dict[str, Any]] = field(default_factory=list)  # the answer's lines: text, status, confidence, evidence
+    spoken: str = ""  # what the spoken answer says
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -181,6 +183,8 @@ def read_recording(
         answer_ms=round(answer_ms, 1),
         stage_seconds=stages,
         speech_wav=str(out / "answer.wav") if spoken is not None else None,
+        answer_lines=list(answer.get("lines", [])),
+        spoken=str(answer.get("spoken", "")),
     )
     if recording.text is not None:
         from darkread.eval.error_rates import error_rates

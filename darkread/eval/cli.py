@@ -12,6 +12,8 @@ if TYPE_CHECKING:
 
 from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
 
+DEFAULT_CONFIDENCE_MODEL = Path(__file__).resolve().parents[2] / "cloud" / "data" / "line_confidence.json"
+
 logger = logging.getLogger(__name__)
 BOTH = "both"
 
@@ -62,6 +64,13 @@ Five forms:
       ink with an event within 1 px; by lux and motion, written to --out (a .md file, or a folder:
       FOLDER/evidence.md) with the per-recording figures beside it (.json). Needs no evaluation.
 
+  darkread eval calibrate SUITE_DIR [--work DIR] [--model-out FILE.json] [--out DIR] [--target-risk R]
+      fit the cloud's line-confidence model on an evaluated suite's lines (each right or wrong by its
+      CER; even-numbered recordings fit it, odd-numbered ones are held out), write it (default
+      cloud/data/line_confidence.json, what the cloud ships) and its calibration on the held-out
+      lines (calibration.md, reliability.png with the ECE) to --out; then rebuild the report
+      (--report-only) to see coverage and risk under it.
+
   Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
   PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
   default SUITE_DIR/eval_runs/<mode>), and the report puts the other mode beside the default:
@@ -79,7 +88,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "eval",
         help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
         description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]\n       darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]",
+        usage="darkread eval SUITE_DIR [options]\n       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]\n       darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]\n       darkread eval calibrate SUITE_DIR [--work DIR] [--model-out FILE.json] [--out DIR]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
@@ -125,6 +134,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-rgb", action="store_true",
                         help="leave out the RGB baseline and the bandwidth figures (they need its snapshot): darkread's "
                              "reading only, e.g. for a second simulator's suite whose scenes another suite already has")
+    parser.add_argument("--model-out", metavar="FILE.json", default=str(DEFAULT_CONFIDENCE_MODEL),
+                        help="calibrate: where the fitted line-confidence model goes (default: the one the cloud ships)")
+    parser.add_argument("--target-risk", type=float, default=0.03, metavar="R",
+                        help="calibrate: the CER the answered lines of the fitting half may have (sets the answer threshold; default 0.03)")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="worker processes (make-suite and evaluation; default 1)")
     parser.set_defaults(func=_run)
@@ -137,6 +150,8 @@ def _run(args: argparse.Namespace) -> int:
         return _attribute(args)
     if args.target == "evidence":
         return _evidence(args)
+    if args.target == "calibrate":
+        return _calibrate(args)
     if args.second_suite is not None:
         raise ValueError(f"unexpected argument {args.second_suite!r}")
     if args.target == "make-suite":
@@ -203,6 +218,22 @@ def _evidence(args: argparse.Namespace) -> int:
     suite = _one_suite(args, "give one suite: darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]")
     path = write_evidence(suite, args.out, jobs=max(1, args.jobs))
     print(path.read_text())
+    return 0
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from darkread.eval.calibrate import calibrate
+    from darkread.eval.runner import load_results
+    from darkread.eval.selective import outcomes
+
+    suite = _one_suite(args, "give one evaluated suite: darkread eval calibrate SUITE_DIR [--work DIR] [--model-out FILE.json]")
+    work = Path(args.work) if args.work else suite / "eval_runs" / _first_mode(args)
+    if not 0 < args.target_risk < 1:
+        raise ValueError(f"--target-risk {args.target_risk:g}: give a CER between 0 and 1")
+    lines = outcomes(load_results(work))
+    model, ece = calibrate(lines, Path(args.model_out), Path(args.out), args.target_risk)
+    print(f"{len(lines)} lines; held-out ECE {ece:.3f}; answer threshold {model.answer_threshold:g}; "
+          f"model: {args.model_out}; calibration: {Path(args.out) / 'calibration.md'}")
     return 0
 
 

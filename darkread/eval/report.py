@@ -21,7 +21,9 @@ from darkread.eval.attribution import attribution_section
 from darkread.eval.evidence import evidence_section
 from darkread.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
 from darkread.eval.provenance import ReportInfo, run_commits
+from darkread.cloud.confidence import load_model as load_confidence_model
 from darkread.eval.results import RecordingResult
+from darkread.eval.selective import selective_section
 from darkread.eval.simulators import simulator_section
 from darkread.eval.tables import (
     backend_table,
@@ -119,6 +121,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         *headline_table(results),
         "",
         *modes_md,
+        *selective_section(every, out, load_confidence_model()),
         "## Real readers' scanpaths",
         "",
         *scanpath_table(results, human),

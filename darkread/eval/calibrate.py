@@ -1,0 +1,176 @@
+"""``darkread eval calibrate``: fit the line-confidence model the cloud ships, and report its calibration.
+
+The lines of an evaluated suite, each labelled right (CER at most ``selective.RIGHT_MAX_CER``) or
+wrong, are split by recording: even-numbered recordings fit the model, odd-numbered ones are held
+out and only measured. The model is a logistic regression on standardised evidence (Newton's
+method with a small ridge, numpy only). The answer threshold is the lowest confidence whose
+answered lines on the fitting half read at ``target_risk`` CER or better; the limits the reasons
+are judged by come from the fitting half's known conditions: the frame rate halfway (in logs)
+between the dim pages (10 lux and below) and the rest, and the head speed halfway between walking
+and the other motions. Written: the model (JSON, ``cloud/data/line_confidence.json`` by default),
+and beside the report ``calibration.md`` with the reliability diagram and ECE on the held-out half.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from darkread.cloud.confidence import FEATURES, ConfidenceModel
+from darkread.eval.selective import LineOutcome, reliability, weighted_cer
+
+RIDGE = 1e-2
+DIM_LUX = 10.0
+SMALL_HEIGHT_PX = 9.0  # a line band lower than this holds glyphs of about 4 px x-height: below what the network resolves
+
+
+def split(lines: Sequence[LineOutcome]) -> tuple[list[LineOutcome], list[LineOutcome]]:
+    """(fitting, held-out): by the recording's number, even or odd."""
+    def held_out(line: LineOutcome) -> bool:
+        head = line.recording.split("_", 1)[0]
+        return head.isdigit() and int(head) % 2 == 1
+
+    return [ln for ln in lines if not held_out(ln)], [ln for ln in lines if held_out(ln)]
+
+
+def _matrix(lines: Sequence[LineOutcome], fill: np.ndarray | None = None) -> np.ndarray:
+    x = np.array([[line.evidence.get(name, np.nan) for name in FEATURES] for line in lines], dtype=np.float64)
+    if fill is None:
+        fill = np.nanmean(np.where(np.isnan(x), np.nan, x), axis=0)
+        fill = np.where(np.isnan(fill), 0.0, fill)
+    return np.where(np.isnan(x), fill, x)
+
+
+def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = RIDGE, steps: int = 50) -> tuple[np.ndarray, float]:
+    """Weights and intercept of a ridge logistic regression on standardised ``x`` (Newton's method)."""
+    design = np.hstack([x, np.ones((len(x), 1))])
+    w = np.zeros(design.shape[1])
+    penalty = np.diag([ridge] * x.shape[1] + [0.0])
+    for _ in range(steps):
+        p = 1.0 / (1.0 + np.exp(-np.clip(design @ w, -50, 50)))
+        gradient = design.T @ (y - p) - penalty @ w
+        hessian = design.T @ (design * (p * (1 - p))[:, None]) + penalty + 1e-9 * np.eye(len(w))
+        step = np.linalg.solve(hessian, gradient)
+        w += step
+        if np.abs(step).max() < 1e-8:
+            break
+    return w[:-1], float(w[-1])
+
+
+def _midpoint(a: list[float], b: list[float], default: float) -> float:
+    return (float(np.median(a)) + float(np.median(b))) / 2 if a and b else default
+
+
+def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceModel:
+    x = _matrix(lines)
+    mean, scale = x.mean(axis=0), x.std(axis=0)
+    scale = np.where(scale > 1e-9, scale, 1.0)
+    y = np.array([line.right for line in lines], dtype=np.float64)
+    weights, intercept = fit_logistic((x - mean) / scale, y)
+    rates_dim = [ln.evidence["log_frame_rate"] for ln in lines if "log_frame_rate" in ln.evidence and (ln.lux or 0) <= DIM_LUX]
+    rates_lit = [ln.evidence["log_frame_rate"] for ln in lines if "log_frame_rate" in ln.evidence and (ln.lux or 0) > DIM_LUX]
+    fast = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion == "walking"]
+    calm = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion != "walking"]
+    model = ConfidenceModel(
+        FEATURES, tuple(map(float, mean)), tuple(map(float, scale)), tuple(map(float, weights)), intercept, 0.0,
+        _midpoint(rates_dim, rates_lit, 0.0), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX,
+    )
+    return _with_threshold(model, lines, target_risk)
+
+
+def _with_threshold(model: ConfidenceModel, lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceModel:
+    """The lowest threshold whose answered lines read at ``target_risk`` CER or better."""
+    p = np.array([model.probability(line.evidence) for line in lines])
+    for threshold in np.round(np.arange(0.0, 1.0, 0.01), 2):
+        answered = [line for line, q in zip(lines, p) if q >= threshold]
+        risk = weighted_cer(answered)
+        if risk is not None and risk <= target_risk:
+            return _replace_threshold(model, float(threshold))
+    return _replace_threshold(model, 0.99)
+
+
+def _replace_threshold(model: ConfidenceModel, threshold: float) -> ConfidenceModel:
+    return replace(model, answer_threshold=threshold)
+
+
+def model_json(model: ConfidenceModel, meta: dict[str, Any]) -> str:
+    doc = {
+        "about": "line confidence: logistic regression on standardised evidence (cloud/confidence.py); "
+                 "fitted by `darkread eval calibrate`", **meta,
+        "features": list(model.features), "mean": [round(v, 6) for v in model.mean], "scale": [round(v, 6) for v in model.scale],
+        "weights": [round(v, 6) for v in model.weights], "intercept": round(model.intercept, 6),
+        "answer_threshold": model.answer_threshold, "dark_frame_rate": round(model.dark_frame_rate, 4),
+        "fast_head_speed": round(model.fast_head_speed, 4), "small_height_px": model.small_height_px,
+    }
+    return json.dumps(doc, indent=1) + "\n"
+
+
+def plot_reliability(rows: list[tuple[float, float, int]], ece: float, path: Path) -> Path:
+    from darkread.eval.plots import _pyplot
+
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    ax.plot([0, 1], [0, 1], color="grey", lw=1, ls="--", label="perfectly calibrated")
+    ax.plot([r[0] for r in rows], [r[1] for r in rows], "o-", label=f"held-out lines (ECE {ece:.3f})")
+    for conf, acc, n in rows:
+        ax.annotate(str(n), (conf, acc), textcoords="offset points", xytext=(4, -10), fontsize=7)
+    ax.set_xlabel("confidence (predicted probability the line is right)")
+    ax.set_ylabel(f"share of lines right (CER <= {100 * 0.04:g} %)")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, target_risk: float) -> tuple[ConfidenceModel, float]:
+    """Fit on the fitting half, measure on the held-out half, write the model and calibration.md."""
+    fitting, held = split(lines)
+    if len(fitting) < 20 or len(held) < 10:
+        raise ValueError(f"too few judged lines to calibrate ({len(fitting)} to fit, {len(held)} held out); evaluate more recordings")
+    model = fit_model(fitting, target_risk)
+    p = np.array([model.probability(line.evidence) for line in held])
+    right = np.array([line.right for line in held], dtype=np.float64)
+    ece, rows = reliability(p, right)
+    meta = {"fitted_on": f"{len(fitting)} lines of {len({ln.recording for ln in fitting})} recordings (even-numbered)",
+            "held_out_ece": round(ece, 4), "target_risk": target_risk}
+    model_out.parent.mkdir(parents=True, exist_ok=True)
+    model_out.write_text(model_json(model, meta))
+    report_dir.mkdir(parents=True, exist_ok=True)
+    plot_reliability(rows, ece, report_dir / "reliability.png")
+    md = [
+        "# Line confidence: calibration",
+        "",
+        (f"Fitted by `darkread eval calibrate` on {meta['fitted_on']}; measured on the {len(held)} lines of the "
+         f"{len({ln.recording for ln in held})} odd-numbered recordings it was not fitted on. A line is right when its CER is "
+         f"at most 4 % (one character in a suite line). Answer threshold {model.answer_threshold:g} (the lowest whose "
+         f"answered lines on the fitting half read at {100 * target_risk:g} % CER or better)."),
+        "",
+        f"**Held-out ECE: {ece:.3f}** (10 equal-width bins; {100 * right.mean():.0f} % of held-out lines right).",
+        "",
+        "![reliability diagram](reliability.png)",
+        "",
+        "| confidence bin (mean) | share right | lines |",
+        "|---:|---:|---:|",
+        *[f"| {conf:.2f} | {acc:.2f} | {n} |" for conf, acc, n in rows],
+        "",
+        "Weights (standardised evidence; positive: more likely right):",
+        "",
+        "| evidence | weight |",
+        "|---|---:|",
+        *[f"| {name} | {w:+.2f} |" for name, w in zip(model.features, model.weights)],
+        "",
+        (f"Reasons: too dark below {math.exp(model.dark_frame_rate):.1f} frames a second, too much motion above "
+         f"{math.expm1(model.fast_head_speed):.0f} px/s of head motion, too small below {model.small_height_px:g} px line height."),
+        "",
+    ]
+    (report_dir / "calibration.md").write_text("\n".join(md))
+    return model, ece
