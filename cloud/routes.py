@@ -21,7 +21,7 @@ from darkread.image_codec import encode_png
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .auth import Principal, Scope
-from .confidence import REASONS, LineRead, PageConditions, judge_lines, load_model, page_reasons, spoken_answer
+from .confidence import REASONS, LineJudgement, LineRead, judge_lines, page_reasons, spoken_answer
 from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
 from .speech import WAV_MEDIA_TYPE, wants_wav
@@ -340,41 +340,35 @@ async def _read(context: AppContext, info: SessionInfo, page: int | None) -> Ask
         glasses = await _glasses_page(context, info)
         result = await _ocr(context, lambda: asyncio.to_thread(context.ocr.read, glasses.image))
         read = [LineRead(line.text, line.text, line.box, line.char_scores) for line in result.lines]
+        corrector = getattr(context.ocr, "corrector", None)
+        judgements = judge_lines(read, glasses.image, context.pages.confidence, known=corrector.known if corrector else None)
         return AskResponse(text=result.text, backend=context.ocr.name, page_id=glasses.page_id, latency_ms=0.0,
                            question="", truncated=result.truncated,
-                           **_judged(context, read, [line.confidence for line in result.lines], glasses.image))  # fmt: skip
+                           **_answer_lines([(ln.text, ln.box, ln.confidence, j) for ln, j in zip(result.lines, judgements)]))  # fmt: skip
     try:
         live = await _ocr(context, lambda: context.pages.ask(info.session_id, page, upto_seq=info.last_seq))
     except NoPageError as exc:
         raise _no_page(exc) from None
-    reading, rendered = live.reading, live.page
-    motion = rendered.motion
-    conditions = PageConditions(motion.frame_rate_hz(), motion.head_speed_px_s()) if motion is not None else PageConditions()
-    read = [LineRead(line.text, line.raw_text or line.text, line.box, line.char_scores) for line in reading.lines]
-    judged = _judged(context, read, [line.confidence for line in reading.lines], rendered.grey, rendered.views, conditions)
+    reading = live.reading
     return AskResponse(
         text=reading.text, backend=context.ocr.name, page_id=_page_id(reading.index, reading.version),
         page=reading.index, version=reading.version, lines_read=reading.lines_read,
-        frames_pending=live.frames_pending, latency_ms=0.0, question="", truncated=reading.truncated, **judged,
+        frames_pending=live.frames_pending, latency_ms=0.0, question="", truncated=reading.truncated,
+        **_answer_lines([(line.text, line.box, line.confidence, line.judgement) for line in reading.lines]),
     )  # fmt: skip
 
 
-def _judged(context: AppContext, read: list[LineRead], scores: list[float | None], grey: np.ndarray,
-            views: np.ndarray | None = None, conditions: PageConditions = PageConditions()) -> dict[str, Any]:
-    """The lines with their calibrated confidence and status, and the answer to speak."""
-    corrector = getattr(context.ocr, "corrector", None)
-    model = load_model(str(context.settings.line_confidence_model) if context.settings.line_confidence_model else None)
-    judgements = judge_lines(read, grey, model, known=corrector.known if corrector is not None else None,
-                             views=views, conditions=conditions)
-    lines = [
-        LineModel(text=line.text, box=line.box, confidence=score) if j is None else
-        LineModel(text=line.text, box=line.box, confidence=j.confidence, status=j.status, reasons=list(j.reasons),
+def _answer_lines(lines: list[tuple[str, Any, float | None, LineJudgement | None]]) -> dict[str, Any]:
+    """The lines with their calibrated confidence and status, how many are unclear and why, and what to say."""
+    models = [
+        LineModel(text=text, box=box, confidence=score) if j is None else
+        LineModel(text=text, box=box, confidence=j.confidence, status=j.status, reasons=list(j.reasons),
                   evidence={k: round(v, 4) for k, v in j.evidence.items()})
-        for line, j, score in zip(read, judgements, scores)
+        for text, box, score, j in lines
     ]
-    unclear = [j for j in judgements if j is not None and j.status == "unclear"]
-    return {"lines": lines, "unclear_lines": len(unclear), "reasons": list(page_reasons(unclear)),
-            "spoken": spoken_answer([(line.text, j) for line, j in zip(read, judgements)])}
+    unclear = [j for *_, j in lines if j is not None and j.status == "unclear"]
+    return {"lines": models, "unclear_lines": len(unclear), "reasons": list(page_reasons(unclear)),
+            "spoken": spoken_answer([(text, j) for text, _, _, j in lines])}
 
 
 def _rate_limit(context: AppContext, principal: Principal, bucket: str = "") -> None:

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
+from ..confidence import ConfidenceModel, LineJudgement, LineRead, PageConditions, judge_lines, load_model
 from ..ocr.base import OcrBackend, OcrLine, OcrResult
 from ..ocr.lexicon import LexiconCorrected, LexiconCorrector
 from .paging import Box, RenderedPage
@@ -38,6 +39,7 @@ class ReadLine:
     read_at_version: int  # the page version whose pixels this text was read from
     char_scores: tuple[float, ...] | None = None  # each character's probability, when the engine reports them
     raw_text: str = ""  # as the engine read it, before the correction
+    judgement: LineJudgement | None = None  # calibrated confidence and status (None: the engine gave no character scores)
 
 
 @dataclass(frozen=True)
@@ -81,7 +83,9 @@ def _same_ink(a: np.ndarray, b: np.ndarray, size_tol_px: int, diff_tol: float, s
 class LineReader:
     """Reads the versions of one page, remembering the lines it read. Not thread-safe."""
 
-    def __init__(self, backend: OcrBackend, *, size_tol_px: int = 2, diff_tol: float = 0.06, keep_versions: int = 4) -> None:
+    def __init__(self, backend: OcrBackend, *, size_tol_px: int = 2, diff_tol: float = 0.06, keep_versions: int = 4,
+                 confidence: ConfidenceModel | None = None) -> None:
+        """``confidence``: the line-confidence model each line is judged by (default the shipped one)."""
         if isinstance(backend, LexiconCorrected):
             self.engine: OcrBackend = backend.engine
             self.corrector: LexiconCorrector | None = backend.corrector
@@ -91,6 +95,7 @@ class LineReader:
         self.size_tol_px = size_tol_px
         self.diff_tol = diff_tol
         self.keep_versions = keep_versions
+        self.confidence = confidence or load_model()
         self._known: list[_Known] = []
         self.readings: dict[int, PageReading] = {}  # version -> answer, the last few
 
@@ -115,11 +120,20 @@ class LineReader:
         corrected = text.split("\n") if text else []
         if len(corrected) == len(lines):
             lines = [replace(ln, text=t) for ln, t in zip(lines, corrected)]
+        lines = self._judged(page, lines)
         reading = PageReading(page.index, page.version, tuple(lines), text, fresh, truncated)
         self.readings[page.version] = reading
         while len(self.readings) > self.keep_versions:
             del self.readings[min(self.readings)]
         return reading
+
+    def _judged(self, page: RenderedPage, lines: list[ReadLine]) -> list[ReadLine]:
+        motion = page.motion
+        conditions = PageConditions(motion.frame_rate_hz(), motion.head_speed_px_s()) if motion is not None else PageConditions()
+        read = [LineRead(ln.text, ln.raw_text or ln.text, ln.box, ln.char_scores) for ln in lines]
+        judgements = judge_lines(read, page.grey, self.confidence, known=self.corrector.known if self.corrector else None,
+                                 views=page.views, conditions=conditions)
+        return [replace(ln, judgement=j) for ln, j in zip(lines, judgements)]
 
     def _read_changed(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, _Text], bool]:
         """Text and mean confidence of each changed band, and whether the engine stopped early:
