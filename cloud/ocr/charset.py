@@ -36,9 +36,13 @@ class CharScores(float):
         return value
 
 
+_NO_DECOMPOSITION = str.maketrans({"ł": "l", "Ł": "L", "ħ": "h", "Ħ": "H", "ı": "i", "ø": "o", "Ø": "O", "đ": "d",
+                                   "Đ": "D", "ß": "ss", "æ": "ae", "Æ": "AE", "œ": "oe", "Œ": "OE"})
+
+
 def ascii_fold(text: str) -> str:
-    """Accents and ligatures taken off (``ą`` -> ``a``, ``ﬁ`` -> ``fi``); what has no ASCII form dropped."""
-    return unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
+    """Accents and ligatures taken off (``ą`` -> ``a``, ``ł`` -> ``l``, ``ﬁ`` -> ``fi``); what has no ASCII form dropped."""
+    return unicodedata.normalize("NFKD", text.translate(_NO_DECOMPOSITION)).encode("ascii", "ignore").decode("ascii")
 
 
 def allowed_classes(character: list[str], alphabet: str) -> np.ndarray:

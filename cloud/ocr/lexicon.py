@@ -213,13 +213,15 @@ class LexiconCorrector:
         long_words = [w for w in words if len(w) > 1]
         if not long_words:
             return "letters"
-        known = sum(self.known(w) or self._one_glyph_from_known(w) for w in long_words) / len(long_words)
+        strict = sum(self.known(w) for w in long_words) / len(long_words)
+        near = sum(self.known(w) or self._one_glyph_from_known(w) for w in long_words) / len(long_words)
         pairs = self._words().bigrams
         adjacent = list(zip(words, words[1:]))
         pair_rate = sum(f"{a} {b}" in pairs for a, b in adjacent) / len(adjacent) if adjacent else 0.0
         if pair_rate >= self.min_pair_rate:
             return "text"
-        if known < self.min_known_fraction or (pair_rate == 0.0 and known < 0.5):
+        # (short random letter groups are often one glyph from some word: "sona", "dop")
+        if near < self.min_known_fraction or (pair_rate == 0.0 and strict < 0.5 and near < 0.75):
             return "letters"
         return "words"
 

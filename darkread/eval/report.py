@@ -18,6 +18,7 @@ from typing import Any
 
 from darkread.eval.aggregate import held_out_fonts, mean, paired, sweep_subset
 from darkread.eval.attribution import attribution_section
+from darkread.eval.clean_text import clean_text_check, clean_text_section
 from darkread.eval.evidence import evidence_section
 from darkread.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
 from darkread.eval.provenance import ReportInfo, run_commits
@@ -122,6 +123,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         "",
         *modes_md,
         *selective_section(every, out, load_confidence_model()),
+        *clean_text_section(clean_text_check()),
         "## Real readers' scanpaths",
         "",
         *scanpath_table(results, human),
