@@ -41,9 +41,9 @@ def split(lines: Sequence[LineOutcome]) -> tuple[list[LineOutcome], list[LineOut
 
 def _matrix(lines: Sequence[LineOutcome], fill: np.ndarray | None = None) -> np.ndarray:
     x = np.array([[line.evidence.get(name, np.nan) for name in FEATURES] for line in lines], dtype=np.float64)
-    if fill is None:
-        fill = np.nanmean(np.where(np.isnan(x), np.nan, x), axis=0)
-        fill = np.where(np.isnan(fill), 0.0, fill)
+    if fill is None:  # a missing piece of evidence counts as its mean (what the cloud assumes too)
+        seen = ~np.isnan(x)
+        fill = np.where(seen, x, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
     return np.where(np.isnan(x), fill, x)
 
 
