@@ -69,9 +69,10 @@ class Settings(BaseSettings):
     ocr_lexicon: bool = Field(
         True, description="correct offline engines' misread glyphs (e/o, i/l) with an English word list"
     )
-    ocr_language: Literal["en"] = Field(
+    ocr_language: Literal["en", "any"] = Field(
         "en", description="the language of the pages: offline engines read only its characters, and the "
-        "correction uses its word lists and language model (English is the only one so far)",
+        "correction of coherent text uses its language model (English is the only one so far); any: every "
+        "character the engine knows, and only the word list's fixes of non-words",
     )
     line_confidence_model: Path | None = Field(
         None, description="the calibrated line-confidence model (JSON, `darkread eval calibrate`); unset = the shipped one"

@@ -33,7 +33,7 @@ def create_backend(settings: Settings) -> OcrBackend:
             from .rapid import RapidOcrBackend
 
             # one engine per thread reading pages, decoding within the language's alphabet
-            engine = RapidOcrBackend(engines=settings.ocr_threads, language=settings.ocr_language,
+            engine = RapidOcrBackend(engines=settings.ocr_threads, language=None if settings.ocr_language == "any" else settings.ocr_language,
                                      known=corrector.known if corrector is not None else None)
         return engine if corrector is None else LexiconCorrected(engine, corrector)
     if name == "google":

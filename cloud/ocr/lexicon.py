@@ -41,6 +41,7 @@ import numpy as np
 
 from ..errors import OcrUnavailableError
 from .base import OcrResult
+from .language_model import MODELS as LANGUAGE_MODELS
 from .language_model import Candidate, TrigramScorer, load_model, viterbi
 
 if TYPE_CHECKING:
@@ -126,7 +127,7 @@ class LexiconCorrector:
     fix_log_prob: float = math.log(0.1)  # channel: per lookalike glyph of a non-word's fix
     keep_nonword_log_prob: float = math.log(1e-4)  # channel: a word the dictionary does not know was printed so
     max_candidates: int = 6  # lookalikes per word the language model weighs (the most frequent)
-    language: str = "en"
+    language: str = "en"  # the language model of coherent text (``language_model.MODELS``); another: non-word fixes only
     _speller: SymSpell | None = field(default=None, init=False, repr=False)
     _trigrams: TrigramScorer | None = field(default=None, init=False, repr=False)
 
@@ -138,7 +139,8 @@ class LexiconCorrector:
     def load(self) -> None:
         """The word lists and the language model, now (OcrUnavailableError when missing)."""
         self._words()
-        self._scorer()
+        if self.language in LANGUAGE_MODELS:
+            self._scorer()
 
     def known(self, word: str) -> bool:
         return word.lower() in self._words().words
@@ -231,7 +233,7 @@ class LexiconCorrector:
         kind = self.text_kind(text)
         if kind == "letters":
             return text
-        if kind == "words":
+        if kind == "words" or self.language not in LANGUAGE_MODELS:  # no language model: non-word fixes only
             return "\n".join(self._correct_line(line, True, sentences=False)[0] for line in text.split("\n"))
         return self._by_language_model(text)
 
