@@ -67,7 +67,8 @@ class LineModel(BaseModel):
 
 
 class AskResponse(BaseModel):
-    text: str = Field(description="the text read from the page, lines top to bottom")
+    text: str = Field(description="the text read from the page, lines top to bottom (unclear lines too: `lines` marks "
+                      "them, and the spoken answer does not say them)")
     backend: str = Field(description="the OCR engine that read it")
     page_id: str = Field(description="which page: page-<id> (glasses) or stitched-<page>-v<version>")
     page: int | None = Field(None, description="the page read (stitched sessions): 0 = the session's first")
