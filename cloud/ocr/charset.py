@@ -75,12 +75,14 @@ def masked_decoder(base: type, character: list[str], alphabet: str, known: Calla
     class MaskedCtcDecode(base):  # type: ignore[misc, valid-type]
         def __init__(self) -> None:
             super().__init__(character=list(character[1:-1]))  # rapidocr puts the blank and space back
-            self.allowed = allowed_classes(self.character, alphabet)
+            self.kept = np.flatnonzero(allowed_classes(self.character, alphabet))
             self.known = known
 
         def __call__(self, preds: np.ndarray, return_word_box: bool = False, **kwargs: Any) -> tuple[list, list]:
-            masked = np.where(self.allowed, preds, -np.inf)
-            indices, probs = masked.argmax(axis=2), masked.max(axis=2)
+            # the allowed classes' columns only: a copy of a hundred columns, not of all the model's
+            kept = preds[:, :, self.kept]
+            best = kept.argmax(axis=2)
+            indices, probs = self.kept[best], np.take_along_axis(kept, best[..., None], axis=2)[..., 0]
             free = preds.argmax(axis=2)
             lines = []
             for row in range(len(indices)):

@@ -31,6 +31,7 @@ from __future__ import annotations
 import logging
 import math
 import re
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
@@ -65,6 +66,7 @@ _ALTERNATIVES: dict[str, str] = {
 DROPPED_STEMS = "ilt"  # thin strokes a reconstruction can lose entirely
 _SENTENCE_END = (".", "!", "?", ":", ";")
 TextKind = Literal["letters", "words", "text"]
+RECENT_PAGES = 64  # corrected texts remembered
 
 
 def misreadings(read: str, substitutions: int) -> Iterator[str]:
@@ -130,6 +132,8 @@ class LexiconCorrector:
     language: str = "en"  # the language model of coherent text (``language_model.MODELS``); another: non-word fixes only
     _speller: SymSpell | None = field(default=None, init=False, repr=False)
     _trigrams: TrigramScorer | None = field(default=None, init=False, repr=False)
+    _recent: dict[str, str] = field(default_factory=dict, init=False, repr=False)
+    _recent_lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
     def _words(self) -> SymSpell:
         if self._speller is None:
@@ -229,7 +233,19 @@ class LexiconCorrector:
 
     def correct(self, text: str) -> str:
         """Random letters stay as read; a word list gets its non-words fixed, one at a time;
-        coherent text gets the language model's pass over the whole page."""
+        coherent text gets the language model's pass over the whole page. (A page asked about
+        again while it grows reads the same until a line changes: the last few are remembered.)"""
+        with self._recent_lock:  # one corrector serves every OCR thread
+            if text in self._recent:
+                return self._recent[text]
+        corrected = self._correct(text)
+        with self._recent_lock:
+            self._recent[text] = corrected
+            while len(self._recent) > RECENT_PAGES:
+                del self._recent[next(iter(self._recent))]
+        return corrected
+
+    def _correct(self, text: str) -> str:
         kind = self.text_kind(text)
         if kind == "letters":
             return text
