@@ -3,7 +3,7 @@
 Each line's *evidence* is what the pipeline knows about it: the recogniser's per-character
 probabilities, how many frames covered its ink and how much they agreed (dark pixels where all
 frames saw ink, grey where they disagreed), its height, how often frames came while the page was
-read (in dim light each frame waits longer for its events) and how fast the head moved, and
+read and how fast the head moved, and
 whether its words are dictionary words. A small logistic model (``line_confidence.json``, fitted
 on the synthetic suite by ``darkread eval calibrate``) turns the evidence into the probability
 that the line was read right. A line below the model's ``answer_threshold`` is ``unclear``: the
@@ -58,7 +58,7 @@ class ConfidenceModel:
     weights: tuple[float, ...]
     intercept: float
     answer_threshold: float  # lines less likely right than this are unclear
-    dark_frame_rate: float  # log frames a second below which the light is the likely cause
+    dark_ink_solid: float  # with a still head, frames agreeing on less of the ink than this: the light is the likely cause
     fast_head_speed: float  # log(1 + px/s) above which motion is the likely cause
     small_height_px: float  # lines lower than this are too small to read
 
@@ -66,7 +66,7 @@ class ConfidenceModel:
     def from_json(cls, data: dict) -> ConfidenceModel:
         return cls(
             tuple(data["features"]), tuple(data["mean"]), tuple(data["scale"]), tuple(data["weights"]),
-            float(data["intercept"]), float(data["answer_threshold"]), float(data["dark_frame_rate"]),
+            float(data["intercept"]), float(data["answer_threshold"]), float(data["dark_ink_solid"]),
             float(data["fast_head_speed"]), float(data["small_height_px"]),
         )
 
@@ -136,11 +136,15 @@ def judge(evidence: dict[str, float], model: ConfidenceModel) -> LineJudgement:
 
 
 def reasons_for(evidence: dict[str, float], model: ConfidenceModel) -> tuple[str, ...]:
-    """What would help an unclear line, from its evidence: light, stillness, size; else a second look."""
+    """What would help an unclear line, from its evidence: stillness, light, size; else a second look.
+
+    Frames disagree in dim light and when the head moves fast; only with a still head is the
+    disagreement put down to the light."""
     reasons = []
-    if evidence.get("log_frame_rate", math.inf) < model.dark_frame_rate:
+    moving = evidence.get("log_head_speed", -math.inf) > model.fast_head_speed
+    if evidence.get("ink_solid", math.inf) < model.dark_ink_solid and not moving:
         reasons.append("too_dark")
-    if evidence.get("log_head_speed", -math.inf) > model.fast_head_speed:
+    if moving:
         reasons.append("too_much_motion")
     if evidence.get("height_px", math.inf) < model.small_height_px:
         reasons.append("too_small")

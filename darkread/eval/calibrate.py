@@ -5,8 +5,8 @@ wrong, are split by recording: even-numbered recordings fit the model, odd-numbe
 out and only measured. The model is a logistic regression on standardised evidence (Newton's
 method with a small ridge, numpy only). The answer threshold is the lowest confidence whose
 answered lines on the fitting half read at ``target_risk`` CER or better; the limits the reasons
-are judged by come from the fitting half's known conditions: the frame rate halfway (in logs)
-between the dim pages (10 lux and below) and the rest, and the head speed halfway between walking
+are judged by come from the fitting half's known conditions: the share of solid ink (all frames
+agreed) halfway between the dim pages (10 lux and below) and the rest, both without walking, and the head speed halfway between walking
 and the other motions. Written: the model (JSON, ``cloud/data/line_confidence.json`` by default),
 and beside the report ``calibration.md`` with the reliability diagram and ECE on the held-out half.
 """
@@ -73,13 +73,14 @@ def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceMod
     scale = np.where(scale > 1e-9, scale, 1.0)
     y = np.array([line.right for line in lines], dtype=np.float64)
     weights, intercept = fit_logistic((x - mean) / scale, y)
-    rates_dim = [ln.evidence["log_frame_rate"] for ln in lines if "log_frame_rate" in ln.evidence and (ln.lux or 0) <= DIM_LUX]
-    rates_lit = [ln.evidence["log_frame_rate"] for ln in lines if "log_frame_rate" in ln.evidence and (ln.lux or 0) > DIM_LUX]
+    still = [ln for ln in lines if ln.motion != "walking" and "ink_solid" in ln.evidence]
+    solid_dim = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) <= DIM_LUX]
+    solid_lit = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) > DIM_LUX]
     fast = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion == "walking"]
     calm = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion != "walking"]
     model = ConfidenceModel(
         FEATURES, tuple(map(float, mean)), tuple(map(float, scale)), tuple(map(float, weights)), intercept, 0.0,
-        _midpoint(rates_dim, rates_lit, 0.0), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX,
+        _midpoint(solid_dim, solid_lit, 0.0), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX,
     )
     return _with_threshold(model, lines, target_risk)
 
@@ -105,7 +106,7 @@ def model_json(model: ConfidenceModel, meta: dict[str, Any]) -> str:
                  "fitted by `darkread eval calibrate`", **meta,
         "features": list(model.features), "mean": [round(v, 6) for v in model.mean], "scale": [round(v, 6) for v in model.scale],
         "weights": [round(v, 6) for v in model.weights], "intercept": round(model.intercept, 6),
-        "answer_threshold": model.answer_threshold, "dark_frame_rate": round(model.dark_frame_rate, 4),
+        "answer_threshold": model.answer_threshold, "dark_ink_solid": round(model.dark_ink_solid, 4),
         "fast_head_speed": round(model.fast_head_speed, 4), "small_height_px": model.small_height_px,
     }
     return json.dumps(doc, indent=1) + "\n"
@@ -168,8 +169,8 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
         "|---|---:|",
         *[f"| {name} | {w:+.2f} |" for name, w in zip(model.features, model.weights)],
         "",
-        (f"Reasons: too dark below {math.exp(model.dark_frame_rate):.1f} frames a second, too much motion above "
-         f"{math.expm1(model.fast_head_speed):.0f} px/s of head motion, too small below {model.small_height_px:g} px line height."),
+        (f"Reasons: too much motion above {math.expm1(model.fast_head_speed):.0f} px/s of head motion; else too dark when "
+         f"frames agree on less than {100 * model.dark_ink_solid:.0f} % of the ink (solid ink: all frames saw it), too small below {model.small_height_px:g} px line height."),
         "",
     ]
     (report_dir / "calibration.md").write_text("\n".join(md))

@@ -16,7 +16,7 @@ def model(threshold: float = 0.5) -> ConfidenceModel:
     weights = tuple(8.0 if name == "ocr_min" else 0.0 for name in FEATURES)
     means = tuple(0.5 if name == "ocr_min" else 0.0 for name in FEATURES)
     return ConfidenceModel(FEATURES, means, (1.0,) * len(FEATURES), weights, 0.0, threshold,
-                           dark_frame_rate=math.log(5.0), fast_head_speed=math.log1p(200.0), small_height_px=9.0)
+                           dark_ink_solid=0.2, fast_head_speed=math.log1p(200.0), small_height_px=9.0)
 
 
 def page() -> np.ndarray:
@@ -41,8 +41,10 @@ def test_evidence_describes_the_line_and_the_page() -> None:
 def test_unsure_lines_are_unclear_with_what_would_help() -> None:
     sure = judge({"ocr_min": 0.95, "log_frame_rate": math.log(30.0)}, model())
     assert sure.status == "read" and sure.confidence > 0.9 and sure.reasons == ()
-    dark_and_shaky = judge({"ocr_min": 0.2, "log_frame_rate": math.log(2.0), "log_head_speed": math.log1p(400.0)}, model())
-    assert dark_and_shaky.status == "unclear" and dark_and_shaky.reasons == ("too_dark", "too_much_motion")
+    dark = judge({"ocr_min": 0.2, "ink_solid": 0.1, "log_head_speed": math.log1p(20.0)}, model())
+    assert dark.status == "unclear" and dark.reasons == ("too_dark",)
+    shaky = judge({"ocr_min": 0.2, "ink_solid": 0.1, "log_head_speed": math.log1p(400.0)}, model())
+    assert shaky.reasons == ("too_much_motion",)  # frames that disagree while the head moves fast: motion first
     small = judge({"ocr_min": 0.2, "height_px": 7.0}, model())
     assert small.reasons == ("too_small",)
     assert judge({"ocr_min": 0.2}, model()).reasons == ("look_again",)

@@ -145,13 +145,13 @@ def test_page_updates_are_pushed_while_the_wearer_reads(server: Any) -> None:
 def test_lines_the_model_is_unsure_of_are_unclear_in_the_answer_and_the_push(
     make_settings: Any, run_server: Any, tmp_path: Any
 ) -> None:
-    """A model that trusts no line (its threshold above any confidence), and takes any frame rate for
-    too dark: every line is unclear, with that reason, in the JSON answer, the push and the spoken words."""
+    """A model that trusts no line (its threshold above any confidence), and takes any disagreement of
+    the frames for too dark: every line is unclear, with that reason, in the JSON answer, the push and the spoken words."""
     from darkread.cloud.confidence import load_model
 
     shipped = load_model()
     doubting = {**{k: getattr(shipped, k) for k in ("mean", "scale", "weights", "intercept", "fast_head_speed", "small_height_px")},
-                "features": list(shipped.features), "answer_threshold": 1.01, "dark_frame_rate": 100.0}
+                "features": list(shipped.features), "answer_threshold": 1.01, "dark_ink_solid": 2.0}
     path = tmp_path / "doubting.json"
     path.write_text(json.dumps(doubting))
     with run_server(make_settings(line_confidence_model=path), ocr=RapidOcrBackend()) as server:

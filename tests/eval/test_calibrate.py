@@ -21,7 +21,7 @@ def synthetic_lines(n: int = 600, seed: int = 3) -> list[LineOutcome]:
         right = rng.random() < 1 / (1 + np.exp(-(10 * ocr_min - 5)))
         lux = float(rng.choice([5, 30]))
         out.append(LineOutcome(f"{i:03d}_x", lux, "walking" if i % 3 == 0 else "still", "words", 0.0 if right else 0.3, 28,
-                               {"ocr_min": ocr_min, "log_frame_rate": 1.0 if lux == 5 else 3.0,
+                               {"ocr_min": ocr_min, "ink_solid": 0.1 if lux == 5 else 0.3,
                                 "log_head_speed": 5.0 if i % 3 == 0 else 2.0}))
     return out
 
@@ -50,7 +50,7 @@ def test_calibrate_writes_a_model_that_is_calibrated_on_held_out_lines(tmp_path:
     assert ece < 0.08
     shipped = ConfidenceModel.from_json(json.loads((tmp_path / "model.json").read_text()))
     assert shipped.answer_threshold == model.answer_threshold > 0
-    assert 1.0 < shipped.dark_frame_rate < 3.0 and 2.0 < shipped.fast_head_speed < 5.0
+    assert 0.1 < shipped.dark_ink_solid < 0.3 and 2.0 < shipped.fast_head_speed < 5.0
     assert (tmp_path / "report" / "reliability.png").stat().st_size > 0
     assert "Held-out ECE" in (tmp_path / "report" / "calibration.md").read_text()
     answered = selective(held, shipped)
