@@ -55,7 +55,7 @@ class TrigramScorer:
     """log P(word | two before) from the model, natural log, unknown words at a floor."""
 
     model: Any
-    unknown_log_prob: float = math.log(1e-7)
+    unknown_log_prob: float = math.log(1e-8)
 
     def __post_init__(self) -> None:
         self._cache: dict[tuple[str, ...], float] = {}
