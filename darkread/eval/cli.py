@@ -138,6 +138,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="calibrate: where the fitted line-confidence model goes (default: the one the cloud ships)")
     parser.add_argument("--target-risk", type=float, default=0.03, metavar="R",
                         help="calibrate: the CER the answered lines of the fitting half may have (sets the answer threshold; default 0.03)")
+    parser.add_argument("--before", metavar="RESULTS.json",
+                        help="an earlier report's results.json of the same suite: the report compares darkread's CER by lux "
+                             "and kind on the recordings both hold (e.g. docs/eval/before/results.json)")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="worker processes (make-suite and evaluation; default 1)")
     parser.set_defaults(func=_run)
@@ -240,6 +243,7 @@ def _calibrate(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     from darkread.edge.reconstruct import default_model_path
     from darkread.eval.provenance import ReportInfo, describe_model, git_commit
+    from darkread.eval.before_after import load_before
     from darkread.eval.report import write_report
 
     suite = Path(args.target)
@@ -257,8 +261,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         suite=_describe_suite(suite, per_mode[0]),
         notes=list(args.note),
     )
+    before = (args.before, load_before(args.before)) if args.before else None
     path = write_report(per_mode[0], args.out, info, beside=per_mode[1] if len(per_mode) > 1 else None,
-                        suite_dir=suite)
+                        suite_dir=suite, before=before)
     print(f"report: {path}")
     return 0
 

@@ -18,6 +18,7 @@ from typing import Any
 
 from darkread.eval.aggregate import held_out_fonts, mean, paired, sweep_subset
 from darkread.eval.attribution import attribution_section
+from darkread.eval.before_after import before_after_section
 from darkread.eval.clean_text import clean_text_check, clean_text_section
 from darkread.eval.evidence import evidence_section
 from darkread.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
@@ -74,12 +75,14 @@ def _results_json(results: Sequence[RecordingResult], suite_dir: Path | None) ->
 
 
 def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: ReportInfo,
-                 beside: Sequence[RecordingResult] | None = None, suite_dir: str | Path | None = None) -> Path:
+                 beside: Sequence[RecordingResult] | None = None, suite_dir: str | Path | None = None,
+                 before: tuple[str, Sequence[RecordingResult]] | None = None) -> Path:
     """Write ``README.md``, ``results.json`` and the PNG plots into ``out_dir``; returns the Markdown path.
 
     ``beside``: the same suite evaluated in the other edge mode, compared with ``results`` (the primary
     mode, which every other table shows) in a section of its own and in the bandwidth table.
-    ``suite_dir``: the paths in the JSON files are written relative to it."""
+    ``suite_dir``: the paths in the JSON files are written relative to it. ``before``: (where from,
+    results) of an earlier evaluation of the same suite, compared on the recordings both hold."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     every = sorted(results, key=lambda r: str(r.name))
@@ -122,6 +125,7 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         *headline_table(results),
         "",
         *modes_md,
+        *(before_after_section(results, before[1], before[0]) if before else []),
         *selective_section(every, out, load_confidence_model()),
         *clean_text_section(clean_text_check()),
         "## Real readers' scanpaths",
