@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib.resources import files
@@ -121,10 +121,10 @@ def line_evidence(
     return evidence
 
 
-def known_word_share(text: str, known: object) -> float:
-    """Share of a line's words (two letters or more) that ``known`` (a word -> bool) knows; 1 without words."""
+def known_word_share(text: str, known: Callable[[str], bool] | None) -> float:
+    """Share of a line's words (two letters or more) that ``known`` knows; 1 without words or a dictionary."""
     words = [w for w in _WORD.findall(text) if len(w) > 1]
-    return sum(bool(known(w)) for w in words) / len(words) if words and callable(known) else 1.0  # type: ignore[operator]
+    return sum(known(w) for w in words) / len(words) if words and known is not None else 1.0
 
 
 def judge(evidence: dict[str, float], model: ConfidenceModel) -> LineJudgement:
@@ -196,7 +196,7 @@ class LineRead:
 
 
 def judge_lines(
-    lines: Sequence[LineRead], grey: np.ndarray, model: ConfidenceModel, *, known: object = None,
+    lines: Sequence[LineRead], grey: np.ndarray, model: ConfidenceModel, *, known: Callable[[str], bool] | None = None,
     views: np.ndarray | None = None, conditions: PageConditions = PageConditions(),
 ) -> list[LineJudgement | None]:
     """Each line judged; None for a line the engine gave no character probabilities or box for
