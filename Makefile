@@ -78,7 +78,7 @@ eval: $(STAMP)  ## the full suite (93 recordings) in both edge modes (~30 min on
 	$(VENV)/bin/darkread eval make-suite runs/eval_suite --jobs 2
 	$(VENV)/bin/darkread eval evidence runs/eval_suite --out docs/eval --jobs 2
 	$(VENV)/bin/darkread eval runs/eval_suite --out docs/eval --infer both --jobs 2
-	# the line-confidence model the cloud ships, fitted on the even-numbered recordings' lines and measured on the odd
+	# the line-confidence model the cloud ships, fitted on half the recordings' lines and measured on the other half
 	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval
 	$(VENV)/bin/darkread eval runs/eval_suite --out docs/eval --infer both --report-only --before docs/eval/before/results.json
 

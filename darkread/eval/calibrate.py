@@ -1,8 +1,8 @@
 """``darkread eval calibrate``: fit the line-confidence model the cloud ships, and report its calibration.
 
 The lines of an evaluated suite, each labelled right (CER at most ``selective.RIGHT_MAX_CER``) or
-wrong, are split by recording: even-numbered recordings fit the model, odd-numbered ones are held
-out and only measured. The model is a logistic regression on standardised evidence (Newton's
+wrong, are split by recording: recordings 0-3, 8-11, 16-19, ... fit the model, 4-7, 12-15, ... are held out
+and only measured (the suite's grid cycles the text kinds within each four). The model is a logistic regression on standardised evidence (Newton's
 method with a small ridge, numpy only). The answer threshold is the lowest confidence whose
 answered lines on the fitting half read at ``target_risk`` CER or better; the limits the reasons
 are judged by come from the fitting half's known conditions: the share of solid ink (all frames
@@ -31,10 +31,11 @@ SMALL_HEIGHT_PX = 9.0  # a line band lower than this holds glyphs of about 4 px 
 
 
 def split(lines: Sequence[LineOutcome]) -> tuple[list[LineOutcome], list[LineOutcome]]:
-    """(fitting, held-out): by the recording's number, even or odd."""
+    """(fitting, held-out): by the recording's number in blocks of four (the suite's grid cycles the
+    four text kinds within a block, so each half holds every kind, and motions alternate)."""
     def held_out(line: LineOutcome) -> bool:
         head = line.recording.split("_", 1)[0]
-        return head.isdigit() and int(head) % 2 == 1
+        return head.isdigit() and (int(head) // 4) % 2 == 1
 
     return [ln for ln in lines if not held_out(ln)], [ln for ln in lines if held_out(ln)]
 
@@ -141,7 +142,7 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
     p = np.array([model.probability(line.evidence) for line in held])
     right = np.array([line.right for line in held], dtype=np.float64)
     ece, rows = reliability(p, right)
-    meta = {"fitted_on": f"{len(fitting)} lines of {len({ln.recording for ln in fitting})} recordings (even-numbered)",
+    meta = {"fitted_on": f"{len(fitting)} lines of {len({ln.recording for ln in fitting})} recordings (numbered 0-3, 8-11, 16-19, ...)",
             "held_out_ece": round(ece, 4), "target_risk": target_risk}
     model_out.parent.mkdir(parents=True, exist_ok=True)
     model_out.write_text(model_json(model, meta))
@@ -151,7 +152,7 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
         "# Line confidence: calibration",
         "",
         (f"Fitted by `darkread eval calibrate` on {meta['fitted_on']}; measured on the {len(held)} lines of the "
-         f"{len({ln.recording for ln in held})} odd-numbered recordings it was not fitted on. A line is right when its CER is "
+         f"{len({ln.recording for ln in held})} recordings it was not fitted on (4-7, 12-15, ...). A line is right when its CER is "
          f"at most 4 % (one character in a suite line). Answer threshold {model.answer_threshold:g} (the lowest whose "
          f"answered lines on the fitting half read at {100 * target_risk:g} % CER or better)."),
         "",

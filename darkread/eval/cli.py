@@ -66,7 +66,7 @@ Five forms:
 
   darkread eval calibrate SUITE_DIR [--work DIR] [--model-out FILE.json] [--out DIR] [--target-risk R]
       fit the cloud's line-confidence model on an evaluated suite's lines (each right or wrong by its
-      CER; even-numbered recordings fit it, odd-numbered ones are held out), write it (default
+      CER; recordings 0-3, 8-11, ... fit it, 4-7, 12-15, ... are held out), write it (default
       cloud/data/line_confidence.json, what the cloud ships) and its calibration on the held-out
       lines (calibration.md, reliability.png with the ECE) to --out; then rebuild the report
       (--report-only) to see coverage and risk under it.
