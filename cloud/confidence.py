@@ -199,10 +199,15 @@ def judge_lines(
     lines: Sequence[LineRead], grey: np.ndarray, model: ConfidenceModel, *, known: Callable[[str], bool] | None = None,
     views: np.ndarray | None = None, conditions: PageConditions = PageConditions(),
 ) -> list[LineJudgement | None]:
-    """Each line judged; None for a line the engine gave no character probabilities or box for
-    (a remote engine: its own confidence is not calibrated here, its lines are answered)."""
+    """Each line judged; a band of ink with no text read is unclear (confidence 0); None for a line
+    the engine gave no character probabilities or box for (a remote engine: its own confidence is
+    not calibrated here, its lines are answered)."""
     out: list[LineJudgement | None] = []
     for line in lines:
+        if line.box is not None and not line.text.strip():
+            evidence = line_evidence(grey, line.box, "", "", None, 0.0, views, conditions)
+            out.append(LineJudgement(0.0, "unclear", reasons_for(evidence, model), evidence))
+            continue
         if line.char_scores is None or line.box is None:
             out.append(None)
             continue

@@ -112,14 +112,18 @@ class LineReader:
                 text, confidence, chars = texts[i]
                 matches[i] = _Known(inks[i].copy(), text, confidence, page.version, chars)
         known = [match for match in matches if match is not None]
-        lines = [ReadLine(box, m.text, m.confidence, m.version, m.char_scores, m.text) for box, m in zip(page.bands, known) if m.text]
+        # a band of ink the engine read nothing in is a line too: an unclear one (it is not left out silently)
+        lines = [ReadLine(box, m.text, m.confidence, m.version, m.char_scores, m.text) for box, m in zip(page.bands, known)
+                 if m.text or _line_shaped(box)]
         fresh = len(changed)
         self._known = known  # only the lines of the newest version are kept
-        raw = "\n".join(line.text for line in lines)
+        read = [i for i, line in enumerate(lines) if line.text]
+        raw = "\n".join(lines[i].text for i in read)
         text = self.corrector.correct(raw) if self.corrector is not None and raw else raw
         corrected = text.split("\n") if text else []
-        if len(corrected) == len(lines):
-            lines = [replace(ln, text=t) for ln, t in zip(lines, corrected)]
+        if len(corrected) == len(read):
+            for i, t in zip(read, corrected):
+                lines[i] = replace(lines[i], text=t)
         lines = self._judged(page, lines)
         reading = PageReading(page.index, page.version, tuple(lines), text, fresh, truncated)
         self.readings[page.version] = reading
@@ -185,6 +189,12 @@ def _joined(lines: list[OcrLine]) -> _Text:
     chars = [p for line in lines if line.text.strip() and line.char_scores for p in line.char_scores]
     return (" ".join(line.text.strip() for line in lines if line.text.strip()), float(np.mean(scores)) if scores else None,
             tuple(chars) if chars else None)
+
+
+def _line_shaped(box: Box) -> bool:
+    """Whether a band could be a line of text: at least three times as wide as high."""
+    x0, y0, x1, y1 = box
+    return x1 - x0 >= 3 * (y1 - y0)
 
 
 def _bordered(image: np.ndarray) -> np.ndarray:

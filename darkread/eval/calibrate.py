@@ -135,7 +135,7 @@ def plot_reliability(rows: list[tuple[float, float, int]], ece: float, path: Pat
 
 def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, target_risk: float) -> tuple[ConfidenceModel, float]:
     """Fit on the fitting half, measure on the held-out half, write the model and calibration.md."""
-    fitting, held = split(lines)
+    fitting, held = split([line for line in lines if line.read])  # bands read as nothing: unclear by rule, not by the model
     if len(fitting) < 20 or len(held) < 10:
         raise ValueError(f"too few judged lines to calibrate ({len(fitting)} to fit, {len(held)} held out); evaluate more recordings")
     model = fit_model(fitting, target_risk)

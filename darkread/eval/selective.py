@@ -33,7 +33,9 @@ def match_lines(reference: str, lines: Sequence[Mapping[str, Any]]) -> list[dict
         text = str(line.get("text", ""))
         best = min((error_rates(ref, text) for ref in refs), key=lambda r: r.cer, default=None)
         cer = min(1.0, best.cer) if best is not None else 1.0
-        out.append({**line, "line_cer": round(cer, 4), "line_ref_chars": best.reference_chars if best else len(normalize_text(text))})
+        chars = best.reference_chars if best is not None and text.strip() else (
+            int(np.median([len(normalize_text(ref)) for ref in refs])) if refs else 1)  # a band read as nothing: a typical line
+        out.append({**line, "line_cer": round(cer, 4), "line_ref_chars": chars})
     return out
 
 
@@ -46,6 +48,7 @@ class LineOutcome:
     cer: float
     ref_chars: int
     evidence: dict[str, float]
+    read: bool = True  # False: a band of ink the engine read nothing in (unclear whatever the model says)
 
     @property
     def right(self) -> bool:
@@ -60,7 +63,8 @@ def outcomes(results: Sequence[Any]) -> list[LineOutcome]:
         for line in doc.get("lines") or []:
             if "line_cer" in line and line.get("evidence"):
                 out.append(LineOutcome(str(r.name), r.lux, r.motion, r.kind, float(line["line_cer"]),
-                                       int(line.get("line_ref_chars") or 1), dict(line["evidence"])))
+                                       int(line.get("line_ref_chars") or 1), dict(line["evidence"]),
+                                       read=bool(str(line.get("text", "")).strip())))
     return out
 
 
@@ -78,7 +82,7 @@ class Selective:
 
 
 def selective(lines: Sequence[LineOutcome], model: ConfidenceModel) -> Selective:
-    answered = [line for line in lines if judge(line.evidence, model).status == "read"]
+    answered = [line for line in lines if line.read and judge(line.evidence, model).status == "read"]
     return Selective(len(lines), len(answered) / len(lines) if lines else None, weighted_cer(lines), weighted_cer(answered))
 
 
@@ -86,7 +90,7 @@ def risk_coverage(lines: Sequence[LineOutcome], model: ConfidenceModel) -> tuple
     """Coverage and CER of the answered lines at every confidence threshold (most confident first)."""
     if not lines:
         return np.zeros(0), np.zeros(0)
-    p = np.array([model.probability(line.evidence) for line in lines])
+    p = np.array([model.probability(line.evidence) if line.read else 0.0 for line in lines])
     order = np.argsort(-p, kind="stable")
     edits = np.cumsum([lines[i].cer * lines[i].ref_chars for i in order])
     chars = np.cumsum([lines[i].ref_chars for i in order])

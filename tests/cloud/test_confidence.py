@@ -69,3 +69,11 @@ def test_the_shipped_model_loads() -> None:
     shipped = load_model()
     assert shipped.features == FEATURES and 0.0 <= shipped.answer_threshold < 1.0
     assert 0.0 <= shipped.probability({}) <= 1.0
+
+
+def test_a_band_of_ink_read_as_nothing_is_an_unclear_line() -> None:
+    judged = judge_lines([LineRead("", "", (0, 23, 100, 37), None)], page(), model(),
+                         conditions=PageConditions(frame_rate_hz=10.0, head_speed_px_s=900.0))
+    assert judged[0] is not None and judged[0].status == "unclear" and judged[0].confidence == 0.0
+    assert judged[0].reasons == ("too_much_motion",)
+    assert spoken_answer([("", judged[0])] * 3) == "Three lines unclear.\nHold still."

@@ -207,7 +207,7 @@ function watchSession(sessionId) {
   }
 
   const linesOf = (result) => (result.lines.length ? result.lines : result.text.split("\n").map((t) => ({ text: t })))
-    .filter((line) => line.text.trim()).map(shownLine);
+    .filter((line) => line.text.trim() || line.status === "unclear").map(shownLine);
 
   // Reads the page again when it changed, at most every MIN_READ_GAP_MS (OCR is the costly part).
   async function readAlong(state) {
@@ -265,7 +265,7 @@ function watchSession(sessionId) {
   }
 
   async function onPage(event) {
-    const lines = (event.lines || []).filter((line) => line.text.trim()).map(shownLine);
+    const lines = (event.lines || []).filter((line) => line.text.trim() || line.status === "unclear").map(shownLine);
     if (lines.length) showText(lines);
     latest = { page: event.page, count: (event.lines || []).length };
     queueReadyLines(false);
