@@ -25,9 +25,11 @@ from typing import Literal
 import numpy as np
 
 Reason = Literal["too_dark", "too_much_motion", "too_small", "look_again"]
-REASONS: dict[str, str] = {  # reason code -> what the spoken answer says
-    "too_dark": "It is too dark here: more light would help.",
-    "too_much_motion": "Hold still.",
+# reason code -> what the spoken answer says: plain words that survive the synthetic voice (an
+# offline recogniser hears "please stop moving" word for word, "hold still" as "pulled deal")
+REASONS: dict[str, str] = {
+    "too_dark": "Please add more light.",
+    "too_much_motion": "Please stop moving.",
     "too_small": "The text is too small: come closer.",
     "look_again": "Look at that line again.",
 }

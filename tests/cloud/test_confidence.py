@@ -60,9 +60,9 @@ def test_the_spoken_answer_reads_the_sure_lines_and_says_what_would_help() -> No
     read = judge({"ocr_min": 0.95}, model())
     shaky = judge({"ocr_min": 0.1, "log_head_speed": math.log1p(500.0)}, model())
     said = spoken_answer([("the quick fox", read), ("xq", shaky), ("zz", shaky), ("jumps", read)])
-    assert said == "the quick fox\nTwo lines unclear.\njumps\nHold still."  # half the page unclear: the guidance
+    assert said == "the quick fox\nTwo lines unclear.\njumps\nPlease stop moving."  # half the page unclear: the guidance
     assert spoken_answer([("a", read), ("b", read), ("c", shaky)]) == "a\nb\nOne line unclear."
-    assert spoken_answer([("guess", shaky)]) == "One line unclear.\nHold still."
+    assert spoken_answer([("guess", shaky)]) == "One line unclear.\nPlease stop moving."
 
 
 def test_the_shipped_model_loads() -> None:
@@ -76,4 +76,4 @@ def test_a_band_of_ink_read_as_nothing_is_an_unclear_line() -> None:
                          conditions=PageConditions(frame_rate_hz=10.0, head_speed_px_s=900.0))
     assert judged[0] is not None and judged[0].status == "unclear" and judged[0].confidence == 0.0
     assert judged[0].reasons == ("too_much_motion",)
-    assert spoken_answer([("", judged[0])] * 3) == "Three lines unclear.\nHold still."
+    assert spoken_answer([("", judged[0])] * 3) == "Three lines unclear.\nPlease stop moving."

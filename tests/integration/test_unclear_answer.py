@@ -21,8 +21,8 @@ from speech_measure import require_espeak, transcribe
 pytestmark = pytest.mark.slow
 
 HEARD = {  # words of each reason's guidance that the recogniser hears reliably
-    "too_dark": {"dark", "light"},
-    "too_much_motion": {"hold", "still"},
+    "too_dark": {"add", "more"},
+    "too_much_motion": {"stop", "moving"},
     "too_small": {"small", "closer"},
     "look_again": {"look", "again"},
 }
