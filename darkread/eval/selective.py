@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from darkread.cloud.confidence import ConfidenceModel, judge
+from darkread.cloud.confidence import ConfidenceModel, judge, reasons_for
 from darkread.eval.aggregate import sort_key
 from darkread.eval.tables import pct
 from darkread.eval.error_rates import error_rates, normalize_text
@@ -112,6 +112,17 @@ def reliability(p: np.ndarray, right: np.ndarray, bins: int = 10) -> tuple[float
     return float(ece), rows
 
 
+def unclear_reasons(lines: Sequence[LineOutcome], model: ConfidenceModel) -> str:
+    """How often each reason was given to the group's unclear lines, e.g. "too_much_motion 5, look_again 1"."""
+    counts: dict[str, int] = {}
+    for line in lines:
+        judgement = judge(line.evidence, model)
+        if not line.read or judgement.status == "unclear":
+            for reason in reasons_for(line.evidence, model):
+                counts[reason] = counts.get(reason, 0) + 1
+    return ", ".join(f"{r} {n}" for r, n in sorted(counts.items(), key=lambda kv: -kv[1])) or "-"
+
+
 def plot_risk_coverage(groups: Mapping[str, Sequence[LineOutcome]], model: ConfidenceModel, path: Path) -> Path:
     from darkread.eval.plots import _pyplot
 
@@ -149,9 +160,10 @@ def selective_section(results: Sequence[Any], out: Path, model: ConfidenceModel)
 
     def row(label: str, group: Sequence[LineOutcome]) -> str:
         s = selective(group, model)
-        return f"| {label} | {s.lines} | {pct(s.cer_all)} | {pct(s.coverage)} | {pct(s.cer_answered)} |"
+        return f"| {label} | {s.lines} | {pct(s.cer_all)} | {pct(s.coverage)} | {pct(s.cer_answered)} | {unclear_reasons(group, model)} |"
 
-    head = ["| {} | lines | CER, all lines | coverage | CER, answered lines |", "|---|---:|---:|---:|---:|"]
+    head = ["| {} | lines | CER, all lines | coverage | CER, answered lines | what the unclear lines were told |",
+            "|---|---:|---:|---:|---:|---|"]
     return [
         "## Selective reading: what the answer says and what it calls unclear",
         "",
