@@ -6,7 +6,8 @@ and only measured (the suite's grid cycles the text kinds within each four). The
 method with a small ridge, numpy only). The answer threshold is the lowest confidence whose
 answered lines on the fitting half read at ``target_risk`` CER or better; the limits the reasons
 are judged by come from the fitting half's known conditions: the share of solid ink (all frames
-agreed) halfway between the dim pages (10 lux and below) and the rest, both without walking, and the head speed halfway between walking
+agreed) halfway between the dim pages (10 lux and below) and the rest, both without walking (at
+most the greyest tenth of the lit lines), and the head speed halfway between walking
 and the other motions. Written: the model (JSON, ``cloud/data/line_confidence.json`` by default),
 and beside the report ``calibration.md`` with the reliability diagram and ECE on the held-out half.
 """
@@ -68,6 +69,15 @@ def _midpoint(a: list[float], b: list[float], default: float) -> float:
     return (float(np.median(a)) + float(np.median(b))) / 2 if a and b else default
 
 
+def _dark_limit(dim: list[float], lit: list[float]) -> float:
+    """Solid ink below which a still page is called too dark: halfway between dim and lit pages, but
+    no higher than what the greyest tenth of lit lines show (the two overlap: in good light a line
+    read by few frames is grey too, and "add more light" would be wrong advice there)."""
+    if not dim or not lit:
+        return 0.0
+    return min(_midpoint(dim, lit, 0.0), float(np.percentile(lit, 10)))
+
+
 def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceModel:
     x = _matrix(lines)
     mean, scale = x.mean(axis=0), x.std(axis=0)
@@ -81,7 +91,7 @@ def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceMod
     calm = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion != "walking"]
     model = ConfidenceModel(
         FEATURES, tuple(map(float, mean)), tuple(map(float, scale)), tuple(map(float, weights)), intercept, 0.0,
-        _midpoint(solid_dim, solid_lit, 0.0), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX,
+        _dark_limit(solid_dim, solid_lit), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX,
     )
     return _with_threshold(model, lines, target_risk)
 
