@@ -3,7 +3,7 @@
 The lines of an evaluated suite, each labelled right (CER at most ``selective.RIGHT_MAX_CER``) or
 wrong, are split by recording: recordings 0-3, 8-11, 16-19, ... fit the model, 4-7, 12-15, ... are held out
 and only measured (the suite's grid cycles the text kinds within each four). The model is a logistic regression on standardised evidence (Newton's
-method with a small ridge, numpy only). The answer threshold is the lowest confidence whose
+method, numpy only), its ridge the one that predicts best across the fitting recordings' two halves. The answer threshold is the lowest confidence whose
 answered lines on the fitting half read at ``target_risk`` CER or better; the limits the reasons
 are judged by come from the fitting half's known conditions: the share of solid ink (all frames
 agreed) halfway between the dim pages (10 lux and below) and the rest, both without walking (at
@@ -26,7 +26,7 @@ import numpy as np
 from darkread.cloud.confidence import FEATURES, ConfidenceModel
 from darkread.eval.selective import LineOutcome, reliability, weighted_cer
 
-RIDGE = 0.3  # on standardised evidence: the suite gives a few hundred lines at most, eleven weights must not fit their noise
+RIDGES = (0.1, 0.3, 1.0, 3.0, 10.0)  # on standardised evidence; the one with the best Brier score in two-fold cross-validation on the fitting half is used
 DIM_LUX = 10.0
 SMALL_HEIGHT_PX = 9.0  # a line band lower than this holds glyphs of about 4 px x-height: below what the network resolves
 
@@ -49,7 +49,7 @@ def _matrix(lines: Sequence[LineOutcome], fill: np.ndarray | None = None) -> np.
     return np.where(np.isnan(x), fill, x)
 
 
-def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = RIDGE, steps: int = 50) -> tuple[np.ndarray, float]:
+def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = 1.0, steps: int = 50) -> tuple[np.ndarray, float]:
     """Weights and intercept of a ridge logistic regression on standardised ``x`` (Newton's method)."""
     design = np.hstack([x, np.ones((len(x), 1))])
     w = np.zeros(design.shape[1])
@@ -78,12 +78,36 @@ def _dark_limit(dim: list[float], lit: list[float]) -> float:
     return min(_midpoint(dim, lit, 0.0), float(np.percentile(lit, 10)))
 
 
-def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceModel:
+def _standardised(lines: Sequence[LineOutcome]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     x = _matrix(lines)
     mean, scale = x.mean(axis=0), x.std(axis=0)
     scale = np.where(scale > 1e-9, scale, 1.0)
-    y = np.array([line.right for line in lines], dtype=np.float64)
-    weights, intercept = fit_logistic((x - mean) / scale, y)
+    return (x - mean) / scale, np.array([line.right for line in lines], dtype=np.float64), mean, scale
+
+
+def choose_ridge(lines: Sequence[LineOutcome]) -> float:
+    """The ridge with the lowest Brier score when one half of the recordings predicts the other, both ways."""
+    recordings = sorted({line.recording for line in lines})
+    first = set(recordings[::2])
+    halves = [[ln for ln in lines if ln.recording in first], [ln for ln in lines if ln.recording not in first]]
+    if min(len(h) for h in halves) < 10:
+        return 1.0
+
+    def brier(ridge: float) -> float:
+        total = 0.0
+        for train, test in (halves, halves[::-1]):
+            x, y, mean, scale = _standardised(train)
+            w, b = fit_logistic(x, y, ridge)
+            p = 1.0 / (1.0 + np.exp(-(((_matrix(test, mean) - mean) / scale) @ w + b)))
+            total += float(np.mean((p - np.array([ln.right for ln in test], dtype=np.float64)) ** 2))
+        return total
+
+    return min(RIDGES, key=brier)
+
+
+def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceModel:
+    x, y, mean, scale = _standardised(lines)
+    weights, intercept = fit_logistic(x, y, choose_ridge(lines))
     still = [ln for ln in lines if ln.motion != "walking" and "ink_solid" in ln.evidence]
     solid_dim = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) <= DIM_LUX]
     solid_lit = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) > DIM_LUX]

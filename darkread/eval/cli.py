@@ -136,8 +136,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "reading only, e.g. for a second simulator's suite whose scenes another suite already has")
     parser.add_argument("--model-out", metavar="FILE.json", default=str(DEFAULT_CONFIDENCE_MODEL),
                         help="calibrate: where the fitted line-confidence model goes (default: the one the cloud ships)")
-    parser.add_argument("--target-risk", type=float, default=0.03, metavar="R",
-                        help="calibrate: the CER the answered lines of the fitting half may have (sets the answer threshold; default 0.03)")
+    parser.add_argument("--target-risk", type=float, default=0.05, metavar="R",
+                        help="calibrate: the CER the answered lines of the fitting half may have (sets the answer threshold; default 0.05)")
     parser.add_argument("--before", metavar="RESULTS.json",
                         help="an earlier report's results.json of the same suite: the report compares darkread's CER by lux "
                              "and kind on the recordings both hold (e.g. docs/eval/before/results.json)")
