@@ -107,10 +107,13 @@ demo: $(DEMO_STAMP) speech-deps  ## read the shipped sample recording aloud and 
 	@echo "demo: darkread read --demo --say"
 	@$(VENV)/bin/darkread read --demo --say
 
-eval: $(STAMP)  ## the full suite (93 recordings) in both edge modes (~30 min on 2 cores, half of it making the suite): report in docs/eval, the default mode first, with how much ink the events show
+eval: $(STAMP)  ## the full suite (93 recordings) in both edge modes (~30 min on 2 cores, half of it making the suite): report in docs/eval, the default mode first, with how much ink the events show; then the line-confidence model fitted (cloud/data/line_confidence.json, docs/eval/calibration.md) and the report rebuilt with coverage and risk under it
 	$(VENV)/bin/darkread eval make-suite runs/eval_suite --jobs 2
 	$(VENV)/bin/darkread eval evidence runs/eval_suite --out docs/eval --jobs 2
 	$(VENV)/bin/darkread eval runs/eval_suite --out docs/eval --infer both --jobs 2
+	# the line-confidence model the cloud ships, fitted on half the recordings' lines and measured on the other half
+	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval
+	$(VENV)/bin/darkread eval runs/eval_suite --out docs/eval --infer both --report-only --before docs/eval/before/results.json
 
 eval-small: $(STAMP)  ## the small suite (17 recordings) in both edge modes (a few minutes); report in runs/eval_small_report
 	$(VENV)/bin/darkread eval make-suite runs/eval_small --small --jobs 2

@@ -62,6 +62,7 @@ def live_config(settings: Settings) -> LiveConfig:
         ocr_threads=settings.ocr_threads,
         catch_up_s=settings.ask_catch_up_s,
         live_idle_s=settings.live_idle_s,
+        confidence_model=str(settings.line_confidence_model) if settings.line_confidence_model else None,
     )
 
 

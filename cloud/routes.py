@@ -15,14 +15,15 @@ from typing import Annotated, Any, Literal, TypeVar
 import numpy as np
 from fastapi import APIRouter, Body, Depends, Header, HTTPException, Path, Query, Response, status
 from fastapi.responses import StreamingResponse
-from pydantic import BaseModel, Field
 
 from darkread.core.image_codec import encode_png
 from darkread.stitch.stitched_page import ink_mask_to_paper
 
 from .auth import Principal, Scope
+from .confidence import REASONS, LineJudgement, LineRead, judge_lines, page_reasons, spoken_answer
 from .context import AppContext, get_context, require
 from .errors import NoPageError, OcrError, OcrUnavailableError
+from .schemas import AskRequest, AskResponse, Health, LineModel, PageModel, SessionModel
 from .speech import WAV_MEDIA_TYPE, wants_wav
 from .speech_http import require_speech_engine, speak
 from .store import SessionInfo
@@ -33,62 +34,6 @@ KEEPALIVE_S = 15.0
 log = logging.getLogger(__name__)
 
 SessionId = Annotated[str, Path(pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$", description="the session id from hello")]
-
-
-class SessionModel(BaseModel):
-    session_id: str
-    device_id: str
-    mode: str = Field(description="'frames' (the cloud stitches) or 'pages' (the glasses stitch)")
-    sensor: tuple[int, int] = Field(description="sensor (width, height) in pixels")
-    fovea: tuple[int, int] = Field(description="foveal window (height, width) in pixels")
-    created_s: float = Field(description="UNIX time of the first hello")
-    updated_s: float = Field(description="UNIX time of the last hello or stored message")
-    last_seq: int = Field(description="highest seq durably stored, -1 if none")
-    frames: int
-    pages: int | None = Field(description="pages the glasses sent (mode 'pages'); null in mode 'frames', whose pages "
-                                          "the cloud stitches as frames arrive: GET /v1/sessions/{id}/pages lists them")
-
-    @classmethod
-    def of(cls, info: SessionInfo) -> SessionModel:
-        return cls(**{**asdict(info), "pages": info.pages if info.mode == "pages" else None})
-
-
-class AskRequest(BaseModel):
-    question: str = Field("what does this say", max_length=2000, description="what the wearer asked")
-
-
-class LineModel(BaseModel):
-    text: str
-    box: tuple[int, int, int, int] | None = Field(None, description="x0, y0, x1, y1 in page pixels")
-    confidence: float | None = None
-
-
-class AskResponse(BaseModel):
-    text: str = Field(description="the text read from the page, lines top to bottom")
-    backend: str = Field(description="the OCR engine that read it")
-    page_id: str = Field(description="which page: page-<id> (glasses) or stitched-<page>-v<version>")
-    page: int | None = Field(None, description="the page read (stitched sessions): 0 = the session's first")
-    version: int | None = Field(None, description="the page's version (frames stitched into it) that was read")
-    lines_read: int | None = Field(None, description="lines OCR read for this version; the others had not changed")
-    frames_pending: bool = Field(False, description="frames stored before the question were still being stitched")
-    latency_ms: float = Field(description="time from the question to the answer")
-    lines: list[LineModel]
-    question: str
-    truncated: bool = Field(False, description="the engine stopped early (token limit); text is incomplete")
-
-
-class PageModel(BaseModel):
-    index: int = Field(description="page number, 0 = the session's first")
-    version: int = Field(description="frames stitched into it so far")
-    first_seq: int
-    last_seq: int
-    started_by: str = Field(description="first, break (the glasses said so), lost (registration lost), size")
-    finished: bool = Field(description="a later page has started; this one no longer changes")
-
-
-class Health(BaseModel):
-    status: str
-    checks: dict[str, bool] = {}
 
 
 public = APIRouter(tags=["health"])
@@ -314,7 +259,9 @@ async def speak_line(
     if line >= len(answer.lines):
         raise HTTPException(status.HTTP_404_NOT_FOUND,
                             detail=f"{answer.page_id} has {len(answer.lines)} lines read so far, no line {line}")  # fmt: skip
-    one = answer.model_copy(update={"text": answer.lines[line].text, "lines": [answer.lines[line]]})
+    chosen = answer.lines[line]
+    said = chosen.text if chosen.status == "read" else " ".join(["One line unclear.", *(REASONS[r] for r in chosen.reasons[:1])])
+    one = answer.model_copy(update={"text": chosen.text, "lines": [chosen], "spoken": said})
     response = await speak(context, principal, one, session_id)
     response.headers["X-Line"] = str(line)
     response.headers["X-Line-Count"] = str(len(answer.lines))
@@ -345,9 +292,12 @@ async def _read(context: AppContext, info: SessionInfo, page: int | None) -> Ask
         glasses = await _glasses_page(context, info)
         loop = asyncio.get_running_loop()  # on the OCR threads, never the default executor
         result = await _ocr(context, lambda: loop.run_in_executor(context.pages.ocr_pool, context.ocr.read, glasses.image))
-        lines = [LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in result.lines]
+        read = [LineRead(line.text, line.text, line.box, line.char_scores) for line in result.lines]
+        corrector = getattr(context.ocr, "corrector", None)
+        judgements = judge_lines(read, glasses.image, context.pages.confidence, known=corrector.known if corrector else None)
         return AskResponse(text=result.text, backend=context.ocr.name, page_id=glasses.page_id, latency_ms=0.0,
-                           lines=lines, question="", truncated=result.truncated)  # fmt: skip
+                           question="", truncated=result.truncated,
+                           **_answer_lines([(ln.text, ln.box, ln.confidence, j) for ln, j in zip(result.lines, judgements)]))  # fmt: skip
     try:
         live = await _ocr(context, lambda: context.pages.ask(info.session_id, page, upto_seq=info.last_seq))
     except NoPageError as exc:
@@ -357,8 +307,21 @@ async def _read(context: AppContext, info: SessionInfo, page: int | None) -> Ask
         text=reading.text, backend=context.ocr.name, page_id=_page_id(reading.index, reading.version),
         page=reading.index, version=reading.version, lines_read=reading.lines_read,
         frames_pending=live.frames_pending, latency_ms=0.0, question="", truncated=reading.truncated,
-        lines=[LineModel(text=line.text, box=line.box, confidence=line.confidence) for line in reading.lines],
+        **_answer_lines([(line.text, line.box, line.confidence, line.judgement) for line in reading.lines]),
     )  # fmt: skip
+
+
+def _answer_lines(lines: list[tuple[str, Any, float | None, LineJudgement | None]]) -> dict[str, Any]:
+    """The lines with their calibrated confidence and status, how many are unclear and why, and what to say."""
+    models = [
+        LineModel(text=text, box=box, confidence=score) if j is None else
+        LineModel(text=text, box=box, confidence=j.confidence, status=j.status, reasons=list(j.reasons),
+                  evidence={k: round(v, 4) for k, v in j.evidence.items()})
+        for text, box, score, j in lines
+    ]
+    unclear = [j for *_, j in lines if j is not None and j.status == "unclear"]
+    return {"lines": models, "unclear_lines": len(unclear), "reasons": list(page_reasons(unclear)),
+            "spoken": spoken_answer([(text, j) for text, _, _, j in lines])}
 
 
 def _rate_limit(context: AppContext, principal: Principal, bucket: str = "") -> None:

@@ -84,6 +84,14 @@ class Settings(BaseSettings):
     ocr_lexicon: bool = Field(
         True, description="correct offline engines' misread glyphs (e/o, i/l) with an English word list"
     )
+    ocr_language: Literal["en", "any"] = Field(
+        "en", description="the language of the pages: offline engines read only its characters, and the "
+        "correction of coherent text uses its language model (English is the only one so far); any: every "
+        "character the engine knows, and only the word list's fixes of non-words",
+    )
+    line_confidence_model: Path | None = Field(
+        None, description="the calibrated line-confidence model (JSON, `darkread eval calibrate`); unset = the shipped one"
+    )
     ocr_timeout_s: float = Field(60.0, gt=0)
     ask_timeout_s: float = Field(90.0, gt=0, description="an ask (stitching + OCR) answers 503 after this long")
     ask_rate_per_min: float = Field(30.0, gt=0, description="asks and page.png per key per minute (sustained)")

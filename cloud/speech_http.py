@@ -22,7 +22,7 @@ from .speech import WAV_MEDIA_TYPE, engine_path, speech_parts, synthesize_wav
 if TYPE_CHECKING:
     from .auth import Principal
     from .context import AppContext
-    from .routes import AskResponse
+    from .schemas import AskResponse
     from .settings import Settings
 
 log = logging.getLogger(__name__)
@@ -40,7 +40,7 @@ async def speak(context: AppContext, principal: Principal, answer: AskResponse, 
     """Part ``part`` of the answer's text spoken as a RIFF WAV; what was read travels in headers."""
     settings = context.settings
     started = time.perf_counter()
-    parts = speech_parts(answer.text, settings.speech_part_words)
+    parts = speech_parts(answer.spoken or answer.text, settings.speech_part_words)
     if part >= len(parts):
         raise HTTPException(status.HTTP_404_NOT_FOUND, detail=f"the answer is spoken in {len(parts)} parts, no part {part}")
     if not context.syntheses.try_acquire(principal.key_id):

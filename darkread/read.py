@@ -72,6 +72,8 @@ class ReadResult:
     wer: float | None = None
     speech_wav: str | None = None
     fovea_event_fraction: float | None = None  # inside the window at their own gaze (as ``darkread inspect``)
+    answer_lines: list[dict[str, Any]] = field(default_factory=list)  # the answer's lines: text, status, confidence, evidence
+    spoken: str = ""  # what the spoken answer says
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -197,6 +199,8 @@ def read_recording(
         stage_seconds=stages,
         speech_wav=str(speech_wav) if spoken is not None else None,
         fovea_event_fraction=fovea_event_fraction(recording),
+        answer_lines=list(answer.get("lines", [])),
+        spoken=str(answer.get("spoken", "")),
     )
     if recording.text is not None:
         rates = error_rates(recording.text, result.text)

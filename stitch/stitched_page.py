@@ -34,6 +34,7 @@ class StitchedPage:
     # alpha-averaged ink probability behind ``image`` (float32, same shape); None when not stitched
     ink_probability: np.ndarray | None = None
     grey_saturation: float = 0.8
+    views: np.ndarray | None = None  # how many frames (views) covered each pixel (same shape); None when not stitched
 
     def to_grey(self) -> np.ndarray:
         """Black-on-white uint8 page with shades where frames disagreed: what OCR should read.

@@ -395,6 +395,7 @@ class PageStitcher:
             skew_deg=skew if abs(skew) >= cfg.deskew_min_deg else 0.0,
             ink_probability=np.where(views >= cfg.min_views, avg, 0.0).astype(np.float32),
             grey_saturation=level,
+            views=views,
         )
 
     def _line_boxes(

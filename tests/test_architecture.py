@@ -37,7 +37,7 @@ ALLOWED: dict[str, set[str]] = {
 
 # third-party packages a component must not import, whatever extras are installed here
 WEB_AND_OCR = {"fastapi", "uvicorn", "starlette", "pydantic", "pydantic_settings", "httpx", "prometheus_client",
-               "rapidocr", "pytesseract", "tesserocr", "symspellpy"}
+               "rapidocr", "pytesseract", "tesserocr", "symspellpy", "pocketsphinx"}
 FORBIDDEN: dict[str, set[str]] = {
     "edge": WEB_AND_OCR | {"torch"},  # the glasses run without a web server, OCR or PyTorch
     "cloud": {"usb", "torch", "numba"},  # no USB stack, no training stack

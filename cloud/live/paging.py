@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import statistics
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -56,6 +56,41 @@ class RenderedPage:
     bands: tuple[Box, ...]  # text lines found on the page (x0, y0, x1, y1), top to bottom
     first_seq: int
     last_seq: int
+    views: np.ndarray | None = field(default=None, repr=False)  # frames that covered each pixel, same shape
+    motion: PageMotion | None = None  # how the frames of the page came
+
+
+@dataclass
+class PageMotion:
+    """How fast the frames of a page came and how far the head moved meanwhile (event time): in
+    dim light the glasses make fewer frames a second (each needs its events), and a fast head
+    smears what they show."""
+
+    frames: int = 0  # reconstructions (a view counts the frames fused into it)
+    first_us: int | None = None
+    last_us: int | None = None
+    path_px: float = 0.0  # the scene's travel in the sensor
+    last_scene: tuple[float, float] | None = None
+
+    def add(self, frame: FrameRecord) -> None:
+        self.frames += frame.frames
+        self.first_us = frame.t_us if self.first_us is None else min(self.first_us, frame.t_us)
+        self.last_us = frame.t_us if self.last_us is None else max(self.last_us, frame.t_us)
+        if frame.scene_px is not None:
+            if self.last_scene is not None:
+                self.path_px += float(np.hypot(frame.scene_px[0] - self.last_scene[0], frame.scene_px[1] - self.last_scene[1]))
+            self.last_scene = frame.scene_px
+
+    def span_s(self) -> float:
+        return (self.last_us - self.first_us) / 1e6 if self.first_us is not None and self.last_us is not None else 0.0
+
+    def frame_rate_hz(self) -> float | None:
+        span = self.span_s()
+        return self.frames / span if span > 0 else None
+
+    def head_speed_px_s(self) -> float | None:
+        span = self.span_s()
+        return self.path_px / span if span > 0 and self.last_scene is not None else None
 
 
 @dataclass
@@ -68,6 +103,7 @@ class LivePage:
     version: int = 0
     registered: int = 0
     rendered: RenderedPage | None = None  # the latest render; a finished page keeps only this
+    motion: PageMotion = field(default_factory=PageMotion)
 
     @property
     def finished(self) -> bool:
@@ -155,6 +191,7 @@ class Paginator:
     def _feed(self, page: LivePage, seq: int, frame: FrameRecord) -> None:
         assert page.stitcher is not None
         placements = page.stitcher.add(frame)  # decides earlier frames (first in, first out)
+        page.motion.add(frame)
         self._undecided.append((seq, frame))
         page.last_seq = seq
         for placement in placements:
@@ -200,6 +237,7 @@ class Paginator:
             return None
         ink = stitched.image
         page.rendered = RenderedPage(
-            page.index, page.version, stitched.to_grey(), ink, find_bands(ink), page.first_seq, page.last_seq
+            page.index, page.version, stitched.to_grey(), ink, find_bands(ink), page.first_seq, page.last_seq,
+            views=stitched.views, motion=replace(page.motion),
         )
         return page.rendered

@@ -16,15 +16,17 @@ correction runs over the whole text afterwards, so words still see their neighbo
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 
+from ..confidence import ConfidenceModel, LineJudgement, LineRead, PageConditions, judge_lines, load_model
 from ..ocr.base import OcrBackend, OcrLine, OcrResult
 from ..ocr.lexicon import LexiconCorrected, LexiconCorrector
 from .paging import Box, RenderedPage
 
+_Text = tuple[str, float | None, tuple[float, ...] | None]  # a band's text, mean confidence, characters' probabilities
 BORDER_PX = 8  # white margin around a line crop: detection misreads glyphs touching the edge (i/I)
 
 
@@ -34,6 +36,9 @@ class ReadLine:
     text: str
     confidence: float | None
     read_at_version: int  # the page version whose pixels this text was read from
+    char_scores: tuple[float, ...] | None = None  # each character's probability, when the engine reports them
+    raw_text: str = ""  # as the engine read it, before the correction
+    judgement: LineJudgement | None = None  # calibrated confidence and status (None: the engine gave no character scores)
 
 
 @dataclass(frozen=True)
@@ -54,6 +59,7 @@ class _Known:
     text: str
     confidence: float | None
     version: int
+    char_scores: tuple[float, ...] | None = None
 
 
 def _same_ink(a: np.ndarray, b: np.ndarray, size_tol_px: int, diff_tol: float, shift_px: int = 1) -> bool:
@@ -76,7 +82,9 @@ def _same_ink(a: np.ndarray, b: np.ndarray, size_tol_px: int, diff_tol: float, s
 class LineReader:
     """Reads the versions of one page, remembering the lines it read. Not thread-safe."""
 
-    def __init__(self, backend: OcrBackend, *, size_tol_px: int = 2, diff_tol: float = 0.06, keep_versions: int = 4) -> None:
+    def __init__(self, backend: OcrBackend, *, size_tol_px: int = 2, diff_tol: float = 0.06, keep_versions: int = 4,
+                 confidence: ConfidenceModel | None = None) -> None:
+        """``confidence``: the line-confidence model each line is judged by (default the shipped one)."""
         if isinstance(backend, LexiconCorrected):
             self.engine: OcrBackend = backend.engine
             self.corrector: LexiconCorrector | None = backend.corrector
@@ -86,6 +94,7 @@ class LineReader:
         self.size_tol_px = size_tol_px
         self.diff_tol = diff_tol
         self.keep_versions = keep_versions
+        self.confidence = confidence or load_model()
         self._known: list[_Known] = []
         self.readings: dict[int, PageReading] = {}  # version -> answer, the last few
 
@@ -99,24 +108,37 @@ class LineReader:
         if changed:
             texts, truncated = self._read_changed(page, changed)
             for i in changed:
-                text, confidence = texts[i]
-                matches[i] = _Known(inks[i].copy(), text, confidence, page.version)
+                text, confidence, chars = texts[i]
+                matches[i] = _Known(inks[i].copy(), text, confidence, page.version, chars)
         known = [match for match in matches if match is not None]
-        lines = [ReadLine(box, m.text, m.confidence, m.version) for box, m in zip(page.bands, known) if m.text]
+        # a band of ink the engine read nothing in is a line too: an unclear one (it is not left out silently)
+        lines = [ReadLine(box, m.text, m.confidence, m.version, m.char_scores, m.text) for box, m in zip(page.bands, known)
+                 if m.text or _line_shaped(box)]
         fresh = len(changed)
         self._known = known  # only the lines of the newest version are kept
-        raw = "\n".join(line.text for line in lines)
+        read = [i for i, line in enumerate(lines) if line.text]
+        raw = "\n".join(lines[i].text for i in read)
         text = self.corrector.correct(raw) if self.corrector is not None and raw else raw
         corrected = text.split("\n") if text else []
-        if len(corrected) == len(lines):
-            lines = [ReadLine(ln.box, t, ln.confidence, ln.read_at_version) for ln, t in zip(lines, corrected)]
+        if len(corrected) == len(read):
+            for i, t in zip(read, corrected):
+                lines[i] = replace(lines[i], text=t)
+        lines = self._judged(page, lines)
         reading = PageReading(page.index, page.version, tuple(lines), text, fresh, truncated)
         self.readings[page.version] = reading
         while len(self.readings) > self.keep_versions:
             del self.readings[min(self.readings)]
         return reading
 
-    def _read_changed(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
+    def _judged(self, page: RenderedPage, lines: list[ReadLine]) -> list[ReadLine]:
+        motion = page.motion
+        conditions = PageConditions(motion.frame_rate_hz(), motion.head_speed_px_s()) if motion is not None else PageConditions()
+        read = [LineRead(ln.text, ln.raw_text or ln.text, ln.box, ln.char_scores) for ln in lines]
+        judgements = judge_lines(read, page.grey, self.confidence, known=self.corrector.known if self.corrector else None,
+                                 views=page.views, conditions=conditions)
+        return [replace(ln, judgement=j) for ln, j in zip(lines, judgements)]
+
+    def _read_changed(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, _Text], bool]:
         """Text and mean confidence of each changed band, and whether the engine stopped early:
         each band's own crop first; if a crop read nothing, every changed band is read again in
         place (the more of the page's layout the detector sees, the more it finds: on two pages
@@ -126,11 +148,11 @@ class LineReader:
         empty = [i for i in changed if not texts[i][0]]
         if empty:
             in_place, stopped = self._read_in_place(page, changed)
-            texts.update({i: in_place[i] for i in empty if in_place.get(i, ("", None))[0]})
+            texts.update({i: in_place[i] for i in empty if in_place.get(i, ("", None, None))[0]})
             truncated |= stopped
         return texts, truncated
 
-    def _read_in_place(self, page: RenderedPage, bands: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
+    def _read_in_place(self, page: RenderedPage, bands: list[int]) -> tuple[dict[int, _Text], bool]:
         """The given bands read together, each where it is on the page and the rest of the page
         white; each text found goes to the band its box lies in. Nothing from an engine that
         reports no boxes."""
@@ -147,22 +169,31 @@ class LineReader:
                 found[_band_of(line.box, page.bands, bands)].append(line)
         return {i: _joined(band_lines) for i, band_lines in found.items()}, result.truncated
 
-    def _read_crops(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, tuple[str, float | None]], bool]:
+    def _read_crops(self, page: RenderedPage, changed: list[int]) -> tuple[dict[int, _Text], bool]:
         """The changed bands one crop at a time."""
         texts, truncated = {}, False
         for i in changed:
             x0, y0, x1, y1 = page.bands[i]
             result = self.engine.read(_bordered(page.grey[y0:y1, x0:x1]))
-            text, confidence = _joined(result.lines)
-            texts[i] = (text or result.text.strip(), confidence)
+            text, confidence, chars = _joined(result.lines)
+            texts[i] = (text or result.text.strip(), confidence, chars)
             truncated |= result.truncated
         return texts, truncated
 
 
-def _joined(lines: list[OcrLine]) -> tuple[str, float | None]:
-    """One line's text from the pieces the engine found in it, and their mean confidence."""
+def _joined(lines: list[OcrLine]) -> _Text:
+    """One line's text from the pieces the engine found in it, their mean confidence and their
+    characters' probabilities."""
     scores = [line.confidence for line in lines if line.confidence is not None]
-    return " ".join(line.text.strip() for line in lines if line.text.strip()), float(np.mean(scores)) if scores else None
+    chars = [p for line in lines if line.text.strip() and line.char_scores for p in line.char_scores]
+    return (" ".join(line.text.strip() for line in lines if line.text.strip()), float(np.mean(scores)) if scores else None,
+            tuple(chars) if chars else None)
+
+
+def _line_shaped(box: Box) -> bool:
+    """Whether a band could be a line of text: at least three times as wide as high."""
+    x0, y0, x1, y1 = box
+    return x1 - x0 >= 3 * (y1 - y0)
 
 
 def _bordered(image: np.ndarray) -> np.ndarray:

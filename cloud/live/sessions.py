@@ -28,6 +28,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
+from ..confidence import LineJudgement, load_model
 from ..errors import NoPageError, StoreError
 from ..ocr.base import OcrBackend
 from ..store import PageBreak, SessionStore, StoredFrame
@@ -49,6 +50,7 @@ class LiveConfig:
     questions_first_s: float = 0.5  # stitching pauses this long at most while a question is read (OCR gets the CPU)
     push_interval_s: float = 1.0  # live push: at most one page update per session this often
     live_idle_s: float = 300.0  # a session untouched this long leaves memory
+    confidence_model: str | None = None  # the line-confidence model (JSON); None: the shipped one
 
 
 @dataclass(frozen=True)
@@ -207,7 +209,7 @@ class SessionPages:
     async def read(self, index: int | None = None) -> tuple[PageReading, RenderedPage]:
         """The page's newest version read: only lines that changed go through OCR."""
         rendered = await self.render(index)
-        reader = self.readers.setdefault(rendered.index, LineReader(self.owner.ocr))
+        reader = self.readers.setdefault(rendered.index, LineReader(self.owner.ocr, confidence=self.owner.confidence))
         lock = self.read_locks.setdefault(rendered.index, asyncio.Lock())
         async with lock:
             reading = await asyncio.get_running_loop().run_in_executor(self.owner.ocr_pool, reader.read, rendered)
@@ -283,11 +285,17 @@ class SessionPages:
             log.warning("session %s: its page task had stopped: %s", self.session_id, exc)
 
 
+def _judged(judgement: LineJudgement | None) -> dict[str, Any]:
+    if judgement is None:
+        return {"status": "read"}
+    return {"status": judgement.status, "confidence": judgement.confidence, "reasons": list(judgement.reasons)}
+
+
 def page_event(reading: PageReading) -> dict[str, Any]:
     return {
         "page": reading.index,
         "version": reading.version,
-        "lines": [{"text": line.text, "box": list(line.box)} for line in reading.lines],
+        "lines": [{"text": line.text, "box": list(line.box), **_judged(line.judgement)} for line in reading.lines],
         "text": reading.text,
     }
 
@@ -298,6 +306,7 @@ class LivePages:
     def __init__(self, store: SessionStore, ocr: OcrBackend, cfg: LiveConfig = LiveConfig()) -> None:
         self.store = store
         self.ocr = ocr
+        self.confidence = load_model(cfg.confidence_model)
         self.cfg = cfg
         self.stitch_pool = ThreadPoolExecutor(cfg.stitch_threads, thread_name_prefix="darkread-stitch")
         self.ocr_pool = ThreadPoolExecutor(cfg.ocr_threads, thread_name_prefix="darkread-ocr")

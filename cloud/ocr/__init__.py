@@ -21,6 +21,9 @@ def create_backend(settings: Settings) -> OcrBackend:
     """
     name = settings.ocr_backend
     if name in ("local", "rapidocr", "tesseract"):
+        from .lexicon import LexiconCorrected, LexiconCorrector
+
+        corrector = LexiconCorrector(language=settings.ocr_language) if settings.ocr_lexicon else None
         engine: OcrBackend
         if name == "tesseract":
             from .tesseract import TesseractBackend
@@ -29,12 +32,10 @@ def create_backend(settings: Settings) -> OcrBackend:
         else:
             from .rapid import RapidOcrBackend
 
-            engine = RapidOcrBackend(engines=settings.ocr_threads)  # one per thread reading pages
-        if not settings.ocr_lexicon:
-            return engine
-        from .lexicon import LexiconCorrected
-
-        return LexiconCorrected(engine)
+            # one engine per thread reading pages, decoding within the language's alphabet
+            engine = RapidOcrBackend(engines=settings.ocr_threads, language=None if settings.ocr_language == "any" else settings.ocr_language,
+                                     known=corrector.known if corrector is not None else None)
+        return engine if corrector is None else LexiconCorrected(engine, corrector)
     if name == "google":
         from .google_vision import GoogleVisionBackend
 

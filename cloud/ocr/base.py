@@ -24,6 +24,7 @@ class OcrLine:
     box: Box | None = None  # None when the engine reports no geometry (LLMs)
     confidence: float | None = None
     quad: Quad | None = None  # corners clockwise from the top-left, when the engine reports a rotated box
+    char_scores: tuple[float, ...] | None = None  # each character's probability, when the engine reports them
 
 
 @dataclass(frozen=True)

@@ -31,16 +31,19 @@ from __future__ import annotations
 import logging
 import math
 import re
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from itertools import combinations, product
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from ..errors import OcrUnavailableError
 from .base import OcrResult
+from .language_model import MODELS as LANGUAGE_MODELS
+from .language_model import Candidate, TrigramScorer, load_model, viterbi
 
 if TYPE_CHECKING:
     from symspellpy import SymSpell
@@ -61,7 +64,8 @@ _ALTERNATIVES: dict[str, str] = {
 }
 DROPPED_STEMS = "ilt"  # thin strokes a reconstruction can lose entirely
 _SENTENCE_END = (".", "!", "?", ":", ";")
-_CORE = re.compile(r"[A-Za-z]+")
+TextKind = Literal["letters", "words", "text"]
+RECENT_PAGES = 64  # corrected texts remembered
 
 
 def misreadings(read: str, substitutions: int) -> Iterator[str]:
@@ -119,14 +123,27 @@ class LexiconCorrector:
     max_substitutions: int = 3
     min_length: int = 3
     min_known_fraction: float = 0.3
-    swap_probability: float = 1e-4  # prior of one lookalike-glyph swap, against the context's evidence
+    min_pair_rate: float = 0.1  # share of adjacent words that are known pairs from which a page is coherent text
+    swap_log_prob: float = math.log(1e-4)  # channel: one real word read as a lookalike real word
+    fix_log_prob: float = math.log(0.1)  # channel: per lookalike glyph of a non-word's fix
+    keep_nonword_log_prob: float = math.log(1e-4)  # channel: a word the dictionary does not know was printed so
+    max_candidates: int = 6  # lookalikes per word the language model weighs (the most frequent)
+    language: str = "en"  # the language model of coherent text (``language_model.MODELS``); another: non-word fixes only
     _speller: SymSpell | None = field(default=None, init=False, repr=False)
-    _total: float = field(default=0.0, init=False, repr=False)
+    _trigrams: TrigramScorer | None = field(default=None, init=False, repr=False)
+    _recent: dict[str, str] = field(default_factory=dict, init=False, repr=False)
+    _recent_lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
     def _words(self) -> SymSpell:
         if self._speller is None:
             self._speller = _dictionary()
         return self._speller
+
+    def load(self) -> None:
+        """The word lists and the language model, now (OcrUnavailableError when missing)."""
+        self._words()
+        if self.language in LANGUAGE_MODELS:
+            self._scorer()
 
     def known(self, word: str) -> bool:
         return word.lower() in self._words().words
@@ -168,8 +185,9 @@ class LexiconCorrector:
         """``after_sentence_end``: whether the text before this line ended a sentence (or there is none)."""
         return self._correct_line(line, after_sentence_end)[0]
 
-    def _correct_line(self, line: str, after_sentence_end: bool) -> tuple[str, bool]:
-        """The line with its unknown words corrected, and whether it reads as prose."""
+    def _correct_line(self, line: str, after_sentence_end: bool, *, sentences: bool = True) -> tuple[str, bool]:
+        """The line with its unknown words corrected, and whether it reads as prose (``sentences``:
+        a capital I inside a sentence may be a misread i; not in a list of words)."""
         tokens = line.split(" ")
         parsed = [_TOKEN.match(t) for t in tokens]
         words = [m.group("word") for m in parsed if m is not None and len(m.group("word")) > 1]
@@ -186,83 +204,116 @@ class LexiconCorrector:
             if match is None:
                 out.append(token)
             else:
-                in_sentence = not sentence_start and not match.group("lead")
+                in_sentence = sentences and not sentence_start and not match.group("lead")
                 out.append(match.group("lead") + self.correct_word(match.group("word"), in_sentence=in_sentence)
                            + match.group("trail"))
             sentence_start = token.endswith(_SENTENCE_END) if token else sentence_start
         return " ".join(out), True
 
-    def correct(self, text: str) -> str:
-        lines: list[str] = []
-        prose: list[bool] = []
-        ended = True
-        for line in text.split("\n"):
-            corrected, is_prose = self._correct_line(line, ended)
-            lines.append(corrected)
-            prose.append(is_prose)
-            if line.strip():
-                ended = line.rstrip().endswith(_SENTENCE_END)
-        return "\n".join(self._in_context(lines, prose))
-
-    # -- known words that are likely misreadings in their context ("will toll us", "tho printer") --
-
-    def _context_score(self, word: str, before: str | None, after: str | None) -> float:
-        """log of a stupid-backoff bigram score of ``word`` between its neighbours."""
-        speller = self._words()
-        counts, pairs = speller.words, speller.bigrams
-        if not self._total:
-            self._total = float(sum(counts.values()))
-        own = max(counts.get(word, 0), 1)
-        score = 0.0
-        if before is not None and before in counts:
-            pair = pairs.get(f"{before} {word}")
-            score += math.log(pair / counts[before] if pair else 0.4 * own / self._total)
-        else:
-            score += math.log(own / self._total)
-        if after is not None and after in counts:
-            pair = pairs.get(f"{word} {after}")
-            score += math.log(pair / own if pair else 0.4 * counts[after] / self._total)
-        return score
-
-    def _in_a_pair(self, word: str, before: str | None, after: str | None) -> bool:
+    def text_kind(self, text: str) -> TextKind:
+        """What the page is, from its words: ``letters`` (most tokens unknown, no adjacent pair a
+        known word pair: random letters, codes), ``words`` (known words that rarely make known
+        pairs: a list), or ``text`` (at least ``min_pair_rate`` of adjacent words are known pairs)."""
+        words = [m.group("word").lower() for m in (_TOKEN.match(t) for t in text.split()) if m is not None]
+        long_words = [w for w in words if len(w) > 1]
+        if not long_words:
+            return "letters"
+        strict = sum(self.known(w) for w in long_words) / len(long_words)
+        near = sum(self.known(w) or self._one_glyph_from_known(w) for w in long_words) / len(long_words)
         pairs = self._words().bigrams
-        return (before is not None and f"{before} {word}" in pairs) or (after is not None and f"{word} {after}" in pairs)
+        adjacent = list(zip(words, words[1:]))
+        pair_rate = sum(f"{a} {b}" in pairs for a, b in adjacent) / len(adjacent) if adjacent else 0.0
+        if pair_rate >= self.min_pair_rate:
+            return "text"
+        # (short random letter groups are often one glyph from some word: "sona", "dop")
+        if near < self.min_known_fraction or (pair_rate == 0.0 and strict < 0.5 and near < 0.75):
+            return "letters"
+        return "words"
 
-    def _in_context(self, lines: list[str], prose: list[bool]) -> list[str]:
-        """Swap a lower-case known word for a lookalike one when it forms no known word pair with its
-        neighbours, the lookalike does, and the pair makes it far likelier (by more than the odds of
-        a glyph swap). Capitalised words (names, sentence starts) and lines that are not prose stay
-        as they are."""
-        tokens = [(k, t) for k, line in enumerate(lines) for t in line.split(" ")]
-        cores = []
-        for _, token in tokens:
-            found = _CORE.search(token)
-            cores.append(found.group(0).lower() if found else None)
+    def correct(self, text: str) -> str:
+        """Random letters stay as read; a word list gets its non-words fixed, one at a time;
+        coherent text gets the language model's pass over the whole page. (A page asked about
+        again while it grows reads the same until a line changes: the last few are remembered.)"""
+        with self._recent_lock:  # one corrector serves every OCR thread
+            if text in self._recent:
+                return self._recent[text]
+        corrected = self._correct(text)
+        with self._recent_lock:
+            self._recent[text] = corrected
+            while len(self._recent) > RECENT_PAGES:
+                del self._recent[next(iter(self._recent))]
+        return corrected
+
+    def _correct(self, text: str) -> str:
+        kind = self.text_kind(text)
+        if kind == "letters":
+            return text
+        if kind == "words" or self.language not in LANGUAGE_MODELS:  # no language model: non-word fixes only
+            return "\n".join(self._correct_line(line, True, sentences=False)[0] for line in text.split("\n"))
+        return self._by_language_model(text)
+
+    # -- coherent text: the noisy channel, scored by the trigram model --
+
+    def _candidates(self, word: str) -> list[Candidate]:
+        """What a lower-case ``word`` may have been printed as, with the channel's cost."""
         counts = self._words().words
-        log_swap = math.log(self.swap_probability)
-        out = [token for _, token in tokens]
-        for i, (k, token) in enumerate(tokens):
-            match = _TOKEN.match(token)
-            if not prose[k] or match is None or not match.group("word").islower():
-                continue
-            word = match.group("word")
-            candidates = sorted({c for c in misreadings(word, 1) if c in counts})
-            if not candidates:
-                continue
-            before = cores[i - 1] if i > 0 else None
-            after = cores[i + 1] if i + 1 < len(cores) else None
-            if self._in_a_pair(word, before, after):
-                continue  # the words around it know this word: keep it
-            best = max(candidates, key=lambda c: self._context_score(c, before, after))
-            if not self._in_a_pair(best, before, after):
-                continue  # no evidence beyond word frequency, which would flatten rare words
-            if self._context_score(best, before, after) + log_swap > self._context_score(word, before, after):
-                out[i] = match.group("lead") + best + match.group("trail")
-                cores[i] = best
-        joined: list[list[str]] = [[] for _ in lines]
-        for (k, _), token in zip(tokens, out):
-            joined[k].append(token)
-        return [" ".join(parts) for parts in joined]
+        read = word.lower()
+        if read in counts:
+            others = sorted((w for w in set(misreadings(read, 1)) if w in counts), key=counts.__getitem__, reverse=True)
+            return [Candidate(read, 0.0), *(Candidate(w, self.swap_log_prob) for w in others[: self.max_candidates - 1])]
+        if len(read) < self.min_length:
+            return [Candidate(read, 0.0)]
+        most = 1 if len(read) <= 4 else (2 if len(read) <= 7 else self.max_substitutions)
+        found: dict[str, float] = {}
+        for level in [1, 0, *range(2, most + 1)]:
+            cost = self.fix_log_prob * max(level, 1)
+            for w in misreadings(read, level):
+                if w in counts and w not in found:
+                    found[w] = cost
+            if len(found) >= self.max_candidates:
+                break
+        ranked = sorted(found, key=lambda w: (-found[w], -counts[w]))[: self.max_candidates]
+        # a word the dictionary does not know is itself a sign of a misreading: kept, it costs a glyph's fix
+        return [Candidate(read, self.keep_nonword_log_prob), *(Candidate(w, found[w]) for w in ranked)]
+
+    def _by_language_model(self, text: str) -> str:
+        """Non-words with a capital (names, sentence starts, a misread I) as in ``_correct_line``;
+        every lower-case word chosen among its lookalikes by Viterbi under the trigram model."""
+        scorer = self._scorer()
+        out_lines: list[list[str]] = []
+        slots: list[list[Candidate]] = []
+        places: list[tuple[int, int, re.Match[str]]] = []  # (line, token, match) of each slot
+        ended = True
+        for k, line in enumerate(text.split("\n")):
+            tokens = line.split(" ")
+            out_lines.append(tokens)
+            for j, token in enumerate(tokens):
+                match = _TOKEN.match(token)
+                if match is None:
+                    if token:
+                        ended = token.endswith(_SENTENCE_END)
+                    continue
+                word = match.group("word")
+                if word.islower():
+                    slot = self._candidates(word)
+                else:
+                    in_sentence = not ended and not match.group("lead")
+                    fixed = self.correct_word(word, in_sentence=in_sentence)
+                    tokens[j] = match.group("lead") + fixed + match.group("trail")
+                    slot = [Candidate(fixed.lower(), 0.0)]
+                slots.append(slot)
+                places.append((k, j, match))
+                ended = token.endswith(_SENTENCE_END)
+        chosen = viterbi(slots, scorer.log_prob)
+        for (k, j, match), slot, word in zip(places, slots, chosen):
+            if len(slot) > 1 and word != slot[0].word:
+                out_lines[k][j] = match.group("lead") + _with_case_of(match.group("word"), word) + match.group("trail")
+        return "\n".join(" ".join(tokens) for tokens in out_lines)
+
+    def _scorer(self) -> TrigramScorer:
+        if self._trigrams is None:
+            self._trigrams = TrigramScorer(load_model(self.language))
+        return self._trigrams
 
 
 class LexiconCorrected:
@@ -282,7 +333,7 @@ class LexiconCorrected:
         if not self.engine.ready():
             return False
         try:
-            self.corrector.known("the")
+            self.corrector.load()
         except OcrUnavailableError as exc:
             logger.warning("%s", exc)
             return False

@@ -6,13 +6,14 @@ import contextlib
 import logging
 import queue
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
 
 from ..errors import OcrError, OcrUnavailableError
 from .base import OcrLine, OcrResult, check_image, join_lines, reading_order
+from .charset import LANGUAGES, restrict_engine
 
 log = logging.getLogger(__name__)
 
@@ -38,9 +39,17 @@ class RapidOcrBackend:
 
     name = "rapidocr"
 
-    def __init__(self, params: dict[str, Any] | None = None, engines: int = 1) -> None:
+    def __init__(self, params: dict[str, Any] | None = None, engines: int = 1, *, language: str | None = "en",
+                 known: Callable[[str], bool] | None = None) -> None:
+        """``language``: decode within its alphabet (``charset.LANGUAGES``; None: every class of the
+        model); ``known``: whether a word is a dictionary word (decides between the masked and the
+        ASCII-folded read)."""
         if engines < 1:
             raise ValueError(f"engines must be at least 1, not {engines}")
+        if language is not None and language not in LANGUAGES:
+            raise ValueError(f"no alphabet for language {language!r}; choose one of {sorted(LANGUAGES)}")
+        self.language = language
+        self.known = known
         self._params = {**RAPIDOCR_PARAMS, **(params or {})}
         self.engines = engines
         self._idle: queue.SimpleQueue[Any] = queue.SimpleQueue()
@@ -59,6 +68,8 @@ class RapidOcrBackend:
         # (and its CPU counted against it); ``ready`` loads them now
         for load in ("_load_det_model", "_load_rec_model"):
             getattr(engine, load, lambda: None)()
+        if self.language is not None:
+            restrict_engine(engine, self.language, self.known)
         return engine
 
     def _make_one(self) -> Any | None:
@@ -101,7 +112,9 @@ class RapidOcrBackend:
         for quad, text, score in zip(output.boxes, output.txts, output.scores, strict=True):
             xs, ys = np.asarray(quad)[:, 0], np.asarray(quad)[:, 1]
             box = (int(xs.min()), int(ys.min()), int(np.ceil(xs.max())), int(np.ceil(ys.max())))
-            c0, c1, c2, c3 = ((float(x), float(y)) for x, y in np.asarray(quad, dtype=np.float64)[:4])
-            lines.append(OcrLine(text=str(text), box=box, confidence=float(score), quad=(c0, c1, c2, c3)))
+            corners = tuple((float(x), float(y)) for x, y in np.asarray(quad, dtype=np.float64)[:4])
+            chars = getattr(score, "chars", None)
+            lines.append(OcrLine(text=str(text), box=box, confidence=float(score), quad=corners,  # type: ignore[arg-type]
+                                 char_scores=tuple(chars) if chars is not None else None))
         ordered = reading_order(lines)
         return OcrResult(text=join_lines(ordered), lines=ordered)

@@ -24,6 +24,11 @@ i/20 of an ask period after the first and reads three passes (``wearers_ask_p95_
 same 20 starting in one instant, one pass each, is measured too (``wearers_burst_ask_p95_ms_20``):
 every first question, each a whole new page, then arrives within a few milliseconds of the others,
 the worst case for the queue.
+
+What reading within the language costs an answer (rapidocr's alphabet mask, the trigram model's
+correction of coherent text, each line judged): ``ask_p95_ratio_language`` is ``ask_p95_ms_300``
+over the same 300-frame run against a service with ``ocr_language=any`` (every character of the
+engine, non-word fixes only), measured right after it (goal <= 1.2).
 """
 
 from __future__ import annotations
@@ -221,12 +226,12 @@ async def _wait_rebuilt(base: str, session_id: str, timeout_s: float) -> float:
     return time.perf_counter() - started
 
 
-def _server(ctx: BenchContext, name: str, ocr_threads: int = ASK_OCR_THREADS) -> tuple[subprocess.Popen[bytes], str]:
+def _server(ctx: BenchContext, name: str, ocr_threads: int = ASK_OCR_THREADS, language: str = "en") -> tuple[subprocess.Popen[bytes], str]:
     """The service in its own process, once /readyz says its OCR engines are loaded."""
     import httpx
 
     os.environ.update(DARKREAD_ASK_RATE_PER_MIN="1000000", DARKREAD_ASK_BURST="10000",  # asks every 0.5 s
-                      DARKREAD_OCR_THREADS=str(ocr_threads))
+                      DARKREAD_OCR_THREADS=str(ocr_threads), DARKREAD_OCR_LANGUAGE=language)
     process, port = start_server(ctx.scratch / name)
     base = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + 300
@@ -291,6 +296,23 @@ def reading_cpu(ctx: BenchContext, frames: list[StoredFrame], kind: str) -> tupl
     return cpu_ms / reading_s, reading_s
 
 
+def _language_ratio(ctx: BenchContext, frames: list[StoredFrame], ask_p95_ms: float) -> Figure:
+    """The answer's cost of reading within the language: ``ask_p95_ms_300`` over the same run with
+    ``ocr_language=any`` (every character of the engine, non-word fixes only, as before the
+    alphabet mask and the language model), measured right after it."""
+    name = "ask-any-language"
+    process, base = _server(ctx, name, language="any")
+    try:
+        latencies = asyncio.run(stream_and_ask(base, name, frames, ASK_EVERY_S))
+    finally:
+        stop_server(process)
+    reference = p95(latencies)
+    print(f"[bench] ask {len(frames)} frames, ocr_language=any: p95 {reference:.0f} ms; {_load()}", file=sys.stderr, flush=True)
+    return Figure("ask_p95_ratio_language", ask_p95_ms / reference,
+                  "ask p95 reading within the language (alphabet mask, trigram LM, line judgements) over ocr_language=any",
+                  reference=f"ocr_language=any: p95 {reference:.0f} ms over {len(latencies)} answers", goal="<= 1.2")
+
+
 def _load() -> str:
     one, five, fifteen = os.getloadavg()
     return f"load average {one:.1f} {five:.1f} {fifteen:.1f}"
@@ -345,6 +367,7 @@ def run(ctx: BenchContext) -> list[Figure]:
                                   f"cloud CPU per s of reading, asking every {ASK_EVERY_S:g} s [ms]",
                                   reference=f"asking every {WEARER_ASK_EVERY_S:g} s: "
                                             f"{per_kind[STREAM_KINDS[default]]:.0f}"))  # fmt: skip
+    figures.append(_language_ratio(ctx, repeated(frames, sizes[0]), next(f.value for f in figures if f.key == f"ask_p95_ms_{sizes[0]}")))
     passes = 1 if ctx.smoke else WEARER_PASSES
     runs = {  # independent wearers (the figure), and the same wearers all starting in one instant
         "": (repeated(frames, passes * len(frames)), WEARER_ASK_EVERY_S),

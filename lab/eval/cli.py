@@ -12,6 +12,8 @@ if TYPE_CHECKING:
 
 from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
 
+DEFAULT_CONFIDENCE_MODEL = Path(__file__).resolve().parents[2] / "cloud" / "data" / "line_confidence.json"
+
 logger = logging.getLogger(__name__)
 BOTH = "both"
 
@@ -62,6 +64,13 @@ Five forms:
       ink with an event within 1 px; by lux and motion, written to --out (a .md file, or a folder:
       FOLDER/evidence.md) with the per-recording figures beside it (.json). Needs no evaluation.
 
+  darkread eval calibrate SUITE_DIR [--work DIR] [--model-out FILE.json] [--out DIR] [--target-risk R]
+      fit the cloud's line-confidence model on an evaluated suite's lines (each right or wrong by its
+      CER; recordings 0-3, 8-11, ... fit it, 4-7, 12-15, ... are held out), write it (default
+      cloud/data/line_confidence.json, what the cloud ships) and its calibration on the held-out
+      lines (calibration.md, reliability.png with the ECE) to --out; then rebuild the report
+      (--report-only) to see coverage and risk under it.
+
   Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
   PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
   default SUITE_DIR/eval_runs/<mode>), and the report puts the other mode beside the default:
@@ -83,7 +92,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
               "       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n"
               "       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n"
               "       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]\n"
-              "       darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]",
+              "       darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]\n"
+              "       darkread eval calibrate SUITE_DIR [--work DIR] [--model-out FILE.json] [--out DIR]",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
@@ -129,6 +139,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-rgb", action="store_true",
                         help="leave out the RGB baseline and the bandwidth figures (they need its snapshot): darkread's "
                              "reading only, e.g. for a second simulator's suite whose scenes another suite already has")
+    parser.add_argument("--model-out", metavar="FILE.json", default=str(DEFAULT_CONFIDENCE_MODEL),
+                        help="calibrate: where the fitted line-confidence model goes (default: the one the cloud ships)")
+    parser.add_argument("--target-risk", type=float, default=0.05, metavar="R",
+                        help="calibrate: the CER the answered lines of the fitting half may have (sets the answer threshold; default 0.05)")
+    parser.add_argument("--before", metavar="RESULTS.json",
+                        help="an earlier report's results.json of the same suite: the report compares darkread's CER by lux "
+                             "and kind on the recordings both hold (e.g. docs/eval/before/results.json)")
     parser.add_argument("--jobs", type=int, default=1, metavar="N",
                         help="worker processes (make-suite and evaluation; default 1)")
     parser.set_defaults(func=_run)
@@ -141,6 +158,8 @@ def _run(args: argparse.Namespace) -> int:
         return _attribute(args)
     if args.target == "evidence":
         return _evidence(args)
+    if args.target == "calibrate":
+        return _calibrate(args)
     if args.second_suite is not None:
         raise ValueError(f"unexpected argument {args.second_suite!r}")
     if args.target == "make-suite":
@@ -210,8 +229,25 @@ def _evidence(args: argparse.Namespace) -> int:
     return 0
 
 
+def _calibrate(args: argparse.Namespace) -> int:
+    from darkread.lab.eval.calibrate import calibrate
+    from darkread.lab.eval.runner import load_results
+    from darkread.lab.eval.selective import outcomes
+
+    suite = _one_suite(args, "give one evaluated suite: darkread eval calibrate SUITE_DIR [--work DIR] [--model-out FILE.json]")
+    work = Path(args.work) if args.work else suite / "eval_runs" / _first_mode(args)
+    if not 0 < args.target_risk < 1:
+        raise ValueError(f"--target-risk {args.target_risk:g}: give a CER between 0 and 1")
+    lines = outcomes(load_results(work))
+    model, ece = calibrate(lines, Path(args.model_out), Path(args.out), args.target_risk)
+    print(f"{len(lines)} lines; held-out ECE {ece:.3f}; answer threshold {model.answer_threshold:g}; "
+          f"model: {args.model_out}; calibration: {Path(args.out) / 'calibration.md'}")
+    return 0
+
+
 def _evaluate(args: argparse.Namespace) -> int:
     from darkread.edge.reconstruct import default_model_path
+    from darkread.lab.eval.before_after import load_before
     from darkread.lab.eval.provenance import ReportInfo, describe_model, git_commit
     from darkread.lab.eval.report import write_report
 
@@ -230,8 +266,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         suite=_describe_suite(suite, per_mode[0]),
         notes=list(args.note),
     )
+    before = (args.before, load_before(args.before)) if args.before else None
     path = write_report(per_mode[0], args.out, info, beside=per_mode[1] if len(per_mode) > 1 else None,
-                        suite_dir=suite)
+                        suite_dir=suite, before=before)
     print(f"report: {path}")
     return 0
 

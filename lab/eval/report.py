@@ -16,12 +16,16 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from darkread.cloud.confidence import load_model as load_confidence_model
 from darkread.lab.eval.aggregate import held_out_fonts, mean, paired, sweep_subset
 from darkread.lab.eval.attribution import attribution_section
+from darkread.lab.eval.before_after import before_after_section
+from darkread.lab.eval.clean_text import clean_text_check, clean_text_section
 from darkread.lab.eval.evidence import evidence_section
 from darkread.lab.eval.plots import plot_backends, plot_cer_vs, plot_cer_vs_lux_by_motion, plot_examples
 from darkread.lab.eval.provenance import ReportInfo, run_commits
 from darkread.lab.eval.results import RecordingResult
+from darkread.lab.eval.selective import selective_section
 from darkread.lab.eval.simulators import simulator_section
 from darkread.lab.eval.tables import (
     backend_table,
@@ -71,12 +75,14 @@ def _results_json(results: Sequence[RecordingResult], suite_dir: str | Path | No
 
 
 def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: ReportInfo,
-                 beside: Sequence[RecordingResult] | None = None, suite_dir: str | Path | None = None) -> Path:
+                 beside: Sequence[RecordingResult] | None = None, suite_dir: str | Path | None = None,
+                 before: tuple[str, Sequence[RecordingResult]] | None = None) -> Path:
     """Write ``README.md``, ``results.json`` and the PNG plots into ``out_dir``; returns the Markdown path.
 
     ``beside``: the same suite evaluated in the other edge mode, compared with ``results`` (the primary
     mode, which every other table shows) in a section of its own and in the bandwidth table.
-    ``suite_dir``: the paths in the JSON files are written relative to it."""
+    ``suite_dir``: the paths in the JSON files are written relative to it. ``before``: (where from,
+    results) of an earlier evaluation of the same suite, compared on the recordings both hold."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     every = sorted(results, key=lambda r: str(r.name))
@@ -119,6 +125,9 @@ def write_report(results: Sequence[RecordingResult], out_dir: str | Path, info: 
         *headline_table(results),
         "",
         *modes_md,
+        *(before_after_section(results, before[1], before[0]) if before else []),
+        *selective_section(every, out, load_confidence_model()),
+        *clean_text_section(clean_text_check()),
         "## Real readers' scanpaths",
         "",
         *scanpath_table(results, human),

@@ -113,6 +113,7 @@ def evaluate_recording(
     from darkread.core.text_metrics import error_rates
     from darkread.lab.eval.bandwidth import measure_bandwidth, page_ink_from_png
     from darkread.lab.eval.rgb_baseline import baseline_snapshot, read_snapshot
+    from darkread.lab.eval.selective import match_lines
     from darkread.read import read_recording
 
     recording_dir, run_dir = Path(recording_dir), Path(run_dir)
@@ -143,6 +144,7 @@ def evaluate_recording(
             "text": r.text, "cer": r.cer, "wer": r.wer, "frames": r.frames, "messages_sent": r.messages_sent,
             "bytes_sent": r.bytes_sent, "events_in": r.events_in, "events_foveated": r.events_foveated,
             "page_png": r.page_png, "seconds": round(time.perf_counter() - started, 2),
+            "lines": match_lines(reference, r.answer_lines), "spoken": r.spoken,
         }
 
     result["darkread"] = _guard(f"{recording_dir.name}: darkread", run_darkread)

@@ -139,6 +139,33 @@ def test_page_updates_are_pushed_while_the_wearer_reads(server: Any) -> None:
     versions = [e["version"] for e in events]
     assert versions == sorted(versions) and versions[-1] >= 25
     assert events[-1]["lines"] and all("text" in line and len(line["box"]) == 4 for line in events[-1]["lines"])
+    assert all(line["status"] in ("read", "unclear") for line in events[-1]["lines"])
+
+
+def test_lines_the_model_is_unsure_of_are_unclear_in_the_answer_and_the_push(
+    make_settings: Any, run_server: Any, tmp_path: Any
+) -> None:
+    """A model that trusts no line (its threshold above any confidence), and takes any disagreement of
+    the frames for too dark: every line is unclear, with that reason, in the JSON answer, the push and the spoken words."""
+    from darkread.cloud.confidence import load_model
+
+    shipped = load_model()
+    doubting = {**{k: getattr(shipped, k) for k in ("mean", "scale", "weights", "intercept", "fast_head_speed", "small_height_px")},
+                "features": list(shipped.features), "answer_threshold": 1.01, "dark_ink_solid": 2.0}
+    path = tmp_path / "doubting.json"
+    path.write_text(json.dumps(doubting))
+    with run_server(make_settings(line_confidence_model=path), ocr=RapidOcrBackend()) as server:
+        stream(server, "doubt", reading_frames())
+        with httpx.Client(base_url=server.url, headers=AUTH, timeout=60) as http:
+            answer = http.post("/v1/sessions/doubt/ask").json()
+            with http.stream("GET", "/v1/sessions/doubt/events") as response:
+                data = next(line for line in response.iter_lines() if line.startswith("data: "))
+    assert answer["lines"] and answer["unclear_lines"] == len(answer["lines"])
+    assert all(line["status"] == "unclear" and "too_dark" in line["reasons"] for line in answer["lines"]), answer["lines"]
+    assert answer["reasons"][0] == "too_dark" and answer["text"].split("\n") == LINES  # the guesses stay in the JSON
+    assert LINES[0] not in answer["spoken"] and "lines unclear." in answer["spoken"] and "Please add more light." in answer["spoken"]
+    pushed = json.loads(data[6:])["lines"]
+    assert pushed and all(line["status"] == "unclear" and line["reasons"] for line in pushed)
 
 
 def test_idle_sessions_leave_memory_and_expire(make_settings: Any, run_server: Any) -> None:

@@ -109,3 +109,21 @@ def test_settings_switch_the_correction() -> None:
     on = create_backend(Settings(_env_file=None, ocr_backend="tesseract"))
     off = create_backend(Settings(_env_file=None, ocr_backend="tesseract", ocr_lexicon=False))
     assert isinstance(on, LexiconCorrected) and not isinstance(off, LexiconCorrected)
+
+
+def test_the_kind_of_text_decides_how_much_is_corrected(corrector: LexiconCorrector) -> None:
+    assert corrector.text_kind("sona dop Xq7 bL\nkw;rt Zp ao") == "letters"
+    assert corrector.text_kind("tamed lantern orchard\nvelvet margin quarry") == "words"
+    assert corrector.text_kind("will tell us more at large\nand the rest of it") == "text"
+    # random letters: no correction at all (the word-list pass made "sona dop" "sana dep")
+    assert corrector.correct("sona dop Xq7 bL") == "sona dop Xq7 bL"
+    # a word list: real words are never swapped for others, non-words are fixed
+    assert corrector.correct("tamed lantern orchard\nvelvet margln quarry") == "tamed lantern orchard\nvelvet margin quarry"
+
+
+def test_clean_prose_is_left_almost_untouched() -> None:
+    from darkread.lab.eval.clean_text import clean_text_check
+
+    check = clean_text_check()
+    assert check.lines > 400
+    assert check.changed_share < 0.02 and check.cer_added < 0.001

@@ -82,7 +82,8 @@ def test_ask_reads_the_latest_page(server: Any, client: httpx.Client) -> None:
     assert answer["backend"] == "recording" and answer["page_id"] == "page-3"
     assert answer["question"] == "what does this say"
     assert answer["text"] == f"80x120 ink={int(mask.sum())}" and answer["latency_ms"] >= 0
-    assert answer["lines"] == [{"text": answer["text"], "box": [0, 0, 120, 80], "confidence": 1.0}]
+    assert answer["lines"] == [{"text": answer["text"], "box": [0, 0, 120, 80], "confidence": 1.0, "status": "read",
+                               "reasons": [], "evidence": {}}]  # an engine without character scores: answered as read
     np.testing.assert_array_equal(server.ocr.images[-1], np.where(mask == 1, 0, 255))  # black on white
     asked = client.post("/v1/sessions/sess-ask/ask", headers=AUTH, json={"question": "read it"}).json()
     assert asked["question"] == "read it"

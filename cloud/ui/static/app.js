@@ -178,16 +178,23 @@ function watchSession(sessionId) {
   }
 
   // New lines are appended (the live region announces only them); a changed reading replaces all.
+  // Each line: { text, unclear } (an unclear line is shown as such, never its guess).
   function showText(lines) {
     const current = Array.from(text.children, (p) => p.textContent);
-    const extends_ = current.length <= lines.length && current.every((line, i) => line === lines[i]);
+    const extends_ = current.length <= lines.length && current.every((line, i) => line === lines[i].text);
     if (!extends_) text.replaceChildren();
     for (const line of lines.slice(extends_ ? current.length : 0)) {
       const p = document.createElement("p");
-      p.textContent = line;
+      p.textContent = line.text;
+      if (line.unclear) p.className = "unclear";
       text.append(p);
     }
   }
+
+  const REASON_WORDS = { too_dark: "too dark", too_much_motion: "hold still", too_small: "too small", look_again: "look again" };
+  const shownLine = (line) => (line.status === "unclear"
+    ? { text: `Unclear line (${(line.reasons || []).map((r) => REASON_WORDS[r] || r).join(", ") || "look again"})`, unclear: true }
+    : { text: line.text, unclear: false });
 
   async function ask() {
     const response = await api(`${base}/ask`, {
@@ -199,8 +206,8 @@ function watchSession(sessionId) {
     return response.json();
   }
 
-  const linesOf = (result) => (result.lines.length ? result.lines.map((l) => l.text) : result.text.split("\n"))
-    .filter((line) => line.trim());
+  const linesOf = (result) => (result.lines.length ? result.lines : result.text.split("\n").map((t) => ({ text: t })))
+    .filter((line) => line.text.trim() || line.status === "unclear").map(shownLine);
 
   // Reads the page again when it changed, at most every MIN_READ_GAP_MS (OCR is the costly part).
   async function readAlong(state) {
@@ -258,7 +265,7 @@ function watchSession(sessionId) {
   }
 
   async function onPage(event) {
-    const lines = (event.lines || []).map((line) => line.text).filter((line) => line.trim());
+    const lines = (event.lines || []).filter((line) => line.text.trim() || line.status === "unclear").map(shownLine);
     if (lines.length) showText(lines);
     latest = { page: event.page, count: (event.lines || []).length };
     queueReadyLines(false);

@@ -138,7 +138,10 @@ def test_an_engine_without_boxes_reads_crops_only() -> None:
 
     ocr = NoBoxes()
     reading = LineReader(ocr).read(page)
-    assert ocr.calls == len(LINES) + 1 and reading.lines == ()  # the in-place read had no boxes: not used
+    assert ocr.calls == len(LINES) + 1 and reading.text == ""  # the in-place read had no boxes: not used
+    # each band read as nothing is an unclear line, not left out
+    assert [line.text for line in reading.lines] == [""] * len(LINES)
+    assert all(line.judgement is not None and line.judgement.status == "unclear" for line in reading.lines)
 
 
 def test_only_the_lines_whose_crop_read_nothing_take_the_in_place_text() -> None:

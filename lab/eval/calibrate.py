@@ -1,0 +1,228 @@
+"""``darkread eval calibrate``: fit the line-confidence model the cloud ships, and report its calibration.
+
+The lines of an evaluated suite, each labelled right (CER at most ``selective.RIGHT_MAX_CER``) or
+wrong, are split by recording: recordings 0-3, 8-11, 16-19, ... fit the model, 4-7, 12-15, ... are held out
+and only measured (the suite's grid cycles the text kinds within each four). The model is a logistic
+regression on standardised evidence (Newton's method, numpy only), its ridge the one that predicts
+best across the fitting recordings' two halves. The answer threshold is the lowest confidence whose
+answered lines on the fitting half read at ``target_risk`` CER or better; the limits the reasons
+are judged by come from the fitting half's known conditions: the share of solid ink (all frames
+agreed) halfway between the dim pages (10 lux and below) and the rest, both without walking (at
+most the greyest tenth of the lit lines), and the head speed halfway between walking
+and the other motions. Written: the model (JSON, ``cloud/data/line_confidence.json`` by default),
+and beside the report ``calibration.md`` with the reliability diagram and ECE on the held-out half.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from darkread.cloud.confidence import FEATURES, ConfidenceModel
+from darkread.lab.eval.selective import LineOutcome, reliability, weighted_cer
+
+# on standardised evidence; the one with the best Brier score in two-fold cross-validation on the fitting half is used
+RIDGES = (0.1, 0.3, 1.0, 3.0, 10.0)
+DIM_LUX = 10.0
+SMALL_HEIGHT_PX = 9.0  # a line band lower than this holds glyphs of about 4 px x-height: below what the network resolves
+
+
+def split(lines: Sequence[LineOutcome]) -> tuple[list[LineOutcome], list[LineOutcome]]:
+    """(fitting, held-out): by the recording's number in blocks of four (the suite's grid cycles the
+    four text kinds within a block, so each half holds every kind, and motions alternate)."""
+    def held_out(line: LineOutcome) -> bool:
+        head = line.recording.split("_", 1)[0]
+        return head.isdigit() and (int(head) // 4) % 2 == 1
+
+    return [ln for ln in lines if not held_out(ln)], [ln for ln in lines if held_out(ln)]
+
+
+def _matrix(lines: Sequence[LineOutcome], fill: np.ndarray | None = None) -> np.ndarray:
+    x = np.array([[line.evidence.get(name, np.nan) for name in FEATURES] for line in lines], dtype=np.float64)
+    if fill is None:  # a missing piece of evidence counts as its mean (what the cloud assumes too)
+        seen = ~np.isnan(x)
+        fill = np.where(seen, x, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
+    return np.where(np.isnan(x), fill, x)
+
+
+def fit_logistic(x: np.ndarray, y: np.ndarray, ridge: float = 1.0, steps: int = 50) -> tuple[np.ndarray, float]:
+    """Weights and intercept of a ridge logistic regression on standardised ``x`` (Newton's method)."""
+    design = np.hstack([x, np.ones((len(x), 1))])
+    w = np.zeros(design.shape[1])
+    penalty = np.diag([ridge] * x.shape[1] + [0.0])
+    for _ in range(steps):
+        p = 1.0 / (1.0 + np.exp(-np.clip(design @ w, -50, 50)))
+        gradient = design.T @ (y - p) - penalty @ w
+        hessian = design.T @ (design * (p * (1 - p))[:, None]) + penalty + 1e-9 * np.eye(len(w))
+        step = np.linalg.solve(hessian, gradient)
+        w += step
+        if np.abs(step).max() < 1e-8:
+            break
+    return w[:-1], float(w[-1])
+
+
+def _midpoint(a: list[float], b: list[float], default: float) -> float:
+    return (float(np.median(a)) + float(np.median(b))) / 2 if a and b else default
+
+
+def _dark_limit(dim: list[float], lit: list[float]) -> float:
+    """Solid ink below which a still page is called too dark: halfway between dim and lit pages, but
+    no higher than what the greyest tenth of lit lines show (the two overlap: in good light a line
+    read by few frames is grey too, and "add more light" would be wrong advice there)."""
+    if not dim or not lit:
+        return 0.0
+    return min(_midpoint(dim, lit, 0.0), float(np.percentile(lit, 10)))
+
+
+def _standardised(lines: Sequence[LineOutcome]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    x = _matrix(lines)
+    mean, scale = x.mean(axis=0), x.std(axis=0)
+    scale = np.where(scale > 1e-9, scale, 1.0)
+    return (x - mean) / scale, np.array([line.right for line in lines], dtype=np.float64), mean, scale
+
+
+def choose_ridge(lines: Sequence[LineOutcome]) -> float:
+    """The ridge with the lowest Brier score when one half of the recordings predicts the other, both ways."""
+    recordings = sorted({line.recording for line in lines})
+    first = set(recordings[::2])
+    halves = [[ln for ln in lines if ln.recording in first], [ln for ln in lines if ln.recording not in first]]
+    if min(len(h) for h in halves) < 10:
+        return 1.0
+
+    def brier(ridge: float) -> float:
+        total = 0.0
+        for train, test in (halves, halves[::-1]):
+            x, y, mean, scale = _standardised(train)
+            w, b = fit_logistic(x, y, ridge)
+            p = 1.0 / (1.0 + np.exp(-(((_matrix(test, mean) - mean) / scale) @ w + b)))
+            total += float(np.mean((p - np.array([ln.right for ln in test], dtype=np.float64)) ** 2))
+        return total
+
+    return min(RIDGES, key=brier)
+
+
+def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceModel:
+    x, y, mean, scale = _standardised(lines)
+    weights, intercept = fit_logistic(x, y, choose_ridge(lines))
+    still = [ln for ln in lines if ln.motion != "walking" and "ink_solid" in ln.evidence]
+    solid_dim = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) <= DIM_LUX]
+    solid_lit = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) > DIM_LUX]
+    fast = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion == "walking"]
+    calm = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion != "walking"]
+    model = ConfidenceModel(
+        FEATURES, tuple(map(float, mean)), tuple(map(float, scale)), tuple(map(float, weights)), intercept, 0.0,
+        _dark_limit(solid_dim, solid_lit), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX,
+    )
+    return _with_threshold(model, lines, target_risk)
+
+
+def _with_threshold(model: ConfidenceModel, lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceModel:
+    """The lowest threshold whose answered lines read at ``target_risk`` CER or better."""
+    p = np.array([model.probability(line.evidence) for line in lines])
+    for threshold in np.round(np.arange(0.0, 1.0, 0.01), 2):
+        answered = [line for line, q in zip(lines, p) if q >= threshold]
+        risk = weighted_cer(answered)
+        if risk is not None and risk <= target_risk:
+            return _replace_threshold(model, float(threshold))
+    return _replace_threshold(model, 0.99)
+
+
+def _replace_threshold(model: ConfidenceModel, threshold: float) -> ConfidenceModel:
+    return replace(model, answer_threshold=threshold)
+
+
+def model_json(model: ConfidenceModel, meta: dict[str, Any]) -> str:
+    doc = {
+        "about": "line confidence: logistic regression on standardised evidence (cloud/confidence.py); "
+                 "fitted by `darkread eval calibrate`", **meta,
+        "features": list(model.features), "mean": [round(v, 6) for v in model.mean], "scale": [round(v, 6) for v in model.scale],
+        "weights": [round(v, 6) for v in model.weights], "intercept": round(model.intercept, 6),
+        "answer_threshold": model.answer_threshold, "dark_ink_solid": round(model.dark_ink_solid, 4),
+        "fast_head_speed": round(model.fast_head_speed, 4), "small_height_px": model.small_height_px,
+    }
+    return json.dumps(doc, indent=1) + "\n"
+
+
+def bootstrap_ece(p: np.ndarray, right: np.ndarray, draws: int = 1000, seed: int = 0) -> tuple[float, float]:
+    """5th and 95th percentile of the ECE over resamplings of the held-out lines."""
+    rng = np.random.default_rng(seed)
+    values = []
+    for _ in range(draws):
+        pick = rng.integers(0, len(p), len(p))
+        values.append(reliability(p[pick], right[pick])[0])
+    return float(np.percentile(values, 5)), float(np.percentile(values, 95))
+
+
+def plot_reliability(rows: list[tuple[float, float, int]], ece: float, path: Path) -> Path:
+    from darkread.lab.eval.plots import _pyplot
+
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    ax.plot([0, 1], [0, 1], color="grey", lw=1, ls="--", label="perfectly calibrated")
+    ax.plot([r[0] for r in rows], [r[1] for r in rows], "o-", label=f"held-out lines (ECE {ece:.3f})")
+    for conf, acc, n in rows:
+        ax.annotate(str(n), (conf, acc), textcoords="offset points", xytext=(4, -10), fontsize=7)
+    ax.set_xlabel("confidence (predicted probability the line is right)")
+    ax.set_ylabel(f"share of lines right (CER <= {100 * 0.04:g} %)")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, target_risk: float) -> tuple[ConfidenceModel, float]:
+    """Fit on the fitting half, measure on the held-out half, write the model and calibration.md."""
+    fitting, held = split([line for line in lines if line.read])  # bands read as nothing: unclear by rule, not by the model
+    if len(fitting) < 20 or len(held) < 10:
+        raise ValueError(f"too few judged lines to calibrate ({len(fitting)} to fit, {len(held)} held out); evaluate more recordings")
+    model = fit_model(fitting, target_risk)
+    p = np.array([model.probability(line.evidence) for line in held])
+    right = np.array([line.right for line in held], dtype=np.float64)
+    ece, rows = reliability(p, right)
+    low, high = bootstrap_ece(p, right)
+    meta = {"fitted_on": f"{len(fitting)} lines of {len({ln.recording for ln in fitting})} recordings (numbered 0-3, 8-11, 16-19, ...)",
+            "held_out_ece": round(ece, 4), "held_out_ece_90": [round(low, 4), round(high, 4)], "held_out_lines": len(held),
+            "target_risk": target_risk}
+    model_out.parent.mkdir(parents=True, exist_ok=True)
+    model_out.write_text(model_json(model, meta))
+    report_dir.mkdir(parents=True, exist_ok=True)
+    plot_reliability(rows, ece, report_dir / "reliability.png")
+    md = [
+        "# Line confidence: calibration",
+        "",
+        (f"Fitted by `darkread eval calibrate` on {meta['fitted_on']}; measured on the {len(held)} lines of the "
+         f"{len({ln.recording for ln in held})} recordings it was not fitted on (4-7, 12-15, ...). A line is right when its CER is "
+         f"at most 4 % (one character in a suite line). Answer threshold {model.answer_threshold:g} (the lowest whose "
+         f"answered lines on the fitting half read at {100 * target_risk:g} % CER or better)."),
+        "",
+        (f"**Held-out ECE: {ece:.3f}** (10 equal-width bins; {100 * right.mean():.0f} % of the {len(held)} held-out lines right; "
+         f"90 % bootstrap interval over the held-out lines {low:.3f}-{high:.3f}: with this few lines the estimate is coarse)."),
+        "",
+        "![reliability diagram](reliability.png)",
+        "",
+        "| confidence bin (mean) | share right | lines |",
+        "|---:|---:|---:|",
+        *[f"| {conf:.2f} | {acc:.2f} | {n} |" for conf, acc, n in rows],
+        "",
+        "Weights (standardised evidence; positive: more likely right):",
+        "",
+        "| evidence | weight |",
+        "|---|---:|",
+        *[f"| {name} | {w:+.2f} |" for name, w in zip(model.features, model.weights)],
+        "",
+        (f"Reasons: too much motion above {math.expm1(model.fast_head_speed):.0f} px/s of head motion; else too dark when "
+         f"frames agree on less than {100 * model.dark_ink_solid:.0f} % of the ink (solid ink: all frames saw it), "
+         f"too small below {model.small_height_px:g} px line height."),
+        "",
+    ]
+    (report_dir / "calibration.md").write_text("\n".join(md))
+    return model, ece

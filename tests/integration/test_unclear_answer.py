@@ -1,0 +1,51 @@
+"""An honest answer in the dark: a 5-lux page read while walking, asked through the real cloud.
+
+The small suite's 5-lux walking recording (synthetic, fixed seed) is replayed by a real edge into
+a real uvicorn cloud on loopback; the JSON answer marks the lines it is unsure of as unclear with
+a reason, and the spoken answer (espeak-ng), transcribed back with PocketSphinx, says so in plain
+words and says what would help.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from speech_measure import require_espeak, transcribe
+
+from darkread.cloud.confidence import REASONS
+from darkread.lab.eval.suite import make_suite, suite_entries
+from darkread.read import read_recording
+
+pytestmark = pytest.mark.slow
+
+HEARD = {  # words of each reason's guidance that the recogniser hears reliably
+    "too_dark": {"add", "more"},
+    "too_much_motion": {"stop", "moving"},
+    "too_small": {"small", "closer"},
+    "look_again": {"look", "again"},
+}
+
+
+def test_a_dim_walking_page_says_what_is_unclear_and_what_would_help(tmp_path: Path) -> None:
+    require_espeak()
+    entry = next(e for e in suite_entries(small=True) if e.lux == 5 and e.motion == "walking")
+    make_suite(tmp_path / "suite", small=True, match=entry.name, progress=False)
+    result = read_recording(tmp_path / "suite" / entry.name, out_dir=tmp_path / "read", speech_wav=tmp_path / "answer.wav")
+    (tmp_path / "answer.json").write_text(json.dumps(result.answer_lines, indent=1))
+
+    unclear = [line for line in result.answer_lines if line["status"] == "unclear"]
+    assert unclear, f"every line answered at 5 lux while walking: {result.answer_lines}"
+    assert all(line["reasons"] and set(line["reasons"]) <= set(REASONS) for line in unclear)
+    assert all(0.0 <= line["confidence"] <= 1.0 and line["evidence"] for line in result.answer_lines)
+    assert "unclear" in result.spoken.lower()
+    reasons = {r for line in unclear for r in line["reasons"]}
+    if 2 * len(unclear) >= len(result.answer_lines):  # most of the page unclear: the answer says what would help
+        assert any(REASONS[r] in result.spoken for r in reasons), result.spoken
+
+    assert result.speech_wav is not None
+    heard = set(transcribe(Path(result.speech_wav).read_bytes()).split())
+    assert heard & {"unclear", "line", "lines"}, heard
+    if 2 * len(unclear) >= len(result.answer_lines):
+        assert heard & set().union(*(HEARD[r] for r in reasons)), (heard, reasons)

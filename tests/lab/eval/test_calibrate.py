@@ -1,0 +1,67 @@
+"""Fitting and measuring the line-confidence model; selective reading figures."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from darkread.cloud.confidence import ConfidenceModel
+from darkread.lab.eval.calibrate import calibrate, fit_logistic, split
+from darkread.lab.eval.selective import LineOutcome, match_lines, reliability, risk_coverage, selective
+
+
+def synthetic_lines(n: int = 600, seed: int = 3) -> list[LineOutcome]:
+    """Lines whose chance of being right is a known logistic function of one piece of evidence."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        ocr_min = float(rng.uniform(0, 1))
+        right = rng.random() < 1 / (1 + np.exp(-(10 * ocr_min - 5)))
+        lux = float(rng.choice([5, 30]))
+        out.append(LineOutcome(f"{i:03d}_x", lux, "walking" if i % 3 == 0 else "still", "words", 0.0 if right else 0.3, 28,
+                               {"ocr_min": ocr_min, "ink_solid": 0.1 if lux == 5 else 0.3,
+                                "log_head_speed": 5.0 if i % 3 == 0 else 2.0}))
+    return out
+
+
+def test_logistic_fit_recovers_a_known_slope() -> None:
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(4000, 1))
+    y = (rng.random(4000) < 1 / (1 + np.exp(-(2.0 * x[:, 0] + 0.5)))).astype(float)
+    w, b = fit_logistic(x, y, ridge=0.0)
+    assert abs(w[0] - 2.0) < 0.2 and abs(b - 0.5) < 0.15
+
+
+def test_ece_is_zero_when_confidence_matches_the_outcomes() -> None:
+    p = np.array([0.25] * 4 + [0.75] * 4)
+    right = np.array([1, 0, 0, 0, 1, 1, 1, 0], dtype=float)
+    ece, rows = reliability(p, right)
+    assert ece == 0.0 and [n for *_, n in rows] == [4, 4]
+    assert reliability(np.array([0.9, 0.9]), np.array([0.0, 0.0]))[0] == 0.9
+
+
+def test_calibrate_writes_a_model_that_is_calibrated_on_held_out_lines(tmp_path: Path) -> None:
+    lines = synthetic_lines()
+    fitting, held = split(lines)
+    assert {int(ln.recording[:3]) // 4 % 2 for ln in held} == {1} and len(fitting) + len(held) == len(lines)
+    model, ece = calibrate(lines, tmp_path / "model.json", tmp_path / "report", target_risk=0.05)
+    assert ece < 0.08
+    shipped = ConfidenceModel.from_json(json.loads((tmp_path / "model.json").read_text()))
+    assert shipped.answer_threshold == model.answer_threshold > 0
+    assert 0.1 < shipped.dark_ink_solid < 0.3 and 2.0 < shipped.fast_head_speed < 5.0
+    assert (tmp_path / "report" / "reliability.png").stat().st_size > 0
+    assert "Held-out ECE" in (tmp_path / "report" / "calibration.md").read_text()
+    answered = selective(held, shipped)
+    everything = selective(held, shipped.__class__(**{**shipped.__dict__, "answer_threshold": 0.0}))
+    assert answered.cer_answered is not None and everything.cer_all is not None
+    assert answered.cer_answered < everything.cer_all and 0 < answered.coverage < 1 and everything.coverage == 1
+    coverage, risk = risk_coverage(held, shipped)
+    assert coverage[-1] == 1.0 and risk[0] <= risk[-1]
+
+
+def test_answer_lines_are_matched_to_their_closest_reference_line() -> None:
+    matched = match_lines("the quick brown\nfox jumps over\n", [{"text": "fox jumps ovor"}, {"text": "the quick brown"}])
+    assert matched[0]["line_cer"] == round(1 / 14, 4) and matched[0]["line_ref_chars"] == 14
+    assert matched[1]["line_cer"] == 0.0
