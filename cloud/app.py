@@ -174,7 +174,7 @@ async def _store_unavailable(request: Request, exc: Exception) -> JSONResponse:
 def _where(settings: Settings) -> str:
     if settings.database_url is None:
         return str(settings.data_dir)
-    from .store.postgres import describe
+    from .store.postgres import describe  # lazy: psycopg only with a PostgreSQL store
 
     return describe(settings.database_url.get_secret_value())
 

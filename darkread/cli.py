@@ -70,7 +70,10 @@ def registrations() -> Iterator[Register]:
             raise
         yield module.register
     for entry in sorted(entry_points(group=COMMAND_GROUP), key=lambda e: e.name):
-        yield entry.load()
+        try:
+            yield entry.load()
+        except ModuleNotFoundError as exc:  # a part whose extra is not installed here: its commands are absent
+            logging.getLogger(__name__).debug("commands of %s not available: %s", entry.value, exc)
 
 
 def configure_logging(verbose: int, quiet: bool) -> None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from darkread.edge.compiled import compiled
+from darkread.edge.events import empty_events
 
 
 def cell_tables(width: int, height: int, cell_px: int, pad: int = 0, row_stride: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -112,7 +113,6 @@ def voxel_sums(x, y, p, t, x0, y0, bins, width, height, sums, marked, touched): 
 def warm_up() -> None:
     """Compile (or load from numba's cache) every loop now, for the fields of event records as the
     edge passes them, so the first live window is not late (a daemon calls this before READY)."""
-    from darkread.edge.events import empty_events
 
     events = empty_events(2)
     x, y, t = events["x"], events["y"], events["t"]

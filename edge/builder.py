@@ -176,6 +176,7 @@ def build_edge(
     ``known_motion``, the head's motion from elsewhere instead of measured from the events
     (``edge.head_motion``).
     """
+    # lazy: only the parts this configuration uses load (USB, websockets, numba)
     from darkread.edge.binning import warm_up as warm_up_binning
     from darkread.edge.io.evt3 import warm_up as warm_up_decoder
 
@@ -199,6 +200,7 @@ def build_edge(
             uplink = _open_uplink(config, metrics, (source.width, source.height), (voxel.height, voxel.width))
             undo.callback(uplink.spool.close)
             if config.uplink.mode == "pages":
+                # lazy: only the parts this configuration uses load (USB, websockets, numba)
                 from darkread.edge.pages import PageBuilder
 
                 pages = PageBuilder(config.uplink.page_every_s)
@@ -269,9 +271,11 @@ def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) 
     takes one processing step per slice of the grid whatever the chunking, so whole chunks only
     save the per-chunk cost (slicing and re-joining, ring push, window count, metrics); paced
     replays keep 1 ms, the latency's resolution."""
+    # lazy: only the parts this configuration uses load (USB, websockets, numba)
     from darkread.edge.io.calibration import load_calibration
 
     if cfg.kind == "replay":
+        # lazy: only the parts this configuration uses load (USB, websockets, numba)
         from darkread.edge.io.recording import open_recording
         from darkread.edge.sources.replay import DEFAULT_SLICE_US, ReplaySource
 
@@ -291,6 +295,7 @@ def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) 
         if isinstance(n_events, int) and n_events > 0:  # the bandwidth ratio against this very stream
             metrics.raw_bytes_per_event = recording.raw_path.stat().st_size / n_events
         return source, recording.calibration, recording.gaze
+    # lazy: only the parts this configuration uses load (USB, websockets, numba)
     from darkread.edge.sources.evk4.camera import Evk4Camera
 
     if not cfg.calibration:
@@ -303,6 +308,7 @@ def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) 
 
 def _open_gaze(cfg: GazeConfig, calibration: Calibration, gaze_track: Any, feeds: list[Any]) -> GazeLookup:
     """The gaze lookup; a live feed is appended to ``feeds`` (started and stopped with the edge)."""
+    # lazy: only the parts this configuration uses load (USB, websockets, numba)
     from darkread.edge.gaze import GazeMapper
     from darkread.edge.sources.gaze_feeds import AriaGen2GazeFeed, LiveGaze, UdpGazeFeed, csv_gaze
 
@@ -323,6 +329,7 @@ def _open_gaze(cfg: GazeConfig, calibration: Calibration, gaze_track: Any, feeds
 
 
 def _open_uplink(config: EdgeConfig, metrics: EdgeMetrics, sensor_wh: tuple[int, int], fovea_hw: tuple[int, int]) -> Any:
+    # lazy: only the parts this configuration uses load (USB, websockets, numba)
     from darkread.edge.spool import Spool, spool_directory
     from darkread.edge.uplink import Uplink
 

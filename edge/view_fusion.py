@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from darkread.core.frame_record import MAX_VIEW_GROWTH, FrameRecord, threshold_levels
+from darkread.proto.messages import View
 from darkread.stitch.register import register_frame
 
 N_LEVELS = 8  # the mean of up to ~7 frames to within half a step; few levels compress well in a PNG
@@ -47,7 +48,6 @@ class ViewRecord(FrameRecord):
     gaze_rad: tuple[float, float] = (0.0, 0.0)
 
     def to_message(self, enc: str = "png"):  # proto stays a lazy import
-        from darkread.proto.messages import View
 
         return View.of(self, t0_us=self.t0_us, gaze_rad=self.gaze_rad, events_used=self.events_used, enc=enc)
 

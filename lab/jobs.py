@@ -4,6 +4,7 @@ in worker processes, one shape for all of them."""
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import TypeVar
 
 Item = TypeVar("Item")
@@ -24,7 +25,6 @@ def run_jobs(task: Callable[[Item], Result], items: Iterable[Item], jobs: int = 
             if done is not None:
                 done()
     else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
 
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             futures = {pool.submit(task, item): k for k, item in enumerate(items)}

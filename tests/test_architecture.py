@@ -202,3 +202,41 @@ def test_circles_are_found() -> None:
 )
 def test_the_rules_themselves(source: str, module: str, allowed: bool) -> None:
     assert (component_of_module(module) in ALLOWED[source]) is allowed
+
+
+# Where an import may sit inside a function. Command-line modules import each handler's stack when
+# the handler runs (so `darkread --help` and `darkread edge` load no web, USB or training stack);
+# these packages are optional (an extra, or absent on the glasses) or heavy to load; any other
+# in-function import says why in a comment on its line or just above it.
+COMMAND_LINE_MODULES = {"darkread/read.py", "edge/inspect.py"}
+OPTIONAL_OR_HEAVY = {
+    "torch", "onnx", "onnxruntime", "hesim3d", "rapidocr", "pytesseract", "tesserocr", "eyekit", "pocketsphinx",
+    "matplotlib", "usb", "psycopg", "psycopg_pool", "selenium", "scipy", "symspellpy", "aria", "projectaria_tools",
+    "evt3", "uvicorn", "httpx", "websockets", "fastapi", "pydantic", "tqdm", "PIL", "numba",
+}
+
+
+def unexplained_function_imports(path: Path) -> Iterator[str]:
+    rel = path.relative_to(ROOT).as_posix()
+    if path.name == "cli.py" or rel in COMMAND_LINE_MODULES:
+        return
+    lines = path.read_text(encoding="utf-8").splitlines()
+    tree = ast.parse("\n".join(lines), rel)
+    for function in ast.walk(tree):
+        if not isinstance(function, ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        for node in ast.walk(function):
+            if not isinstance(node, ast.Import | ast.ImportFrom):
+                continue
+            name = node.names[0].name if isinstance(node, ast.Import) else (node.module or "")
+            relative = isinstance(node, ast.ImportFrom) and node.level > 0
+            if not relative and name.split(".")[0] in OPTIONAL_OR_HEAVY:
+                continue
+            above = lines[max(0, node.lineno - 4) : node.lineno - 1]
+            said = "#" in lines[node.lineno - 1] or any(line.strip().startswith("#") for line in above)
+            if not said:
+                yield f"{rel}:{node.lineno}: import {name} inside {function.name}() without a reason"
+
+
+def test_imports_inside_functions_say_why() -> None:
+    assert [line for path in shipped_files() for line in unexplained_function_imports(path)] == []

@@ -90,7 +90,7 @@ def _dictionary() -> SymSpell:
     """SymSpell's bundled English word and word-pair counts (about 2 s, once per process); its
     spelling search is not used (lookalike glyphs decide the candidates), so no edit index is built."""
     try:
-        from importlib.resources import files
+        from importlib.resources import files  # lazy: the word list is read when the first correction needs it
 
         from symspellpy import SymSpell
     except ImportError as exc:

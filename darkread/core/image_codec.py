@@ -22,7 +22,7 @@ class ImageCodecError(DarkreadError):
 def _cv2() -> Any:
     """OpenCV, imported on first use: the wire protocol imports this module, and a peer that never
     sees a PNG (the glasses decoding acks) need not load it."""
-    import cv2
+    import cv2  # lazy: OpenCV loads when an image is first encoded or decoded
 
     return cv2
 

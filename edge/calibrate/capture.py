@@ -29,6 +29,7 @@ from darkread.edge.calibrate.markers import (
     load_board,
 )
 from darkread.edge.errors import CalibrationError
+from darkread.edge.io.raw import read_raw
 
 logger = logging.getLogger(__name__)
 
@@ -53,7 +54,6 @@ def raw_path_of(path: str | Path) -> Path:
 
 def read_capture_events(path: str | Path) -> CaptureEvents:
     """All events and triggers of a capture (captures are seconds long, so they are read whole)."""
-    from darkread.edge.io.raw import read_raw
 
     data = read_raw(raw_path_of(path))
     return CaptureEvents(data.events, data.triggers, int(data.header.width), int(data.header.height))

@@ -22,6 +22,7 @@ import numpy as np
 from darkread.edge.calibrate.clock import ActivityCounter, RefineResult, refine_offset
 from darkread.edge.calibrate.event_image import count_image, denoise
 from darkread.edge.errors import CalibrationError
+from darkread.edge.gaze import GazeMapper
 from darkread.edge.io.calibration import Calibration
 from darkread.edge.io.gaze_csv import GazeTrack
 
@@ -43,7 +44,6 @@ class CheckResult:
 
 def gaze_track_pixels(calibration: Calibration, track: GazeTrack) -> tuple[np.ndarray, np.ndarray]:
     """(event-clock times, pixels) of every valid gaze sample projected with ``calibration``."""
-    from darkread.edge.gaze import GazeMapper
 
     mapper = GazeMapper(calibration, track)
     t_event = track.t_us[track.valid].astype(np.int64) + mapper.clock_offset_us

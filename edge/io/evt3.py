@@ -97,7 +97,7 @@ _COUNTER_FIELDS = (
 def _jit() -> ModuleType | None:
     """The compiled word loop, or None when numba is not installed."""
     try:
-        from darkread.edge.io import evt3_jit
+        from darkread.edge.io import evt3_jit  # lazy: numba compiles the decoder on first use
     except ImportError:  # numba missing: the numpy path decodes the same, slower
         return None
     return evt3_jit

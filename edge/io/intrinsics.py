@@ -71,7 +71,7 @@ class Intrinsics:
 
     def unproject(self, uv: np.ndarray, *, iterations: int = 30, eps: float = 1e-10) -> np.ndarray:
         """(N, 2) pixels -> (N, 2) undistorted normalised rays (x/z, y/z) (``cv2.undistortPoints``)."""
-        import cv2
+        import cv2  # lazy: OpenCV only for a lens with distortion
 
         pts = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, eps)

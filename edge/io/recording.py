@@ -17,6 +17,7 @@ from typing import Any
 from darkread.edge.errors import RecordingError
 from darkread.edge.io.calibration import Calibration, load_calibration
 from darkread.edge.io.gaze_csv import GazeTrack, read_gaze_csv
+from darkread.edge.io.raw import RawReader
 
 logger = logging.getLogger(__name__)
 
@@ -47,7 +48,6 @@ class Recording:
 
     def reader(self, **kwargs: Any):  # RawReader, imported lazily
         """A chunked reader of ``events.raw`` (``darkread.edge.io.raw.RawReader``)."""
-        from darkread.edge.io.raw import RawReader
 
         return RawReader(self.raw_path, **kwargs)
 

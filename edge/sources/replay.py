@@ -20,7 +20,7 @@ from darkread.core.errors import DarkreadError
 from darkread.edge.events import Events, select_events
 from darkread.edge.fovea import in_window
 from darkread.edge.io.iterator import EventsIterator, PacedReplay
-from darkread.edge.io.plausibility import TimeCheck
+from darkread.edge.io.plausibility import TimeCheck, problems
 from darkread.edge.io.raw import RawReader
 from darkread.edge.io.raw_header import read_raw_header
 from darkread.edge.sources.base import EventSink
@@ -130,8 +130,6 @@ class ReplaySource:
 
     def _judge(self) -> None:
         """After the replay: name what makes the stream implausible (``problems``)."""
-        from darkread.edge.io.plausibility import problems
-
         if self._reader is None:
             return
         header = self._reader.header

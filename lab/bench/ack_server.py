@@ -11,6 +11,8 @@ import asyncio
 import threading
 from typing import Any
 
+from darkread.proto.messages import Ack, Hello, Welcome, decode, encode
+
 MAX_BYTES = 1 << 22
 
 
@@ -33,7 +35,6 @@ class AckServer:
         return int(self.server.sockets[0].getsockname()[1])
 
     async def _handle(self, ws) -> None:
-        from darkread.proto.messages import Ack, Hello, Welcome, decode, encode
 
         hello = decode(await ws.recv(), max_bytes=MAX_BYTES)
         assert isinstance(hello, Hello)  # the uplink opens with hello

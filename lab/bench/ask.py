@@ -34,6 +34,7 @@ engine, non-word fixes only), measured right after it (goal <= 1.2).
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import subprocess
 import sys
@@ -43,11 +44,16 @@ from pathlib import Path
 
 import numpy as np
 
+from darkread.cloud.ocr import create_backend
+from darkread.cloud.settings import Settings
 from darkread.cloud.store import SessionSpec, SqliteStore, StoredFrame
 from darkread.core.paths import SAMPLE_RECORDING
+from darkread.edge.config import default_infer_mode
 from darkread.lab.bench import BenchContext, Figure
 from darkread.lab.bench.cloud import API_KEY, start_server, stop_server
 from darkread.proto.messages import Ack, Frame, Hello, View, Welcome, decode, encode
+from darkread.read import read_recording
+from darkread.stitch import stitch_page
 
 ASK_EVERY_S = 0.5
 WEARERS = 20
@@ -65,7 +71,6 @@ STREAM_KINDS = {"every-window": "frames", "on-change": "views"}  # ``darkread re
 
 def default_infer() -> str:
     """The mode ``darkread read`` uses unless told otherwise (the bench follows it)."""
-    from darkread.edge.config import default_infer_mode
 
     return default_infer_mode()
 
@@ -73,7 +78,6 @@ def default_infer() -> str:
 def recorded_frames(ctx: BenchContext, infer: str | None = None) -> tuple[list[StoredFrame], float]:
     """The sample recording's frames (``infer`` mode; None: the default) as the cloud stored them,
     and ``darkread read``'s answer_ms."""
-    from darkread.read import read_recording
 
     infer = infer or default_infer()
     out = ctx.scratch / f"read-sample-{infer}"
@@ -96,10 +100,7 @@ def demo_answer_runs(ctx: BenchContext) -> list[Figure]:
     """``darkread read --demo``'s answer_ms, question to answer: in fresh processes (each starts its
     cloud, whose OCR engine loads while the edge streams: the question must not wait for it) and
     warm (one process reading again and again); the spread of all of them."""
-    import json
-    import subprocess
 
-    from darkread.read import read_recording
 
     runs = ctx.runs(5, 3, 1)
     command = [sys.executable, "-m", "darkread", "-q", "read", "--demo", "--json"]
@@ -265,9 +266,6 @@ def _wearers(base: str, frames: list[StoredFrame], stagger_s: float) -> tuple[fl
 
 def from_scratch_ms(frames: list[StoredFrame]) -> tuple[float, float]:
     """The old way to answer: stitch every stored frame, then read the whole page (ms each)."""
-    from darkread.cloud.ocr import create_backend
-    from darkread.cloud.settings import Settings
-    from darkread.stitch import stitch_page
 
     ocr = create_backend(Settings(_env_file=None))
     ocr.ready()

@@ -27,8 +27,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from darkread.cloud.store import SessionSpec, SqliteStore
+from darkread.cloud.store.postgres import PostgresStore
+from darkread.cloud.stream import stored_frame
 from darkread.lab.bench import BenchContext, Figure
+from darkread.lab.bench.replays import count_stored_in, run_replays
+from darkread.lab.fixtures.pg_server import PostgresUnavailable, TemporaryPostgres
 from darkread.proto.messages import Ack, Frame, Hello, Welcome, decode, encode, pack_mask
+from darkread.proto.messages import decode as decode_message
 
 if TYPE_CHECKING:
     from darkread.cloud.store import SessionStore
@@ -126,14 +132,11 @@ async def _ingest(url: str, streams: int, frames_per_stream: int, time_limit_s: 
 
 
 def _store_alone(open_store: Callable[[], Awaitable[SessionStore]], count: int) -> float:
-    from darkread.cloud.stream import stored_frame
-    from darkread.proto.messages import decode as decode_message
 
     messages = [decode_message(data, max_bytes=1 << 20) for data in _frame_bytes(count)]
     frames = [stored_frame(message) for message in messages if isinstance(message, Frame)]
 
     async def write() -> float:
-        from darkread.cloud.store import SessionSpec
 
         store = await open_store()
         try:
@@ -167,7 +170,6 @@ def _ingest_rates(data_dir: Path, database_url: str | None, total: int, time_lim
 
 def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
     """50 paced replays over two instances, the first killed halfway and restarted."""
-    from darkread.lab.bench.replays import count_stored_in, run_replays
 
     database_url = pg.create_database("replays")
     instances = [start_server(ctx.scratch / f"replay-{name}", database_url) for name in "ab"]
@@ -204,9 +206,6 @@ def _replays(ctx: BenchContext, pg: TemporaryPostgres) -> list[Figure]:
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    from darkread.cloud.store import SqliteStore
-    from darkread.cloud.store.postgres import PostgresStore
-    from darkread.lab.fixtures.pg_server import PostgresUnavailable, TemporaryPostgres
 
     total = ctx.runs(6000, 1500, 100)  # frames per configuration, split over the streams
     time_limit_s = float(ctx.runs(30, 10, 10))

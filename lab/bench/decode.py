@@ -13,6 +13,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
+from darkread.edge.events import make_events
 from darkread.edge.io.evt3 import decode_evt3, encode_evt3
 from darkread.edge.io.raw import RawReader
 from darkread.edge.io.raw_header import RawHeader, format_raw_header, parse_raw_header
@@ -43,9 +46,7 @@ def _inputs(ctx: BenchContext) -> dict[str, Path]:
         found = {name: path for name, path in found.items() if path.is_file()}
         if found:
             return found
-    import numpy as np
 
-    from darkread.edge.events import make_events  # synthetic fallback: 500k events over 2 s
 
     rng = np.random.default_rng(0)
     n = 20_000 if ctx.smoke else 500_000

@@ -23,18 +23,31 @@ the view latency is on-change's (only it makes views), the event-to-wire latency
 from __future__ import annotations
 
 import contextlib
+import multiprocessing
 import os
+import shutil
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict, TypeVar
 
+import cv2
 import numpy as np
 
+from darkread.core.image_codec import ImageCodecError, encode_png, read_image
 from darkread.core.paths import SAMPLE_RECORDING
-from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
+from darkread.edge.builder import build_edge
+from darkread.edge.config import INFER_MODES, default_infer_mode, load_config, other_infer_mode
+from darkread.edge.io.raw import RawReader, read_raw, write_raw
+from darkread.edge.io.recording import open_recording
+from darkread.edge.reconstruct import default_model_path
+from darkread.edge.sources.replay import ReplaySource
+from darkread.edge.telemetry import RGB_FRAME_BYTES_ESTIMATE
+from darkread.edge.voxel import VoxelConfig
 from darkread.lab.bench import BenchContext, Figure
 from darkread.lab.bench.ack_server import AckServer
+from darkread.proto.messages import encode
 
 if TYPE_CHECKING:
     from darkread.edge.frame import FrameResult
@@ -76,9 +89,7 @@ def _recording(ctx: BenchContext) -> Path | None:
 
 def _first_seconds(recording: Path, out: Path, seconds: float) -> Path:
     """A copy of ``recording`` cut to its first ``seconds`` of events (the smoke run's input)."""
-    import shutil
 
-    from darkread.edge.io.raw import read_raw, write_raw
 
     out.mkdir(parents=True, exist_ok=True)
     for name in ("general_eye_gaze.csv", "calibration.json", "text.txt"):
@@ -92,7 +103,6 @@ def _first_seconds(recording: Path, out: Path, seconds: float) -> Path:
 
 def _model(ctx: BenchContext) -> Path | None:
     """The shipped model, else a stand-in with its I/O (noted), else None."""
-    from darkread.edge.reconstruct import default_model_path
 
     if default_model_path().is_file():
         return None
@@ -101,7 +111,6 @@ def _model(ctx: BenchContext) -> Path | None:
         from onnx import TensorProto, helper
     except ImportError:
         raise RuntimeError("no shipped model and no `onnx` package to build a stand-in") from None
-    from darkread.edge.voxel import VoxelConfig
 
     bins, height, width = VoxelConfig().shape  # the window the shipped model was trained for
     x = helper.make_tensor_value_info("voxel", TensorProto.FLOAT, ["batch", bins, height, width])
@@ -138,7 +147,6 @@ def _one_core() -> Iterator[bool]:
 
 
 def _decode_only_cpu_s(raw_path: Path) -> float:
-    from darkread.edge.io.raw import RawReader
 
     started = time.process_time()
     for _ in RawReader(raw_path, chunk_bytes=1 << 18):
@@ -155,9 +163,6 @@ def _run_edge(
     ``speed`` 0 replays as fast as possible (lossless); ``on_frame`` takes the frames instead of
     the uplink (then ``uplink_url`` is unused).
     """
-    from darkread.edge.builder import build_edge
-    from darkread.edge.config import load_config
-    from darkread.edge.sources.replay import ReplaySource
 
     config = load_config(None, environ={}, overrides={
         "source": {"kind": "replay", "path": str(recording), "speed": speed},
@@ -182,13 +187,10 @@ def _run_edge(
 
 def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
     """Bytes of one 2880x2880 RGB PNG: the recording's snapshot upscaled and encoded, or the estimate."""
-    from darkread.edge.telemetry import RGB_FRAME_BYTES_ESTIMATE
 
     rgb = recording / "rgb.png"
     if rgb.is_file():
-        import cv2
 
-        from darkread.core.image_codec import ImageCodecError, encode_png, read_image
 
         try:
             image = read_image(rgb, colour=True)
@@ -214,22 +216,18 @@ def _lossless(recording: Path, model: Path | None, repeats: int) -> LosslessRuns
 
 
 def _encode_only(frame: FrameResult | ViewRecord, arrival: float) -> None:  # the uplink's work on a message, without a socket
-    from darkread.proto.messages import encode
 
     encode(frame.to_message())
 
 
 def _in_fresh_process(function: Callable[..., T], *args: object) -> T:
     """``function(*args)`` in a new interpreter (spawned, not forked: nothing of this process comes along)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
 
     with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
         return pool.submit(function, *args).result()
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    from darkread.edge.io.recording import open_recording
 
     recording = _recording(ctx)
     if recording is None:

@@ -11,14 +11,14 @@ classifier on noise-free rows, the best a tracker of that rate allows.
 from __future__ import annotations
 
 from darkread.lab.bench import BenchContext, Figure
+from darkread.lab.gaze import human
+from darkread.lab.gaze.scores import ARIA_RATES_HZ, oz_onset_scores
 
 
 def run(ctx: BenchContext) -> list[Figure]:
     if ctx.shared_data is None or not (ctx.shared_data / "reading_gaze" / "oz").is_dir():
         ctx.notes.append("gaze: ../shared/data/reading_gaze/oz absent; fixation-onset F1 not measured")
         return []
-    from darkread.lab.gaze import human
-    from darkread.lab.gaze.scores import ARIA_RATES_HZ, oz_onset_scores
 
     raw = human.load_eyelink_asc(ctx.shared_data / "reading_gaze" / "oz" / "OZ_1trial.txt")
     seeds = range(ctx.runs(10, 3))

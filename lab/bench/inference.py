@@ -9,6 +9,7 @@ blocks where the shipped one has 96 and eight), alternated with the shipped one:
 
 from __future__ import annotations
 
+from darkread.edge.reconstruct import default_model_path
 from darkread.lab import PREVIOUS_NETWORK
 from darkread.lab.bench import BenchContext, Figure
 from darkread.models.train.latency import onnx_latency_ms, reference_latency_ms
@@ -17,7 +18,6 @@ INT8_FILENAME = "binary_unet_int8.onnx"
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    from darkread.edge.reconstruct import default_model_path
 
     fp32 = default_model_path()
     if not fp32.is_file():

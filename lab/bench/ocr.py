@@ -14,8 +14,11 @@ import time
 import unicodedata
 from typing import TYPE_CHECKING
 
+import jiwer
 import numpy as np
 
+from darkread.cloud.ocr.rapid import RapidOcrBackend
+from darkread.cloud.ocr.tesseract import TesseractBackend
 from darkread.lab.bench import BenchContext, Figure
 
 if TYPE_CHECKING:
@@ -52,7 +55,6 @@ def normalise(text: str) -> str:
 
 
 def cer(reference: str, hypothesis: str) -> float:
-    import jiwer
 
     return float(jiwer.cer(normalise(reference), normalise(hypothesis) or " "))
 
@@ -70,8 +72,6 @@ def _time_engine(engine: OcrBackend, image: np.ndarray, repeats: int) -> tuple[f
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    from darkread.cloud.ocr.rapid import RapidOcrBackend
-    from darkread.cloud.ocr.tesseract import TesseractBackend
 
     repeats = ctx.runs(5, 2, 0)
     text = PARAGRAPH.split(". ")[0] + "." if ctx.smoke else PARAGRAPH

@@ -15,7 +15,13 @@ import time
 from pathlib import Path
 from types import ModuleType
 
+import cv2
+import jiwer
+import numpy as np
+
+from darkread.core.image_codec import decode_image
 from darkread.lab.bench import BenchContext, Figure
+from darkread.stitch import naive_page, stitch_page
 
 _SCAN = Path(__file__).resolve().parents[2] / "tests" / "stitch" / "reading_factory.py"
 
@@ -50,7 +56,6 @@ def _ocr_reader():
     engine = RapidOCR(params=params)
 
     def read(png: bytes) -> str:
-        from darkread.core.image_codec import decode_image
 
         result = engine(decode_image(png, colour=True))
         return re.sub(r"\s+", " ", " ".join(result.txts or ())).strip()
@@ -59,9 +64,7 @@ def _ocr_reader():
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    import jiwer
 
-    from darkread.stitch import naive_page, stitch_page
 
     scan = load_scan()
     if scan is None:
@@ -134,10 +137,7 @@ def run(ctx: BenchContext) -> list[Figure]:
 
 def write_example(path: Path, seed: int = 0) -> Path:
     """``docs/stitch_example.png``: the true page, naive placement and the stitched page, stacked."""
-    import cv2
-    import numpy as np
 
-    from darkread.stitch import naive_page, stitch_page
 
     scan = load_scan()
     if scan is None:

@@ -32,9 +32,14 @@ from typing import Any
 import cv2
 import numpy as np
 
+from darkread.cloud.store.sqlite import SqliteStore
+from darkread.core.text_metrics import error_rates
+from darkread.lab.eval.runner import RESULT_NAME, make_ocr_backend, network_digest
 from darkread.lab.eval.tables import page_as_section
 from darkread.lab.eval.true_motion import TrueHeadMotion
 from darkread.lab.truth import PageTruth, load_truth
+from darkread.models.train.annotate import page_coordinates, project_page, render_target, window_rays
+from darkread.read import read_recording
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +68,6 @@ class Attribution:
 
 def stored_frames(cloud_dir: Path) -> list[Any]:
     """Every frame of the one session a ``darkread read`` stored in ``cloud_dir`` (SQLite), in order."""
-    from darkread.cloud.store.sqlite import SqliteStore
 
     async def read() -> list[Any]:
         store = SqliteStore(cloud_dir)
@@ -98,7 +102,6 @@ def place_window(truth: PageTruth, rays: np.ndarray, origin: tuple[int, int], sh
                  H: np.ndarray) -> Placement | None:
     """The placement of a window (``rays``: its pixels' undistorted rays) under ``H``; None when it sees
     none of the page. Only the box its corners span (2 texels of margin) is projected."""
-    from darkread.models.train.annotate import page_coordinates, project_page
 
     h, w = shape
     corners = page_coordinates(H, rays[[0, w - 1, (h - 1) * w, h * w - 1]]) * truth.px_per_mm
@@ -134,7 +137,6 @@ def compose(masks: Sequence[np.ndarray], placements: Sequence[Placement | None],
 
 def window_truth(truth: PageTruth, rays: np.ndarray, shape: tuple[int, int], H: np.ndarray) -> np.ndarray:
     """The true binary ink of a window (uint8, 1 = ink), as the training targets define it."""
-    from darkread.models.train.annotate import render_target
 
     return render_target(truth.ink, truth.px_per_mm, H, rays, shape)
 
@@ -149,14 +151,11 @@ def ink_found(predicted: np.ndarray, target: np.ndarray, tolerance_px: int = TOL
 
 def attribute_recording(recording: Path, read_dir: Path, read_page: Callable[[np.ndarray], str]) -> Attribution | None:
     """The three readings and the frame scores of one evaluated recording (None without truth files)."""
-    from darkread.core.text_metrics import error_rates
-    from darkread.lab.eval.runner import RESULT_NAME
 
     truth = load_truth(recording)
     if truth is None:
         return None
     result = json.loads((read_dir.parent / RESULT_NAME).read_text(encoding="utf-8"))
-    from darkread.models.train.annotate import window_rays
 
     frames = stored_frames(read_dir / "cloud")
     masks = [f.mask for f in frames]
@@ -209,7 +208,6 @@ def attribution_table(rows: Sequence[Attribution]) -> str:
 
 def cached_attribution(run_dir: Path, backend: str) -> Attribution | None:
     """The attribution stored beside a recording's result, if it is of that result and engine."""
-    from darkread.lab.eval.runner import RESULT_NAME
 
     cache, result = run_dir / CACHE_NAME, run_dir / RESULT_NAME
     if not cache.is_file() or (result.is_file() and result.stat().st_mtime_ns > cache.stat().st_mtime_ns):
@@ -228,8 +226,6 @@ def true_motion_cer(recording: Path, run_dir: Path, backend: str, model: str | N
     """CER of ``recording`` read again end to end, in the mode it was evaluated in, with the head's
     motion known exactly (the simulator's pose as the edge's ``KnownHeadMotion``; kept in ``run_dir/true_motion``). ValueError
     when ``model`` is not the network the recording was evaluated with."""
-    from darkread.lab.eval.runner import RESULT_NAME, network_digest
-    from darkread.read import read_recording
 
     result = json.loads((run_dir / RESULT_NAME).read_text(encoding="utf-8"))
     if result.get("model") not in (None, network_digest(model)):
@@ -249,7 +245,6 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
     result (``attribution.json``), so a rerun only attributes what is new or was evaluated again."""
     from tqdm import tqdm
 
-    from darkread.lab.eval.runner import make_ocr_backend
 
     engine = make_ocr_backend(backend)
     evaluated = sorted(p for p in work.iterdir() if (p / "read" / "cloud").is_dir()) if work.is_dir() else []

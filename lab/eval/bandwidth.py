@@ -19,6 +19,15 @@ from typing import Any
 import numpy as np
 
 from darkread.core.image_codec import encode_jpeg, encode_png, read_image
+from darkread.edge.config import PipelineConfig
+from darkread.edge.fovea import FoveaConfig, foveate_along_gaze
+from darkread.edge.gaze import GazeMapper
+from darkread.edge.io.evt3_encode import encode_evt3
+from darkread.edge.io.gaze_csv import read_gaze_csv
+from darkread.edge.io.raw import read_raw
+from darkread.edge.io.raw_header import read_raw_header
+from darkread.edge.io.recording import open_recording
+from darkread.proto.messages import Frame, Page, encode, pack_mask
 
 JPEG_QUALITIES: tuple[int, ...] = (100, 80, 60, 40, 20)
 PAPER_FOVEATION_REMOVED = 0.98
@@ -37,7 +46,6 @@ def image_sizes(image: np.ndarray, qualities: tuple[int, ...] = JPEG_QUALITIES) 
 
 def raw_data_bytes(raw_path: str | Path) -> int:
     """Bytes of a RAW file's event data (the file without its text header)."""
-    from darkread.edge.io.raw_header import read_raw_header
 
     header = read_raw_header(raw_path)
     return Path(raw_path).stat().st_size - int(header.data_offset)
@@ -48,8 +56,6 @@ def frame_message_bytes(shape: tuple[int, int] | None = None) -> int:
 
     ``shape`` (rows, cols) defaults to the shipped model's window.
     """
-    from darkread.edge.fovea import FoveaConfig
-    from darkread.proto.messages import Frame, encode, pack_mask
 
     if shape is None:
         shape = (FoveaConfig().height, FoveaConfig().width)
@@ -67,7 +73,6 @@ PAGE_ENC = "g4"  # what edge/pages.py sends
 def page_message_bytes(ink: np.ndarray, lines: list[tuple[int, int, int, int]] | None = None, enc: str = PAGE_ENC) -> int:
     """Bytes of one encoded ``Page`` wire message holding the binary page ``ink`` (1 = ink), as the
     glasses send it (``enc="g4"``: CCITT G4, v3; ``"png"``: a 1-bit PNG, v2; ``"bits"``: v1)."""
-    from darkread.proto.messages import Page, encode, pack_mask
 
     shape, bits = pack_mask(np.asarray(ink, dtype=np.uint8))
     return len(encode(Page(seq=0, page_id=0, t_us=0, shape=shape, bits=bits, lines=tuple(lines or ()), enc=enc)))
@@ -136,13 +141,6 @@ def measure_bandwidth(
     ``bytes_sent``); without them the frame count is estimated as one frame per 1600 foveated
     events. ``page_ink`` is the stitched page; without it the page figure is 0.
     """
-    from darkread.edge.config import PipelineConfig
-    from darkread.edge.fovea import foveate_along_gaze
-    from darkread.edge.gaze import GazeMapper
-    from darkread.edge.io.evt3_encode import encode_evt3
-    from darkread.edge.io.gaze_csv import read_gaze_csv
-    from darkread.edge.io.raw import read_raw
-    from darkread.edge.io.recording import open_recording
 
     recording = open_recording(recording_dir)
     raw = read_raw(recording.raw_path)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from darkread.cloud.confidence import FEATURES, ConfidenceModel
+from darkread.lab.eval.plots import _pyplot
 from darkread.lab.eval.selective import LineOutcome, reliability, weighted_cer
 
 # on standardised evidence; the one with the best Brier score in two-fold cross-validation on the fitting half is used
@@ -160,7 +161,6 @@ def bootstrap_ece(p: np.ndarray, right: np.ndarray, draws: int = 1000, seed: int
 
 
 def plot_reliability(rows: list[tuple[float, float, int]], ece: float, path: Path) -> Path:
-    from darkread.lab.eval.plots import _pyplot
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(4.5, 4.5))

@@ -25,13 +25,26 @@ import json
 import logging
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from functools import partial
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from darkread.edge.deblur import DeblurConfig
+from darkread.edge.denoise import DenoiseConfig
 from darkread.edge.events import Events
+from darkread.edge.fovea import FoveaConfig, window_events, window_origin
+from darkread.edge.frame import clean_window
+from darkread.edge.gaze import GazeMapper
+from darkread.lab.eval.attribution import ink_found, window_truth
+from darkread.lab.eval.suite import load_suite
 from darkread.lab.eval.tables import page_as_section
+from darkread.lab.eval.true_motion import TrueHeadMotion
+from darkread.lab.jobs import run_jobs
+from darkread.lab.truth import load_truth_and_pose
+from darkread.models.train.annotate import window_rays
+from darkread.models.train.windows import read_events
 
 log = logging.getLogger(__name__)
 
@@ -99,16 +112,6 @@ def _key(estimate: str, length: int) -> str:
 def recording_evidence(recording: str | Path, lengths: Sequence[int] = LENGTHS, every_ms: float = EVERY_MS,
                        max_windows: int = MAX_WINDOWS) -> Evidence | None:
     """Score the recording's windows (None for one without the simulator's truth: a real recording)."""
-    from darkread.edge.deblur import DeblurConfig
-    from darkread.edge.denoise import DenoiseConfig
-    from darkread.edge.fovea import FoveaConfig, window_events, window_origin
-    from darkread.edge.frame import clean_window
-    from darkread.edge.gaze import GazeMapper
-    from darkread.lab.eval.attribution import ink_found, window_truth
-    from darkread.lab.eval.true_motion import TrueHeadMotion
-    from darkread.lab.truth import load_truth_and_pose
-    from darkread.models.train.annotate import window_rays
-    from darkread.models.train.windows import read_events
 
     path = Path(recording)
     loaded = load_truth_and_pose(path)
@@ -184,16 +187,13 @@ def write_evidence(suite: str | Path, out: str | Path, *, lengths: Sequence[int]
                    progress: bool = True) -> Path:
     """Score every synthetic recording of ``suite``; write the report (``out``: a .md file or a
     folder) and the per-recording figures beside it (.json). Returns the report's path."""
-    from darkread.lab.eval.suite import load_suite
 
     out = Path(out)
     report = out if out.suffix == ".md" else out / EVIDENCE_NAME
     recordings = load_suite(suite)
-    from functools import partial
 
     from tqdm import tqdm
 
-    from darkread.lab.jobs import run_jobs
 
     bar = tqdm(total=len(recordings), unit="rec", desc="evidence", disable=not progress)
     rows = run_jobs(partial(recording_evidence, lengths=tuple(lengths)), recordings, jobs, bar.update)

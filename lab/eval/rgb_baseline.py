@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from darkread.core.image_codec import read_image, write_png
+from darkread.core.text_metrics import error_rates
 from darkread.lab.synth.rgb_camera import (
     SPEC_NAME,
     RgbCameraModel,
@@ -75,7 +76,6 @@ def read_snapshot(snapshot: RgbSnapshot, backend: OcrBackend) -> str:
 
 def rgb_baseline(recording_dir: str | Path, backend: OcrBackend, *, save_crop: str | Path | None = None) -> RgbReading:
     """OCR of the simulated RGB snapshot of a suite recording, scored against its text.txt."""
-    from darkread.core.text_metrics import error_rates
 
     snap = snapshot_for_recording(recording_dir)
     if save_crop is not None:

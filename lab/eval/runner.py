@@ -18,7 +18,19 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+from darkread.cloud.ocr import create_backend
+from darkread.cloud.settings import Settings
+from darkread.core.image_codec import read_image, write_png
+from darkread.core.text_metrics import error_rates
+from darkread.edge.reconstruct import default_model_path
+from darkread.lab.eval.bandwidth import measure_bandwidth, page_ink_from_png
+from darkread.lab.eval.provenance import git_commit, model_digest
 from darkread.lab.eval.results import RecordingResult, why_evaluate_again
+from darkread.lab.eval.rgb_baseline import baseline_snapshot, read_snapshot
+from darkread.lab.eval.selective import match_lines
+from darkread.lab.eval.suite import HELD_OUT_FONTS, load_suite
+from darkread.lab.jobs import run_jobs
+from darkread.read import read_recording
 
 logger = logging.getLogger(__name__)
 
@@ -31,8 +43,6 @@ RESULT_NAME = "result.json"
 def make_ocr_backend(name: str) -> Any:
     """An OCR engine by name, configured from ``DARKREAD_*`` settings like the cloud service;
     ``<engine>-raw``: an offline engine without the dictionary correction."""
-    from darkread.cloud.ocr import create_backend
-    from darkread.cloud.settings import Settings
 
     if name.endswith(RAW_SUFFIX):
         return create_backend(Settings(ocr_backend=name.removesuffix(RAW_SUFFIX), ocr_lexicon=False))
@@ -40,7 +50,6 @@ def make_ocr_backend(name: str) -> Any:
 
 
 def remote_configured(name: str) -> bool:
-    from darkread.cloud.settings import Settings
 
     settings = Settings()
     if name == "google":
@@ -69,7 +78,6 @@ def available_backends(names: Sequence[str] | None = None) -> list[str]:
 
 def conditions(recording_dir: Path) -> dict[str, Any]:
     """The recording's conditions from ``meta.json`` (the grouping keys of the report)."""
-    from darkread.lab.eval.suite import HELD_OUT_FONTS
 
     meta = json.loads((recording_dir / "meta.json").read_text()) if (recording_dir / "meta.json").is_file() else {}
     font = meta.get("font")
@@ -109,12 +117,6 @@ def evaluate_recording(
 ) -> dict[str, Any]:
     """Everything the report needs about one recording (errors are recorded per stage); ``rgb=False``
     leaves out the RGB baseline and the bandwidth figures (which need its snapshot)."""
-    from darkread.core.image_codec import read_image, write_png
-    from darkread.core.text_metrics import error_rates
-    from darkread.lab.eval.bandwidth import measure_bandwidth, page_ink_from_png
-    from darkread.lab.eval.rgb_baseline import baseline_snapshot, read_snapshot
-    from darkread.lab.eval.selective import match_lines
-    from darkread.read import read_recording
 
     recording_dir, run_dir = Path(recording_dir), Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -126,7 +128,6 @@ def evaluate_recording(
         return cache[name]
 
     reference = (recording_dir / "text.txt").read_text(encoding="utf-8")
-    from darkread.lab.eval.provenance import git_commit
 
     result: dict[str, Any] = {**conditions(recording_dir), "backend": backend, "commit": git_commit(),
                               "evaluated": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "infer": infer,
@@ -221,8 +222,6 @@ def evaluate_suite(
     """
     from tqdm import tqdm
 
-    from darkread.lab.eval.suite import load_suite
-    from darkread.lab.jobs import run_jobs
 
     folders = load_suite(suite_dir)
     runs = Path(work_dir) if work_dir is not None else Path(suite_dir) / "eval_runs"
@@ -259,8 +258,6 @@ def _evaluate_in(folder: Path, runs: Path, **options: Any) -> dict[str, Any]:
 
 def network_digest(model: str | Path | None) -> str:
     """Which weights read a recording (``model``, else the shipped network): its sha256 prefix."""
-    from darkread.edge.reconstruct import default_model_path
-    from darkread.lab.eval.provenance import model_digest
 
     path = Path(model) if model is not None else default_model_path()
     return model_digest(path) if path.is_file() else f"{path.name} (missing)"

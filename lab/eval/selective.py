@@ -20,6 +20,7 @@ import numpy as np
 from darkread.cloud.confidence import ConfidenceModel, judge, reasons_for
 from darkread.core.text_metrics import error_rates, normalize_text
 from darkread.lab.eval.aggregate import sort_key
+from darkread.lab.eval.plots import _pyplot
 from darkread.lab.eval.tables import pct
 
 RIGHT_MAX_CER = 0.04  # a line reads "right" at this CER or less: at most one character wrong in a 28-character line
@@ -124,7 +125,6 @@ def unclear_reasons(lines: Sequence[LineOutcome], model: ConfidenceModel) -> str
 
 
 def plot_risk_coverage(groups: Mapping[str, Sequence[LineOutcome]], model: ConfidenceModel, path: Path) -> Path:
-    from darkread.lab.eval.plots import _pyplot
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 4))

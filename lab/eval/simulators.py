@@ -16,6 +16,7 @@ from pathlib import Path
 
 from darkread.lab.eval.aggregate import group_by, mean, median
 from darkread.lab.eval.results import RecordingResult
+from darkread.lab.eval.runner import load_results
 from darkread.lab.eval.tables import page_as_section, pct
 
 HESIM_NOTE = ("How the second one differs (models/synth/README.md): hesim-3d 0.1.0's H-ESIM with its IMX636 preset "
@@ -37,7 +38,6 @@ class SimulatorRun:
 
     @classmethod
     def load(cls, suite_dir: str | Path, mode: str) -> SimulatorRun:
-        from darkread.lab.eval.runner import load_results
 
         suite = Path(suite_dir)
         work = suite / "eval_runs" / mode

@@ -23,11 +23,16 @@ import logging
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
+from fnmatch import fnmatch
 from functools import partial
 from pathlib import Path
 
+from darkread.lab.jobs import run_jobs
 from darkread.lab.synth.rgb_camera import SPEC_NAME
 from darkread.lab.synth.simulators import simulator_for
+from darkread.models.synth.fonts import FACES
+from darkread.models.synth.recording import RecordingSpec, write_recording
+from darkread.models.synth.sensor import REGIMES
 
 logger = logging.getLogger(__name__)
 
@@ -60,7 +65,6 @@ class SuiteEntry:
     regime: str = "standard"  # our simulator's sensor regime (sensor.REGIMES), e.g. "fast-photoreceptor"
 
     def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
-        from darkread.models.synth.recording import RecordingSpec
 
         return RecordingSpec(
             lux=self.lux, motion=self.motion, kind=self.kind, seconds=self.seconds, seed=self.seed, font=self.font,
@@ -137,7 +141,6 @@ def spec_document(entry: SuiteEntry) -> dict:
 
 def _write_entry(out: Path, entry: SuiteEntry) -> None:
     """Write one recording unless it is already complete (runs in a worker process)."""
-    from darkread.models.synth.recording import write_recording
 
     folder = out / entry.name
     spec_doc = spec_document(entry)
@@ -167,7 +170,6 @@ def select_entries(*, small: bool = False, match: str | Sequence[str] | None = N
     entries = simulator_check_entries() if subset == "simulator-check" else suite_entries(small=small)
     entries = [replace(e, simulator=simulator, regime=regime) for e in entries]
     if match:
-        from fnmatch import fnmatch
 
         patterns = [match] if isinstance(match, str) else list(match)
         entries = [e for e in entries if any(fnmatch(e.name, m) or m in e.name for m in patterns)]
@@ -192,15 +194,12 @@ def make_suite(
     draws; ``fast-photoreceptor``: what the photoreceptor's speed in the dark decides)."""
     from tqdm import tqdm
 
-    from darkread.lab.jobs import run_jobs
-    from darkread.models.synth.fonts import FACES
 
     families = sorted({face.family for face in FACES})
     if font is not None and font not in families:
         raise ValueError(f"--font {font!r}: use one of {', '.join(families)}")
 
     simulator_for(simulator)  # an unknown name, or hesim-3d missing here: one line before any work
-    from darkread.models.synth.sensor import REGIMES
 
     if regime not in REGIMES:
         raise ValueError(f"--regime {regime!r}: use one of {', '.join(REGIMES)}")

@@ -17,6 +17,7 @@ import numpy as np
 from darkread.edge.deblur import moved_to
 from darkread.edge.events import Events
 from darkread.lab.truth import PageTruth, load_truth_and_pose
+from darkread.models.train.annotate import project_page
 
 
 class NoTruthError(ValueError):
@@ -45,7 +46,6 @@ class TrueHeadMotion:
         return cls(truth, pose.t_us, pose.H)
 
     def _centre_px(self, t_us: float) -> np.ndarray:
-        from darkread.models.train.annotate import project_page
 
         return project_page(self.truth.pose_at(t_us), self.truth.calibration, self._centre_mm)[0]
 

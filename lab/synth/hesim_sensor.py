@@ -52,6 +52,7 @@ import numpy as np
 
 from darkread.edge.events import EVENT_CD_DTYPE, empty_events
 from darkread.models.synth.camera import SENSOR_WH
+from darkread.models.synth.sensor import concat_events
 
 HESIM_PACKAGE = "hesim-3d"
 HESIM_VERSION = "0.1.0"
@@ -153,7 +154,6 @@ def simulate_region(session: Any, region: Any, seconds: float, seed: int, *, pro
     import torch
     from tqdm import tqdm
 
-    from darkread.models.synth.sensor import concat_events
 
     config = load_config()
     torch.set_num_threads(1)  # one step is small; the machine's cores go to parallel recordings

@@ -35,10 +35,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import cv2
 import numpy as np
 
 from darkread.core.image_codec import decode_image, encode_jpeg
 from darkread.edge.io.intrinsics import RECTIFIED, Intrinsics
+from darkread.models.synth.recording import RecordingSpec, recording_seconds, session_spec
+from darkread.models.synth.scene import Region
+from darkread.models.synth.session import make_session
 
 if TYPE_CHECKING:
     from darkread.models.synth.recording import RecordingSpec
@@ -111,7 +115,6 @@ def pixel_rays(camera: RgbCameraModel, x0: int, y0: int, width: int, height: int
 
 
 def rgb_region(camera: RgbCameraModel, x0: int, y0: int, width: int, height: int) -> Region:
-    from darkread.models.synth.scene import Region
 
     return Region(int(x0), int(y0), int(width), int(height), pixel_rays(camera, x0, y0, width, height))
 
@@ -177,7 +180,6 @@ def expose(
     camera: RgbCameraModel = RgbCameraModel(),
 ) -> np.ndarray:
     """Reflectance [h, w] -> the 8-bit sRGB image [h, w, 3] the camera delivers."""
-    import cv2
 
     reflect: np.ndarray = np.asarray(reflectance, dtype=np.float32)
     if camera.lens_psf_sigma_px > 0:
@@ -264,7 +266,6 @@ def take_snapshot(
 
 def recording_spec(recording_dir: str | Path) -> RecordingSpec:
     """The synthesis spec of a suite recording (``spec.json``), needed to re-create its scene."""
-    from darkread.models.synth.recording import RecordingSpec
 
     path = Path(recording_dir) / SPEC_NAME
     if not path.is_file():
@@ -278,8 +279,6 @@ def recording_spec(recording_dir: str | Path) -> RecordingSpec:
 
 def session_for(spec: RecordingSpec) -> Session:
     """The session ``write_recording(spec)`` simulated (same spec, same seed -> same scene)."""
-    from darkread.models.synth.recording import session_spec
-    from darkread.models.synth.session import make_session
 
     return make_session(session_spec(spec), spec.seed)
 
@@ -294,7 +293,6 @@ def snapshot_for_recording(
     text_path = recording_dir / "text.txt"
     if text_path.is_file() and text_path.read_text(encoding="utf-8") != session.page.text:
         raise ValueError(f"{recording_dir}: {SPEC_NAME} does not re-create this recording's page (text differs)")
-    from darkread.models.synth.recording import recording_seconds
 
     rng = np.random.default_rng([spec.seed, 7])
     return take_snapshot(session, recording_seconds(spec, session) / 2, rng, camera, full_frame=full_frame)

@@ -31,8 +31,12 @@ from typing import Any
 import numpy as np
 
 from darkread.lab.eval.provenance import model_digest
+from darkread.lab.jobs import run_jobs
 from darkread.lab.truth import ScoredWindows, is_recording, truth_windows
+from darkread.models.train.data import load_dataset
+from darkread.models.train.evaluate import predict_onnx
 from darkread.models.train.ink_scores import ink_counts, scores_from_counts
+from darkread.read import read_recording
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +46,6 @@ PLOT_NAME = "compare.png"
 
 
 def shard_windows(directory: str | Path, limit: int | None = None) -> ScoredWindows:
-    from darkread.models.train.data import load_dataset
 
     data = load_dataset(directory, limit=limit)
     return ScoredWindows(data.voxels, data.targets, "shard targets", data.ignore)
@@ -50,7 +53,6 @@ def shard_windows(directory: str | Path, limit: int | None = None) -> ScoredWind
 
 def ink_f1(model: str | Path, scored: ScoredWindows) -> dict[str, Any] | None:
     """Pooled ink counts and F1 of ``model`` on the windows (None without ground truth)."""
-    from darkread.models.train.evaluate import predict_onnx
 
     if scored.targets is None or len(scored.voxels) == 0:
         return None
@@ -65,7 +67,6 @@ def ink_f1(model: str | Path, scored: ScoredWindows) -> dict[str, Any] | None:
 
 def read_cer(model: str | Path, recording: str | Path, backend: str, cache_dir: Path) -> dict[str, Any]:
     """``darkread read --model`` on the recording (cached per model digest and recording name)."""
-    from darkread.read import read_recording
 
     cache = cache_dir / f"{Path(recording).name}.json"
     if cache.is_file():
@@ -107,7 +108,6 @@ def compare(
     out = Path(out)
     digests = {name: model_digest(path) for name, path in models.items()}
     items = [Path(p) for p in inputs]
-    from darkread.lab.jobs import run_jobs
 
     bar = tqdm(total=len(items), desc="comparing", unit="input", disable=not progress)
     task = partial(score_input, models=models, digests=digests, out=out, read=read, backend=backend, group=group)

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from darkread.models.train.onnx_weights import load_onnx_model
+
 
 def perturbed(weights: np.ndarray, rng: np.random.Generator, scale: float) -> np.ndarray:
     """``weights`` times (1 + ``scale`` x standard normal), element by element, in their own dtype."""
@@ -25,7 +27,6 @@ def write_placebo(base: str | Path, out: str | Path, *, seed: int, scale: float 
     import onnx
     from onnx import numpy_helper
 
-    from darkread.models.train.onnx_weights import load_onnx_model
 
     if not 0 < scale < 1:
         raise ValueError(f"--scale {scale}: must be between 0 and 1 (a relative perturbation, e.g. 0.005)")

@@ -19,7 +19,11 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from darkread.models.synth.recording import RecordingSpec
+from darkread.lab.jobs import run_jobs
+from darkread.lab.truth import annotate_from_truth
+from darkread.models.synth.recording import RecordingSpec, write_recording
+from darkread.models.train.annotate import SHARD_NAME
+from darkread.models.train.data import count_samples
 
 SUMMARY_NAME = "rehearsal.json"
 LUX_LEVELS: tuple[float, ...] = (5.0, 10.0, 10.0, 20.0, 30.0, 50.0)  # the dim end, where forgetting showed
@@ -41,9 +45,6 @@ def _one(indexed: tuple[int, RecordingSpec], work: Path, out: Path, every_ms: fl
     """Simulate session ``index`` (``indexed``: index and spec), label its windows from the truth,
     keep only the shard (a process task)."""
     index, spec = indexed
-    from darkread.lab.truth import annotate_from_truth
-    from darkread.models.synth.recording import write_recording
-    from darkread.models.train.annotate import SHARD_NAME
 
     recording, labelled = work / f"s{spec.seed}", work / f"s{spec.seed}_windows"
     write_recording(recording, spec, progress=False)
@@ -60,7 +61,6 @@ def make_rehearsal(out: str | Path, count: int = 18, seed: int = 601, every_ms: 
     already there is kept, so an interrupted run resumes."""
     from tqdm import tqdm
 
-    from darkread.lab.jobs import run_jobs
 
     if every_ms <= 0:
         raise ValueError(f"--every-ms {every_ms}: must be positive")
@@ -92,7 +92,6 @@ def make_rehearsal(out: str | Path, count: int = 18, seed: int = 601, every_ms: 
 
 def _found(shard: Path, spec: RecordingSpec) -> dict[str, Any]:
     """A session an interrupted run finished but did not get to record: counted from its shard."""
-    from darkread.models.train.data import count_samples
 
     return {"lux": spec.lux, "motion": spec.motion, "windows": count_samples(shard), "seed": spec.seed}
 

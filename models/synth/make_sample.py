@@ -12,6 +12,7 @@ import argparse
 import shutil
 from pathlib import Path
 
+from darkread.core.paths import SAMPLE_RECORDING
 from darkread.models.synth.recording import RecordingSpec, write_recording
 
 SAMPLE_SPEC = RecordingSpec(
@@ -29,7 +30,6 @@ SAMPLE_SPEC = RecordingSpec(
 
 
 def default_out() -> Path:
-    from darkread.core.paths import SAMPLE_RECORDING
 
     return SAMPLE_RECORDING
 

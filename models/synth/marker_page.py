@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -283,7 +284,6 @@ def write_target(out: str | Path, page: MarkerPage, *, dpi: float = 300.0) -> tu
 
 def text_lines(text: str, max_chars: int = 48) -> tuple[str, ...]:
     """Printed lines of a text file: its own lines, long ones wrapped at word boundaries."""
-    import textwrap
 
     lines: list[str] = []
     for raw in text.splitlines():

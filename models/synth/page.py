@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import lru_cache
 
+import cv2
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
@@ -137,7 +138,6 @@ def reflectance(
 
     ``blur_tex`` (Gaussian sigma in texels) models print and focus blur.
     """
-    import cv2
 
     cov = page.coverage
     if blur_tex > 0.05:

@@ -13,6 +13,7 @@ import json
 import logging
 import math
 import time
+import uuid
 import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -27,6 +28,8 @@ from darkread.edge.io.raw import write_raw
 from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
 from darkread.models.synth.camera import SENSOR_WH
 from darkread.models.synth.gaze import points_from_angles, row_times_us, tracker_rows
+from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath
+from darkread.models.synth.marker_page import save_layout
 from darkread.models.synth.scene import Region
 from darkread.models.synth.sensor import DEFAULT_F_NUMBER, EventSensor, background_events, concat_events
 from darkread.models.synth.session import Session, SessionSpec, choose_dt_us, make_session
@@ -342,7 +345,6 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         },
     )
     uid_bytes = rng.integers(0, 256, 16).astype(np.uint8).tobytes()
-    import uuid
 
     write_gaze_csv(
         out / "general_eye_gaze.csv",
@@ -356,8 +358,6 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     )
     save_calibration(out / "calibration.json", calib)
     if session.marker_page is not None:
-        from darkread.models.synth.marker_page import save_layout
-
         save_layout(out / LAYOUT_NAME, session.marker_page)
     else:
         write_page_ink(out / PAGE_INK_NAME, session)
@@ -394,8 +394,6 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         meta["markers"] = {"layout": LAYOUT_NAME, "pose_truth": POSE_TRUTH_NAME, "n_markers": len(session.marker_page.markers)}
     meta["truth"] = {"pose": POSE_TRUTH_NAME, "ink": LAYOUT_NAME if session.marker_page is not None else PAGE_INK_NAME}
     if spec.scanpath != "model" or spec.scanpath_file is not None:
-        from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath
-
         meta["scanpath"] = {"kind": "human", "source": HumanScanpath.load(spec.scanpath_file or SHIPPED).source}
     (out / "meta.json").write_text(json.dumps(meta, indent=2))
     log.info("wrote %s: %d events in %.1f s wall", out, events.size, time.perf_counter() - t_wall)

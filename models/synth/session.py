@@ -17,6 +17,7 @@ from darkread.models.synth.biases import apply_profile
 from darkread.models.synth.camera import random_calibration
 from darkread.models.synth.fonts import FontFace, face_by_name, faces_for, font_split
 from darkread.models.synth.gaze import Scanpath, TrackerModel, reading_scanpath
+from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath, replay_scanpath
 from darkread.models.synth.marker_page import MarkerPage, MarkerPageSpec, lay_out, mm_to_px
 from darkread.models.synth.motion import MOTION_LEVELS, random_motion
 from darkread.models.synth.page import PrintedPage, reflectance, render_page
@@ -147,8 +148,6 @@ def make_session(spec: SessionSpec, seed: int) -> Session:
     if spec.scanpath == "model" and spec.scanpath_file is None:
         scanpath = reading_scanpath(page, spec.duration_s + 1.0, deg_per_texel, rng, start_line=0)
     elif spec.scanpath in SCANPATHS:
-        from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath, replay_scanpath
-
         human = HumanScanpath.load(spec.scanpath_file or SHIPPED)
         scanpath = replay_scanpath(page, human, spec.duration_s + 1.0, deg_per_texel, rng)
     else:

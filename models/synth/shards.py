@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import multiprocessing as mp
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -326,7 +327,6 @@ def build_dataset(
             results.append(build_shard(task))
             bar.update(results[-1]["count"])
     else:
-        import multiprocessing as mp
 
         with mp.get_context("spawn").Pool(workers) as pool:
             for res in pool.imap_unordered(build_shard, todo):

@@ -43,10 +43,12 @@ import cv2
 import numpy as np
 
 from darkread.edge.calibrate.event_image import count_image
+from darkread.edge.calibrate.markers import detector_parameters
 from darkread.edge.io.calibration import Calibration
-from darkread.models.synth.marker_page import MarkerPage, mm_to_px
+from darkread.models.synth.camera import region_rays
+from darkread.models.synth.marker_page import MarkerPage, load_layout, mm_to_px
 from darkread.models.synth.recording import load_pose_truth
-from darkread.models.synth.shards import ncc, window_count_image
+from darkread.models.synth.shards import SampleMeta, ncc, window_count_image, write_shard
 from darkread.models.train.page_search import (
     SearchConfig,
     edge_map,
@@ -118,7 +120,6 @@ def to_detection_image(signed: np.ndarray, percentile: float = 98.0) -> np.ndarr
 
 def detector(page: MarkerPage) -> cv2.aruco.ArucoDetector:
     """An ArUco detector for event images of ``page``'s dictionary."""
-    from darkread.edge.calibrate.markers import detector_parameters
 
     params = detector_parameters()  # the calibration's (sub-pixel corner refinement)
     params.adaptiveThreshWinSizeMin = 5
@@ -229,7 +230,6 @@ class PoseTrack:
 
 def window_rays(calib: Calibration, origin: tuple[int, int], hw: tuple[int, int] = WINDOW_HW) -> np.ndarray:
     """Undistorted normalised rays of a window's pixel centres, [h*w, 2]."""
-    from darkread.models.synth.camera import region_rays
 
     return region_rays(calib, int(origin[0]), int(origin[1]), hw[1], hw[0])
 
@@ -319,7 +319,6 @@ class SensorRays:
     """Undistorted rays of every sensor pixel, computed once per recording (crops are views)."""
 
     def __init__(self, calib: Calibration) -> None:
-        from darkread.models.synth.camera import region_rays
 
         self.rays = region_rays(calib, 0, 0, calib.width, calib.height).reshape(calib.height, calib.width, 2)
 
@@ -507,8 +506,6 @@ def choose_offset(windows: Windows, track: PoseTrack, page: MarkerPage, calib: C
 def annotate_recording(recording: str | Path, layout: str | Path | None, out: str | Path,
                        cfg: AnnotateConfig = AnnotateConfig(), *, progress: bool = True) -> dict[str, Any]:
     """Annotate every window of ``recording`` from the marker page's pose; writes the shard and summary."""
-    from darkread.models.synth.marker_page import load_layout
-    from darkread.models.synth.shards import SampleMeta, write_shard
 
     recording = Path(recording)
     layout = Path(layout) if layout is not None else recording / "page.layout.json"

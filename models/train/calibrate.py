@@ -18,6 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from darkread.edge.reconstruct import INK_TEMPERATURE_KEY, Reconstructor, probability_from_logits
+from darkread.models.train.data import load_dataset
+
 TEMPERATURES = (0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0)
 
 
@@ -58,7 +61,6 @@ def fit_temperature(logits: np.ndarray, targets: np.ndarray, temperatures: Seque
     """The grid temperature with the lowest log-loss (the loss is smooth and has one minimum in T)."""
     losses = {float(t): log_loss(logits, targets, float(t)) for t in temperatures}
     best = min(losses, key=losses.__getitem__)
-    from darkread.edge.reconstruct import probability_from_logits
 
     table = reliability(probability_from_logits(logits, best), targets)
     return Calibration(best, int(np.asarray(logits).shape[0]), losses, table)
@@ -66,8 +68,6 @@ def fit_temperature(logits: np.ndarray, targets: np.ndarray, temperatures: Seque
 
 def calibrate(val_dir: str | Path, model: str | Path | None = None, limit: int | None = 500) -> Calibration:
     """Fit the temperature of ``model`` (default: the shipped one) on a shard directory's windows."""
-    from darkread.edge.reconstruct import Reconstructor
-    from darkread.models.train.data import load_dataset
 
     data = load_dataset(val_dir, limit=limit)
     rec = Reconstructor(model, threads=1, warmup=0)
@@ -80,7 +80,6 @@ def stored_ink_temperature(path: str | Path) -> float | None:
     """The ink temperature a network file carries in its metadata, or None when it carries none."""
     import onnx
 
-    from darkread.edge.reconstruct import INK_TEMPERATURE_KEY
 
     for entry in onnx.load(str(path), load_external_data=False).metadata_props:
         if entry.key == INK_TEMPERATURE_KEY:
@@ -93,7 +92,6 @@ def store_ink_temperature(path: str | Path, temperature: float) -> Path:
     edge's ink probability is sigmoid(logits / T) with the T its network carries."""
     import onnx
 
-    from darkread.edge.reconstruct import INK_TEMPERATURE_KEY
 
     if not 0 < float(temperature) < float("inf"):
         raise ValueError(f"ink temperature must be a positive number, not {temperature}")

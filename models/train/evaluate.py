@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from darkread.edge.reconstruct import Reconstructor
 from darkread.models.train.baseline import BaselineParams
 from darkread.models.train.baseline import predict as baseline_predict
 from darkread.models.train.data import Shard, iterate_batches, load_dataset, shard_paths
@@ -27,7 +28,6 @@ def predict_onnx(model_path: str | Path, voxels: np.ndarray, batch_size: int = 3
     """uint8 ink masks of ``voxels`` through the edge Reconstructor."""
     from tqdm import tqdm
 
-    from darkread.edge.reconstruct import Reconstructor
 
     rec = Reconstructor(model_path, threads=1, warmup=1)
     out = np.zeros((len(voxels), *voxels.shape[-2:]), np.uint8)

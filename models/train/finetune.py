@@ -38,7 +38,14 @@ from typing import Any
 
 import numpy as np
 
+from darkread.models.synth.session import SessionSpec
+from darkread.models.synth.shards import SAMPLES_PER_PAGE, make_samples, shard_seed
+from darkread.models.train.annotate import SHARD_NAME, annotate_recording
+from darkread.models.train.calibrate import store_ink_temperature, stored_ink_temperature
 from darkread.models.train.data import Shard, augment, concat_shards, count_samples, labels, load_dataset, random_crop, split_labels
+from darkread.models.train.export import export_onnx
+from darkread.models.train.fit import bce_dice_loss, evaluate_model, frozen, training_mode
+from darkread.models.train.onnx_weights import max_output_difference, model_from_onnx
 
 log = logging.getLogger(__name__)
 
@@ -127,8 +134,6 @@ def synthetic_windows(n: int, sources: Sequence[str | Path] = (), seed: int = 0,
         return Shard(np.concatenate([p.voxels for p in parts]), np.concatenate([p.targets for p in parts]), {})
     from tqdm import tqdm
 
-    from darkread.models.synth.session import SessionSpec
-    from darkread.models.synth.shards import SAMPLES_PER_PAGE, make_samples, shard_seed
 
     spec = SessionSpec(split="train", duration_s=4.0)
     vs: list[np.ndarray] = []
@@ -162,7 +167,6 @@ def tune(model: Any, annotated: Shard, synthetic: Shard, cfg: TuneConfig, *, anc
     import torch.nn.functional as F
     from tqdm import tqdm
 
-    from darkread.models.train.fit import bce_dice_loss, training_mode
 
     if len(annotated) == 0:
         raise FinetuneError("no annotated windows to tune on")
@@ -222,7 +226,6 @@ def spread_indices(total: int, n: int) -> np.ndarray:
 
 
 def _monitor(model: Any, pools: dict[str, Shard], n: int) -> dict[str, float]:
-    from darkread.models.train.fit import evaluate_model
 
     scores = {}
     for name, pool in pools.items():
@@ -235,7 +238,6 @@ def _monitor(model: Any, pools: dict[str, Shard], n: int) -> dict[str, float]:
 
 def annotate_missing(recordings: Sequence[str | Path], layout: str | Path | None, root: Path, progress: bool) -> list[Path]:
     """Annotate recordings not yet annotated under ``root``; returns their annotated directories."""
-    from darkread.models.train.annotate import SHARD_NAME, annotate_recording
 
     out = []
     for rec in recordings:
@@ -261,10 +263,6 @@ def finetune(
     """Fine-tune ``base_model`` (ONNX) on the annotated windows plus synthetic ones; export ONNX."""
     import torch
 
-    from darkread.models.train.calibrate import store_ink_temperature, stored_ink_temperature
-    from darkread.models.train.export import export_onnx
-    from darkread.models.train.fit import frozen
-    from darkread.models.train.onnx_weights import max_output_difference, model_from_onnx
 
     annotated, counts = load_annotated(annotated_dirs)
     log.info("%d annotated windows from %d directories", len(annotated), len(counts))

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import pickle
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -30,6 +31,7 @@ from darkread.models.train.data import (
 )
 from darkread.models.train.ink_scores import ink_scores
 from darkread.models.train.net import BinaryUNet, NetConfig, count_parameters
+from darkread.models.train.onnx_weights import model_from_onnx
 
 log = logging.getLogger(__name__)
 
@@ -164,7 +166,6 @@ def save_checkpoint(path: Path, model: BinaryUNet, optimizer: torch.optim.Optimi
 
 def load_model(checkpoint: str | Path) -> BinaryUNet:
     """The network stored in a checkpoint, in eval mode (ValueError naming the file when it is not one)."""
-    import pickle
 
     try:
         data = torch.load(checkpoint, map_location="cpu", weights_only=False)
@@ -190,8 +191,6 @@ def load_initial_weights(path: str | Path, config: NetConfig | None, option: str
     if not Path(path).is_file():
         raise FileNotFoundError(f"{option} {path}: no such file")
     if is_exported_network(path):
-        from darkread.models.train.onnx_weights import model_from_onnx
-
         return model_from_onnx(path, config)
     return load_model(path)
 

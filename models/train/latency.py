@@ -56,9 +56,9 @@ def reference_latency_ms(runs: int) -> tuple[float, str]:
     try:
         import torch
 
-        from darkread.models.train.net import BinaryUNet
+        from darkread.models.train.net import BinaryUNet  # optional: torch is the reference where installed
     except ImportError:
-        from darkread.models.train.baseline import BaselineParams, predict
+        from darkread.models.train.baseline import BaselineParams, predict  # optional: torch is the reference where installed
 
         ms = median_ms(lambda: predict(voxel, BaselineParams()), runs)
         return ms, f"naive count-image baseline: {ms:.2f} ms"

@@ -14,7 +14,15 @@ from typing import Any
 
 import numpy as np
 
+from darkread.models.synth.shards import LUX_RANGE, build_dataset
+from darkread.models.train.baseline import tune
+from darkread.models.train.card import write_card
+from darkread.models.train.data import shard_paths
+from darkread.models.train.evaluate import evaluate, sample_figure, training_sample
+from darkread.models.train.export import export_onnx, quantize_int8
 from darkread.models.train.fit import BEST_CHECKPOINT, FitConfig, fit, load_model
+from darkread.models.train.latency import onnx_latency_ms, reference_latency_ms
+from darkread.models.train.net import BinaryUNet, NetConfig, count_parameters
 
 log = logging.getLogger(__name__)
 
@@ -29,8 +37,6 @@ DEFAULT_RUN_DIR = Path("runs/binary_unet")
 
 def export_models(checkpoint: str | Path, train_dir: str | Path, out_dir: str | Path = MODELS_DIR, calibration_windows: int = 256) -> dict[str, Any]:
     """fp32 ONNX from ``checkpoint`` and its int8 twin calibrated on training windows."""
-    from darkread.models.train.evaluate import training_sample
-    from darkread.models.train.export import export_onnx, quantize_int8
 
     out = Path(out_dir)
     fp32 = export_onnx(load_model(checkpoint), out / FP32_NAME)
@@ -44,7 +50,6 @@ def export_models(checkpoint: str | Path, train_dir: str | Path, out_dir: str | 
 def measure_latency(models_dir: str | Path = MODELS_DIR, runs: int = 60) -> dict[str, Any]:
     import onnxruntime
 
-    from darkread.models.train.latency import onnx_latency_ms, reference_latency_ms
 
     ref_ms, ref = reference_latency_ms(runs)
     out = Path(models_dir)
@@ -61,8 +66,6 @@ def evaluate_models(
     train_dir: str | Path, val_dir: str | Path, models_dir: str | Path = MODELS_DIR, *,
     baseline_windows: int = 600, limit: int | None = None, figure: str | Path | None = FIGURE_PATH,
 ) -> dict[str, Any]:
-    from darkread.models.train.baseline import tune
-    from darkread.models.train.evaluate import evaluate, sample_figure, training_sample
 
     tuning = training_sample(train_dir, baseline_windows, seed=2)
     params, train_f1 = tune(tuning.voxels, tuning.targets)
@@ -87,7 +90,6 @@ def _families(fonts: Any) -> list[str]:
 
 
 def write_model_card(info: dict[str, Any], models_dir: str | Path = MODELS_DIR) -> Path:
-    from darkread.models.train.card import write_card
 
     return write_card(info, Path(models_dir) / CARD_NAME)
 
@@ -127,7 +129,6 @@ def evaluate_and_card(
     timings.setdefault("fit", float(history["elapsed_s"]))
     fit_info = {**history["fit_config"], "steps": history["step"], "epochs": history["epoch"],
                 "elapsed_s": history["elapsed_s"], "best_f1": history["best_f1"]}
-    from darkread.models.train.net import BinaryUNet, NetConfig, count_parameters
 
     fit_info["parameters"] = count_parameters(BinaryUNet(NetConfig.from_dict(fit_info["net"])))
     train_manifest = _manifest(train_dir)
@@ -182,7 +183,6 @@ def reproduce(
     models_dir: str | Path = MODELS_DIR, figure: str | Path | None = FIGURE_PATH,
 ) -> dict[str, Any]:
     """The recipe's synthetic sets (those absent) -> fit on their mix -> export -> int8 -> evaluate -> model card."""
-    from darkread.models.train.data import shard_paths
 
     timings: dict[str, float] = {}
     sets = training_sets(train_dir, train_samples)
@@ -205,7 +205,6 @@ def reproduce(
 
 def generate_dataset(recipe: SetRecipe, root: str | Path, workers: int) -> None:
     """Make one set of the recipe as ``darkread synth dataset`` does."""
-    from darkread.models.synth.shards import LUX_RANGE, build_dataset
 
     log.info("generating %s: %s, %d workers -> %s", recipe.folder, recipe, workers, root)
     build_dataset(root, recipe.samples, workers=workers, seed=recipe.seed, split=recipe.split,

@@ -11,6 +11,18 @@ from typing import Any
 
 import numpy as np
 
+from darkread.edge.config import PipelineConfig
+from darkread.edge.deblur import DeblurConfig
+from darkread.edge.denoise import DenoiseConfig
+from darkread.edge.fovea import window_events, window_origin
+from darkread.edge.frame import clean_window
+from darkread.edge.gaze import GazeMapper
+from darkread.edge.io.evt3 import decode_evt3
+from darkread.edge.io.raw_header import read_raw_header
+from darkread.edge.io.recording import open_recording
+from darkread.edge.voxel import VoxelConfig, voxel_grid
+from darkread.edge.windows import MAX_HISTORY_EVENTS
+
 WINDOW_HW: tuple[int, int] = (100, 200)
 
 
@@ -27,9 +39,6 @@ class Windows:
 
 def read_events(path: str | Path, *, need_text: bool = False) -> tuple[Any, np.ndarray, tuple[int, int]]:
     """(recording, all its events, sensor (width, height)); raises for a recording without events."""
-    from darkread.edge.io.evt3 import decode_evt3
-    from darkread.edge.io.raw_header import read_raw_header
-    from darkread.edge.io.recording import open_recording
 
     rec = open_recording(path)
     if need_text and not rec.text:
@@ -48,14 +57,6 @@ def window_stack(rec: Any, events: np.ndarray, sensor_wh: tuple[int, int], every
     ``deblur``: each window's events moved back along the head's motion as the edge does before its
     voxel grid (``edge.deblur``), so a network tuned on these windows sees what it will be given;
     ``denoise``: a dim-light window's isolated events dropped as the edge drops them (``edge.denoise``)."""
-    from darkread.edge.config import PipelineConfig
-    from darkread.edge.deblur import DeblurConfig
-    from darkread.edge.denoise import DenoiseConfig
-    from darkread.edge.fovea import window_events, window_origin
-    from darkread.edge.frame import clean_window
-    from darkread.edge.gaze import GazeMapper
-    from darkread.edge.voxel import VoxelConfig, voxel_grid
-    from darkread.edge.windows import MAX_HISTORY_EVENTS
 
     mapper = GazeMapper(rec.calibration, rec.gaze())
     deblur_cfg, denoise_cfg = DeblurConfig(enabled=deblur), DenoiseConfig(enabled=denoise)

@@ -13,7 +13,7 @@ __all__ = ["Evk4Camera"]
 
 def __getattr__(name: str) -> Any:
     if name == "Evk4Camera":
-        from darkread.edge.sources.evk4.camera import Evk4Camera
+        from darkread.edge.sources.evk4.camera import Evk4Camera  # lazy: importing the package needs no USB stack
 
         return Evk4Camera
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

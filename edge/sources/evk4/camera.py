@@ -42,7 +42,7 @@ class Decoder(Protocol):
 
 
 def _default_decoder() -> Decoder:
-    from darkread.edge.io.evt3 import Evt3Decoder
+    from darkread.edge.io.evt3 import Evt3Decoder  # lazy: the compiled decoder loads with the first stream
 
     return Evt3Decoder(width=regs.WIDTH, height=regs.HEIGHT)
 

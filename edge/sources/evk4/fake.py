@@ -28,6 +28,7 @@ import usb.core
 import usb.util
 
 from darkread.edge.events import Events
+from darkread.edge.io.evt3 import encode_evt3
 from darkread.edge.sources.evk4 import registers as regs
 from darkread.edge.sources.evk4 import treuzell as tz
 
@@ -94,8 +95,6 @@ class FakeEvk4:
     @classmethod
     def from_events(cls, events: Events, **kwargs: Any) -> FakeEvk4:
         """A board that serves ``events`` encoded as EVT3."""
-        from darkread.edge.io.evt3 import encode_evt3
-
         return cls(recording=encode_evt3(events), **kwargs)
 
     @classmethod
