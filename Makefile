@@ -110,26 +110,26 @@ demo: $(DEMO_STAMP) speech-deps  ## read the shipped sample recording aloud and 
 eval: $(STAMP)  ## the full suite (93 recordings) in both edge modes (~30 min on 2 cores, half of it making the suite): report in docs/eval, the default mode first, with how much ink the events show; then the line-confidence model fitted (cloud/data/line_confidence.json, docs/eval/calibration.md) and the report rebuilt with coverage and risk under it
 	$(VENV)/bin/darkread eval make-suite runs/eval_suite --jobs 2
 	$(VENV)/bin/darkread eval evidence runs/eval_suite --out docs/eval --jobs 2
-	$(VENV)/bin/darkread eval runs/eval_suite --out docs/eval --infer both --jobs 2
+	$(VENV)/bin/darkread eval run runs/eval_suite --out docs/eval --infer both --jobs 2
 	# the line-confidence model the cloud ships, fitted on half the recordings' lines and measured on the other half
 	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval
-	$(VENV)/bin/darkread eval runs/eval_suite --out docs/eval --infer both --report-only --before docs/eval/before/results.json
+	$(VENV)/bin/darkread eval run runs/eval_suite --out docs/eval --infer both --report-only --before docs/eval/before/results.json
 
 eval-small: $(STAMP)  ## the small suite (17 recordings) in both edge modes (a few minutes); report in runs/eval_small_report
 	$(VENV)/bin/darkread eval make-suite runs/eval_small --small --jobs 2
-	$(VENV)/bin/darkread eval runs/eval_small --out runs/eval_small_report --infer both --jobs 2
+	$(VENV)/bin/darkread eval run runs/eval_small --out runs/eval_small_report --infer both --jobs 2
 
 eval-hesim: hesim  ## the second-simulator check: 18 recordings of the suite made by each simulator (30/10/5 lux), read end to end; CER per lux side by side in docs/eval/simulators.md, the "Second simulator" section of the next `make eval` report (~1 h on 2 cores)
 	nice -n 10 $(VENV)/bin/darkread eval make-suite runs/eval_hesim/darkread --subset simulator-check --jobs 2
 	nice -n 10 $(VENV)/bin/darkread eval make-suite runs/eval_hesim/hesim --subset simulator-check --simulator hesim --jobs 2
-	$(VENV)/bin/darkread eval runs/eval_hesim/darkread --out runs/eval_hesim/report_darkread --jobs 2
-	$(VENV)/bin/darkread eval runs/eval_hesim/hesim --out runs/eval_hesim/report_hesim --no-rgb --compare --jobs 2
+	$(VENV)/bin/darkread eval run runs/eval_hesim/darkread --out runs/eval_hesim/report_darkread --jobs 2
+	$(VENV)/bin/darkread eval run runs/eval_hesim/hesim --out runs/eval_hesim/report_hesim --no-rgb --compare --jobs 2
 	$(VENV)/bin/darkread eval compare-simulators runs/eval_hesim/darkread runs/eval_hesim/hesim --out docs/eval/simulators.md
 
 eval-photoreceptor: $(STAMP)  ## what the photoreceptor's speed in the dark decides: the suite's 27 recordings at 10 and 5 lux made again with --regime fast-photoreceptor, read in both edge modes (~10 min on 2 cores); report and evidence in runs/eval_photoreceptor_report (models/MODEL_CARD.md)
 	$(VENV)/bin/darkread eval make-suite runs/eval_photoreceptor --regime fast-photoreceptor --match '*_lux10_*' --match '*_lux5_*' --jobs 2
 	$(VENV)/bin/darkread eval evidence runs/eval_photoreceptor --out runs/eval_photoreceptor_report --jobs 2
-	$(VENV)/bin/darkread eval runs/eval_photoreceptor --out runs/eval_photoreceptor_report --infer both --no-rgb --jobs 2
+	$(VENV)/bin/darkread eval run runs/eval_photoreceptor --out runs/eval_photoreceptor_report --infer both --no-rgb --jobs 2
 
 train: $(STAMP)  ## reproduce the shipped model from scratch
 	$(VENV)/bin/darkread train all

@@ -106,7 +106,7 @@ def test_synth_into_a_path_under_a_regular_file(tmp_path: Path) -> None:
 
 
 def test_eval_a_suite_that_does_not_exist(tmp_path: Path) -> None:
-    _assert_one_line(_darkread("eval", str(tmp_path / "no_suite")), mentions="no_suite")
+    _assert_one_line(_darkread("eval", "run", str(tmp_path / "no_suite")), mentions="no_suite")
 
 
 def test_every_darkread_error_is_a_user_error_and_anything_else_a_bug() -> None:

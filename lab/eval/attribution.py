@@ -249,7 +249,7 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
     engine = make_ocr_backend(backend)
     evaluated = sorted(p for p in work.iterdir() if (p / "read" / "cloud").is_dir()) if work.is_dir() else []
     if not evaluated:
-        raise FileNotFoundError(f"{work}: no evaluated recordings; run `darkread eval {suite} --work {work}` first")
+        raise FileNotFoundError(f"{work}: no evaluated recordings; run `darkread eval run {suite} --work {work}` first")
     rows = []
     for run_dir in tqdm(evaluated, desc="attributing", unit="rec", disable=not progress):
         recording = suite / run_dir.name

@@ -1,9 +1,10 @@
-"""``darkread eval SUITE_DIR`` and ``darkread eval make-suite OUT``: evaluation suites and the report."""
+"""``darkread eval FORM ...``: evaluation suites, the report, and the lab's questions about them."""
 
 from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -11,6 +12,8 @@ if TYPE_CHECKING:
     from darkread.lab.eval.results import RecordingResult
 
 from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
+from darkread.lab.synth.simulators import SIMULATORS
+from darkread.models.synth.sensor import REGIMES
 
 DEFAULT_CONFIDENCE_MODEL = Path(__file__).resolve().parents[2] / "cloud" / "data" / "line_confidence.json"
 
@@ -18,7 +21,7 @@ logger = logging.getLogger(__name__)
 BOTH = "both"
 
 EVAL_HELP = """\
-Five forms:
+Six forms:
 
   darkread eval make-suite OUT [--small | --subset simulator-check] [--simulator darkread|hesim] [--font FAMILY] [--jobs N]
       write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
@@ -33,7 +36,7 @@ Five forms:
       FAMILY: the selected recordings made again in another font family, all else alike (names end
       in _as_<their own family>), to tell what a font costs from what a scene does.
 
-  darkread eval SUITE_DIR [--out docs/eval] [--backend local] [--infer MODE|both] [--beside DIR] [--jobs N]
+  darkread eval run SUITE_DIR [--out docs/eval] [--backend local] [--infer MODE|both] [--beside DIR] [--jobs N]
       read every recording of SUITE_DIR (folders with text.txt) end to end, take the RGB baseline
       snapshot of the same scene, compare OCR engines on the stitched pages, measure bandwidth, and
       write the Markdown report with PNG plots to --out. Results are kept per recording under
@@ -77,103 +80,118 @@ Five forms:
   CER by lux and motion with the difference, the 30-lux headline, a CER-vs-lux plot of both, and
   each mode's stream in the bandwidth table. --beside DIR alone puts the stored results of another
   run (the other mode, same suite) beside this one without evaluating them, e.g.
-      darkread eval SUITE --infer on-change --work W1 --beside SUITE/eval_runs/every-window
+      darkread eval run SUITE --infer on-change --work W1 --beside SUITE/eval_runs/every-window
 """
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    from darkread.models.synth.sensor import REGIMES
-
-    parser = subparsers.add_parser(
-        "eval",
-        help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
-        description=EVAL_HELP,
-        usage="darkread eval SUITE_DIR [options]\n"
-              "       darkread eval make-suite OUT [--small | --subset NAME] [--simulator NAME] [--match PATTERN] [--jobs N]\n"
-              "       darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]\n"
-              "       darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md]\n"
-              "       darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]\n"
-              "       darkread eval calibrate SUITE_DIR [--work DIR] [--model-out FILE.json] [--out DIR]",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("target", metavar="SUITE_DIR", help="suite directory, or the word make-suite")
-    parser.add_argument("make_suite_out", nargs="?", metavar="OUT", help=argparse.SUPPRESS)
-    parser.add_argument("second_suite", nargs="?", metavar="OTHER_SUITE", help=argparse.SUPPRESS)
-    parser.add_argument("--out", default="docs/eval", metavar="DIR", help="report folder (default docs/eval)")
-    parser.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
+def _common_options() -> argparse.ArgumentParser:
+    """Options every form that reads a suite shares."""
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--out", default="docs/eval", metavar="DIR", help="where the report goes (default docs/eval)")
+    common.add_argument("--backend", default="local", choices=["local", "rapidocr", "tesseract", "google", "openai"],
                         help="OCR engine for darkread and the RGB baseline (default: local)")
-    parser.add_argument("--compare", nargs="*", metavar="ENGINE", default=None,
-                        help="OCR engines to compare on the stitched pages (default: every installed offline "
-                             "engine with and without the word-list correction, e.g. rapidocr and rapidocr-raw, plus "
-                             "remote ones when configured; --compare alone: no comparison)")
-    parser.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
-    parser.add_argument("--work", metavar="DIR", help="per-recording outputs of the (default) mode (default SUITE_DIR/eval_runs/<mode>)")
-    parser.add_argument("--force", action="store_true", help="re-evaluate recordings that already have results")
-    parser.add_argument("--report-only", action="store_true", help="rebuild the report from stored results")
-    parser.add_argument("--note", action="append", default=[], metavar="TEXT", help="a line for the report's header (repeatable)")
-    parser.add_argument("--small", action="store_true", help="make-suite: the small (CI) suite")
-    parser.add_argument("--limit", type=int, metavar="N", help="make-suite: only the first N recordings")
-    parser.add_argument("--match", metavar="PATTERN", action="append",
-                        help="make-suite: only recordings whose name matches (shell pattern or substring), e.g. "
-                             "'*lux30_*_human' for the real-scanpath recordings at 30 lux (repeatable: any of them)")
-    parser.add_argument("--subset", choices=["simulator-check"],
-                        help="make-suite: a named part of the full suite; simulator-check: its words and paragraph "
-                             "recordings at 30, 10 and 5 lux, every motion (18, same names, seeds and texts)")
-    parser.add_argument("--simulator", choices=["darkread", "hesim"], default="darkread",
-                        help="make-suite: what turns the rendered scenes into events: darkread (our sensor model, "
-                             "default) or hesim (hesim-3d's H-ESIM, IMX636 preset; `make hesim` installs it)")
-    parser.add_argument("--regime", default="standard", choices=REGIMES,
-                        help="make-suite: our simulator's sensor regime (default standard); fast-photoreceptor: the same "
-                             "scenes and sensors with a photoreceptor that keeps up in the dark (~1 ms at 5 lux, the "
-                             "IMX636's stated latency read as scene light; standard: 4-50 ms): what that choice decides")
-    parser.add_argument("--font", metavar="FAMILY",
-                        help="make-suite: every selected recording not already in this font family made again in it "
-                             "(same seed, light, motion, text kind and x-height; named <name-in-FAMILY>_as_<old family>), "
-                             "e.g. --font 'DejaVu Sans' --match '*_lux5_*roboto*': what the held-out font costs")
-    parser.add_argument("--infer", default=None, choices=[*INFER_MODES, BOTH],
+    common.add_argument("--model", metavar="ONNX", help="reconstruction model (default: the shipped one)")
+    common.add_argument("--work", metavar="DIR",
+                        help="per-recording outputs of the (default) mode (default SUITE_DIR/eval_runs/<mode>)")
+    common.add_argument("--note", action="append", default=[], metavar="TEXT", help="a line for the report's header (repeatable)")
+    common.add_argument("--infer", default=None, choices=[*INFER_MODES, BOTH],
                         help="the edge's mode (default: the edge's default, PipelineConfig().infer; every-window: every frame; "
                              "on-change: one fused view per fixation; both: the default and the other beside it)")
-    parser.add_argument("--beside", metavar="DIR",
-                        help="results of the other mode to put beside this run in the report (a --work folder of the same "
-                             "suite); with --infer both, where the other mode is evaluated (default SUITE_DIR/eval_runs/<mode>)")
-    parser.add_argument("--no-rgb", action="store_true",
-                        help="leave out the RGB baseline and the bandwidth figures (they need its snapshot): darkread's "
-                             "reading only, e.g. for a second simulator's suite whose scenes another suite already has")
-    parser.add_argument("--model-out", metavar="FILE.json", default=str(DEFAULT_CONFIDENCE_MODEL),
-                        help="calibrate: where the fitted line-confidence model goes (default: the one the cloud ships)")
-    parser.add_argument("--target-risk", type=float, default=0.05, metavar="R",
-                        help="calibrate: the CER the answered lines of the fitting half may have (sets the answer threshold; default 0.05)")
-    parser.add_argument("--before", metavar="RESULTS.json",
-                        help="an earlier report's results.json of the same suite: the report compares darkread's CER by lux "
-                             "and kind on the recordings both hold (e.g. docs/eval/before/results.json)")
-    parser.add_argument("--jobs", type=int, default=1, metavar="N",
-                        help="worker processes (make-suite and evaluation; default 1)")
-    parser.set_defaults(func=_run)
+    common.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes (default 1)")
+    return common
 
 
-def _run(args: argparse.Namespace) -> int:
-    if args.target == "compare-simulators":
-        return _compare_simulators(args)
-    if args.target == "attribute":
-        return _attribute(args)
-    if args.target == "evidence":
-        return _evidence(args)
-    if args.target == "calibrate":
-        return _calibrate(args)
-    if args.second_suite is not None:
-        raise ValueError(f"unexpected argument {args.second_suite!r}")
-    if args.target == "make-suite":
-        return _make_suite(args)
-    if args.make_suite_out is not None:
-        raise ValueError(f"unexpected argument {args.make_suite_out!r}; `darkread eval SUITE_DIR` takes one folder")
-    return _evaluate(args)
+def _add_run(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    p = sub.add_parser("run", parents=[common], help="read every recording of a suite end to end and write the report",
+                       description="Read every recording of SUITE_DIR end to end, take the RGB baseline snapshot of the same "
+                                   "scene, compare OCR engines on the stitched pages, measure bandwidth, and write the report.")
+    p.add_argument("target", metavar="SUITE_DIR", help="a suite made by `darkread eval make-suite`")
+    p.add_argument("--compare", nargs="*", metavar="ENGINE", default=None,
+                   help="OCR engines to compare on the stitched pages (default: every installed offline engine with and "
+                        "without the word-list correction, plus remote ones when configured; --compare alone: no comparison)")
+    p.add_argument("--force", action="store_true", help="re-evaluate recordings that already have results")
+    p.add_argument("--report-only", action="store_true", help="rebuild the report from stored results")
+    p.add_argument("--beside", metavar="DIR",
+                   help="results of the other mode to put beside this run in the report (a --work folder of the same "
+                        "suite); with --infer both, where the other mode is evaluated (default SUITE_DIR/eval_runs/<mode>)")
+    p.add_argument("--no-rgb", action="store_true",
+                   help="leave out the RGB baseline and the bandwidth figures (they need its snapshot): darkread's "
+                        "reading only, e.g. for a second simulator's suite whose scenes another suite already has")
+    p.add_argument("--before", metavar="RESULTS.json",
+                   help="an earlier report's results.json of the same suite: the report compares darkread's CER by lux "
+                        "and kind on the recordings both hold (e.g. docs/eval/before/results.json)")
+    p.set_defaults(func=_evaluate)
+
+
+def _add_make_suite(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("make-suite", help="write the evaluation suite (synthetic recordings with fixed seeds)",
+                       description="Write the evaluation suite: synthetic recordings with fixed seeds over lux, text kinds, "
+                                   "fonts, x-heights and motion (see `darkread eval --help`).")
+    p.add_argument("make_suite_out", metavar="OUT", help="the suite's folder")
+    p.add_argument("--small", action="store_true", help="the small (CI) suite")
+    p.add_argument("--limit", type=int, metavar="N", help="only the first N recordings")
+    p.add_argument("--match", metavar="PATTERN", action="append",
+                   help="only recordings whose name matches (shell pattern or substring), e.g. '*lux30_*_human' for the "
+                        "real-scanpath recordings at 30 lux (repeatable: any of them)")
+    p.add_argument("--subset", choices=["simulator-check"],
+                   help="a named part of the full suite; simulator-check: its words and paragraph recordings at 30, 10 "
+                        "and 5 lux, every motion (18, same names, seeds and texts)")
+    p.add_argument("--simulator", choices=SIMULATORS, default="darkread",
+                   help="what turns the rendered scenes into events: darkread (our sensor model, default) or hesim "
+                        "(hesim-3d's H-ESIM, IMX636 preset; `make hesim` installs it)")
+    p.add_argument("--regime", default="standard", choices=REGIMES,
+                   help="our simulator's sensor regime (default standard); fast-photoreceptor: a photoreceptor that keeps "
+                        "up in the dark (an optimistic ablation); grounded: the laws fitted to published IMX636 measurements")
+    p.add_argument("--font", metavar="FAMILY",
+                   help="every selected recording not already in this font family made again in it (same seed, light, "
+                        "motion, text kind and x-height; named <name-in-FAMILY>_as_<old family>)")
+    p.add_argument("--jobs", type=int, default=1, metavar="N", help="worker processes (default 1)")
+    p.set_defaults(func=_make_suite)
+
+
+def _add_compare_simulators(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("compare-simulators", help="the same recordings made by two event simulators, side by side",
+                       description="Mean CER per lux and per lux x motion of two evaluated suites made by two simulators.")
+    p.add_argument("make_suite_out", metavar="OURS_SUITE")
+    p.add_argument("second_suite", metavar="OTHER_SUITE")
+    p.add_argument("--out", default="docs/eval", metavar="FILE.md", help="a .md file, or a folder: FOLDER/simulators.md")
+    p.add_argument("--infer", default=None, choices=INFER_MODES, help="the edge mode both suites were evaluated in")
+    p.set_defaults(func=_compare_simulators)
+
+
+def _add_one_suite_form(sub: argparse._SubParsersAction, common: argparse.ArgumentParser, name: str, help_text: str,
+                        handler: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
+    p = sub.add_parser(name, parents=[common], help=help_text, description=help_text)
+    p.add_argument("make_suite_out", metavar="SUITE_DIR")
+    p.set_defaults(func=handler)
+    return p
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "eval", help="evaluate darkread on a suite of recordings against an RGB snapshot baseline; make suites",
+        description=EVAL_HELP, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.set_defaults(func=lambda _args: (parser.print_help(), 2)[1], second_suite=None)
+    sub = parser.add_subparsers(dest="eval_command", metavar="FORM")
+    common = _common_options()
+    _add_make_suite(sub)
+    _add_run(sub, common)
+    _add_compare_simulators(sub)
+    _add_one_suite_form(sub, common, "attribute", "where an evaluated suite's errors come from (head motion, stitching, frames)",
+                        _attribute)
+    _add_one_suite_form(sub, common, "evidence", "how much of the ink the events themselves show", _evidence)
+    calibrate = _add_one_suite_form(sub, common, "calibrate", "fit the cloud's line-confidence model on an evaluated suite",
+                                    _calibrate)
+    calibrate.add_argument("--model-out", metavar="FILE.json", default=str(DEFAULT_CONFIDENCE_MODEL),
+                           help="where the fitted line-confidence model goes (default: the one the cloud ships)")
+    calibrate.add_argument("--target-risk", type=float, default=0.05, metavar="R",
+                           help="the CER the answered lines of the fitting half may have (sets the answer threshold)")
 
 
 def _make_suite(args: argparse.Namespace) -> int:
     from darkread.lab.eval.suite import make_suite
 
-    if not args.make_suite_out:
-        raise ValueError("give the output folder: darkread eval make-suite OUT [--small]")
     entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
                          subset=args.subset, simulator=args.simulator, font=args.font, regime=args.regime)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
@@ -183,8 +201,6 @@ def _make_suite(args: argparse.Namespace) -> int:
 def _compare_simulators(args: argparse.Namespace) -> int:
     from darkread.lab.eval.simulators import SIMULATORS_NAME, write_comparison
 
-    if not (args.make_suite_out and args.second_suite):
-        raise ValueError("give two evaluated suites: darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md]")
     out = Path(args.out)
     out = out / SIMULATORS_NAME if out.suffix != ".md" else out
     path = write_comparison(args.make_suite_out, args.second_suite, out, mode=args.infer or default_infer_mode())
@@ -252,6 +268,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     from darkread.lab.eval.report import write_report
 
     suite = Path(args.target)
+    if not suite.is_dir():
+        raise FileNotFoundError(f"{suite}: no such suite directory")
     mode = _first_mode(args)
     runs = [(mode, Path(args.work) if args.work else suite / "eval_runs" / mode)]
     if args.infer == BOTH or args.beside:
@@ -282,7 +300,7 @@ def _results(suite: Path, work: Path, mode: str, args: argparse.Namespace, *, ev
                               force=args.force, jobs=args.jobs, infer=mode)
     results = load_results(work)
     if not results:
-        raise FileNotFoundError(f"{work}: no stored results; run `darkread eval {suite} --infer {mode} --work {work}` first")
+        raise FileNotFoundError(f"{work}: no stored results; run `darkread eval run {suite} --infer {mode} --work {work}` first")
     others = sorted({r.infer for r in results} - {mode})
     if others:
         raise ValueError(f"{work}: expected {mode} results, found {', '.join(others)} ones; give the folder of a {mode} run")

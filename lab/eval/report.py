@@ -235,7 +235,7 @@ def _modes_section(results: Sequence[RecordingResult], beside: Sequence[Recordin
     first, second = _mode(results), _mode(beside)
     md = ["## Edge modes side by side", "",
           (f"darkread with the edge in `{first}` mode (every other table of this report) and in `{second}` mode, on the "
-           f"{len(pairs)} recordings both runs evaluated (`darkread eval --infer both`, or `--beside` a stored run). "
+           f"{len(pairs)} recordings both runs evaluated (`darkread eval run --infer both`, or `--beside` a stored run). "
            "every-window infers every 1600-event window and sends every frame; on-change infers when the view "
            "changed during a fixation and sends one fused view per fixation. Difference in percentage points: "
            "positive when the first mode reads worse."), ""]

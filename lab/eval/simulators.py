@@ -43,7 +43,7 @@ class SimulatorRun:
         work = suite / "eval_runs" / mode
         results = [r for r in load_results(work) if r.scanpath == "model"]
         if not results:
-            raise FileNotFoundError(f"{work}: no stored results; run `darkread eval {suite} --infer {mode}` first")
+            raise FileNotFoundError(f"{work}: no stored results; run `darkread eval run {suite} --infer {mode}` first")
         metas = {str(r.name): json.loads((suite / str(r.name) / "meta.json").read_text())
                  for r in results if (suite / str(r.name) / "meta.json").is_file()}
         names = {str(m.get("simulator", "darkread")) for m in metas.values()}

@@ -18,7 +18,7 @@ MAX_BRIGHT_CER = 0.15  # 1000 lux, normal motion, pangram: darkread reads it (re
 def test_small_suite_subset_is_made_read_and_reported(tmp_path: Path) -> None:
     suite, report = tmp_path / "suite", tmp_path / "report"
     assert main(["eval", "make-suite", str(suite), "--small", "--limit", "2", "--jobs", "2"]) == 0
-    assert main(["eval", str(suite), "--out", str(report), "--jobs", "2", "--compare", "rapidocr", "rapidocr-raw"]) == 0
+    assert main(["eval", "run", str(suite), "--out", str(report), "--jobs", "2", "--compare", "rapidocr", "rapidocr-raw"]) == 0
 
     results = json.loads((report / "results.json").read_text())
     assert [r["lux"] for r in results] == [1000.0, 100.0]

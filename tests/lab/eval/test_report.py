@@ -119,7 +119,7 @@ def test_cli_rebuilds_the_report_from_stored_results(tmp_path: Path) -> None:
         folder.mkdir(parents=True)
         (folder / "result.json").write_text(json.dumps(result))
     out = tmp_path / "report"
-    assert main(["eval", str(suite), "--report-only", "--infer", "every-window", "--out", str(out),
+    assert main(["eval", "run", str(suite), "--report-only", "--infer", "every-window", "--out", str(out),
                  "--note", "a second run gave 3.0%"]) == 0
     md = (out / "README.md").read_text()
     assert "2 synthetic recordings" in md and "(cer_vs_lux.png)" in md
@@ -131,7 +131,7 @@ def test_cli_refuses_a_report_without_results(tmp_path: Path) -> None:
 
     (tmp_path / "suite").mkdir()
     with pytest.raises(FileNotFoundError, match="no stored results"):
-        main(["-vv", "eval", str(tmp_path / "suite"), "--report-only", "--out", str(tmp_path / "out")])
+        main(["-vv", "eval", "run", str(tmp_path / "suite"), "--report-only", "--out", str(tmp_path / "out")])
 
 
 def test_examples_grid_shows_the_rgb_crop_next_to_the_page(tmp_path: Path) -> None:
@@ -260,7 +260,7 @@ def test_cli_puts_the_other_mode_beside_the_default(tmp_path: Path) -> None:
             folder.mkdir(parents=True)
             (folder / "result.json").write_text(json.dumps(result))
     out = tmp_path / "report"
-    assert main(["eval", str(suite), "--infer", "both", "--report-only", "--out", str(out)]) == 0
+    assert main(["eval", "run", str(suite), "--infer", "both", "--report-only", "--out", str(out)]) == 0
     md = (out / "README.md").read_text()
     first = PipelineConfig().infer
     second = "on-change" if first == "every-window" else "every-window"
@@ -276,7 +276,7 @@ def test_cli_puts_the_other_mode_beside_the_default(tmp_path: Path) -> None:
 
     # --beside a folder of the same mode is refused with one line
     with pytest.raises(ValueError, match="expected on-change results, found every-window"):
-        main(["-vv", "eval", str(suite), "--infer", "every-window", "--report-only", "--out", str(out),
+        main(["-vv", "eval", "run", str(suite), "--infer", "every-window", "--report-only", "--out", str(out),
               "--beside", str(suite / "eval_runs" / "every-window")])
 
 

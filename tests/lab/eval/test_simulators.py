@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from darkread.cli import main
 from darkread.lab.eval.simulators import simulator_section
 
@@ -48,8 +50,9 @@ def test_compare_simulators_pairs_recordings_by_name_and_means_cer_per_lux(tmp_p
 
 def test_compare_simulators_wants_two_evaluated_suites(tmp_path: Path, capsys) -> None:
     ours = _suite(tmp_path / "ours", "darkread", 2, 1.0)
-    assert main(["eval", "compare-simulators", str(ours)]) == 1
-    assert "give two evaluated suites" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:  # argparse names the missing suite, with the form's usage
+        main(["eval", "compare-simulators", str(ours)])
+    assert usage.value.code == 2 and "OTHER_SUITE" in capsys.readouterr().err
     (tmp_path / "empty").mkdir()
     assert main(["eval", "compare-simulators", str(ours), str(tmp_path / "empty"), "--out", str(tmp_path / "x.md")]) == 1
     err = capsys.readouterr().err
