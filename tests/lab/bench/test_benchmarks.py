@@ -130,7 +130,7 @@ def test_ask_benchmark_writes_its_keys(tmp_path: Path) -> None:
     figures = run_smoke("ask", tmp_path)
     assert set(figures) == {
         "read_demo_answer_ms", "read_demo_answer_ms_after_start_max", "read_demo_answer_ms_warm_max",
-        "read_demo_answer_spread", "ask_p95_ms_300", "cloud_cpu_ms_per_reading_s",
+        "read_demo_answer_spread", "ask_p95_ms_300", "ask_p95_ratio_language", "cloud_cpu_ms_per_reading_s",
         "cloud_cpu_ms_per_reading_s_frames", "cloud_cpu_ms_per_reading_s_views", "cloud_cpu_ms_per_reading_s_asking_2hz",
         "wearers_ask_p95_ms_20", "wearers_frames_exactly_once_20",
         "wearers_burst_ask_p95_ms_20", "wearers_burst_frames_exactly_once_20",
