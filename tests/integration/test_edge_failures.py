@@ -176,7 +176,7 @@ def test_a_wrong_key_ends_the_run_with_counts_that_agree(tmp_path: Path, recordi
 
 
 def test_a_read_only_spool_disk(tmp_path: Path, recording: Path, model: Path) -> None:
-    with small_disk(tmp_path / "disk", 4096) as disk:
+    with small_disk(tmp_path / "disk", 32768) as disk:  # room for two runs and their WAL: only read-only is tested here
         spool = disk.path / "spool"
         port = free_port()
         url = f"ws://127.0.0.1:{port}/v1/stream"
