@@ -9,13 +9,11 @@ import argparse
 import json
 from pathlib import Path
 
-from darkread import models
+from darkread.models import FIGURE_PATH, MODELS_DIR
 
 DEFAULT_TRAIN = Path("runs/data/train")  # relative to the working directory (`make train` runs at the repo root)
 DEFAULT_VAL = Path("runs/data/val")
 
-MODELS_DIR = Path(models.__file__).resolve().parent  # the shipped .onnx files
-FIGURE_PATH = MODELS_DIR.parent / "docs" / "model_samples.png"
 
 
 def _fit_config(args: argparse.Namespace):  # -> FitConfig

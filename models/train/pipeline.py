@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from darkread.models import FIGURE_PATH, MODELS_DIR
 from darkread.models.synth.shards import LUX_RANGE, build_dataset
 from darkread.models.train.baseline import tune
 from darkread.models.train.card import write_card
@@ -26,12 +27,9 @@ from darkread.models.train.net import BinaryUNet, NetConfig, count_parameters
 
 log = logging.getLogger(__name__)
 
-MODELS_DIR = Path(__file__).resolve().parent.parent
-REPO_ROOT = MODELS_DIR.parent
 FP32_NAME = "binary_unet.onnx"
 INT8_NAME = "binary_unet_int8.onnx"
 CARD_NAME = "MODEL_CARD.md"
-FIGURE_PATH = REPO_ROOT / "docs" / "model_samples.png"
 DEFAULT_RUN_DIR = Path("runs/binary_unet")
 
 
