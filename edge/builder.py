@@ -19,7 +19,7 @@ from typing import Any
 
 from darkread.core.errors import DarkreadError
 from darkread.core.redact import redact
-from darkread.edge.config import EdgeConfig, GazeConfig, PipelineConfig, SourceConfig
+from darkread.edge.config import EdgeConfig, GazeConfig, ImuConfig, PipelineConfig, SourceConfig
 from darkread.edge.errors import RunError, SpoolError, UndeliveredError
 from darkread.edge.frame import FrameResult, Infer
 from darkread.edge.gaze import GazeLookup
@@ -174,7 +174,9 @@ def build_edge(
     ``watchdog`` is called from the processing loop while events flow (systemd's watchdog ping);
     ``on_frame``, when given, receives the frames instead of an uplink (the bench's encode-only run);
     ``known_motion``, the head's motion from elsewhere instead of measured from the events
-    (``edge.head_motion``).
+    (``edge.head_motion``); without it, the gyroscope's (``[imu]``: the replayed recording's
+    ``closed_loop_trajectory.csv`` when it has one, or a live feed), searched around by the deblur
+    with the event tracker beside it (``edge.imu_motion``).
     """
     # lazy: only the parts this configuration uses load (USB, websockets, numba)
     from darkread.edge.binning import warm_up as warm_up_binning
@@ -183,12 +185,14 @@ def build_edge(
     metrics = EdgeMetrics()
     with contextlib.ExitStack() as undo:  # a failure half-way closes what was opened
         coarse = STEPS[config.pipeline.infer].replay_grid_us is not None
-        source, calibration, gaze_track = _open_source(config.source, metrics, coarse=coarse)
+        source, calibration, gaze_track, imu_track = _open_source(config.source, metrics, coarse=coarse)
         close = getattr(source, "close", None)
         if close is not None:
             undo.callback(close)
         feeds: list[Any] = []
         gaze = _open_gaze(config.gaze, calibration, gaze_track, feeds)
+        if known_motion is None:
+            known_motion = _open_imu(config.imu, calibration, imu_track, feeds)
         for feed in feeds:
             undo.callback(feed.stop)
         warm_up_decoder()  # READY only once the first chunk can be decoded without a JIT pause ...
@@ -263,8 +267,8 @@ def _to_pages(pages: Any) -> FrameHandler:
     return add
 
 
-def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) -> tuple[EventSource, Calibration, Any]:
-    """The event source, its calibration and (for a replayed recording) its gaze track loader.
+def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) -> tuple[EventSource, Calibration, Any, Any]:
+    """The event source, its calibration and (for a replayed recording) its gaze and IMU track loaders.
 
     ``coarse``: an as-fast-as-possible replay into a step with its own grid (on-change's
     ``replay_grid_us``) hands over the decoder's chunks whole instead of 1 ms slices: its pipeline
@@ -294,7 +298,7 @@ def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) 
         n_events = recording.meta.get("event_count")
         if isinstance(n_events, int) and n_events > 0:  # the bandwidth ratio against this very stream
             metrics.raw_bytes_per_event = recording.raw_path.stat().st_size / n_events
-        return source, recording.calibration, recording.gaze
+        return source, recording.calibration, recording.gaze, recording.imu
     # lazy: only the parts this configuration uses load (USB, websockets, numba)
     from darkread.edge.sources.evk4.camera import Evk4Camera
 
@@ -303,7 +307,28 @@ def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) 
     calibration = load_calibration(cfg.calibration)
     camera = Evk4Camera(serial=cfg.serial or None)
     camera.open()
-    return camera, calibration, None
+    return camera, calibration, None, None
+
+
+def _open_imu(cfg: ImuConfig, calibration: Calibration, imu_track: Any, feeds: list[Any]) -> Any:
+    """The gyroscope's head motion (``ImuHeadMotion``), or None where there is none; a live feed is
+    appended to ``feeds`` (started and stopped with the edge)."""
+    if cfg.kind == "none" or (cfg.kind == "recording" and imu_track is None):
+        return None
+    # lazy: only the parts this configuration uses load (USB, websockets, numba)
+    from darkread.edge.imu_motion import ImuHeadMotion
+    from darkread.edge.io.imu_csv import read_imu_csv
+    from darkread.edge.sources.imu_feed import AriaGen2ImuFeed, UdpImuFeed
+
+    if cfg.kind in ("recording", "csv"):
+        track = imu_track() if cfg.kind == "recording" else read_imu_csv(cfg.path)
+        if track is None:
+            return None
+        logger.info("head motion from the gyroscope: %d samples at %.0f Hz", len(track), track.rate_hz)
+        return ImuHeadMotion.of_track(track, calibration, clock_offset_us=cfg.clock_offset_us)
+    motion = ImuHeadMotion(calibration, clock_offset_us=cfg.clock_offset_us, live=True)
+    feeds.append(UdpImuFeed(motion, cfg.udp_host, cfg.udp_port) if cfg.kind == "udp" else AriaGen2ImuFeed(motion))
+    return motion
 
 
 def _open_gaze(cfg: GazeConfig, calibration: Calibration, gaze_track: Any, feeds: list[Any]) -> GazeLookup:

@@ -46,6 +46,19 @@ class GazeConfig:
     depth_prior_m: float = 0.45
 
 
+@dataclass(frozen=True)
+class ImuConfig:
+    # where the head's rotation comes from (edge.imu_motion): "recording" (the replay's
+    # closed_loop_trajectory.csv when it has one, else none), "csv" (path), "udp" (datagrams,
+    # edge.sources.imu_feed), "aria" (Gen2 SDK) or "none" (the head's motion from the events only)
+    kind: str = "recording"
+    path: str = ""  # csv: an MPS closed_loop_trajectory.csv
+    udp_host: str = "127.0.0.1"
+    udp_port: int = 7008
+    clock_offset_us: int | None = None  # device clock -> event clock; None: from calibration.json (the gaze's)
+
+
+IMU_KINDS = ("recording", "csv", "udp", "aria", "none")
 INFER_MODES = ("on-change", "every-window")  # ``[pipeline] infer``: the first is the default
 FUSE_MODES = ("probability", "mask")  # ``[pipeline] fuse``: the first is the default
 
@@ -124,6 +137,7 @@ class MetricsConfig:
 class EdgeConfig:
     source: SourceConfig = field(default_factory=SourceConfig)
     gaze: GazeConfig = field(default_factory=GazeConfig)
+    imu: ImuConfig = field(default_factory=ImuConfig)
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
     uplink: UplinkConfig = field(default_factory=UplinkConfig)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
@@ -132,6 +146,7 @@ class EdgeConfig:
 _SECTION_TYPES = {
     "source": SourceConfig,
     "gaze": GazeConfig,
+    "imu": ImuConfig,
     "pipeline": PipelineConfig,
     "uplink": UplinkConfig,
     "metrics": MetricsConfig,
@@ -242,6 +257,10 @@ def validate(config: EdgeConfig) -> EdgeConfig:
         raise ValueError(f"config [source] kind must be 'replay' or 'evk4', not {config.source.kind!r}")
     if config.gaze.kind not in {"recording", "csv", "udp", "aria"}:
         raise ValueError(f"config [gaze] kind must be recording, csv, udp or aria, not {config.gaze.kind!r}")
+    if config.imu.kind not in IMU_KINDS:
+        raise ValueError(f"config [imu] kind must be {', '.join(IMU_KINDS)}, not {config.imu.kind!r}")
+    if config.imu.kind == "csv" and not config.imu.path:
+        raise ValueError("config [imu] kind 'csv' needs [imu] path (an MPS closed_loop_trajectory.csv)")
     if config.source.speed < 0:
         raise ValueError("config [source] speed must be >= 0 (0 = as fast as possible)")
     if config.pipeline.n_events <= 0 or config.pipeline.period_ms <= 0:

@@ -27,6 +27,7 @@ import numpy as np
 
 from darkread.edge.binning import cell_tables, slice_counts, voters
 from darkread.edge.events import Events
+from darkread.edge.head_motion import SmearPrior
 from darkread.edge.scene_motion import gaussian_transfer
 
 
@@ -71,19 +72,65 @@ def smear_of(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int
     """``estimate_smear`` of events given as their coordinates and times: the fields of a
     caller's events, not a copy of its records. Those inside ``region`` vote; with ``t_first_us``
     only those of [``t_first_us``, ``t_ref_us``]."""
-    x0, y0, width, height = region
     clock = np.iinfo(np.int64)
     t_first, t_last = (int(clock.min), int(clock.max)) if t_first_us is None else (int(t_first_us), int(t_ref_us))
     if span_us <= 0:
         return 0.0, 0.0
+    x0, y0, width, height = region
     n, earliest = voters(x, y, t, x0, y0, width, height, t_first, t_last)
     if n < cfg.min_events:
         return 0.0, 0.0
-    k_n = cfg.slices
     r = int(min(max(math.ceil(cfg.max_speed_px_s * span_us / 1e6), 1), cfg.max_shift_px))
+    pairs = _slice_pairs(x, y, t, region, t_ref_us, span_us, cfg, t_first, t_last, earliest, r)
+    if not pairs:
+        return 0.0, 0.0
+    # a coarse search (linear interpolation: cheap, but it pulls peaks onto whole cells), then a
+    # fine one around its best (cubic: no such pull)
+    dx, dy = _displacements(float(r), 1.0)
+    best, _ = _best(pairs, dx, dy, cv2.INTER_LINEAR)
+    dx, dy = _displacements(1.0, cfg.step_px)
+    found, top = _best(pairs, dx + np.float32(best[0]), dy + np.float32(best[1]), cv2.INTER_CUBIC)
+    if max(abs(found[0]), abs(found[1])) >= r:
+        return 0.0, 0.0  # the best lies at the edge of what was searched: no peak inside it
+    _, still = _best(pairs, *_displacements(0.0, 1.0), cv2.INTER_CUBIC)
+    # a peak barely above the still page's is noise (on still pages the best is 0.1-2 % above it;
+    # a smear the network suffers from is 2-12 %)
+    return found if top >= cfg.min_gain * still else (0.0, 0.0)
+
+
+def smear_near(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int, int, int], t_ref_us: int, span_us: float,
+               prior: tuple[float, float], radius_px: float, cfg: DeblurConfig = DeblurConfig(),
+               t_first_us: int | None = None) -> tuple[float, float]:
+    """``smear_of`` searched only within ``radius_px`` of a predicted smear ``prior`` (the gyroscope's,
+    ``edge.imu_motion``): no coarse search and no test against a still page, the motion is known to be
+    near it; with too few events to sharpen, the prediction itself."""
+    clock = np.iinfo(np.int64)
+    t_first, t_last = (int(clock.min), int(clock.max)) if t_first_us is None else (int(t_first_us), int(t_ref_us))
+    if span_us <= 0:
+        return 0.0, 0.0
+    x0, y0, width, height = region
+    n, earliest = voters(x, y, t, x0, y0, width, height, t_first, t_last)
+    r = int(math.ceil(max(abs(prior[0]), abs(prior[1])) + radius_px + 1))
+    if n < cfg.min_events or r > 4 * cfg.max_shift_px:
+        return prior
+    pairs = _slice_pairs(x, y, t, region, t_ref_us, span_us, cfg, t_first, t_last, earliest, r)
+    if not pairs:
+        return prior
+    dx, dy = _displacements(float(radius_px), cfg.step_px)
+    found, _ = _best(pairs, dx + np.float32(prior[0]), dy + np.float32(prior[1]), cv2.INTER_CUBIC)
+    return found
+
+
+def _slice_pairs(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int, int, int], t_ref_us: int,
+                 span_us: float, cfg: DeblurConfig, t_first: int, t_last: int, earliest: int,
+                 r: int) -> list[tuple[np.ndarray, np.float32]]:
+    """The region's events in ``cfg.slices`` count images by age, and the correlation of each pair of
+    them with the lag (cells) between their mean ages; room for shifts up to ``r`` px."""
+    x0, y0, width, height = region
+    k_n = cfg.slices
     oldest = (t_ref_us - float(earliest)) / span_us  # 0 at the reference, 1 a span before
     if not oldest > 0:
-        return 0.0, 0.0
+        return []
     b = cfg.bin_px  # counted in b x b cells: a quarter of the transforms, the peak still found to a fraction of a cell
     pad = -(-r // b) + 1
     shape = (cv2.getOptimalDFTSize(-(-height // b) + 2 * pad), cv2.getOptimalDFTSize(-(-width // b) + 2 * pad))
@@ -105,20 +152,7 @@ def smear_of(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int
                 # correlation[s] = sum_y image_i(y) image_j(y + s): their overlap when j sits s further on
                 correlation = cv2.idft(cv2.mulSpectrums(spectra[j], spectra[i], 0, conjB=True), flags=cv2.DFT_REAL_OUTPUT | cv2.DFT_SCALE)
                 pairs.append((correlation, np.float32((mean_age[i] - mean_age[j]) / b)))
-    if not pairs:
-        return 0.0, 0.0
-    # a coarse search (linear interpolation: cheap, but it pulls peaks onto whole cells), then a
-    # fine one around its best (cubic: no such pull)
-    dx, dy = _displacements(float(r), 1.0)
-    best, _ = _best(pairs, dx, dy, cv2.INTER_LINEAR)
-    dx, dy = _displacements(1.0, cfg.step_px)
-    found, top = _best(pairs, dx + np.float32(best[0]), dy + np.float32(best[1]), cv2.INTER_CUBIC)
-    if max(abs(found[0]), abs(found[1])) >= r:
-        return 0.0, 0.0  # the best lies at the edge of what was searched: no peak inside it
-    _, still = _best(pairs, *_displacements(0.0, 1.0), cv2.INTER_CUBIC)
-    # a peak barely above the still page's is noise (on still pages the best is 0.1-2 % above it;
-    # a smear the network suffers from is 2-12 %)
-    return found if top >= cfg.min_gain * still else (0.0, 0.0)
+    return pairs
 
 
 def _best(pairs: list[tuple[np.ndarray, np.float32]], dx: np.ndarray, dy: np.ndarray, interpolation: int) -> tuple[tuple[float, float], float]:
@@ -169,10 +203,13 @@ def moved_to(window: Events, x: np.ndarray, y: np.ndarray, origin: tuple[int, in
 
 
 def deblur_window(window: Events, nearby: Events, origin: tuple[int, int], shape_hw: tuple[int, int],
-                  sensor_wh: tuple[int, int], cfg: DeblurConfig = DeblurConfig()) -> tuple[Events, tuple[float, float]]:
+                  sensor_wh: tuple[int, int], cfg: DeblurConfig = DeblurConfig(),
+                  prior: SmearPrior | None = None) -> tuple[Events, tuple[float, float]]:
     """The window's events deblurred, and the smear found ((0, 0): left as they were).
 
-    ``nearby``: the sensor's events of the window's span (at least those around the window)."""
+    ``nearby``: the sensor's events of the window's span (at least those around the window).
+    ``prior``: the smear predicted from elsewhere (the gyroscope) for the window's span, searched
+    only around it (``smear_near``); where it has no prediction, the full search."""
     if not cfg.enabled or window.shape[0] < 2:
         return window, (0.0, 0.0)
     t_ref, t_first = int(window["t"][-1]), int(window["t"][0])
@@ -180,8 +217,14 @@ def deblur_window(window: Events, nearby: Events, origin: tuple[int, int], shape
     if span < cfg.min_span_us:
         return window, (0.0, 0.0)
     region = region_of(origin, shape_hw, sensor_wh, cfg.margin_px)
+    centre = (origin[0] + shape_hw[1] / 2.0, origin[1] + shape_hw[0] / 2.0)
+    predicted = None if prior is None else prior.smear_prior(t_first, t_ref, centre)
     # (``nearby`` can be the sensor's tens of thousands: its fields are read in place, not selected)
-    smear = smear_of(nearby["x"], nearby["y"], nearby["t"], region, t_ref, span, cfg, t_first_us=t_first)
+    if predicted is not None:
+        smear = smear_near(nearby["x"], nearby["y"], nearby["t"], region, t_ref, span, predicted, prior.smear_radius_px,
+                           cfg, t_first_us=t_first)
+    else:
+        smear = smear_of(nearby["x"], nearby["y"], nearby["t"], region, t_ref, span, cfg, t_first_us=t_first)
     if np.hypot(*smear) < cfg.min_smear_px:
         return window, (0.0, 0.0)
     return deblur(window, smear, t_ref, span, origin, shape_hw), smear

@@ -30,6 +30,10 @@ class GazeCsvError(RecordingError):
     """An eye-gaze CSV that cannot be read."""
 
 
+class ImuCsvError(RecordingError):
+    """A head-motion (IMU) CSV that cannot be read."""
+
+
 class CalibrationError(RecordingError):
     """A calibration file that cannot be used."""
 

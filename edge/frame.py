@@ -21,7 +21,7 @@ from darkread.edge.denoise import DenoiseConfig, drop_isolated
 from darkread.edge.events import Events
 from darkread.edge.fovea import FoveaConfig, in_window
 from darkread.edge.gaze import GazeSample
-from darkread.edge.head_motion import KnownHeadMotion
+from darkread.edge.head_motion import KnownHeadMotion, SmearPrior
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 
 if TYPE_CHECKING:
@@ -74,13 +74,15 @@ def clean_window(
 ) -> tuple[Events, bool, bool]:
     """A window's events as the network is given them: moved back along the head's motion during
     their span (``edge.deblur``, measured from them and ``nearby``, the sensor's events of that span
-    around the window; or by ``known_motion`` when given: ``edge.head_motion``), then in dim light
+    around the window; or by ``known_motion`` when given: ``edge.head_motion``; a gyroscope's
+    motion, a ``SmearPrior``, is searched around instead), then in dim light
     without those that have no neighbour (``edge.denoise``); and whether each step changed them.
     The edge and the training windows (``train.windows``) both cut windows this way."""
-    if known_motion is not None:
+    if known_motion is not None and not isinstance(known_motion, SmearPrior):
         cleaned, moved = known_motion.warp(window, origin, shape_hw), window.shape[0] > 0
-    else:
-        cleaned, smear = deblur_window(window, nearby, origin, shape_hw, sensor_wh, deblur)
+    else:  # (a gyroscope's prediction is searched around: edge.deblur)
+        prior = known_motion if isinstance(known_motion, SmearPrior) else None
+        cleaned, smear = deblur_window(window, nearby, origin, shape_hw, sensor_wh, deblur, prior)
         moved = smear != (0.0, 0.0)
     before = cleaned.shape[0]
     cleaned = drop_isolated(cleaned, origin, shape_hw, denoise)

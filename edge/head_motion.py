@@ -8,6 +8,11 @@ the simulator's own pose, knows the motion without looking at the events. A pipe
 ``KnownHeadMotion`` takes both from it and measures neither; everything after (denoise, voxel
 grid, network, fusion, stitching) runs as always. The lab drives a synthetic recording this way
 (``darkread eval attribute``) to measure how much of a page's errors the head's motion causes.
+
+The glasses' gyroscope (``edge.imu_motion``) knows the head's rotation, not the page's own motion
+nor the head's translation, and not at all in a gap of its stream: it is a ``KnownHeadMotion`` that
+is also a ``SmearPrior``. The deblur then searches only around its prediction (and where it has
+none, as without it), and the event tracker keeps running beside it as the fallback and the check.
 """
 
 from __future__ import annotations
@@ -29,4 +34,20 @@ class KnownHeadMotion(Protocol):
     def warp(self, window: Events, origin: tuple[int, int], shape_hw: tuple[int, int]) -> Events:
         """``window``'s events moved to where their page points were at its newest event; those that
         leave the window at ``origin`` (``shape_hw``) are dropped."""
+        ...
+
+
+@runtime_checkable
+class SmearPrior(Protocol):
+    """A prediction of the deblur's smear that the events refine (``edge.deblur.smear_near``)."""
+
+    smear_radius_px: float  # how far around the prediction the deblur searches
+
+    def smear_prior(self, t_first_us: int, t_ref_us: int, centre_px: tuple[float, float]) -> tuple[float, float] | None:
+        """The page's displacement at ``centre_px`` (sensor px) from ``t_first_us`` to ``t_ref_us``;
+        None where it is not known (then the deblur searches as without it)."""
+        ...
+
+    def healthy(self, t_us: int) -> bool:
+        """Whether the motion at ``t_us`` is known (else the edge falls back to the events)."""
         ...

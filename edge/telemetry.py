@@ -29,6 +29,8 @@ COUNTERS = (
     "frames",  # inferences: frames made
     "frames_deblurred",  # frames whose events were moved back along the head's motion (edge.deblur)
     "frames_denoised",  # frames whose isolated events (dim-light shot noise) were dropped (edge.denoise)
+    "frames_imu_motion",  # frames whose scene offset came from the gyroscope (edge.imu_motion)
+    "frames_imu_fallback",  # ... and those where its stream had a gap: the event tracker's (or unknown)
     "views",  # on-change mode: fused views of fixations
     "views_split",  # on-change mode: views ended early by a frame that did not register onto them
     "event_us",  # event-clock time covered by the events read (reading time)
@@ -111,6 +113,8 @@ class EdgeMetrics:
         self.totals = dict.fromkeys(COUNTERS, 0)
         self.inference_ms: deque[float] = deque(maxlen=RESERVOIR)
         self.latency_ms: deque[float] = deque(maxlen=RESERVOIR)
+        # px between the gyroscope's and the event tracker's scene motion between frames (where both are known)
+        self.motion_disagreement_px: deque[float] = deque(maxlen=RESERVOIR)
         self.spool_depth: Callable[[], int] = lambda: 0
         self.spool_lost: Callable[[], int] = lambda: 0
         self.raw_bytes_per_event = RAW_EVT3_BYTES_PER_EVENT  # the raw stream's size, for the bandwidth ratio
@@ -128,6 +132,9 @@ class EdgeMetrics:
 
     def observe_latency(self, ms: float) -> None:
         self.latency_ms.append(ms)
+
+    def observe_motion_disagreement(self, px: float) -> None:
+        self.motion_disagreement_px.append(px)
 
     def snapshot(self) -> Snapshot:
         with self._lock:
@@ -159,6 +166,7 @@ class EdgeMetrics:
             totals = dict(self.totals)
             uptime = self._clock() - self._started
         inference, latency = list(self.inference_ms), list(self.latency_ms)
+        disagreement = list(self.motion_disagreement_px)
         lines: list[str] = []
 
         def metric(name: str, kind: str, help_text: str, samples: list[tuple[str, float]]) -> None:
@@ -171,6 +179,10 @@ class EdgeMetrics:
         for name, values in (("inference_ms", inference), ("event_to_wire_ms", latency)):
             quantiles = [(f'{{quantile="{q}"}}', percentile(values, q * 100)) for q in (0.5, 0.99)]
             metric(name, "gauge", f"{name.replace('_', ' ')} over the last {RESERVOIR} frames", quantiles)
+        if disagreement:
+            metric("head_motion_disagreement_px", "gauge",
+                   "gyroscope vs event tracker: px between their scene motions from frame to frame",
+                   [(f'{{quantile="{q}"}}', percentile(disagreement, q * 100)) for q in (0.5, 0.9)])
         metric("spool_depth", "gauge", "messages waiting for an ack", [("", self.spool_depth())])
         metric("spool_lost", "gauge", "messages the full spool evicted before their ack (lost)", [("", self.spool_lost())])
         reading_s = totals["event_us"] / 1e6

@@ -19,7 +19,8 @@ from darkread.edge.events import Events
 from darkread.edge.fovea import in_window
 from darkread.edge.frame import FrameResult, Infer, clean_window, make_frame
 from darkread.edge.gaze import GazeLookup, GazeSample
-from darkread.edge.head_motion import KnownHeadMotion
+from darkread.edge.head_motion import KnownHeadMotion, SmearPrior
+from darkread.edge.imu_motion import JoinedSceneMotion
 from darkread.edge.ring import EventRing
 from darkread.edge.scene_motion import SceneMotion
 from darkread.edge.sources.base import EventSource
@@ -64,11 +65,14 @@ class Windows:
         self.frames_made = 0
         self._history = MIN_HISTORY_EVENTS
         # the head's motion from all events, unless it is known from elsewhere (then it is neither
-        # measured nor searched)
+        # measured nor searched); a gyroscope's (a SmearPrior) is searched around, and the events'
+        # tracker runs beside it: where the gyroscope's stream has a gap, and as a check
         self.known_motion = known_motion
-        measure_scene = settings.scene_motion and not settings.sensor_roi and known_motion is None
+        self.imu = known_motion if isinstance(known_motion, SmearPrior) else None
+        measure_scene = settings.scene_motion and not settings.sensor_roi and (known_motion is None or self.imu is not None)
         self.scene = SceneMotion(self.sensor_wh) if measure_scene else None
         self._scene_lock = threading.Lock()
+        self._joined = JoinedSceneMotion()
 
     def push_scene(self, events: Events) -> None:
         """Reader thread: every event goes to the scene's motion tracker (when it is measured)."""
@@ -78,12 +82,28 @@ class Windows:
 
     def scene_at(self, t_us: int) -> tuple[float, float] | None:
         """The scene's motion at ``t_us`` (None when not measured)."""
+        if self.imu is not None:
+            return self._imu_scene_at(t_us)
         if self.known_motion is not None:
             return self.known_motion.scene_px(t_us)
         if self.scene is None:
             return None
         with self._scene_lock:
             return self.scene.at(t_us)
+
+    def _imu_scene_at(self, t_us: int) -> tuple[float, float] | None:
+        """The gyroscope's offset where healthy, else the tracker's, joined (``JoinedSceneMotion``); counted."""
+        assert self.known_motion is not None and self.imu is not None
+        imu = self.known_motion.scene_px(t_us) if self.imu.healthy(t_us) else None
+        tracker = None
+        if self.scene is not None:
+            with self._scene_lock:
+                tracker = self.scene.at(t_us)
+        offset, disagreement = self._joined.at(imu, tracker)
+        self.metrics.add("frames_imu_motion" if imu is not None else "frames_imu_fallback")
+        if disagreement is not None:
+            self.metrics.observe_motion_disagreement(disagreement)
+        return offset
 
     def frame(self, window: Events, origin: tuple[int, int], gaze: GazeSample, t_us: int,
               probability: bool = False) -> FrameResult | None:

@@ -11,6 +11,7 @@ Each component keeps its own errors in its own ``errors.py``::
      │    ├── RawFormatError           RAW header unknown or inconsistent
      │    ├── CorruptRawError          bytes that cannot be decoded (names file and byte offset)
      │    ├── GazeCsvError             eye-gaze CSV missing columns or malformed (names file and line)
+     │    ├── ImuCsvError              head-motion (IMU) CSV missing columns or malformed (names file and line)
      │    └── CalibrationError         calibration.json missing keys or impossible values
      ├── DeviceError                   edge/errors.py: the event camera cannot be opened or answers wrongly
      │    └── TreuzellError            edge/sources/evk4/treuzell.py: the EVK4's control protocol failed

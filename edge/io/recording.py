@@ -1,4 +1,5 @@
-"""A recording: ``events.raw`` + ``general_eye_gaze.csv`` + ``calibration.json`` (+ text, meta, rgb).
+"""A recording: ``events.raw`` + ``general_eye_gaze.csv`` + ``calibration.json`` (+ text, meta, rgb, the
+head's rotation: ``closed_loop_trajectory.csv``).
 
 Opens either a directory in the recording format or a bare ``.raw`` file with its gaze CSV and
 calibration given explicitly. Every missing piece is named in one ``RecordingError`` so a user can
@@ -17,6 +18,7 @@ from typing import Any
 from darkread.edge.errors import RecordingError
 from darkread.edge.io.calibration import Calibration, load_calibration
 from darkread.edge.io.gaze_csv import GazeTrack, read_gaze_csv
+from darkread.edge.io.imu_csv import IMU_NAME, ImuTrack, read_imu_csv
 from darkread.edge.io.raw import RawReader
 
 logger = logging.getLogger(__name__)
@@ -38,6 +40,7 @@ class Recording:
     text: str | None
     meta: dict
     rgb_path: Path | None = None
+    imu_path: Path | None = None  # the gyroscope's stream, when the recording has one
     _gaze: GazeTrack | None = field(default=None, repr=False)
 
     def gaze(self) -> GazeTrack:
@@ -45,6 +48,10 @@ class Recording:
         if self._gaze is None:
             self._gaze = read_gaze_csv(self.gaze_path)
         return self._gaze
+
+    def imu(self) -> ImuTrack | None:
+        """The head's angular velocity (``edge.io.imu_csv``), or None when the recording has no IMU stream."""
+        return None if self.imu_path is None else read_imu_csv(self.imu_path)
 
     def reader(self, **kwargs: Any):  # RawReader, imported lazily
         """A chunked reader of ``events.raw`` (``darkread.edge.io.raw.RawReader``)."""
@@ -83,11 +90,12 @@ def open_recording(path: str | Path, *, gaze: str | None = None, calibration: st
     if missing or gaze_path is None or calibration_path is None:
         raise RecordingError(f"{path}: incomplete recording, missing " + "; ".join(missing))
 
-    text, meta, rgb_path = None, {}, None
+    text, meta, rgb_path, imu_path = None, {}, None, None
     if in_directory:
         text = _optional_text(root / TEXT_NAME)
         meta = _optional_meta(root / META_NAME)
         rgb_path = root / RGB_NAME if (root / RGB_NAME).is_file() else None
+        imu_path = root / IMU_NAME if (root / IMU_NAME).is_file() else None
     return Recording(
         path=path,
         raw_path=raw_path,
@@ -96,6 +104,7 @@ def open_recording(path: str | Path, *, gaze: str | None = None, calibration: st
         text=text,
         meta=meta,
         rgb_path=rgb_path,
+        imu_path=imu_path,
     )
 
 

@@ -140,10 +140,11 @@ def _finite(value: Any, name: str) -> float:
 
 def parse_gaze_datagram(data: bytes) -> tuple[int, float, float, float | None]:
     """One UDP datagram (JSON object or msgpack map) -> (t_us, yaw, pitch, depth_m or None)."""
-    return _gaze_sample(_datagram_payload(data))
+    return _gaze_sample(datagram_payload(data))
 
 
-def _datagram_payload(data: bytes) -> Mapping[str, Any]:
+def datagram_payload(data: bytes) -> Mapping[str, Any]:
+    """A datagram's JSON object or msgpack map (the gaze's and the IMU's feeds alike); ValueError if neither."""
     if len(data) > MAX_DATAGRAM_BYTES:
         raise ValueError(f"datagram of {len(data)} bytes exceeds {MAX_DATAGRAM_BYTES}")
     try:
@@ -214,7 +215,7 @@ class UdpGazeFeed:
             except OSError:
                 return
             try:
-                payload = _datagram_payload(data)
+                payload = datagram_payload(data)
                 if "clock_offset_us" in payload and "t_us" not in payload:
                     self._set_offset(payload["clock_offset_us"])
                 else:

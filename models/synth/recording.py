@@ -24,11 +24,13 @@ import numpy as np
 from darkread.edge.fovea import FoveaConfig
 from darkread.edge.io.calibration import save_calibration
 from darkread.edge.io.gaze_csv import write_gaze_csv
+from darkread.edge.io.imu_csv import IMU_NAME
 from darkread.edge.io.raw import write_raw
 from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
 from darkread.models.synth.camera import SENSOR_WH
 from darkread.models.synth.gaze import points_from_angles, row_times_us, tracker_rows
 from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath
+from darkread.models.synth.imu import write_imu
 from darkread.models.synth.marker_page import save_layout
 from darkread.models.synth.scene import Region
 from darkread.models.synth.sensor import DEFAULT_F_NUMBER, EventSensor, background_events, concat_events
@@ -283,7 +285,8 @@ def drop_same_time_duplicates(events: np.ndarray, width: int = SENSOR_WH[0]) -> 
 
 def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = True,
                     simulator: Simulator = simulate_events) -> dict:
-    """Write a recording folder (events.raw, general_eye_gaze.csv, calibration.json, text.txt, meta.json).
+    """Write a recording folder (events.raw, general_eye_gaze.csv, calibration.json, text.txt, meta.json,
+    closed_loop_trajectory.csv: the head's rotation as a MEMS gyroscope reports it, ``synth.imu``).
 
     ``simulator`` turns the scene into events (our sensor model unless the caller brings another one:
     ``spec.simulator`` names it in ``meta.json``).
@@ -362,6 +365,8 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     else:
         write_page_ink(out / PAGE_INK_NAME, session)
     write_pose_truth(out / POSE_TRUTH_NAME, session, seconds, event_t0)
+    # the gyroscope's own generator: the rest of the recording comes out as without it
+    write_imu(out / IMU_NAME, session.scene, seconds, device_t0, np.random.default_rng([spec.seed, 4]))
     (out / "text.txt").write_text(session.page.text, encoding="ascii")
     duration = round(seconds, 3)
     face_family = session.page.font.removesuffix(" Bold")

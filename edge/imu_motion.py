@@ -1,0 +1,314 @@
+"""The head's motion from the glasses' gyroscope: a ``KnownHeadMotion`` that needs no events.
+
+The camera sits on the head, and a page at reading distance is far compared with how far the
+camera moves while the head turns, so to first order the page moves in the sensor by the head's
+rotation alone: a pure-rotation homography ``K R K^-1`` (translation and the page's own motion are
+not seen; they are what the event tracker and the deblur's search still take). The gyroscope's
+angular velocity (device frame = CPF, ``edge.io.imu_csv``) is rotated into the event camera by
+``calibration.json``'s ``T_event_cpf``, its bias removed, and integrated: the camera's rotation
+since the stream began, as a rotation vector summed sample by sample (small-angle: the rotations
+between two times the edge compares are a few degrees at most). A rotation ``theta`` of the camera
+moves a fixed direction ``d`` (camera frame) to ``exp(-[theta]x) d``; projected through the
+intrinsics (with distortion) that is the scene's shift at a pixel.
+
+The bias is estimated online: the mean angular velocity over ``bias_window_us`` of the samples
+where the head is still (the mean over ``still_span_us`` around them is under ``still_rad_s``; the
+head keeps facing the page, so slow motion flagged still averages out). Samples further apart
+than ``gap_us`` are a gap: nothing is integrated across it, and for ``trust_us`` after it the
+motion is unknown (``healthy`` is False): the edge then falls back to the event tracker and the
+deblur's own search.
+
+Pure functions of arrays at the core; ``ImuHeadMotion`` holds the integrated track, extended by a
+whole file (replay) or by the live feed's batches (``edge.sources.imu_feed``), under a lock.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from darkread.edge.deblur import moved_to
+from darkread.edge.events import Events
+from darkread.edge.io.calibration import Calibration
+from darkread.edge.io.imu_csv import ImuTrack
+
+
+@dataclass(frozen=True)
+class ImuMotionConfig:
+    gap_us: int = 20_000  # samples further apart: a gap (Aria's IMUs sample every 1-1.25 ms)
+    trust_us: int = 100_000  # after a gap (or before the first sample) the motion stays unknown this long
+    max_age_us: int = 50_000  # a live stream's newest sample answers for this long after it
+    still_span_us: int = 100_000  # the head is still when its mean angular velocity over this span ...
+    still_rad_s: float = 0.035  # ... is below this (2 deg/s: above a calibrated MEMS bias, below a turning head)
+    bias_window_us: int = 10_000_000  # the bias: the mean of the still samples over this long before
+    smear_radius_px: float = 2.0  # the deblur searches this far around the predicted smear
+    keep_us: int = 30_000_000  # a live stream keeps this much history (a replayed file keeps all)
+
+
+# -- rotations, vectorised ------------------------------------------------------------------------
+
+def rotate(vectors: np.ndarray, rotvecs: np.ndarray) -> np.ndarray:
+    """``vectors`` [n, 3] (or one [3]) rotated by the rotation vectors ``rotvecs`` [n, 3] (Rodrigues)."""
+    rotvecs = np.asarray(rotvecs, np.float64).reshape(-1, 3)
+    v = np.broadcast_to(np.asarray(vectors, np.float64), rotvecs.shape)
+    angle = np.linalg.norm(rotvecs, axis=1, keepdims=True)
+    safe = np.where(angle > 0, angle, 1.0)
+    k = rotvecs / safe
+    cos, sin = np.cos(angle), np.sin(angle)
+    return v * cos + np.cross(k, v) * sin + k * np.sum(k * v, axis=1, keepdims=True) * (1.0 - cos)
+
+
+def rotation_matrices(rotvecs: np.ndarray) -> np.ndarray:
+    """[n, 3, 3] rotation matrices of rotation vectors [n, 3] (what ``cv2.Rodrigues`` gives, for many)."""
+    rotvecs = np.asarray(rotvecs, np.float64).reshape(-1, 3)
+    eye = np.broadcast_to(np.eye(3), (rotvecs.shape[0], 3, 3))
+    return np.stack([rotate(eye[:, :, j], rotvecs) for j in range(3)], axis=2)
+
+
+def rotation_vectors(matrices: np.ndarray) -> np.ndarray:
+    """[n, 3] rotation vectors of rotation matrices [n, 3, 3] (angles below pi)."""
+    m = np.asarray(matrices, np.float64).reshape(-1, 3, 3)
+    cos = np.clip((np.trace(m, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    axis = np.stack([m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]], axis=1)
+    sin = np.sin(angle)
+    scale = np.where(sin > 1e-12, angle / np.where(sin > 1e-12, 2.0 * sin, 1.0), 0.5)  # (small angles: axis ~ 2 theta)
+    return axis * scale[:, None]
+
+
+def quaternions_xyzw(matrices: np.ndarray) -> np.ndarray:
+    """[n, 4] unit quaternions (x, y, z, w; w >= 0) of rotation matrices [n, 3, 3]."""
+    rotvecs = rotation_vectors(matrices)
+    angle = np.linalg.norm(rotvecs, axis=1, keepdims=True)
+    k = rotvecs / np.where(angle > 0, angle, 1.0)
+    return np.concatenate([k * np.sin(angle / 2), np.cos(angle / 2)], axis=1)
+
+
+# -- the gyroscope's track ------------------------------------------------------------------------
+
+def moving_mean(t_us: np.ndarray, values: np.ndarray, span_us: int, cum: np.ndarray) -> np.ndarray:
+    """The mean of ``values`` [n, d] over the ``span_us`` up to each sample (causal); ``cum`` [n + 1, d]
+    their cumulative sums with a leading zero row."""
+    first = np.searchsorted(t_us, t_us - span_us, side="right")
+    count = (np.arange(1, t_us.shape[0] + 1) - first)[:, None]
+    return (cum[1:] - cum[first]) / np.maximum(count, 1)
+
+
+def still_samples(t_us: np.ndarray, omega: np.ndarray, cfg: ImuMotionConfig = ImuMotionConfig()) -> np.ndarray:
+    """bool [n]: the head was still at each sample (its mean angular velocity over ``still_span_us`` small)."""
+    cum = np.concatenate([np.zeros((1, 3)), np.cumsum(omega, axis=0)])
+    mean = moving_mean(t_us, omega, cfg.still_span_us, cum)
+    return np.linalg.norm(mean, axis=1) < cfg.still_rad_s
+
+
+def running_bias(t_us: np.ndarray, omega: np.ndarray, still: np.ndarray, window_us: int) -> np.ndarray:
+    """[n, 3]: each sample's bias estimate, the mean of the still samples over ``window_us`` up to it (0 before any)."""
+    weight = still.astype(np.float64)[:, None]
+    cum_w = np.concatenate([np.zeros((1, 3)), np.cumsum(omega * weight, axis=0)])
+    cum_n = np.concatenate([np.zeros((1, 1)), np.cumsum(weight, axis=0)])
+    first = np.searchsorted(t_us, t_us - window_us, side="right")
+    n = cum_n[1:] - cum_n[first]
+    return np.where(n > 0, (cum_w[1:] - cum_w[first]) / np.maximum(n, 1), 0.0)
+
+
+def integrate(t_us: np.ndarray, omega: np.ndarray, gap_us: int) -> np.ndarray:
+    """[n, 3]: the rotation vector summed from the first sample (trapezoids; nothing across a gap)."""
+    dt = np.diff(t_us).astype(np.float64) * 1e-6
+    steps = 0.5 * (omega[1:] + omega[:-1]) * dt[:, None]
+    steps[np.diff(t_us) > gap_us] = 0.0
+    return np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+
+
+def shift_px(calibration: Calibration, centre_px: tuple[float, float], rotvecs: np.ndarray) -> np.ndarray:
+    """[n, 2]: where the scene point seen at ``centre_px`` goes in the sensor when the camera turns by
+    each rotation vector (camera frame), minus ``centre_px``: the pure-rotation homography at that pixel."""
+    ray = calibration.unproject(np.asarray([centre_px], np.float64))[0]
+    direction = np.array([ray[0], ray[1], 1.0])
+    moved = rotate(direction, -np.asarray(rotvecs, np.float64).reshape(-1, 3))
+    return calibration.project(moved) - np.asarray(centre_px, np.float64)
+
+
+class ImuHeadMotion:
+    """``KnownHeadMotion`` from the gyroscope, with the deblur's predicted smear (``smear_prior``).
+
+    Times asked for are on the event clock; samples arrive on the device clock
+    (``t_event = t_device + calibration.gaze_to_event_time_offset_us``, the gaze's clock).
+    ``healthy(t)`` says whether the motion at ``t`` is known: the edge falls back to the events where not.
+    """
+
+    def __init__(self, calibration: Calibration, cfg: ImuMotionConfig = ImuMotionConfig(), *,
+                 clock_offset_us: int | None = None, live: bool = False) -> None:
+        self.calibration = calibration
+        self.cfg = cfg
+        self.clock_offset_us = int(calibration.gaze_to_event_time_offset_us if clock_offset_us is None else clock_offset_us)
+        self.live = live
+        self.smear_radius_px = cfg.smear_radius_px
+        self._rotation = np.asarray(calibration.T_event_cpf, np.float64)[:3, :3]  # device (CPF) -> event camera
+        self._centre = (float(calibration.cx), float(calibration.cy))
+        self._lock = threading.Lock()
+        self._t = np.zeros(0, np.int64)  # event clock
+        self._raw = np.zeros((0, 3))  # device frame, as received
+        self._theta = np.zeros((0, 3))  # camera frame, integrated
+        self._gaps = np.zeros(0, np.int64)  # event times where a gap ended (the first sample after it)
+        self.received = 0
+
+    @classmethod
+    def of_track(cls, track: ImuTrack, calibration: Calibration, cfg: ImuMotionConfig = ImuMotionConfig(),
+                 clock_offset_us: int | None = None) -> ImuHeadMotion:
+        motion = cls(calibration, cfg, clock_offset_us=clock_offset_us)
+        motion.extend(track.t_us, track.omega)
+        return motion
+
+    # -- samples in ---------------------------------------------------------------------------------
+    def extend(self, t_device_us: np.ndarray, omega_device: np.ndarray) -> None:
+        """Append samples (device clock, rad/s in the device frame); older than the newest held are dropped."""
+        t = np.asarray(t_device_us, np.int64).reshape(-1) + self.clock_offset_us
+        omega = np.asarray(omega_device, np.float64).reshape(-1, 3)
+        with self._lock:
+            if self._t.shape[0]:
+                newer = t > self._t[-1]
+                t, omega = t[newer], omega[newer]
+            keep = np.concatenate([[True], np.diff(t) > 0]) if t.shape[0] else np.zeros(0, bool)
+            t, omega = t[keep], omega[keep]
+            if t.shape[0] == 0:
+                return
+            n_old = self._t.shape[0]
+            all_t = np.concatenate([self._t, t])
+            all_raw = np.concatenate([self._raw, omega])
+            # the bias from the history held, then the new samples integrated onto the last angle
+            bias = running_bias(all_t, all_raw, still_samples(all_t, all_raw, self.cfg), self.cfg.bias_window_us)[max(n_old - 1, 0):]
+            corrected = (all_raw[max(n_old - 1, 0):] - bias) @ self._rotation.T
+            theta = integrate(all_t[max(n_old - 1, 0):], corrected, self.cfg.gap_us)
+            if n_old:
+                theta = theta[1:] + self._theta[-1]
+            steps = np.diff(all_t[max(n_old - 1, 0):])
+            ended = all_t[max(n_old - 1, 0) + 1:][steps > self.cfg.gap_us]
+            self._t, self._raw, self._theta = all_t, all_raw, np.concatenate([self._theta, theta])
+            self._gaps = np.concatenate([self._gaps, ended])
+            self.received += int(t.shape[0])
+            if self.live and self._t[-1] - self._t[0] > 2 * self.cfg.keep_us:  # amortised trim
+                first = int(np.searchsorted(self._t, self._t[-1] - self.cfg.keep_us))
+                self._t, self._raw, self._theta = self._t[first:], self._raw[first:], self._theta[first:]
+                self._gaps = self._gaps[self._gaps >= self._t[0]]
+
+    # -- what the edge asks -------------------------------------------------------------------------
+    @property
+    def available(self) -> bool:
+        """Whether any sample has arrived."""
+        return self._t.shape[0] > 0
+
+    def healthy(self, t_us: int) -> bool:
+        """The rotation at ``t_us`` is known: inside the samples (a live stream's newest answers
+        ``max_age_us`` on), and neither the stream's start nor a gap's end lies within ``trust_us`` before."""
+        with self._lock:
+            return self._healthy(int(t_us))
+
+    def _healthy(self, t_us: int) -> bool:
+        t = self._t
+        if t.shape[0] < 2 or t_us < t[0] + self.cfg.trust_us or t_us > t[-1] + (self.cfg.max_age_us if self.live else 0):
+            return False
+        k = int(np.searchsorted(self._gaps, t_us, side="right"))
+        if k and t_us - int(self._gaps[k - 1]) < self.cfg.trust_us:
+            return False
+        nxt = int(np.searchsorted(t, t_us))  # inside a gap: the samples around it are far apart
+        return not (0 < nxt < t.shape[0] and t[nxt] - t[nxt - 1] > self.cfg.gap_us)
+
+    def rotation_at(self, t_us: np.ndarray) -> np.ndarray:
+        """[n, 3]: the camera's integrated rotation vector at event times ``t_us`` (interpolated; held
+        after the newest sample)."""
+        with self._lock:
+            return self._rotation_at(np.asarray(t_us, np.float64).reshape(-1))
+
+    def _rotation_at(self, t: np.ndarray) -> np.ndarray:
+        times = self._t.astype(np.float64)
+        return np.stack([np.interp(t, times, self._theta[:, k]) for k in range(3)], axis=1)
+
+    def scene_px(self, t_us: int) -> tuple[float, float] | None:
+        """The scene's shift at the principal point since the stream's first sample (None where not healthy)."""
+        with self._lock:
+            if not self._healthy(int(t_us)):
+                return None
+            theta = self._rotation_at(np.array([float(t_us)]))
+        dx, dy = shift_px(self.calibration, self._centre, theta)[0]
+        return float(dx), float(dy)
+
+    def smear_prior(self, t_first_us: int, t_ref_us: int, centre_px: tuple[float, float]) -> tuple[float, float] | None:
+        """The page's displacement at ``centre_px`` from ``t_first_us`` to ``t_ref_us`` (the deblur's
+        smear), or None when the rotation is not known over that span."""
+        with self._lock:
+            if not (self._healthy(int(t_first_us)) and self._healthy(int(t_ref_us))):
+                return None
+            theta = self._rotation_at(np.array([float(t_first_us), float(t_ref_us)]))
+        dx, dy = shift_px(self.calibration, centre_px, theta[1:] - theta[:1])[0]
+        return float(dx), float(dy)
+
+    def warp(self, window: Events, origin: tuple[int, int], shape_hw: tuple[int, int]) -> Events:
+        """``window``'s events moved by the rotation between each event and its newest (the window's
+        centre's shift for every event); unchanged where the rotation is not known."""
+        if window.shape[0] == 0:
+            return window
+        t_ref = int(window["t"][-1])
+        with self._lock:
+            if not (self._healthy(int(window["t"][0])) and self._healthy(t_ref)):
+                return window
+            theta = self._rotation_at(window["t"].astype(np.float64))
+        centre = (origin[0] + shape_hw[1] / 2.0, origin[1] + shape_hw[0] / 2.0)
+        d = shift_px(self.calibration, centre, theta[-1] - theta)
+        return moved_to(window, window["x"] + d[:, 0], window["y"] + d[:, 1], origin, shape_hw)
+
+    def summary(self) -> dict[str, float]:
+        """Rate, duration and angular speed (deg/s) of the samples held."""
+        with self._lock:
+            t, raw = self._t, self._raw
+        if t.shape[0] < 2:
+            return {"samples": float(t.shape[0])}
+        speed = np.degrees(np.linalg.norm(raw, axis=1))
+        return {"samples": float(t.shape[0]), "rate_hz": 1e6 / float(np.median(np.diff(t))),
+                "duration_s": float(t[-1] - t[0]) * 1e-6, "gaps": float(self._gaps.shape[0]),
+                "speed_deg_s_p50": float(np.median(speed)), "speed_deg_s_p99": float(np.percentile(speed, 99))}
+
+
+class JoinedSceneMotion:
+    """The scene's offset from the gyroscope where it is healthy, else from the event tracker, as one
+    continuous track; and how far the two disagree where both are known (the check).
+
+    The two count from different origins, so each switch re-bases the source taken over: while both
+    are known the gap between them is kept (``_tracker_shift``), the tracker continues the
+    gyroscope's track with it, and the gyroscope, back, continues the tracker's. Where the source
+    taken over is unknown too, the offset is unknown (None: the stitcher restarts its anchors).
+    Asked in time order (the frames' times), by one thread.
+    """
+
+    def __init__(self) -> None:
+        self._imu_shift = np.zeros(2)  # added to the gyroscope's offsets
+        self._tracker_shift = np.zeros(2)  # added to the tracker's: (gyroscope + its shift) - tracker when last both were known
+        self._using_imu = False
+        self._last_both: tuple[np.ndarray, np.ndarray] | None = None  # (gyroscope, tracker) at the last time both were known
+
+    def at(self, imu: tuple[float, float] | None,
+           tracker: tuple[float, float] | None) -> tuple[tuple[float, float] | None, float | None]:
+        """(the offset, the disagreement in px since the last time both were known, or None)."""
+        disagreement = None
+        if imu is not None:
+            value = np.asarray(imu, np.float64) + self._imu_shift
+            if not self._using_imu and tracker is not None:  # taking over from the tracker: continue its track
+                continued = np.asarray(tracker, np.float64) + self._tracker_shift
+                self._imu_shift += continued - value
+                value = continued
+            self._using_imu = True
+            if tracker is not None:
+                seen = np.asarray(tracker, np.float64)
+                self._tracker_shift = value - seen
+                if self._last_both is not None:
+                    moved = (value - self._last_both[0]) - (seen - self._last_both[1])
+                    disagreement = float(np.hypot(moved[0], moved[1]))
+                self._last_both = (value, seen)
+            return (float(value[0]), float(value[1])), disagreement
+        self._using_imu = False
+        self._last_both = None
+        if tracker is None:
+            return None, None
+        value = np.asarray(tracker, np.float64) + self._tracker_shift
+        return (float(value[0]), float(value[1])), None
