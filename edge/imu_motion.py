@@ -199,6 +199,12 @@ class ImuHeadMotion:
         """Whether any sample has arrived."""
         return self._t.shape[0] > 0
 
+    @property
+    def span_us(self) -> tuple[int, int] | None:
+        """(first, newest) sample times on the event clock; None with fewer than two samples."""
+        with self._lock:
+            return None if self._t.shape[0] < 2 else (int(self._t[0]), int(self._t[-1]))
+
     def healthy(self, t_us: int) -> bool:
         """The rotation at ``t_us`` is known: inside the samples (a live stream's newest answers
         ``max_age_us`` on), and neither the stream's start nor a gap's end lies within ``trust_us`` before."""

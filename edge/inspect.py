@@ -2,8 +2,9 @@
 
 Streams the RAW file in chunks, so files larger than memory work, and reports the sensor, format,
 duration, event count and rate, ON/OFF split, triggers and, for recordings, the gaze track and the
-share of events that fall inside the 100 x 200 gaze window (the foveated fraction). ``--png``
-draws the accumulated events with the window track on top.
+share of events that fall inside the 100 x 200 gaze window (the foveated fraction), and the IMU
+stream when the recording has one (rate, duration, angular speed). ``--png`` draws the accumulated
+events with the window track on top, and the scene's motion the gyroscope predicts.
 """
 
 from __future__ import annotations
@@ -209,8 +210,12 @@ def inspect_path(
         )
         if recording.meta:
             report["meta"] = recording.meta
+    imu_path = None
+    if recording is not None and recording.imu_path is not None:
+        imu_path = _imu_path_px(recording)
+        report["imu"] = _imu_report(recording)
     if png is not None:
-        write_png(png, summary.counts, width, height, mapper, track)
+        write_png(png, summary.counts, width, height, mapper, track, imu_path)
         report["png"] = str(png)
     return report
 
@@ -232,6 +237,29 @@ def _progress(*, enabled: bool, name: str) -> Any:
     from tqdm import tqdm
 
     return tqdm(desc=f"inspect {name}", unit="ev", unit_scale=True, file=sys.stderr, leave=False)
+
+
+def _imu_report(recording: Any) -> dict[str, Any]:
+    """The IMU stream: samples, rate, duration, gaps, angular speed (deg/s) and how much of the events' time it covers."""
+    from darkread.edge.imu_motion import ImuHeadMotion
+
+    track = recording.imu()
+    motion = ImuHeadMotion.of_track(track, recording.calibration)
+    return {"file": recording.imu_path.name, "columns": "angular_velocity_{x,y,z}_device (rad/s, CPF), tracking_timestamp_us",
+            **{k: round(v, 3) for k, v in motion.summary().items()}}
+
+
+def _imu_path_px(recording: Any) -> np.ndarray | None:
+    """[n, 2]: the principal point's scene shift the gyroscope predicts every 10 ms (for the picture)."""
+    from darkread.edge.imu_motion import ImuHeadMotion, shift_px
+
+    motion = ImuHeadMotion.of_track(recording.imu(), recording.calibration)
+    span = motion.span_us
+    if span is None:
+        return None
+    theta = motion.rotation_at(np.arange(span[0], span[1], 10_000))
+    centre = (recording.calibration.cx, recording.calibration.cy)
+    return np.asarray(centre) + shift_px(recording.calibration, centre, theta - theta[0])
 
 
 def _report(path: Path, header: Any, s: EventSummary, width: int, height: int) -> dict[str, Any]:
@@ -273,6 +301,14 @@ def format_report(report: dict[str, Any]) -> str:
             f"  fovea       {report['fovea_event_fraction']:.1%} of events inside the 100x200 gaze window "
             f"({1 - report['fovea_event_fraction']:.1%} dropped)",
         ]
+    if "imu" in report:
+        imu = report["imu"]
+        if imu.get("samples", 0) >= 2:
+            lines.append(f"  IMU         {imu['file']}: {int(imu['samples']):,} samples at {imu['rate_hz']:.0f} Hz over "
+                         f"{imu['duration_s']:.3f} s, {int(imu['gaps'])} gaps; angular speed median "
+                         f"{imu['speed_deg_s_p50']:.2f} deg/s, p99 {imu['speed_deg_s_p99']:.2f} deg/s")
+        else:
+            lines.append(f"  IMU         {imu['file']}: {int(imu.get('samples', 0))} samples")
     if "png" in report:
         lines.append(f"  picture     {report['png']}")
     lines += [f"  PROBLEM     {problem}" for problem in report.get("problems", [])]
@@ -280,9 +316,11 @@ def format_report(report: dict[str, Any]) -> str:
 
 
 def write_png(
-    out: str | Path, counts: np.ndarray | None, width: int, height: int, mapper: Any = None, track: Any = None
+    out: str | Path, counts: np.ndarray | None, width: int, height: int, mapper: Any = None, track: Any = None,
+    imu_path: np.ndarray | None = None,
 ) -> None:
-    """Accumulated events (log-scaled grey) with the gaze window centres and a few windows drawn."""
+    """Accumulated events (log-scaled grey) with the gaze window centres and a few windows drawn, and
+    (magenta) the path of the principal point's scene shift the gyroscope predicts."""
     import cv2
 
     image = np.zeros((height, width), dtype=np.float64) if counts is None else counts.reshape(height, width)
@@ -303,5 +341,7 @@ def write_png(
         for i in np.linspace(0, origins.shape[0] - 1, num=min(5, origins.shape[0])).astype(int):
             x0, y0 = int(origins[i, 0]), int(origins[i, 1])
             cv2.rectangle(picture, (x0, y0), (x0 + cfg.width - 1, y0 + cfg.height - 1), (0, 255, 0), 1)
+    if imu_path is not None and np.isfinite(imu_path).all():
+        cv2.polylines(picture, [np.round(imu_path).astype(np.int32).reshape(-1, 1, 2)], False, (255, 0, 255), 1, cv2.LINE_AA)
     if not cv2.imwrite(str(out), picture):
         raise ValueError(f"could not write {out} (use a .png name in an existing folder)")

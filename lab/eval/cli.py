@@ -21,7 +21,7 @@ logger = logging.getLogger(__name__)
 BOTH = "both"
 
 EVAL_HELP = """\
-Six forms:
+Seven forms:
 
   darkread eval make-suite OUT [--small | --subset simulator-check] [--simulator darkread|hesim] [--font FAMILY] [--jobs N]
       write the evaluation suite (synthetic recordings with fixed seeds over lux 1000/100/30/10/5,
@@ -49,6 +49,10 @@ Six forms:
       written to --out (a .md file, or a folder: FOLDER/simulators.md; default docs/eval/simulators.md,
       which the report of docs/eval then shows as its "Second simulator" section). `make eval-hesim`
       runs it all.
+
+  darkread eval head-motion RECORDING... [--out FILE.md]
+      the head's motion from the gyroscope (closed_loop_trajectory.csv) and from the events' tracker,
+      each against the simulator's true pose: median error per 20-ms slice (docs/head_motion.md).
 
   darkread eval attribute SUITE_DIR [--work DIR] [--out FILE.md] [--infer MODE] [--model ONNX]
       where an evaluated suite's errors come from: each recording read again end to end with the
@@ -185,8 +189,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                     _calibrate)
     calibrate.add_argument("--model-out", metavar="FILE.json", default=str(DEFAULT_CONFIDENCE_MODEL),
                            help="where the fitted line-confidence model goes (default: the one the cloud ships)")
+    _add_head_motion(sub)
     calibrate.add_argument("--target-risk", type=float, default=0.05, metavar="R",
                            help="the CER the answered lines of the fitting half may have (sets the answer threshold)")
+
+
+def _add_head_motion(sub: argparse._SubParsersAction) -> None:
+    help_text = "the gyroscope's head motion and the event tracker's against the simulator's true pose, per 20-ms slice"
+    p = sub.add_parser("head-motion", help=help_text, description=help_text)
+    p.add_argument("recordings", nargs="+", metavar="RECORDING", help="synthetic recordings with closed_loop_trajectory.csv")
+    p.add_argument("--out", default=None, metavar="FILE.md", help="also write the table there (and a .json beside it)")
+    p.set_defaults(func=_head_motion)
+
+
+def _head_motion(args: argparse.Namespace) -> int:
+    from darkread.lab.eval.head_motion import write_head_motion
+
+    print(write_head_motion(args.recordings, Path(args.out) if args.out else None), end="")
+    return 0
 
 
 def _make_suite(args: argparse.Namespace) -> int:
