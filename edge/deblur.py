@@ -220,7 +220,7 @@ def deblur_window(window: Events, nearby: Events, origin: tuple[int, int], shape
     centre = (origin[0] + shape_hw[1] / 2.0, origin[1] + shape_hw[0] / 2.0)
     predicted = None if prior is None else prior.smear_prior(t_first, t_ref, centre)
     # (``nearby`` can be the sensor's tens of thousands: its fields are read in place, not selected)
-    if predicted is not None:
+    if prior is not None and predicted is not None:
         smear = smear_near(nearby["x"], nearby["y"], nearby["t"], region, t_ref, span, predicted, prior.smear_radius_px,
                            cfg, t_first_us=t_first)
     else:

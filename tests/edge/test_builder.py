@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import socket
 from pathlib import Path
 
@@ -13,6 +14,8 @@ from darkread.edge.builder import build_edge
 from darkread.edge.config import load_config
 from darkread.edge.daemon import Daemon
 from darkread.edge.errors import ModelError
+from darkread.edge.imu_motion import ImuHeadMotion
+from darkread.edge.io.imu_csv import IMU_NAME, write_imu_csv
 from darkread.edge.notify import Notifier
 from darkread.edge.spool import Spool
 from darkread.lab.bench.ack_server import AckServer
@@ -132,3 +135,28 @@ def test_pages_are_built_from_frames_and_sent_when_due() -> None:
     message = pages.message(t_us=99, final=True)
     assert message is not None and message.t_us == 99 and message.mask().any()
     assert not pages.due()  # the clock restarts with every page
+
+
+def test_a_recording_with_an_imu_stream_gives_the_edge_the_gyroscopes_head_motion(tmp_path: Path) -> None:
+    recording = synthetic_recording(tmp_path / "rec", n_events=8_000)
+    t = np.arange(0, 400_000, 1000, dtype=np.int64)
+    write_imu_csv(recording / IMU_NAME, t, np.zeros((t.shape[0], 3)), np.tile([0.0, 0.0, 0.0, 1.0], (t.shape[0], 1)),
+                  graph_uid="g", utc_offset_ns=0)
+    config = replay_config(recording, sum_bins_model(tmp_path / "m.onnx"), "ws://127.0.0.1:1/v1/stream", tmp_path / "spool")
+    frames: list = []
+    edge = build_edge(config, on_frame=lambda frame, arrival: frames.append(frame))
+    windows = edge.pipeline.windows
+    assert isinstance(windows.known_motion, ImuHeadMotion) and windows.imu is windows.known_motion
+    assert windows.scene is not None  # the event tracker runs beside it: the fallback and the check
+    edge.startup()
+    assert edge.source.wait(10)
+    assert edge.shutdown(1.0)
+    totals = edge.metrics.totals
+    assert frames and totals["frames_imu_motion"] + totals["frames_imu_fallback"] >= len(frames)
+    # [imu] kind "none": the edge as without the stream
+    plain = build_edge(dataclasses.replace(config, imu=dataclasses.replace(config.imu, kind="none")),
+                       on_frame=lambda frame, arrival: None)
+    try:
+        assert plain.pipeline.windows.known_motion is None
+    finally:
+        plain.shutdown(1.0)

@@ -7,14 +7,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from factories import random_events
+from factories import random_events, synthetic_recording
 
 from darkread.cli import build_parser, main
 from darkread.edge.events import make_events
 from darkread.edge.gaze import GazeMapper
-from darkread.edge.inspect import format_report, summarize, write_png
+from darkread.edge.inspect import format_report, inspect_path, summarize, write_png
 from darkread.edge.io.calibration import Calibration
 from darkread.edge.io.gaze_csv import GazeTrack
+from darkread.edge.io.imu_csv import IMU_NAME, write_imu_csv
 
 JSON_KEYS = {"width", "height", "format", "events", "on", "off", "t_first_us", "t_last_us", "sum_t_us", "sum_x", "sum_y", "triggers"}
 RECORDING_KEYS = {"gaze_samples", "gaze_valid_fraction", "fovea_event_fraction"}
@@ -150,3 +151,16 @@ def test_bare_raw_with_only_a_gaze_csv_names_the_missing_calibration(shared_samp
     code = main(["inspect", str(shared_sample_recording / "events.raw"), "--gaze", str(shared_sample_recording / "general_eye_gaze.csv")])
     assert code == 1
     assert "--calibration" in capsys.readouterr().err
+
+
+def test_the_imu_stream_is_shown(tmp_path: Path) -> None:
+    recording = synthetic_recording(tmp_path / "rec", n_events=2_000)
+    t = np.arange(0, 500_000, 1000, dtype=np.int64)
+    omega = np.tile([0.0, np.radians(10.0), 0.0], (t.shape[0], 1))
+    write_imu_csv(recording / IMU_NAME, t, omega, np.tile([0.0, 0.0, 0.0, 1.0], (t.shape[0], 1)), graph_uid="g", utc_offset_ns=0)
+    report = inspect_path(recording, png=tmp_path / "out.png", progress=False)
+    imu = report["imu"]
+    assert imu["samples"] == 500 and imu["rate_hz"] == 1000 and imu["duration_s"] == 0.499
+    assert imu["speed_deg_s_p50"] == pytest.approx(10.0, abs=1e-3)
+    assert "IMU         closed_loop_trajectory.csv: 500 samples at 1000 Hz" in format_report(report)
+    assert (tmp_path / "out.png").is_file()

@@ -1,0 +1,168 @@
+"""The head's motion from the gyroscope: rotations, bias, integration against a known rotation,
+gaps and the fallback to the event tracker, the deblur searched around the prediction."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from factories import moving_strokes
+
+from darkread.edge.deblur import DeblurConfig, deblur_window, smear_near, smear_of
+from darkread.edge.head_motion import KnownHeadMotion, SmearPrior
+from darkread.edge.imu_motion import (
+    ImuHeadMotion,
+    ImuMotionConfig,
+    JoinedSceneMotion,
+    integrate,
+    rotation_matrices,
+    rotation_vectors,
+    running_bias,
+    still_samples,
+)
+from darkread.edge.io.calibration import Calibration
+from darkread.edge.io.imu_csv import ImuTrack
+
+FX = 1400.0
+CPF_TO_CAMERA = np.diag([-1.0, -1.0, 1.0, 1.0])  # CPF x left, y up -> camera x right, y down
+
+
+def calibration(offset_us: int = 0) -> Calibration:
+    return Calibration(width=1280, height=720, fx=FX, fy=FX, cx=640.0, cy=360.0, distortion=(0.0, 0.0, 0.0, 0.0),
+                       T_event_cpf=CPF_TO_CAMERA, gaze_to_event_time_offset_us=offset_us)
+
+
+def steady_turn(rate_cpf: tuple[float, float, float], seconds: float = 1.0, bias=(0.0, 0.0, 0.0),
+                still_s: float = 0.0, t0: int = 5_000_000) -> ImuTrack:
+    """1 kHz samples: ``still_s`` of a still head, then a steady turn at ``rate_cpf`` rad/s; plus ``bias``."""
+    t = t0 + np.arange(int((still_s + seconds) * 1000) + 1, dtype=np.int64) * 1000
+    omega = np.where(((t - t0) * 1e-6 >= still_s)[:, None], np.asarray(rate_cpf), 0.0) + np.asarray(bias)
+    return ImuTrack(t, omega)
+
+
+def test_rotation_helpers_agree_with_each_other() -> None:
+    rotvecs = np.random.default_rng(1).normal(0, 0.5, (20, 3))
+    matrices = rotation_matrices(rotvecs)
+    assert np.allclose(matrices @ np.transpose(matrices, (0, 2, 1)), np.eye(3), atol=1e-12)
+    assert np.allclose(rotation_vectors(matrices), rotvecs, atol=1e-9)
+
+
+def test_a_steady_turn_moves_the_scene_by_the_homography() -> None:
+    # the wearer turns left (about CPF +y, up) at 0.1 rad/s: the camera pans left, the page moves right
+    rate = 0.1
+    motion = ImuHeadMotion.of_track(steady_turn((0.0, rate, 0.0), seconds=1.0), calibration())
+    assert isinstance(motion, KnownHeadMotion) and isinstance(motion, SmearPrior)
+    t0, t1 = 5_200_000, 5_700_000
+    a, b = motion.scene_px(t0), motion.scene_px(t1)
+    assert a is not None and b is not None
+    expected = FX * np.tan(rate * 0.5 + np.arctan(a[0] / FX)) - a[0]  # pure rotation about the optical centre
+    assert b[0] - a[0] == pytest.approx(expected, rel=1e-3) and abs(b[1] - a[1]) < 1e-6
+    # the deblur's smear over 20 ms: the same shift at the window's centre
+    smear = motion.smear_prior(t1 - 20_000, t1, (640.0, 360.0))
+    assert smear is not None and smear[0] == pytest.approx(FX * rate * 0.02, rel=0.02)
+
+
+def test_the_device_clock_is_mapped_by_the_calibrations_offset() -> None:
+    track = steady_turn((0.0, 0.1, 0.0), seconds=1.0)
+    plain = ImuHeadMotion.of_track(track, calibration())
+    shifted = ImuHeadMotion.of_track(track, calibration(offset_us=-3_000_000))
+    assert shifted.scene_px(5_500_000 - 3_000_000) == plain.scene_px(5_500_000)
+
+
+def test_the_bias_is_learnt_while_the_head_is_still() -> None:
+    bias = (0.004, -0.006, 0.003)  # ~0.3 deg/s per axis, as a calibrated MEMS gyroscope leaves
+    track = steady_turn((0.0, 0.0, 0.0), seconds=0.001, bias=bias, still_s=3.0)
+    noisy = ImuTrack(track.t_us, track.omega + np.random.default_rng(2).normal(0, 0.004, track.omega.shape))
+    still = still_samples(noisy.t_us, noisy.omega, ImuMotionConfig())
+    assert still[100:].all()
+    estimate = running_bias(noisy.t_us, noisy.omega, still, 10_000_000)
+    assert np.allclose(estimate[-1], bias, atol=5e-4)
+    motion = ImuHeadMotion.of_track(noisy, calibration())
+    a, b = motion.scene_px(6_000_000), motion.scene_px(8_000_000)
+    uncorrected = FX * 0.006 * 2.0  # what the bias alone would drift in 2 s
+    assert a is not None and b is not None and np.hypot(b[0] - a[0], b[1] - a[1]) < 0.1 * uncorrected
+
+
+def test_a_turning_head_is_not_taken_for_bias() -> None:
+    t = np.arange(3001, dtype=np.int64) * 1000
+    omega = np.c_[np.zeros(3001), np.full(3001, 0.3), np.zeros(3001)]
+    assert not still_samples(t, omega).any()
+    assert np.array_equal(running_bias(t, omega, still_samples(t, omega), 10_000_000), np.zeros((3001, 3)))
+
+
+def test_integration_skips_gaps_and_gaps_are_not_healthy() -> None:
+    t = np.concatenate([np.arange(0, 500_000, 1000), np.arange(600_000, 1_000_000, 1000)]).astype(np.int64)
+    omega = np.tile([0.0, 0.2, 0.0], (t.shape[0], 1))
+    theta = integrate(t, omega, gap_us=20_000)
+    assert theta[-1, 1] == pytest.approx(0.2 * (0.499 + 0.399))  # nothing integrated across the 101-ms gap
+    motion = ImuHeadMotion.of_track(ImuTrack(t, omega), calibration())
+    assert motion.available and motion.healthy(300_000)
+    assert not motion.healthy(50_000)  # the stream's first trust span
+    assert not motion.healthy(550_000)  # inside the gap
+    assert not motion.healthy(650_000)  # just after it
+    assert motion.healthy(750_000)
+    assert not motion.healthy(1_200_000)  # after the file's end
+    assert motion.scene_px(550_000) is None and motion.smear_prior(540_000, 560_000, (640.0, 360.0)) is None
+
+
+def test_the_tracker_takes_over_in_a_gap_and_the_track_stays_continuous() -> None:
+    joined = JoinedSceneMotion()
+    # both known from the start: the gyroscope continues the tracker's track (its origin is arbitrary) ...
+    assert joined.at((0.0, 0.0), (100.0, 100.0)) == ((100.0, 100.0), None)
+    # ... and the disagreement between frames is measured
+    offset, disagreement = joined.at((5.0, 0.0), (104.0, 100.0))
+    assert offset == (105.0, 100.0) and disagreement == pytest.approx(1.0)
+    # a gap: the tracker continues from where the gyroscope was
+    assert joined.at(None, (110.0, 100.0)) == ((111.0, 100.0), None)
+    assert joined.at(None, (112.0, 101.0)) == ((113.0, 101.0), None)
+    # the gyroscope back (its own origin far off): it continues the tracker's track
+    assert joined.at((50.0, 50.0), (113.0, 101.0))[0] == (114.0, 101.0)
+    assert joined.at((52.0, 50.0), (115.0, 101.0))[0] == (116.0, 101.0)
+    # neither known: unknown
+    assert joined.at(None, None) == (None, None)
+
+
+def test_no_gyroscope_sample_at_all_leaves_the_tracker_as_it_is() -> None:
+    joined = JoinedSceneMotion()
+    assert joined.at(None, (3.0, 4.0)) == ((3.0, 4.0), None)
+    assert joined.at(None, None) == (None, None)
+
+
+def test_the_deblur_searches_around_the_prediction() -> None:
+    velocity = (240.0, -120.0)  # px/s: a turning head
+    events = moving_strokes(velocity, span_ms=30.0, seed=3)
+    t_first, t_ref = int(events["t"][0]), int(events["t"][-1])
+    span = float(t_ref - t_first)
+    truth = (velocity[0] * span / 1e6, velocity[1] * span / 1e6)
+    region = (480, 250, 320, 220)
+    args = (events["x"], events["y"], events["t"], region, t_ref, span)
+    found = smear_near(*args, (truth[0] + 1.2, truth[1] - 0.8), 2.0, DeblurConfig(), t_first_us=t_first)
+    assert np.hypot(found[0] - truth[0], found[1] - truth[1]) < 0.6
+    assert np.hypot(*np.subtract(found, smear_of(*args, DeblurConfig(), t_first_us=t_first))) < 0.6
+    # too few events to sharpen: the prediction itself
+    few = events[::400]
+    assert smear_near(few["x"], few["y"], few["t"], region, t_ref, span, (3.0, 1.0), 2.0, DeblurConfig(),
+                      t_first_us=t_first) == (3.0, 1.0)
+
+
+class _Prior:
+    smear_radius_px = 2.0
+
+    def __init__(self, smear: tuple[float, float] | None) -> None:
+        self.smear = smear
+
+    def smear_prior(self, t_first_us: int, t_ref_us: int, centre_px: tuple[float, float]) -> tuple[float, float] | None:
+        return self.smear
+
+    def healthy(self, t_us: int) -> bool:
+        return self.smear is not None
+
+
+def test_deblur_window_without_a_prediction_searches_as_before() -> None:
+    events = moving_strokes((240.0, 0.0), span_ms=30.0, seed=4)
+    origin, shape = (540, 310), (100, 200)
+    inside = events[(events["x"] >= 540) & (events["x"] < 740) & (events["y"] >= 310) & (events["y"] < 410)]
+    plain = deblur_window(inside, events, origin, shape, (1280, 720))
+    unknown = deblur_window(inside, events, origin, shape, (1280, 720), prior=_Prior(None))
+    assert plain[1] == unknown[1] and np.array_equal(plain[0], unknown[0])
+    known = deblur_window(inside, events, origin, shape, (1280, 720), prior=_Prior(plain[1]))
+    assert np.hypot(*np.subtract(known[1], plain[1])) < 0.6
