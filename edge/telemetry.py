@@ -35,6 +35,7 @@ COUNTERS = (
     "frames_skipped",  # windows never inferred because inference fell behind (live): what a busy edge loses
     "frames_no_gaze",
     "events_overwritten",  # ring history overwritten by newer events: normal once the ring is full, no loss
+    "roi_writes",  # the sensor's ROI moved (or given back to the whole sensor): register writes (edge.roi)
     "messages_sent",
     "bytes_sent",
     "messages_acked",
@@ -85,6 +86,7 @@ class Snapshot:
             f"wire p50 {self.latency_ms_p50:.1f} p99 {self.latency_ms_p99:.1f} ms "
             f"deblurred {self.totals['frames_deblurred']} denoised {self.totals['frames_denoised']} "
             f"skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
+            f"roi writes {r['roi_writes']:.1f}/s "
             f"spool {self.spool_depth} (lost {self.spool_lost}) "
             f"sent {r['bytes_sent']/1e3:.1f} kB/s ({self.bandwidth_vs_raw():.1%} of raw events, "
             f"{self.bandwidth_vs_rgb():.1%} of one RGB frame per second)"

@@ -65,6 +65,7 @@ class OnChangeStep:
         if self._fixation is None:
             self._fixation, self._fixation_events, self._since_infer = key, 0, 0
             self.trigger.reset()
+            self._roi_at_landing(t)
         self._fixation_events += pending.foveated
         self._since_infer += pending.foveated
         if len(self.fuser) and t - self.fuser.t0_us >= self.settings.view_every_ms * 1e3:
@@ -90,8 +91,8 @@ class OnChangeStep:
             return self._view_origin, gaze
         centre = self._fixation_centre(t) or gaze.pixel
         origin = window_origin(centre, w.sensor_wh, w.fovea)
-        if origin != w.origin and self.settings.sensor_roi:
-            self._roi_for_view(origin)
+        if origin != w.origin:
+            self._roi_for_view(origin, t)
         w.origin = self._view_origin = origin
         return origin, gaze
 
@@ -125,12 +126,20 @@ class OnChangeStep:
         self._since_infer = 0
         return True
 
-    def _roi_for_view(self, origin: tuple[int, int]) -> None:
+    def _roi_for_view(self, origin: tuple[int, int], t: int) -> None:
         """The sensor's ROI over the view's window and both dithered ones (all its frames' events)."""
         fov = self.windows.fovea
         top, bottom = self._dithered(origin, 0), self._dithered(origin, 1)
         y0, y1 = min(origin[1], top[1]), max(origin[1], bottom[1]) + fov.height
-        self.windows.source.set_roi(origin[0], y0, fov.width, y1 - y0)
+        self.windows.place_roi((origin[0], y0, fov.width, y1 - y0), t)
+
+    def _roi_at_landing(self, t: int) -> None:
+        """A fixation began: the ROI moves to where the gaze landed now, so the events the view's
+        first frame takes (from the fixation's start) are delivered; the view's window, placed later
+        at the fixation's mean gaze, usually lies inside its margin."""
+        gaze = self.windows.gaze.at(t)
+        if gaze is not None:
+            self._roi_for_view(window_origin(gaze.pixel, self.windows.sensor_wh, self.windows.fovea), t)
 
     def _dithered(self, origin: tuple[int, int], k: int) -> tuple[int, int]:
         """The window of a view's ``k``-th frame: the view's window moved up (even ``k``) or down
