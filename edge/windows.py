@@ -72,6 +72,7 @@ class Windows:
         self.scene = SceneMotion(self.sensor_wh) if measure_scene else None
         self._scene_lock = threading.Lock()
         self.roi: Rect | None = None  # what the sensor delivers (None: all of it)
+        self.shed_level = 0  # live and falling behind: what the steps give up (edge.load)
         self._roi_lock = threading.Lock()  # (placed by the steps, given back by the reader thread)
 
     def motion_known(self, t_us: int) -> bool:

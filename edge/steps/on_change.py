@@ -15,6 +15,7 @@ import numpy as np
 from darkread.edge.config import PipelineConfig
 from darkread.edge.fovea import window_origin
 from darkread.edge.gaze import GazeSample
+from darkread.edge.load import frames_per_view
 from darkread.edge.steps import FrameHandler, Pending
 from darkread.edge.view_fusion import MARGIN_PX, ViewFuser
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
@@ -44,6 +45,7 @@ class OnChangeStep:
         self._fixation_events = 0  # window events since it started
         self._since_infer = 0  # window events since the last inference
         self._view_origin: tuple[int, int] | None = None  # the current view's window (placed once per view)
+        self._capped = False  # the current view was denied a frame (edge.load)
 
     def due(self, pending: Pending) -> bool:
         return pending.events > 0  # every chunk: the gaze may have changed
@@ -77,7 +79,20 @@ class OnChangeStep:
             return
         origin, gaze = window
         if self.trigger.due(t, self._fixation, self._since_infer, self._fixation_events, origin):
+            if self._over_budget():
+                return  # shed: the view keeps the frames it has (edge.load)
             self._infer_into_view(origin, gaze, t, self._fixation, arrival)
+
+    def _over_budget(self) -> bool:
+        """A live edge falling behind caps a view's frames (edge.load); the first capped inference
+        of a view counts it in ``views_capped``."""
+        budget = frames_per_view(self.windows.shed_level)
+        if budget is None or len(self.fuser) < budget:
+            return False
+        if not self._capped:
+            self._capped = True
+            self.windows.metrics.add("views_capped")
+        return True
 
     def _view_window(self, t: int) -> tuple[tuple[int, int], GazeSample] | None:
         """Where the current view's window is, and the gaze at ``t``. A view's window stays put: it
@@ -169,6 +184,7 @@ class OnChangeStep:
         view = self.fuser.view(self.views_made)
         self.fuser = self.fuser.fresh()
         self._view_origin = None
+        self._capped = False
         self.views_made += 1
         self.windows.metrics.add("views")
         self.on_frame(view, arrival)
