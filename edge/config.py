@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from darkread.proto.messages import Mode
 
 from darkread.core.redact import redact
+from darkread.edge.roi import ROI_MODES, parse_roi_mode
 
 ENV_PREFIX = "DARKREAD_EDGE_"
 
@@ -72,9 +73,12 @@ class PipelineConfig:
     ring_capacity: int = 1 << 19  # 8 MB: 0.5 s at 1 Mev/s, far more than a window needs
     lossless: bool = False  # True: the reader waits for inference instead of skipping windows
     stall_s: float = 5.0  # no events for this long: the watchdog is no longer fed (systemd restarts us)
-    sensor_roi: bool = False  # move the sensor's ROI with the foveal window (EVK4: less USB traffic)
+    # the sensor delivers only the view's window and a margin, moved with the gaze (edge.roi; EVK4: less
+    # USB traffic, a replay decodes less): "auto" while the head's motion is known from elsewhere and
+    # healthy (an IMU: edge.head_motion), "on" always, "off" never (true/false read as on/off)
+    sensor_roi: str = ROI_MODES[0]
     # measure the head's motion from all the sensor's events (edge.scene_motion) and send it with
-    # each frame and view: the stitcher predicts from it. Not with sensor_roi (only the window's events come then)
+    # each frame and view: the stitcher predicts from it. Not while the ROI is on (only the window's events come then)
     scene_motion: bool = True
     # move each window's events back along the head's motion during its span (edge.deblur): in dim
     # light a window spans 20-50 ms and a moving head smears its strokes over 4-10 px
@@ -102,6 +106,9 @@ class PipelineConfig:
     # binary "mask" (a view holds 1-3 frames: a mask's average has too few levels to keep faint strokes;
     # frames doubted all over, in dim light, go in as masks either way: view_fusion.MAX_DOUBT)
     fuse: str = "probability"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sensor_roi", parse_roi_mode(self.sensor_roi))  # (a boolean reads as on/off)
 
 
 @dataclass(frozen=True)
@@ -187,7 +194,10 @@ def _section(name: str, values: Mapping[str, Any], base: Any) -> Any:
             raise ValueError(f"config: [pipeline] {key} is gone: the window size and bins are the model's input shape")
         if key not in known:
             raise ValueError(f"config: unknown key [{name}] {key} (known: {', '.join(sorted(known))})")
-        updates[key] = _coerce(raw, getattr(base, key), f"[{name}] {key}")
+        if name == "pipeline" and key == "sensor_roi":
+            updates[key] = parse_roi_mode(raw)  # a mode that was a boolean: true/false still read
+        else:
+            updates[key] = _coerce(raw, getattr(base, key), f"[{name}] {key}")
     return dataclasses.replace(base, **updates)
 
 

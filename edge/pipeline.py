@@ -10,7 +10,8 @@ and the one place live and lossless differ:
 - live (a camera, a paced replay): the reconstruction thread wakes when the step is due (or every
   ``period_ms``) and steps with all that arrived meanwhile, at the newest event's time; if inference
   fell behind, the step jumps to the newest window (the ring is fixed-size, so memory never grows
-  with load) and the windows it skipped are counted.
+  with load) and the windows it skipped are counted. How long the oldest data a step takes has
+  waited is its lag: a lag that stays long sheds inferences (:mod:`darkread.edge.load`).
 - lossless (offline replays): the reader thread steps itself, on the event clock, so it waits for
   inference instead of skipping and a replay is reproducible; the reconstruction thread only feeds
   the watchdog and takes the last step when the stream ends.
@@ -33,6 +34,7 @@ from darkread.edge.config import PipelineConfig
 from darkread.edge.events import Events
 from darkread.edge.fovea import in_window
 from darkread.edge.frame import count_in_window
+from darkread.edge.load import LoadShedder
 from darkread.edge.sources.base import EventSource
 from darkread.edge.steps import Pending, Step
 from darkread.edge.windows import Windows
@@ -72,6 +74,7 @@ class Pipeline:
         self.settings = settings
         self.metrics = windows.metrics
         self.watchdog = watchdog
+        self.shedder = LoadShedder()  # live only: lossless replays wait for inference instead
         self.error: BaseException | None = None
         self._pending = Pending()  # what arrived since the last step
         self._open_piece: tuple[int, int] | None = None  # lossless on a grid: (grid index, newest t) of a piece not yet stepped
@@ -250,12 +253,22 @@ class Pipeline:
                 self._step_at(open_t)
             with self._cond:
                 pending = self._pending.take()
+            if not self.settings.lossless and not final:
+                self._observe_lag(pending)
             skipped = self.step.skipped(pending)
             if skipped > 0:
                 self.metrics.add("frames_skipped", skipped)
             t = self.ring.newest_t
             if t is not None:
                 self.step.step(t, pending, final)
+
+    def _observe_lag(self, pending: Pending) -> None:
+        """Live: how long this step's oldest data waited, to the shedder; its level to the steps."""
+        lag_s = time.monotonic() - pending.first_arrival if pending.first_arrival else 0.0
+        self.metrics.observe_step_lag(lag_s * 1e3)
+        if self.shedder.observe(lag_s):
+            self.windows.shed_level = self.metrics.shed_level = self.shedder.level
+            self.metrics.add("shed_changes")
 
     def _step_at(self, t_us: int) -> None:
         """A step at ``t_us`` with what arrived since the last (step lock held)."""

@@ -37,6 +37,9 @@ COUNTERS = (
     "frames_skipped",  # windows never inferred because inference fell behind (live): what a busy edge loses
     "frames_no_gaze",
     "events_overwritten",  # ring history overwritten by newer events: normal once the ring is full, no loss
+    "shed_changes",  # live: the shedding level changed (edge.load; the level is a gauge)
+    "views_capped",  # live, shedding: views denied a frame the view trigger wanted
+    "roi_writes",  # the sensor's ROI moved (or given back to the whole sensor): register writes (edge.roi)
     "messages_sent",
     "bytes_sent",
     "messages_acked",
@@ -61,6 +64,8 @@ class Snapshot:
     latency_ms_p99: float
     spool_depth: int
     spool_lost: int  # messages the full spool evicted before their ack: the uplink's only loss
+    step_lag_ms_p99: float = 0.0  # live: how long a step's oldest data waited (edge.load)
+    shed_level: int = 0
     raw_bytes_per_event: float = RAW_EVT3_BYTES_PER_EVENT
     cpu_s: float = 0.0  # process CPU time over the interval
 
@@ -87,6 +92,8 @@ class Snapshot:
             f"wire p50 {self.latency_ms_p50:.1f} p99 {self.latency_ms_p99:.1f} ms "
             f"deblurred {self.totals['frames_deblurred']} denoised {self.totals['frames_denoised']} "
             f"skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
+            f"roi writes {r['roi_writes']:.1f}/s step lag p99 {self.step_lag_ms_p99:.0f} ms "
+            f"shedding level {self.shed_level} (views capped {self.totals['views_capped']}) "
             f"spool {self.spool_depth} (lost {self.spool_lost}) "
             f"sent {r['bytes_sent']/1e3:.1f} kB/s ({self.bandwidth_vs_raw():.1%} of raw events, "
             f"{self.bandwidth_vs_rgb():.1%} of one RGB frame per second)"
@@ -115,6 +122,8 @@ class EdgeMetrics:
         self.latency_ms: deque[float] = deque(maxlen=RESERVOIR)
         # px between the gyroscope's and the event tracker's scene motion between frames (where both are known)
         self.motion_disagreement_px: deque[float] = deque(maxlen=RESERVOIR)
+        self.step_lag_ms: deque[float] = deque(maxlen=RESERVOIR)
+        self.shed_level = 0  # set by the pipeline (edge.load)
         self.spool_depth: Callable[[], int] = lambda: 0
         self.spool_lost: Callable[[], int] = lambda: 0
         self.raw_bytes_per_event = RAW_EVT3_BYTES_PER_EVENT  # the raw stream's size, for the bandwidth ratio
@@ -135,6 +144,8 @@ class EdgeMetrics:
 
     def observe_motion_disagreement(self, px: float) -> None:
         self.motion_disagreement_px.append(px)
+    def observe_step_lag(self, ms: float) -> None:
+        self.step_lag_ms.append(ms)
 
     def snapshot(self) -> Snapshot:
         with self._lock:
@@ -156,6 +167,8 @@ class EdgeMetrics:
             latency_ms_p99=percentile(latency, 99),
             spool_depth=self.spool_depth(),
             spool_lost=self.spool_lost(),
+            step_lag_ms_p99=percentile(list(self.step_lag_ms), 99),
+            shed_level=self.shed_level,
             raw_bytes_per_event=self.raw_bytes_per_event,
             cpu_s=cpu_s,
         )
@@ -184,6 +197,10 @@ class EdgeMetrics:
                    "gyroscope vs event tracker: px between their scene motions from frame to frame",
                    [(f'{{quantile="{q}"}}', percentile(disagreement, q * 100)) for q in (0.5, 0.9)])
         metric("spool_depth", "gauge", "messages waiting for an ack", [("", self.spool_depth())])
+        metric("shed_level", "gauge", "live and falling behind: 0 none, 1 a view's frames capped at two, 2 at one",
+               [("", self.shed_level)])
+        metric("step_lag_ms", "gauge", f"how long a live step's oldest data waited, over the last {RESERVOIR} steps",
+               [(f'{{quantile="{q}"}}', percentile(list(self.step_lag_ms), q * 100)) for q in (0.5, 0.99)])
         metric("spool_lost", "gauge", "messages the full spool evicted before their ack (lost)", [("", self.spool_lost())])
         reading_s = totals["event_us"] / 1e6
         metric("cpu_seconds_per_reading_second", "gauge", "process CPU time per second of event time since start",

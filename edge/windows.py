@@ -2,7 +2,8 @@
 
 :class:`Windows` holds what both steps (:mod:`darkread.edge.steps`) share: the ring the reader
 fills, the gaze, where the window is now, the head's motion (measured from all events by
-:mod:`darkread.edge.scene_motion`, or known from elsewhere: :mod:`darkread.edge.head_motion`);
+:mod:`darkread.edge.scene_motion`, or known from elsewhere: :mod:`darkread.edge.head_motion`) and
+the sensor's ROI that follows the window while that motion is known (:mod:`darkread.edge.roi`);
 it cuts one frame's events out of the ring and makes the frame (:mod:`darkread.edge.frame`).
 """
 
@@ -22,6 +23,7 @@ from darkread.edge.gaze import GazeLookup, GazeSample
 from darkread.edge.head_motion import KnownHeadMotion, SmearPrior
 from darkread.edge.imu_motion import JoinedSceneMotion
 from darkread.edge.ring import EventRing
+from darkread.edge.roi import ROI_FOLLOW_MARGIN_PX, Rect, follow_window, motion_healthy, roi_wanted
 from darkread.edge.scene_motion import SceneMotion
 from darkread.edge.sources.base import EventSource
 from darkread.edge.telemetry import EdgeMetrics
@@ -51,7 +53,7 @@ class Windows:
         known_motion: KnownHeadMotion | None = None,
     ) -> None:
         self.ring = ring
-        self.source = source  # (its ROI follows the window with ``sensor_roi``)
+        self.source = source  # (its ROI follows the window while ``roi_wanted``: ``place_roi``)
         self.gaze = gaze
         self.infer = infer
         self.settings = settings
@@ -64,19 +66,37 @@ class Windows:
         self.origin: tuple[int, int] | None = None
         self.frames_made = 0
         self._history = MIN_HISTORY_EVENTS
-        # the head's motion from all events, unless it is known from elsewhere (then it is neither
-        # measured nor searched); a gyroscope's (a SmearPrior) is searched around, and the events'
-        # tracker runs beside it: where the gyroscope's stream has a gap, and as a check
+        # the head's motion from all events, unless it is known from elsewhere and healthy (then it
+        # is neither measured nor searched); the tracker stands by for when it is not. A gyroscope's
+        # (a SmearPrior) is searched around, and while the whole sensor is delivered the tracker runs
+        # beside it as a check
         self.known_motion = known_motion
         self.imu = known_motion if isinstance(known_motion, SmearPrior) else None
-        measure_scene = settings.scene_motion and not settings.sensor_roi and (known_motion is None or self.imu is not None)
-        self.scene = SceneMotion(self.sensor_wh) if measure_scene else None
+        self._measure_scene = settings.scene_motion and settings.sensor_roi != "on"
+        self.scene = SceneMotion(self.sensor_wh) if self._measure_scene else None
         self._scene_lock = threading.Lock()
         self._joined = JoinedSceneMotion()
+        self.roi: Rect | None = None  # what the sensor delivers (None: all of it)
+        self.shed_level = 0  # live and falling behind: what the steps give up (edge.load)
+        self._roi_lock = threading.Lock()  # (placed by the steps, given back by the reader thread)
+
+    def motion_known(self, t_us: int) -> bool:
+        """The head's motion at ``t_us`` comes from the known motion (present and healthy)."""
+        return motion_healthy(self.known_motion, t_us)
 
     def push_scene(self, events: Events) -> None:
-        """Reader thread: every event goes to the scene's motion tracker (when it is measured)."""
-        if self.scene is not None:
+        """Reader thread: every event goes to the scene's motion tracker while the head's motion is
+        not known, or beside a gyroscope (its check) while the whole sensor is delivered; a known
+        motion that stopped being healthy gets the whole sensor back first (the chunk delivered
+        through the ROI is not measured, and the tracker starts afresh)."""
+        t = int(events["t"][-1])
+        if self.roi is not None and not roi_wanted(self.settings.sensor_roi, self.known_motion, t):
+            self._write_roi(None)
+            if self._measure_scene:  # its last slices are from before the pause: it starts afresh
+                with self._scene_lock:
+                    self.scene = SceneMotion(self.sensor_wh)
+            return
+        if self.scene is not None and self.roi is None and (self.imu is not None or not self.motion_known(t)):
             with self._scene_lock:
                 self.scene.push(events)
 
@@ -84,7 +104,7 @@ class Windows:
         """The scene's motion at ``t_us`` (None when not measured)."""
         if self.imu is not None:
             return self._imu_scene_at(t_us)
-        if self.known_motion is not None:
+        if self.known_motion is not None and self.motion_known(t_us):
             return self.known_motion.scene_px(t_us)
         if self.scene is None:
             return None
@@ -104,6 +124,29 @@ class Windows:
         if disagreement is not None:
             self.metrics.observe_motion_disagreement(disagreement)
         return offset
+
+    def place_roi(self, wanted: Rect, t_us: int) -> None:
+        """A step wants the sensor's events of ``wanted`` (x0, y0, width, height) from ``t_us`` on:
+        while ``[pipeline] sensor_roi`` wants the ROI (``edge.roi.roi_wanted``) the sensor delivers
+        it with a margin, rewritten only once ``wanted`` leaves the window delivered (hysteresis);
+        otherwise the whole sensor."""
+        if not roi_wanted(self.settings.sensor_roi, self.known_motion, t_us):
+            if self.roi is not None:
+                self._write_roi(None)
+            return
+        target = follow_window(wanted, self.roi, ROI_FOLLOW_MARGIN_PX, self.sensor_wh)
+        if target is not None:
+            self._write_roi(target)
+
+    def _write_roi(self, roi: Rect | None) -> None:
+        """Program the source's ROI (None: the whole sensor) and count the write (``roi_writes``)."""
+        with self._roi_lock:
+            if roi == self.roi:
+                return
+            x0, y0, w, h = roi if roi is not None else (0, 0, *self.sensor_wh)
+            self.source.set_roi(x0, y0, w, h)
+            self.roi = roi
+        self.metrics.add("roi_writes")
 
     def frame(self, window: Events, origin: tuple[int, int], gaze: GazeSample, t_us: int,
               probability: bool = False) -> FrameResult | None:
@@ -143,8 +186,9 @@ class Windows:
             depth = recent.shape[0] - int(used[0])
             self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), MAX_HISTORY_EVENTS))
         nearby = recent[int(used[0]) :] if used.shape[0] else recent[:0]
+        known = self.known_motion if self.motion_known(t_until) else None
         window, deblurred, denoised = clean_window(recent[used], nearby, origin, (cfg.height, cfg.width), self.sensor_wh,
-                                                   self.deblur, self.denoise, self.known_motion)
+                                                   self.deblur, self.denoise, known)
         if deblurred:
             self.metrics.add("frames_deblurred")
         if denoised:

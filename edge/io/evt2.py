@@ -59,7 +59,7 @@ class Evt2Decoder(WordStreamDecoder):
         is_cd, is_high, is_trigger = types <= CD_ON, types == TIME_HIGH, types == EXT_TRIGGER
         high_at = self._highs(words, is_high)
         self.stats.skipped_other += len(words) - int(np.count_nonzero(is_cd | is_high | is_trigger))
-        events = self._events(words, np.flatnonzero(is_cd), high_at)
+        events = self._cropped(self._events(words, np.flatnonzero(is_cd), high_at))
         triggers = self._triggers(words, np.flatnonzero(is_trigger), high_at)
         return self._shifted(events, triggers)
 

@@ -23,6 +23,11 @@ skipped; OTHERS, CONTINUED and reserved types are skipped and counted; pixels ou
 (only in corrupt data) and VECT words past the sensor width are dropped and counted. A stream that
 ends inside a word is counted in ``stats.trailing_bytes`` (and raises :class:`CorruptRawError`,
 naming the file and byte offset, with ``strict=True``), so a recording cut short still reads.
+
+``set_roi`` makes a replay deliver what a sensor with that ROI would: the compiled loop keeps the
+row's verdict from its ADDR_Y word and skips the event words of rows outside (and the columns
+outside) without writing a pixel; ``stats.events`` counts the events delivered inside, and
+``stats.words_outside_roi`` the file's event words skipped.
 """
 
 from __future__ import annotations
@@ -74,7 +79,7 @@ class Evt3Decoder(WordStreamDecoder):
 
     def decode(self, chunk: bytes | memoryview) -> tuple[Events, Triggers]:
         words = self._whole_words(chunk)
-        events, triggers = self._decode_words(words, self._state, self.stats, self.width, self.height)
+        events, triggers = self._decode_words(words, self._state, self.stats, self.width, self.height, self.roi_bounds())
         lo, hi = self.y_range
         if lo > 0 or hi < self.height:
             events = events[(events["y"] >= lo) & (events["y"] < hi)]
@@ -90,6 +95,7 @@ _COUNTER_FIELDS = (
     "vectors_out_of_range",
     "events_out_of_range",
     "dropped_non_monotonic",
+    "words_outside_roi",
 )
 
 
@@ -114,14 +120,15 @@ def _resolve_backend(backend: str) -> str:
 
 
 def _decode_words_jit(
-    words: np.ndarray, state: DecoderState, stats: DecodeStats, width: int, height: int
+    words: np.ndarray, state: DecoderState, stats: DecodeStats, width: int, height: int,
+    bounds: tuple[int, int, int, int] | None = None,
 ) -> tuple[Events, Triggers]:
     jit = _jit()
     if jit is None:  # only reachable if numba vanished after the decoder was built
         raise ImportError("the compiled EVT3 decoder needs the numba package")
     vector = np.array([int(getattr(state, f) or 0) for f in _STATE_FIELDS], dtype=np.int64)
     counters = np.zeros(len(_COUNTER_FIELDS), dtype=np.int64)
-    events, triggers = jit.decode_words(words, vector, counters, width, height)
+    events, triggers = jit.decode_words(words, vector, counters, width, height, bounds)
     for name, value in zip(_STATE_FIELDS, vector.tolist()):
         setattr(state, name, value)
     state.started = bool(state.started)

@@ -16,7 +16,7 @@ from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE
 
 # Slots of the state vector and of the counters vector (evt3.py maps them to its dataclasses).
 STARTED, LAST_HIGH, LOOPS, MAX_HIGH, HIGH, LOW, Y, BASE, POLARITY, FIRST_HIGH = range(10)
-SKIPPED_BEFORE, SKIPPED_OTHER, NON_MONOTONIC, VECTORS_OUT, EVENTS_OUT, DROPPED = range(6)
+SKIPPED_BEFORE, SKIPPED_OTHER, NON_MONOTONIC, VECTORS_OUT, EVENTS_OUT, DROPPED, OUTSIDE_ROI = range(7)
 
 
 # Most events a word can carry, by type (ADDR_X 1, VECT_12 12, VECT_8 8), and triggers (EXT_TRIGGER).
@@ -37,10 +37,12 @@ def _bounds(words: np.ndarray) -> tuple[int, int]:  # pragma: no cover - compile
 
 
 @compiled
-def _decode(words, state, counters, width, height, ev64, tr16, tr64):  # pragma: no cover
+def _decode(words, state, counters, width, height, x0, x1, y0, y1, ev64, tr16, tr64):  # pragma: no cover
     """Decode ``words`` into flat views of the records (EVENT_CD: x | y << 16 | p << 32 and t in the
     two i64 slots of each 16 bytes; TRIGGER: p, id at u16 slots 0 and 8, t at i64 slot 1 of 24 bytes);
-    returns the numbers of events and triggers written."""
+    returns the numbers of events and triggers written. Only pixels in columns ``x0..x1`` and rows
+    ``y0..y1`` (half-open: the sensor's ROI) are written; an event word wholly outside is counted and
+    its pixels never looked at."""
     last_high, loops, max_high = state[LAST_HIGH], state[LOOPS], state[MAX_HIGH]
     high, low, y, base, polarity = state[HIGH], state[LOW], state[Y], state[BASE], state[POLARITY]
     n = len(words)
@@ -54,6 +56,7 @@ def _decode(words, state, counters, width, height, ev64, tr16, tr64):  # pragma:
         last_high = np.int64(words[i] & 0xFFF)
         high = max_high = last_high
         state[STARTED], state[FIRST_HIGH] = 1, last_high
+    rows_in = y0 <= y < y1
     ne = 0
     nt = 0
     for j in range(i, n):
@@ -62,12 +65,15 @@ def _decode(words, state, counters, width, height, ev64, tr16, tr64):  # pragma:
         v = w & 0xFFF
         if kind == 0:
             y = v & 0x7FF
+            rows_in = y0 <= y < y1
         elif kind == 2:
             x = v & 0x7FF
             if high < 0:
                 counters[DROPPED] += 1
             elif x >= width or y >= height:
                 counters[EVENTS_OUT] += 1
+            elif not rows_in or x < x0 or x >= x1:
+                counters[OUTSIDE_ROI] += 1
             else:
                 ev64[2 * ne] = x | (y << 16) | ((v >> 11) << 32)  # x, y, p and the padding
                 ev64[2 * ne + 1] = (high << 12) | low
@@ -99,7 +105,13 @@ def _decode(words, state, counters, width, height, ev64, tr16, tr64):  # pragma:
                 counters[DROPPED] += _POPCOUNT_12[mask]
             elif y >= height:
                 counters[EVENTS_OUT] += _POPCOUNT_12[mask]
+            elif not rows_in or base + n_bits <= x0 or base >= x1:
+                counters[OUTSIDE_ROI] += 1
             else:
+                if base < x0:  # the columns left of the ROI
+                    mask &= ~((1 << (x0 - base)) - 1)
+                if base + n_bits > x1:  # and right of it
+                    mask &= (1 << (x1 - base)) - 1
                 t = (high << 12) | low
                 x = base
                 while mask:  # set bits, lowest first
@@ -127,15 +139,18 @@ def _decode(words, state, counters, width, height, ev64, tr16, tr64):  # pragma:
 
 
 def decode_words(
-    words: np.ndarray, state: np.ndarray, counters: np.ndarray, width: int, height: int
+    words: np.ndarray, state: np.ndarray, counters: np.ndarray, width: int, height: int,
+    bounds: tuple[int, int, int, int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Events and triggers of ``words``; ``state`` and ``counters`` (int64 vectors) are updated."""
+    """Events and triggers of ``words``; ``state`` and ``counters`` (int64 vectors) are updated.
+    ``bounds``: (x0, x1, y0, y1), only the events inside (the sensor's ROI)."""
+    x0, x1, y0, y1 = bounds if bounds is not None else (0, width, 0, height)
     n_pixels, n_triggers = _bounds(words)
     events = np.empty(n_pixels, dtype=EVENT_CD_DTYPE)  # every byte is written, padding included
     triggers = np.empty(n_triggers, dtype=TRIGGER_DTYPE)
     ev64 = events.view(np.int64)  # flat views of the records
     tr16, tr64 = triggers.view(np.uint16), triggers.view(np.int64)
-    ne, nt = _decode(words, state, counters, width, height, ev64, tr16, tr64)
+    ne, nt = _decode(words, state, counters, width, height, x0, x1, y0, y1, ev64, tr16, tr64)
     # A view, not a copy: copying costs as much as decoding, and the unused tail of the buffer
     # (vectors with few bits set) is never written, so it takes address space but no memory.
     return events[:ne], triggers[:nt]

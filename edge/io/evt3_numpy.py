@@ -158,9 +158,12 @@ def _vectors(words: np.ndarray, types: np.ndarray, state: DecoderState) -> tuple
 
 
 def decode_words(
-    words: np.ndarray, state: DecoderState, stats: DecodeStats, width: int, height: int
+    words: np.ndarray, state: DecoderState, stats: DecodeStats, width: int, height: int,
+    bounds: tuple[int, int, int, int] | None = None,
 ) -> tuple[Events, Triggers]:
-    """Decode one chunk of words, updating ``state`` and ``stats``."""
+    """Decode one chunk of words, updating ``state`` and ``stats``; with ``bounds`` (x0, x1, y0, y1,
+    the sensor's ROI) only the events inside them, the event words wholly outside counted
+    (``stats.words_outside_roi``, as the compiled loop skips them)."""
     stats.words += len(words)
     words = _skip_until_time_high(words, state, stats)
     types = (words >> 12).astype(np.uint8)
@@ -186,12 +189,33 @@ def decode_words(
         return time_table[time_rank[query]], y_table[y_rank[query]]
 
     x_idx = np.flatnonzero(is_x)
-    if n_vect:
-        events = _mixed_events(words, types, x_idx, *_vectors(words, types, state), state_at, stats, width)
+    vectors = _vectors(words, types, state) if n_vect else None
+    if vectors is not None:
+        events = _mixed_events(words, types, x_idx, *vectors, state_at, stats, width)
     else:
         events = _single_events(words, x_idx, state_at)
     triggers = _triggers(words, np.flatnonzero(is_trigger), state_at, stats)
-    return _drop_invalid(events, stats, width, height), triggers
+    if bounds is not None:
+        stats.words_outside_roi += _words_outside(words, x_idx, vectors, state_at, bounds, width, height)
+    return _drop_invalid(events, stats, width, height, bounds), triggers
+
+
+def _words_outside(words, x_idx, vectors, state_at, bounds, width, height) -> int:
+    """Valid event words (a time, on the sensor) whose row or columns all lie outside ``bounds``."""
+    x0, x1, y0, y1 = bounds
+    t, y = state_at(x_idx)
+    x = (words[x_idx] & 0x7FF).astype(np.int64)
+    valid = (t >= 0) & (x < width) & (y < height)
+    away = (y < y0) | (y >= y1) | (x < x0) | (x >= x1)
+    n = int(np.count_nonzero(valid & away))
+    if vectors is not None:
+        v_idx, base, _ = vectors
+        n_bits = np.where((words[v_idx] >> 12) == VECT_12, 12, 8)
+        t, y = state_at(v_idx)
+        valid = (base + n_bits <= width) & (t >= 0) & (y < height)
+        away = (y < y0) | (y >= y1) | (base + n_bits <= x0) | (base >= x1)
+        n += int(np.count_nonzero(valid & away))
+    return n
 
 
 def _single_events(words: np.ndarray, x_idx: np.ndarray, state_at) -> Events:
@@ -234,7 +258,8 @@ def _mixed_events(words, types, x_idx, v_idx, v_base, v_pol, state_at, stats, wi
     return out
 
 
-def _drop_invalid(out: Events, stats: DecodeStats, width: int, height: int) -> Events:
+def _drop_invalid(out: Events, stats: DecodeStats, width: int, height: int,
+                  bounds: tuple[int, int, int, int] | None = None) -> Events:
     timeless = out["t"] < 0
     outside = (out["x"] >= width) | (out["y"] >= height)
     bad = timeless | outside
@@ -242,6 +267,9 @@ def _drop_invalid(out: Events, stats: DecodeStats, width: int, height: int) -> E
         stats.dropped_non_monotonic += int(np.count_nonzero(timeless))
         stats.events_out_of_range += int(np.count_nonzero(outside & ~timeless))
         out = out[~bad]
+    if bounds is not None:
+        x0, x1, y0, y1 = bounds
+        out = out[(out["x"] >= x0) & (out["x"] < x1) & (out["y"] >= y0) & (out["y"] < y1)]
     stats.events += len(out)
     return out
 

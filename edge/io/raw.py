@@ -87,6 +87,7 @@ class RawReader:
         self.stats: DecodeStats = self._decoder.stats
         self._triggers: list[Triggers] = []
         self._started = False
+        self._roi: tuple[int, int, int, int] | None = None
 
     def _new_decoder(self) -> Evt3Decoder | Evt2Decoder:
         return make_decoder(self.header, path=str(self.path), time_shift=self._time_shift, strict=self._strict)
@@ -99,10 +100,17 @@ class RawReader:
         """(height, width), as OpenEB's readers report it."""
         return self.header.height, self.header.width
 
+    def set_roi(self, roi: tuple[int, int, int, int] | None) -> None:
+        """Deliver only the events inside ``roi`` (x0, y0, width, height) from the next chunk on
+        (None: all); the words skipped are counted in ``stats.words_outside_roi``."""
+        self._decoder.set_roi(roi)
+        self._roi = self._decoder.roi
+
     def __iter__(self) -> Iterator[Events]:
         """Decode from the start of the data; iterating again starts over with fresh counters."""
         if self._started:
             self._decoder = self._new_decoder()
+            self._decoder.set_roi(self._roi)
             self.stats, self._triggers = self._decoder.stats, []
         self._started = True
         with self.path.open("rb") as f:

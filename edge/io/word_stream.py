@@ -35,6 +35,9 @@ class DecodeStats:
     trailing_bytes: int = 0
     events_out_of_range: int = 0  # pixels outside the sensor (corrupt data), dropped
     dropped_non_monotonic: int = 0  # events and triggers dropped after a non-monotonic TIME_HIGH
+    # event words wholly outside the sensor's ROI (``set_roi``): a replay's stand-in for what the
+    # sensor never reads out, skipped without decoding their pixels (``events`` counts those inside)
+    words_outside_roi: int = 0
 
     def add(self, other: DecodeStats) -> None:
         for f in fields(self):
@@ -64,12 +67,44 @@ class WordStreamDecoder:
         self.time_shift, self.path, self.strict = time_shift, path, strict
         self.y_range = (0, height) if y_range is None else (max(0, y_range[0]), min(height, y_range[1]))
         self.stats = DecodeStats()
+        self.roi: tuple[int, int, int, int] | None = None  # (x0, y0, width, height); None: the whole sensor
         self._pending = b""
         self._offset = byte_offset  # file offset of the next byte fed
 
     @property
     def time_shift_us(self) -> int:
         raise NotImplementedError
+
+    def set_roi(self, roi: tuple[int, int, int, int] | None) -> None:
+        """Decode only the events inside ``roi`` (x0, y0, width, height) from the next chunk on, as
+        a sensor with that ROI would deliver them; None (or the whole sensor): every event."""
+        if roi is not None:
+            x0, y0, w, h = roi
+            if w <= 0 or h <= 0 or x0 < 0 or y0 < 0:
+                raise ValueError(f"ROI must be non-negative with a positive size, got {roi}")
+            if (x0, y0) == (0, 0) and x0 + w >= self.width and y0 + h >= self.height:
+                roi = None
+        self.roi = roi
+
+    def roi_bounds(self) -> tuple[int, int, int, int] | None:
+        """The ROI as half-open bounds (x0, x1, y0, y1), or None for the whole sensor."""
+        if self.roi is None:
+            return None
+        x0, y0, w, h = self.roi
+        return x0, x0 + w, y0, y0 + h
+
+    def _cropped(self, events: Events) -> Events:
+        """``events`` inside the ROI (for formats whose word loop does not skip), the rest counted:
+        one word per event (EVT 2.0)."""
+        bounds = self.roi_bounds()
+        if bounds is None:
+            return events
+        x0, x1, y0, y1 = bounds
+        inside = (events["x"] >= x0) & (events["x"] < x1) & (events["y"] >= y0) & (events["y"] < y1)
+        n_outside = int(inside.size - np.count_nonzero(inside))
+        self.stats.words_outside_roi += n_outside
+        self.stats.events -= n_outside
+        return events[inside]
 
     def _whole_words(self, chunk: bytes | memoryview) -> np.ndarray:
         """The chunk's whole words, after the partial word left by the previous chunk."""

@@ -3,8 +3,12 @@
 A reader thread cuts the file into ``slice_us`` time slices with the OpenEB-style
 :class:`~darkread.edge.io.iterator.EventsIterator` and hands the non-empty ones to the sink, paced
 by :class:`~darkread.edge.io.iterator.PacedReplay` at wall-clock speed (``speed=1``), N times
-faster (``speed=N``) or as fast as the sink takes them (``speed=None``). ``set_roi`` crops in
-software, as the sensor's ROI would.
+faster (``speed=N``) or as fast as the sink takes them (``speed=None``). ``set_roi`` delivers
+what the sensor's ROI would: the decoder skips the file's words outside it (``edge.io.evt3``), so
+``events_out`` counts what would have crossed USB and ``words_outside_roi`` what never did. A new
+ROI applies from the next chunk the decoder reads; while one is set the chunks are smaller
+(``ROI_CHUNK_BYTES``), so a move takes effect within a few milliseconds of events, as a register
+write does on the camera.
 """
 
 from __future__ import annotations
@@ -17,8 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from darkread.core.errors import DarkreadError
-from darkread.edge.events import Events, select_events
-from darkread.edge.fovea import in_window
+from darkread.edge.events import Events
 from darkread.edge.io.iterator import EventsIterator, PacedReplay
 from darkread.edge.io.plausibility import TimeCheck, problems
 from darkread.edge.io.raw import RawReader
@@ -28,6 +31,7 @@ from darkread.edge.sources.base import EventSink
 logger = logging.getLogger(__name__)
 
 DEFAULT_SLICE_US = 1_000
+ROI_CHUNK_BYTES = 1 << 15  # a chunk of a full-sensor stream at 300 kev/s: about 18 ms of events
 
 
 def parse_speed(text: str | float | None) -> float | None:
@@ -103,12 +107,20 @@ class ReplaySource:
             raise ValueError(f"ROI must be non-negative with a positive size, got ({x0}, {y0}, {width}, {height})")
         full = (x0, y0, width, height) == (0, 0, self.width, self.height)
         self._roi = None if full else (x0, y0, width, height)
+        if self._reader is not None:
+            self._apply_roi(self._reader)
+
+    def _apply_roi(self, reader: RawReader) -> None:
+        """The decoder's ROI, and its chunk size: small while a ROI is set (a move applies sooner)."""
+        reader.set_roi(self._roi)
+        reader.chunk_bytes = min(self.chunk_bytes, ROI_CHUNK_BYTES) if self._roi is not None else self.chunk_bytes
 
     @property
     def stats(self) -> dict[str, float]:
         span_s = (self._last_t - self._first_t) / 1e6 if self._first_t is not None and self._last_t is not None else 0.0
         return {
-            "events_out": float(self._events_out),
+            "events_out": float(self._events_out),  # delivered: inside the ROI while one is set
+            "words_outside_roi": float(self._reader.stats.words_outside_roi if self._reader is not None else 0),
             "slices": float(self._slices),
             "recording_s": span_s,
             "wall_s": self._wall_s,
@@ -123,9 +135,12 @@ class ReplaySource:
         """
         if self.slice_us is None:
             self._reader = RawReader(self.raw_path, chunk_bytes=self.chunk_bytes)
+            self._apply_roi(self._reader)
             return self._reader
         slices = EventsIterator(self.raw_path, delta_t=self.slice_us, chunk_bytes=self.chunk_bytes)
         self._reader = slices.reader
+        assert self._reader is not None  # (a file's iterator has its reader)
+        self._apply_roi(self._reader)
         return PacedReplay(slices, self.speed, clock=time.perf_counter, sleep=self._stop.wait)
 
     def _judge(self) -> None:
@@ -136,11 +151,6 @@ class ReplaySource:
         self.problems = problems(self._reader.stats, header.format, header.width, header.height, self._time_check)
         for problem in self.problems:
             logger.warning("%s: %s", self.raw_path, problem)
-
-    def _apply_roi(self, events: Events) -> Events:
-        if self._roi is None:
-            return events
-        return select_events(events, in_window(events, *self._roi))
 
     def _run(self, sink: EventSink) -> None:
         started = time.perf_counter()
@@ -155,9 +165,6 @@ class ReplaySource:
                     self._first_t = int(events["t"][0])
                 self._last_t = int(events["t"][-1])
                 self._time_check.add(events["t"])
-                events = self._apply_roi(events)
-                if events.shape[0] == 0:
-                    continue
                 self._events_out += int(events.shape[0])
                 sink(events)
         except BaseException as exc:  # surfaced through ``error``; the daemon exits non-zero

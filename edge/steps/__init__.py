@@ -29,22 +29,27 @@ data that completed it arrived (its newest event, or the chunk that ended the fi
 @dataclass
 class Pending:
     """What the reader handed over since the last step: the events inside the window (every event
-    before the first window is placed), all events, and when the newest arrived (``time.monotonic()``)."""
+    before the first window is placed), all events, when the newest arrived (``time.monotonic()``)
+    and when the oldest did (0.0: nothing since the last step; how long a live step lags)."""
 
     foveated: int = 0
     events: int = 0
     arrival: float = 0.0
+    first_arrival: float = 0.0
 
     def add(self, foveated: int, events: int, arrival: float | None = None) -> None:
         self.foveated += foveated
         self.events += events
         if arrival is not None:
             self.arrival = arrival
+            if not self.first_arrival and events:
+                self.first_arrival = arrival
 
     def take(self) -> Pending:
         """The counts so far, reset to none (the newest arrival is kept: it stamps later steps too)."""
-        taken = Pending(self.foveated, self.events, self.arrival)
+        taken = Pending(self.foveated, self.events, self.arrival, self.first_arrival)
         self.foveated = self.events = 0
+        self.first_arrival = 0.0
         return taken
 
 

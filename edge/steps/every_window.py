@@ -44,8 +44,8 @@ class EveryWindowStep:
         origin = window_origin(gaze.pixel, w.sensor_wh, w.fovea)
         moved = origin != w.origin
         w.origin = origin
-        if moved and self.settings.sensor_roi:
-            w.source.set_roi(origin[0], origin[1], w.fovea.width, w.fovea.height)
+        if moved:
+            w.place_roi((origin[0], origin[1], w.fovea.width, w.fovea.height), t_us)
         if pending.foveated == 0 and not moved:
             return
         frame = w.frame(w.recent_events(origin, t_us), origin, gaze, t_us)

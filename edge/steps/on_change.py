@@ -15,6 +15,7 @@ import numpy as np
 from darkread.edge.config import PipelineConfig
 from darkread.edge.fovea import window_origin
 from darkread.edge.gaze import GazeSample
+from darkread.edge.load import frames_per_view
 from darkread.edge.steps import FrameHandler, Pending
 from darkread.edge.view_fusion import MARGIN_PX, ViewFuser
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
@@ -44,6 +45,7 @@ class OnChangeStep:
         self._fixation_events = 0  # window events since it started
         self._since_infer = 0  # window events since the last inference
         self._view_origin: tuple[int, int] | None = None  # the current view's window (placed once per view)
+        self._capped = False  # the current view was denied a frame (edge.load)
 
     def due(self, pending: Pending) -> bool:
         return pending.events > 0  # every chunk: the gaze may have changed
@@ -65,6 +67,7 @@ class OnChangeStep:
         if self._fixation is None:
             self._fixation, self._fixation_events, self._since_infer = key, 0, 0
             self.trigger.reset()
+            self._roi_at_landing(t)
         self._fixation_events += pending.foveated
         self._since_infer += pending.foveated
         if len(self.fuser) and t - self.fuser.t0_us >= self.settings.view_every_ms * 1e3:
@@ -76,7 +79,20 @@ class OnChangeStep:
             return
         origin, gaze = window
         if self.trigger.due(t, self._fixation, self._since_infer, self._fixation_events, origin):
+            if self._over_budget():
+                return  # shed: the view keeps the frames it has (edge.load)
             self._infer_into_view(origin, gaze, t, self._fixation, arrival)
+
+    def _over_budget(self) -> bool:
+        """A live edge falling behind caps a view's frames (edge.load); the first capped inference
+        of a view counts it in ``views_capped``."""
+        budget = frames_per_view(self.windows.shed_level)
+        if budget is None or len(self.fuser) < budget:
+            return False
+        if not self._capped:
+            self._capped = True
+            self.windows.metrics.add("views_capped")
+        return True
 
     def _view_window(self, t: int) -> tuple[tuple[int, int], GazeSample] | None:
         """Where the current view's window is, and the gaze at ``t``. A view's window stays put: it
@@ -90,8 +106,8 @@ class OnChangeStep:
             return self._view_origin, gaze
         centre = self._fixation_centre(t) or gaze.pixel
         origin = window_origin(centre, w.sensor_wh, w.fovea)
-        if origin != w.origin and self.settings.sensor_roi:
-            self._roi_for_view(origin)
+        if origin != w.origin:
+            self._roi_for_view(origin, t)
         w.origin = self._view_origin = origin
         return origin, gaze
 
@@ -125,12 +141,20 @@ class OnChangeStep:
         self._since_infer = 0
         return True
 
-    def _roi_for_view(self, origin: tuple[int, int]) -> None:
+    def _roi_for_view(self, origin: tuple[int, int], t: int) -> None:
         """The sensor's ROI over the view's window and both dithered ones (all its frames' events)."""
         fov = self.windows.fovea
         top, bottom = self._dithered(origin, 0), self._dithered(origin, 1)
         y0, y1 = min(origin[1], top[1]), max(origin[1], bottom[1]) + fov.height
-        self.windows.source.set_roi(origin[0], y0, fov.width, y1 - y0)
+        self.windows.place_roi((origin[0], y0, fov.width, y1 - y0), t)
+
+    def _roi_at_landing(self, t: int) -> None:
+        """A fixation began: the ROI moves to where the gaze landed now, so the events the view's
+        first frame takes (from the fixation's start) are delivered; the view's window, placed later
+        at the fixation's mean gaze, usually lies inside its margin."""
+        gaze = self.windows.gaze.at(t)
+        if gaze is not None:
+            self._roi_for_view(window_origin(gaze.pixel, self.windows.sensor_wh, self.windows.fovea), t)
 
     def _dithered(self, origin: tuple[int, int], k: int) -> tuple[int, int]:
         """The window of a view's ``k``-th frame: the view's window moved up (even ``k``) or down
@@ -160,6 +184,7 @@ class OnChangeStep:
         view = self.fuser.view(self.views_made)
         self.fuser = self.fuser.fresh()
         self._view_origin = None
+        self._capped = False
         self.views_made += 1
         self.windows.metrics.add("views")
         self.on_frame(view, arrival)

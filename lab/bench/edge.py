@@ -18,6 +18,12 @@ the view latency is on-change's (only it makes views), the event-to-wire latency
   mode the same clock runs from the arrival of the chunk that ended the fixation (the first gaze
   row off it, as the classifier sees it) to its view handed to the socket.
 * Uplink bytes per second of reading, paced at 1x, and inferences per second of reading.
+* The wearable's mode (``edge_realtime_factor_imu_roi``, ``edge_events_decoded_per_s_roi``): the
+  same lossless replay with the head's motion known and the sensor's ROI on (``sensor_roi = "auto"``),
+  beside today's (``edge_realtime_factor``, ``edge_events_decoded_per_s``: events the replay decodes
+  and hands over per second of reading, what would cross USB). Until the IMU stream exists the known
+  motion is the simulator's pose of the sample (``lab.eval.true_motion``; the sample regenerated with
+  its truth files, the same events byte for byte); it will switch to the recording's IMU stream.
 """
 
 from __future__ import annotations
@@ -47,6 +53,9 @@ from darkread.edge.telemetry import RGB_FRAME_BYTES_ESTIMATE
 from darkread.edge.voxel import VoxelConfig
 from darkread.lab.bench import BenchContext, Figure
 from darkread.lab.bench.ack_server import AckServer
+from darkread.lab.eval.true_motion import TrueHeadMotion
+from darkread.models.synth.make_sample import SAMPLE_SPEC
+from darkread.models.synth.recording import write_recording
 from darkread.proto.messages import encode
 
 if TYPE_CHECKING:
@@ -69,6 +78,8 @@ class ModeRun(TypedDict):
     events_out: float
     frames: int
     views: int
+    words_outside_roi: float
+    roi_writes: int
 
 
 class LosslessRuns(TypedDict):
@@ -156,7 +167,7 @@ def _decode_only_cpu_s(raw_path: Path) -> float:
 
 def _run_edge(
     recording: Path, model: Path | None, speed: float, on_frame: FrameHandler | None = None, uplink_url: str = "",
-    infer: str = "on-change",
+    infer: str = "on-change", known_motion: TrueHeadMotion | None = None,
 ) -> tuple[float, float, ReplaySource, EdgeMetrics]:
     """(wall s, process CPU s, source, metrics) of one replay through the edge ``build_edge`` wires.
 
@@ -171,7 +182,7 @@ def _run_edge(
         "uplink": {"url": uplink_url or "ws://127.0.0.1:1/v1/stream", "device_id": "bench", "spool_dir": ":memory:"},
         "metrics": {"log_every_s": 3600.0},
     })
-    edge = build_edge(config, on_frame=on_frame)
+    edge = build_edge(config, on_frame=on_frame, known_motion=known_motion)
     source = edge.source
     assert isinstance(source, ReplaySource)  # the config above asks for a replay
     started, cpu_started = time.perf_counter(), time.process_time()
@@ -200,19 +211,41 @@ def _rgb_frame_bytes(recording: Path) -> tuple[int, str]:
     return RGB_FRAME_BYTES_ESTIMATE, "estimated"
 
 
-def _lossless(recording: Path, model: Path | None, repeats: int) -> LosslessRuns:
-    """The decode-only reference and each mode's best lossless replay on one pinned core (plain numbers)."""
+def _lossless(recording: Path, model: Path | None, repeats: int, posed: Path | None = None) -> LosslessRuns:
+    """The decode-only reference and each mode's best lossless replay on one pinned core (plain numbers);
+    with ``posed`` (the recording with its simulator truth) also the default mode with the head's
+    motion known and the ROI on, as ``modes["imu_roi"]``."""
+    known = TrueHeadMotion.from_recording(posed) if posed is not None else None
     with _one_core() as pinned:
         decode_s = min(_decode_only_cpu_s(recording / "events.raw") for _ in range(repeats))
         modes: dict[str, ModeRun] = {}
-        for mode in INFER_MODES:
+        runs: list[tuple[str, Path, str, TrueHeadMotion | None]] = [(mode, recording, mode, None) for mode in INFER_MODES]
+        if posed is not None:
+            runs.append(("imu_roi", posed, default_infer_mode(), known))
+        for name, path, mode, motion in runs:
             wall, cpu, source, metrics = min(
-                (_run_edge(recording, model, 0.0, on_frame=_encode_only, infer=mode) for _ in range(repeats)), key=lambda r: r[1]
+                (_run_edge(path, model, 0.0, on_frame=_encode_only, infer=mode, known_motion=motion) for _ in range(repeats)),
+                key=lambda r: r[1],
             )
-            modes[mode] = {"wall_s": wall, "cpu_s": cpu, "recording_s": source.stats["recording_s"],
+            modes[name] = {"wall_s": wall, "cpu_s": cpu, "recording_s": source.stats["recording_s"],
                            "events_out": source.stats["events_out"], "frames": metrics.totals["frames"],
-                           "views": metrics.totals["views"]}
+                           "views": metrics.totals["views"], "words_outside_roi": source.stats["words_outside_roi"],
+                           "roi_writes": metrics.totals["roi_writes"]}
     return {"pinned": pinned, "decode_s": decode_s, "modes": modes}
+
+
+def _posed_sample(recording: Path, ctx: BenchContext) -> Path | None:
+    """The sample regenerated with the simulator's truth (pose_truth.npz) when its events come out
+    byte for byte the shipped ones; None (noted) otherwise or in a smoke run."""
+    if ctx.smoke:
+        ctx.notes.append("edge: smoke run, no imu_roi replay (the sample's truth takes a simulation)")
+        return None
+    out = ctx.scratch / "sample_with_truth"
+    write_recording(out, SAMPLE_SPEC, progress=False)
+    if (out / "events.raw").read_bytes() != (recording / "events.raw").read_bytes():
+        ctx.notes.append("edge: the regenerated sample differs from the shipped one; no imu_roi figures")
+        return None
+    return out
 
 
 def _encode_only(frame: FrameResult | ViewRecord, arrival: float) -> None:  # the uplink's work on a message, without a socket
@@ -238,7 +271,8 @@ def run(ctx: BenchContext) -> list[Figure]:
     repeats = ctx.runs(3, 1)
     # in a fresh process: threads left running by the benchmarks before this one (a simulator's
     # pool, a server) would count in this process's CPU time and are not pinned with it
-    lossless_runs = _in_fresh_process(_lossless, recording, model, repeats)
+    posed = _posed_sample(recording, ctx)
+    lossless_runs = _in_fresh_process(_lossless, recording, model, repeats, posed)
     if not lossless_runs["pinned"]:
         ctx.notes.append("edge: could not pin to one core; the real-time factor used all cores")
     decode_s = lossless_runs["decode_s"]
@@ -247,6 +281,7 @@ def run(ctx: BenchContext) -> list[Figure]:
     other = other_infer_mode(default)
     span_s = lossless[default]["recording_s"]
     rtf = {mode: span_s / run["cpu_s"] for mode, run in lossless.items()}  # CPU seconds: the host is shared
+    decoded = {mode: run["events_out"] / span_s for mode, run in lossless.items()}
     inferences = {mode: run["frames"] for mode, run in lossless.items()}
     views = lossless["on-change"]["views"]
     wall = {mode: span_s / run["wall_s"] for mode, run in lossless.items()}
@@ -281,6 +316,9 @@ def run(ctx: BenchContext) -> list[Figure]:
         Figure("edge_realtime_factor_every_window", rtf["every-window"], "edge real-time factor, every-window mode",
                reference=f"wall clock {wall['every-window']:.1f}x" + (" (the default)" if default == "every-window" else "")),
         Figure("edge_decode_realtime_factor", span_s / decode_s, "RAW decode alone, real-time factor", reference="(reference)"),
+        Figure("edge_events_decoded_per_s", decoded[default], f"events decoded and handed over per s of reading, {default}, whole sensor",
+               reference=f"{int(lossless[default]['events_out']):,} events in {span_s:.2f} s"),
+        *_imu_roi_figures(lossless, rtf, decoded, default),
         Figure(
             "edge_inferences_per_s", inferences[default] / span_s, f"inferences per second of reading, default mode {default}",
             reference=f"{other} {inferences[other] / span_s:.1f}/s; views {views / span_s:.1f}/s",
@@ -303,4 +341,23 @@ def run(ctx: BenchContext) -> list[Figure]:
         ),
         Figure("edge_latency_p99_ms", float(np.percentile(latency, 99)), "event-to-wire latency p99, every-window, paced at 1x",
                reference=infer_ref, goal="<= 20 ms"),
+    ]
+
+
+def _imu_roi_figures(lossless: dict[str, ModeRun], rtf: dict[str, float], decoded: dict[str, float], default: str) -> list[Figure]:
+    """The wearable's mode beside today's (none when it did not run)."""
+    if "imu_roi" not in lossless:
+        return []
+    run = lossless["imu_roi"]
+    skipped = run["words_outside_roi"]
+    return [
+        Figure("edge_realtime_factor_imu_roi", rtf["imu_roi"],
+               f"edge real-time factor, {default}, head motion known (the simulator's pose until the IMU stream) and the sensor ROI on",
+               reference=f"today's {rtf[default]:.2f}x ({rtf['imu_roi'] / rtf[default]:.2f}x of it); {run['frames']} frames, "
+                         f"{run['views']} views, {run['roi_writes']} ROI writes",
+               goal=">= 40x and >= 2x today's"),
+        Figure("edge_events_decoded_per_s_roi", decoded["imu_roi"], "events decoded and handed over per s of reading, sensor ROI on",
+               reference=f"whole sensor {decoded[default]:.0f}/s ({decoded[default] / max(decoded['imu_roi'], 1e-9):.1f}x more); "
+                         f"{int(skipped):,} file words skipped",
+               goal=">= 10x below the whole sensor's"),
     ]

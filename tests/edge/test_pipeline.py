@@ -17,6 +17,7 @@ from darkread.edge.events import EVENT_CD_DTYPE, Events, empty_events
 from darkread.edge.fovea import FoveaConfig, window_events, window_origin
 from darkread.edge.frame import FrameResult, count_in_window, make_frame
 from darkread.edge.gaze import GazeSample
+from darkread.edge.roi import ROI_FOLLOW_MARGIN_PX
 from darkread.edge.sources.base import EventSource
 from darkread.edge.telemetry import EdgeMetrics, MetricsServer
 from darkread.edge.voxel import VoxelConfig
@@ -194,8 +195,6 @@ def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, 
         source, gaze, infer, lambda f, t: frames.append((f, t)), dataclasses.replace(settings, ring_capacity=1 << 16),
         metrics=metrics, watchdog=lambda: pings.append(1), known_motion=known_motion,
     )
-    if known_motion is not None:
-        assert pipeline.windows.scene is None  # the head's motion is not measured from the events then
     assert isinstance(source, EventSource)
     pipeline.start()
     assert source.done.wait(5)
@@ -342,11 +341,13 @@ def test_sensor_roi_follows_the_window() -> None:
     ev = events_in_box(8000, 540, 310, 200, 100)
     source = ListSource(chunked(ev, 200))
     gaze = FixedGaze((640.0, 360.0))
-    frames, _, _ = run_pipeline(source, gaze, every_window(lossless=True, sensor_roi=True))
-    assert frames and source.rois == [(540, 310, 200, 100)]  # programmed once: the gaze did not move
+    frames, metrics, _ = run_pipeline(source, gaze, every_window(lossless=True, sensor_roi="on"))
+    m = ROI_FOLLOW_MARGIN_PX  # the window and its margin, programmed once: the gaze did not move
+    assert frames and source.rois == [(540 - m, 310 - m, 200 + 2 * m, 100 + 2 * m)]
+    assert metrics.totals["roi_writes"] == 1
     plain = ListSource(chunked(ev, 200))
-    run_pipeline(plain, FixedGaze(), every_window(lossless=True))
-    assert plain.rois == []
+    _, metrics, _ = run_pipeline(plain, FixedGaze(), every_window(lossless=True))  # "auto", no known motion
+    assert plain.rois == [] and metrics.totals["roi_writes"] == 0
 
 
 def test_lossless_replay_is_reproducible() -> None:
@@ -410,3 +411,66 @@ def test_noisy_windows_lose_their_isolated_events_and_are_counted(denoise: bool)
         assert metrics.totals["frames_denoised"] == len(frames) and all(f.events_used < 1600 for f, _ in frames)
     else:
         assert metrics.totals["frames_denoised"] == 0 and all(f.events_used == 1600 for f, _ in frames[:-1])
+
+
+class MovingGaze(FixedGaze):
+    """The gaze jumps ``step`` px right every ``every_us`` of event time."""
+
+    def __init__(self, step: float, every_us: int) -> None:
+        super().__init__()
+        self.step, self.every_us = step, every_us
+
+    def at(self, t_event_us: int) -> GazeSample | None:
+        return GazeSample((500.0 + self.step * (t_event_us // self.every_us), 360.0), (0.0, 0.0))
+
+
+def test_the_roi_moves_only_when_the_window_leaves_its_margin() -> None:
+    ev = events_in_box(24_000, 300, 250, 700, 250)
+    settings = every_window(lossless=True, sensor_roi="on", scene_motion=False, n_events=200, denoise=False)  # a frame per ~2 ms
+    small = ListSource(chunked(ev, 500))
+    _, metrics, _ = run_pipeline(small, MovingGaze(5.0, 2000), settings)  # 5 px a jump: inside the 32-px margin
+    large = ListSource(chunked(ev, 500))
+    _, moved, _ = run_pipeline(large, MovingGaze(40.0, 2000), settings)  # 40 px: out of it every time
+    assert 1 <= metrics.totals["roi_writes"] <= 3 and moved.totals["roi_writes"] >= 8
+    assert len(small.rois) == metrics.totals["roi_writes"] and len(large.rois) == moved.totals["roi_writes"]
+
+
+class FailingMotion(ShiftRight):
+    """A known head motion whose source (an IMU) stops being healthy at ``t_fail``."""
+
+    def __init__(self, t_fail: int) -> None:
+        super().__init__()
+        self.t_fail = t_fail
+
+    def healthy(self, t_us: int) -> bool:
+        return t_us < self.t_fail
+
+
+def test_the_roi_is_on_while_a_known_motion_is_healthy_and_given_back_when_it_fails() -> None:
+    ev = moving_strokes((300.0, 100.0), span_ms=60.0)
+    t_fail = int(ev["t"][0]) + 30_000
+    known = FailingMotion(t_fail)
+    source = ListSource(chunked(ev, 2000))
+    settings = every_window(lossless=True, denoise=False)  # sensor_roi "auto", the default
+    frames, metrics, _ = run_pipeline(source, FixedGaze(), settings, known_motion=known)
+    full = (0, 0, *SENSOR)
+    assert source.rois[0] != full and source.rois[-1] == full  # narrowed while healthy, the whole sensor after
+    assert metrics.totals["roi_writes"] == len(source.rois) >= 2
+    warped_before = sum(1 for f, _ in frames if f.t_us < t_fail)
+    assert len(known.windows) == warped_before  # after the failure the deblur searches the events again
+    assert metrics.totals["frames_deblurred"] == len(frames)
+
+
+def test_a_healthy_known_motion_leaves_the_event_tracker_idle() -> None:
+    ev = moving_strokes((300.0, 100.0), span_ms=60.0)
+    settings = every_window(lossless=True, denoise=False)
+    source = ListSource(chunked(ev, 2000))
+    frames: list = []
+    pipeline = build_pipeline(source, FixedGaze(), ink_where_events, lambda f, t: frames.append(f), settings,
+                              known_motion=ShiftRight())
+    pipeline.start()
+    assert source.done.wait(5)
+    pipeline.stop()
+    assert frames and pipeline.windows.scene is not None  # standing by ...
+    assert pipeline.windows.scene.at(int(ev["t"][-1])) is None  # ... and fed nothing
+    assert all(f.scene_px == (f.t_us / 1000.0, 0.0) for f in frames)

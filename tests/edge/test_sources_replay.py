@@ -88,9 +88,10 @@ def test_stop_interrupts_a_slow_replay(raw_file) -> None:
     assert source.finished.is_set()
 
 
-def test_roi_crops_in_software(raw_file) -> None:
+@pytest.mark.parametrize("slice_us", [1_000, None])
+def test_roi_is_applied_in_the_decoder_as_the_sensor_would_deliver_it(raw_file, slice_us) -> None:
     path, expected = raw_file
-    source = ReplaySource(path, speed=None)
+    source = ReplaySource(path, speed=None, slice_us=slice_us)
     source.set_roi(100, 50, 200, 100)
     sink = Collector()
     source.start(sink)
@@ -98,8 +99,33 @@ def test_roi_crops_in_software(raw_file) -> None:
     got = sink.events()
     inside = expected[(expected["x"] >= 100) & (expected["x"] < 300) & (expected["y"] >= 50) & (expected["y"] < 150)]
     assert np.array_equal(got, inside)
+    stats = source.stats
+    assert stats["events_out"] == len(inside)  # what crossed USB, not what the file holds
+    assert stats["words_outside_roi"] >= len(expected) - len(inside)  # (EVT3 vectors: a word may hold several)
     with pytest.raises(ValueError):
         source.set_roi(0, 0, 0, 10)
+
+
+def test_a_roi_set_while_replaying_applies_from_the_next_chunk(raw_file) -> None:
+    path, expected = raw_file
+    source = ReplaySource(path, speed=None, slice_us=None, chunk_bytes=1 << 12)
+    chunks: list[Events] = []
+
+    def sink(events: Events) -> None:
+        chunks.append(events)
+        if len(chunks) == 3:
+            source.set_roi(0, 0, 640, 360)  # from the fourth chunk on: the top-left quarter only
+        if len(chunks) == 6:
+            source.set_roi(0, 0, 1280, 720)  # and the whole sensor again from the seventh
+
+    source.start(sink)
+    source.wait(5)
+    assert len(chunks) > 7
+    quarter = np.concatenate(chunks[3:6])
+    assert quarter["x"].max() < 640 and quarter["y"].max() < 360
+    assert np.concatenate(chunks[6:])["x"].max() >= 640
+    kept = np.concatenate(chunks)
+    assert kept.shape[0] < expected.shape[0] and kept.shape[0] == source.stats["events_out"]
 
 
 def test_bad_arguments(raw_file, tmp_path: Path) -> None:

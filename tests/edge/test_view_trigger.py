@@ -11,6 +11,7 @@ from darkread.edge.config import PipelineConfig
 from darkread.edge.events import Events, make_events
 from darkread.edge.gaze import GazeSample
 from darkread.edge.gaze_events import EventKind
+from darkread.edge.roi import ROI_FOLLOW_MARGIN_PX
 from darkread.edge.telemetry import EdgeMetrics
 from darkread.edge.view_fusion import ViewRecord
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
@@ -184,10 +185,11 @@ def test_the_sensor_roi_spans_a_views_dithered_windows() -> None:
     gaze = ScanGaze(n_fixations=2)
     events = busy_events(int(gaze.t[-1]) + 20_000)
     source = RoiChunks(events)
-    views, _ = run_on_change(gaze, events, source=source, dither_px=20, sensor_roi=True, scene_motion=False)
+    views, _ = run_on_change(gaze, events, source=source, dither_px=20, sensor_roi="on", scene_motion=False)
     assert views and source.rois
-    for _x0, y0, w, h in source.rois:
-        assert (w, h) == (200, 140) and y0 == 360 - 50 - 20  # the window 20 px up to 20 px down
+    m = ROI_FOLLOW_MARGIN_PX
+    for _x0, y0, w, h in source.rois:  # the window 20 px up to 20 px down, and the margin
+        assert (w, h) == (200 + 2 * m, 140 + 2 * m) and y0 == 360 - 50 - 20 - m
 
 
 def test_a_long_fixation_sends_its_view_every_view_every_ms() -> None:

@@ -21,6 +21,7 @@ from usb.util import SPEED_SUPER
 from darkread.core.errors import DarkreadError
 from darkread.edge.errors import DeviceError
 from darkread.edge.events import Events
+from darkread.edge.roi import ROI_FOLLOW_MARGIN_PX, follow_window
 from darkread.edge.sources.base import EventSink
 from darkread.edge.sources.evk4 import registers as regs
 from darkread.edge.sources.evk4.bias_profiles import check_bias_offsets
@@ -31,7 +32,6 @@ from darkread.edge.sources.evk4.treuzell import format_version
 log = logging.getLogger(__name__)
 
 ROI_POLL_ATTEMPTS = 50
-ROI_FOLLOW_MARGIN_PX = 32  # slack around a gaze window so small eye movements need no rewrite
 DEFAULT_QUEUE_BYTES = 64 * 1024 * 1024
 USB_PACKET_BYTES = 1024  # SuperSpeed bulk packet; reads must be whole packets
 COALESCE_BYTES = 4 * 1024 * 1024  # largest buffer the decode thread builds from queued chunks
@@ -45,20 +45,6 @@ def _default_decoder() -> Decoder:
     from darkread.edge.io.evt3 import Evt3Decoder  # lazy: the compiled decoder loads with the first stream
 
     return Evt3Decoder(width=regs.WIDTH, height=regs.HEIGHT)
-
-
-def follow_window(
-    requested: tuple[int, int, int, int], current: tuple[int, int, int, int] | None, margin: int
-) -> tuple[int, int, int, int] | None:
-    """The hardware window to program for a gaze window, or None when ``current`` still covers it."""
-    x0, y0, w, h = requested
-    if current is not None:
-        cx, cy, cw, ch = current
-        if cx <= x0 and cy <= y0 and x0 + w <= cx + cw and y0 + h <= cy + ch:
-            return None
-    nx0, ny0 = max(0, x0 - margin), max(0, y0 - margin)
-    nx1, ny1 = min(regs.WIDTH, x0 + w + margin), min(regs.HEIGHT, y0 + h + margin)
-    return nx0, ny0, nx1 - nx0, ny1 - ny0
 
 
 class Evk4Camera:
@@ -402,7 +388,7 @@ class Evk4Camera:
         requested = (x0, y0, width, height)
         with self._config_lock:
             if self.roi_follow and requested != (0, 0, regs.WIDTH, regs.HEIGHT):
-                target = follow_window(requested, self._roi, ROI_FOLLOW_MARGIN_PX)
+                target = follow_window(requested, self._roi, ROI_FOLLOW_MARGIN_PX, (regs.WIDTH, regs.HEIGHT))
                 if target is None:
                     return
             else:

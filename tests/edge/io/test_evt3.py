@@ -311,3 +311,55 @@ def test_warm_up_decodes_its_own_words() -> None:
     events, triggers = decode_evt3(_WARM_UP_WORDS)
     assert events[["x", "y", "p", "t"]].tolist() == [(10, 5, 0, 4096)] and len(triggers) == 0
     warm_up()  # compiles or loads the cached decoder; must not raise
+
+
+# --- the sensor's ROI ----------------------------------------------------------------------------
+
+
+def test_roi_delivers_the_events_inside_and_counts_the_words_skipped(backend: str) -> None:
+    # row 10 (outside the ROI's rows 20..29): a single event and a vector, skipped unread;
+    # row 20: x=3 (left of the columns 8..19) skipped, x=8 kept; a vector from 4 straddling the left
+    # edge keeps its columns 8..15, the next (16..27) its 16..19
+    data = pack(w(TH, 1), w(TL, 2), w(Y, 10), w(X, 9), w(BASE, 8), w(V12, 0xFFF),
+                w(Y, 20), w(X, 3), w(X, 8), w(BASE, 4), w(V12, 0xFFF), w(V12, 0xFFF), w(V8, 0xFF))
+    decoder = Evt3Decoder(64, 64, backend=backend)
+    decoder.set_roi((8, 20, 12, 10))
+    events, _ = decoder.decode(data)
+    assert [e[:2] for e in columns(events)] == [(8, 20)] + [(x, 20) for x in range(8, 20)]
+    assert decoder.stats.events == len(events)
+    assert decoder.stats.words_outside_roi == 4  # row 10's two, x=3, and the VECT_8 at 28..35
+
+
+def test_roi_decode_equals_a_crop_of_the_whole_decode_in_any_chunking(backend: str) -> None:
+    events = random_stream(5, 20_000, 1 << 20, 40, 0.5)
+    data = encode_evt3(events)
+    roi = (300, 200, 264, 204)
+    decoder = Evt3Decoder(backend=backend)
+    decoder.set_roi(roi)
+    parts = [decoder.decode(data[i : i + 777])[0] for i in range(0, len(data), 777)]
+    x0, y0, w_, h = roi
+    inside = (events["x"] >= x0) & (events["x"] < x0 + w_) & (events["y"] >= y0) & (events["y"] < y0 + h)
+    assert np.array_equal(np.concatenate(parts), events[inside])
+    assert decoder.stats.events == int(inside.sum()) and decoder.stats.words_outside_roi > 0
+    decoder.set_roi((0, 0, 1280, 720))  # the whole sensor: no ROI
+    assert decoder.roi is None
+    with pytest.raises(ValueError):
+        decoder.set_roi((0, 0, 0, 10))
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba not installed")
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**16), x0=st.integers(0, 600), y0=st.integers(0, 470), w_=st.integers(1, 200), h=st.integers(1, 60))
+def test_both_backends_skip_the_same_words(seed: int, x0: int, y0: int, w_: int, h: int) -> None:
+    rng = np.random.default_rng(seed)
+    kinds = rng.choice([TH, TL, Y, X, BASE, V12, V8, TRIG, OTHERS], size=60)
+    payload = rng.integers(0, 4096, size=60)
+    payload[kinds == TH] = np.sort(rng.integers(0, 4096, size=int(np.sum(kinds == TH))))
+    data = pack(*((kinds << 12) | payload).tolist())
+    decoders = [Evt3Decoder(640, 480, backend=b) for b in ("numpy", "numba")]
+    outputs = []
+    for decoder in decoders:
+        decoder.set_roi((x0, y0, w_, h))
+        outputs.append(decoder.decode(data))
+    assert np.array_equal(outputs[0][0], outputs[1][0]) and np.array_equal(outputs[0][1], outputs[1][1])
+    assert decoders[0].stats == decoders[1].stats

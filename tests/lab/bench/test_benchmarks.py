@@ -28,7 +28,7 @@ SYNTH = {"synth_samples_per_s", "synth_sim_s_per_wall_s"}
 EDGE = {
     "edge_realtime_factor", "edge_decode_realtime_factor", "edge_latency_p50_ms", "edge_latency_p99_ms",
     "edge_uplink_kbyte_per_s", "edge_inferences_per_s", "edge_view_latency_p99_ms", "edge_realtime_factor_every_window",
-    "edge_realtime_factor_on_change",
+    "edge_realtime_factor_on_change", "edge_events_decoded_per_s",  # (imu_roi: not in a smoke run, it simulates the sample)
 }
 CLOUD = {"cloud_ingest_frames_per_s_1", "cloud_ingest_frames_per_s_10", "cloud_ingest_frames_per_s_50"}
 CLOUD_POSTGRES = {

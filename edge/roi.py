@@ -1,0 +1,74 @@
+"""The sensor's region of interest: when the edge narrows the sensor to the window, and where.
+
+With the ROI on, the sensor reads out only the view's window and a margin around it (the EVK4's
+analog ROI: :meth:`~darkread.edge.sources.evk4.camera.Evk4Camera.set_roi`; a replay crops in its
+decoder, :meth:`~darkread.edge.sources.replay.ReplaySource.set_roi`), so the events of the rest of
+the sensor never cross USB nor get decoded. The price is the head's motion: measured from the
+events (``edge.scene_motion``), it needs the whole sensor. So ``[pipeline] sensor_roi = "auto"``
+(the default) narrows the sensor only while the head's motion is known from elsewhere and healthy
+(``edge.head_motion``: an inertial sensor), and gives the whole sensor back to the event tracker
+the moment it is not; ``"on"`` and ``"off"`` force it.
+
+The window moves with the gaze with hysteresis (:func:`follow_window`): it is padded by a margin
+and rewritten only once the wanted window leaves the padded one, so small eye movements cost no
+register writes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+Rect = tuple[int, int, int, int]  # x0, y0, width, height
+
+ROI_MODES = ("auto", "on", "off")  # ``[pipeline] sensor_roi``: the first is the default
+ROI_FOLLOW_MARGIN_PX = 32  # slack around a wanted window so small eye movements need no rewrite
+
+
+def follow_window(requested: Rect, current: Rect | None, margin: int, sensor_wh: tuple[int, int] = (1280, 720)) -> Rect | None:
+    """The window to program for the wanted ``requested`` one, or None when ``current`` still covers it:
+    the wanted window padded by ``margin`` on every side, clipped to the sensor."""
+    x0, y0, w, h = requested
+    if current is not None:
+        cx, cy, cw, ch = current
+        if cx <= x0 and cy <= y0 and x0 + w <= cx + cw and y0 + h <= cy + ch:
+            return None
+    nx0, ny0 = max(0, x0 - margin), max(0, y0 - margin)
+    nx1, ny1 = min(sensor_wh[0], x0 + w + margin), min(sensor_wh[1], y0 + h + margin)
+    return nx0, ny0, nx1 - nx0, ny1 - ny0
+
+
+def always(t_us: int) -> bool:
+    """A known head motion that says nothing about its health is healthy at every time."""
+    return True
+
+
+def motion_healthy(known: object | None, t_us: int) -> bool:
+    """Whether a known head motion is present and trustworthy at ``t_us``: its ``healthy(t_us)``
+    when it has one (an inertial stream with a gap is not), else present means healthy."""
+    if known is None:
+        return False
+    healthy: Callable[[int], bool] = getattr(known, "healthy", always)
+    return bool(healthy(t_us))
+
+
+def roi_wanted(mode: str, known: object | None, t_us: int) -> bool:
+    """Whether the sensor should deliver only the window now (``mode`` is ``[pipeline] sensor_roi``)."""
+    if mode == "on":
+        return True
+    if mode == "off":
+        return False
+    return motion_healthy(known, t_us)
+
+
+def parse_roi_mode(raw: object) -> str:
+    """``[pipeline] sensor_roi`` from TOML or the environment: "auto", "on", "off", or a boolean (on/off)."""
+    if isinstance(raw, bool):
+        return "on" if raw else "off"
+    text = str(raw).strip().lower()
+    if text in {"1", "true", "yes", "on"}:
+        return "on"
+    if text in {"0", "false", "no", "off"}:
+        return "off"
+    if text == "auto":
+        return "auto"
+    raise ValueError(f"config [pipeline] sensor_roi: cannot use {raw!r} (expected auto, on or off)")
