@@ -98,6 +98,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ds.add_argument("--target-time", choices=("end", "evidence"), default="end",
                     help="when each target shows the page: end (the window's newest event, default) or evidence "
                          "(the time, up to 60 ms earlier, its events match best: in the dark events trail the page)")
+    ds.add_argument("--regime", choices=REGIMES, default="standard", help="the sensor regime (default standard)")
+    ds.add_argument("--sensor-profile", metavar="PROFILE",
+                    help="with --regime grounded: draw the sensor around this measured profile (`darkread calibrate sensor`)")
     ds.set_defaults(func=_dataset)
 
     ev = sub.add_parser(
@@ -182,6 +185,8 @@ def _dataset(args: argparse.Namespace) -> int:
         target_time=args.target_time,
         more_fonts=args.more_fonts,
         lux_range=(args.lux[0], args.lux[1]) if args.lux else LUX_RANGE,
+        regime=args.regime,
+        sensor_profile=args.sensor_profile,
     )
     print(f"{manifest['samples']} samples in {len(manifest['shards'])} shards -> {args.out} "
           f"({manifest['samples_per_s']} samples/s)")
