@@ -110,7 +110,7 @@ def arrival_plane(x: np.ndarray, y: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Least-squares t = a + b x + c y, refitted without the points off by more than 3 MADs."""
     a = np.column_stack([np.ones_like(x), x, y]).astype(np.float64)
     keep = np.ones(x.size, dtype=bool)
-    coef = np.zeros(3)
+    coef: np.ndarray = np.zeros(3)
     for _ in range(3):
         coef, *_ = np.linalg.lstsq(a[keep], t[keep].astype(np.float64), rcond=None)
         resid = t - a @ coef

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -43,9 +44,9 @@ PRIOR_WEIGHT = 0.02  # a weak pull of each constant towards the published fit (l
 def crossing_table(pixels: int = 48, seconds: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
     """G: noise events per pixel per noise-bandwidth cycle vs threshold / noise sd, measured with the event
     sensor (factory-like thresholds, no leak) over light levels whose noise spans the range."""
+    noise: dict[str, Any] = {**NOISE_FIT, "noise_electrons_per_s": NOISE_FIT["noise_electrons_per_s"] / 16.0}
     params = replace(GroundedSensorParams(lux=1.0), c_on=TABLE_THRESHOLD, c_off=TABLE_THRESHOLD, c_sigma=0.04,
-                     refractory_us=150.0, leak_rate_hz=0.0, hot_pixel_fraction=0.0,
-                     **{**NOISE_FIT, "noise_electrons_per_s": NOISE_FIT["noise_electrons_per_s"] / 16.0})  # wider noise: low c / sigma too
+                     refractory_us=150.0, leak_rate_hz=0.0, hot_pixel_fraction=0.0, **noise)  # wider noise: low c / sigma too
     rates = background_rate_curve(params, TABLE_LEVELS, pixels=pixels, seconds=seconds, warmup_s=0.5)
     sd, band = params.noise_sd_and_cutoff(TABLE_LEVELS.astype(np.float32))
     x = TABLE_THRESHOLD / sd.astype(np.float64)
@@ -82,7 +83,7 @@ def fit_noise_constants(profile: SensorProfile, table: tuple[np.ndarray, np.ndar
     grid = np.meshgrid(n, f_max, k_n, e_dark, indexing="ij")
     shape = grid[0].shape
     cols = [g.reshape(-1, 1) for g in grid]
-    model = process_rate(chip[None, :], *cols, leak_hz=leak_hz, table=table)
+    model = process_rate(chip[None, :], cols[0], cols[1], cols[2], cols[3], leak_hz, table)
     misfit = ((np.log(model) - np.log(np.maximum(measured, 1e-4))[None, :]) ** 2).sum(axis=1)
     for col, key in zip(cols, ("noise_electrons_per_s", "noise_max_hz", "noise_k_hz_per_chip_lux", "dark_chip_lux"), strict=True):
         misfit = misfit + PRIOR_WEIGHT * np.log(col[:, 0] / base[key]) ** 2
@@ -117,7 +118,7 @@ def profile_sensor_params(profile: SensorProfile, rng: np.random.Generator, lux:
     base = grounded_sensor_params(rng, lux, f_number)  # thresholds, refractory, leak, hot pixels: the factory draws
     half = max(K_MIN_SPREAD, 2.0 * profile.k_relative_sd)
     k = profile.k_hz_per_chip_lux
-    noise = {name: _log_uniform(rng, v / NOISE_PROFILE_SPREAD, v * NOISE_PROFILE_SPREAD)
+    noise: dict[str, Any] = {name: _log_uniform(rng, v / NOISE_PROFILE_SPREAD, v * NOISE_PROFILE_SPREAD)
              for name, v in fitted_noise_constants(profile).items()}
     return replace(
         base,
