@@ -135,7 +135,7 @@ def spec_document(entry: SuiteEntry) -> dict:
     """What ``spec.json`` holds: the recording spec, without the fields left at their defaults that
     older suites did not have (so their recordings stay complete)."""
     doc = asdict(entry.recording_spec())
-    for key, default in (("scanpath", "model"), ("scanpath_file", None), ("simulator", "darkread")):
+    for key, default in (("scanpath", "model"), ("scanpath_file", None), ("simulator", "darkread"), ("sensor_profile", None)):
         if doc.get(key) == default:
             doc.pop(key, None)
     return doc
