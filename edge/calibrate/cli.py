@@ -1,4 +1,5 @@
-"""``darkread calibrate intrinsics|clock|extrinsics|check``: make and check ``calibration.json``.
+"""``darkread calibrate intrinsics|clock|extrinsics|check|sensor``: make and check ``calibration.json``;
+``sensor`` fits a sensor profile (the photoreceptor's K and the background-noise curve).
 
 Order of a calibration session (see docs/calibration.md): intrinsics from a flashing board seen
 from several angles; the clock from the board flashing while the glasses stay still (RGB frames
@@ -82,6 +83,31 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--png", default="calibration_check.png", help="output picture (default calibration_check.png)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=_check)
+
+    p = sub.add_parser("sensor", help="fit K (photoreceptor speed) and the background-noise curve: a sensor profile",
+                       description=(
+                           "Fit the photoreceptor's K (Hz per chip-lux) from a bright edge swept across the view and the "
+                           "background activity (Hz per pixel) from a still blank card at three or more light levels "
+                           "measured with a lux meter; write a sensor profile (JSON) that `darkread eval make-suite "
+                           "--sensor-profile` and training draw from. Recordings: FOLDER's sub-folders (events.raw + "
+                           "meta.json with a sensor_calibration block) and/or RAW files with their lux (--card, --edge, "
+                           "--dark). See docs/calibration.md, \"Sensor\"."
+                       ))
+    p.add_argument("folder", nargs="?", help="folder of calibration recordings (sub-folders with events.raw and meta.json)")
+    p.add_argument("--card", action="append", default=[], metavar="FILE.raw@LUX",
+                   help="a still blank card at LUX (the lux meter's reading at the card), repeatable")
+    p.add_argument("--edge", action="append", default=[], metavar="FILE.raw@LUX",
+                   help="a bright edge swept once across a dark field at LUX, repeatable")
+    p.add_argument("--dark", action="append", default=[], metavar="FILE.raw", help="the lens capped: the dark floor")
+    p.add_argument("--card-reflectance", type=float, default=0.8, help="the card's reflectance (default 0.8, white card)")
+    p.add_argument("--edge-reflectance", type=float, nargs=2, default=(0.8, 0.05), metavar=("BRIGHT", "DARK"),
+                   help="the edge's two reflectances (default 0.8 0.05: white card over black)")
+    p.add_argument("--f-number", type=float, help="the lens's f-number (default: the recordings' meta.json, else 2.4)")
+    p.add_argument("--bias", action="append", default=[], metavar="NAME=OFFSET",
+                   help="the biases the recordings were made at (offsets from factory; default: meta.json's, else factory)")
+    p.add_argument("--out", default="sensor_profile.json", help="the profile to write (default sensor_profile.json)")
+    p.add_argument("--json", action="store_true", help="print the profile as JSON")
+    p.set_defaults(func=_sensor)
     parser.set_defaults(func=lambda args: parser.print_help() or 2)
 
 
@@ -276,4 +302,40 @@ def _check(args: argparse.Namespace) -> int:
         print(f"  gaze samples drawn       {result.n_gaze}")
         print(f"  gaze on text             {result.on_text_fraction:.0%}")
         print(f"  picture                  {args.png}")
+    return 0
+
+
+def _sensor(args: argparse.Namespace) -> int:
+    from darkread.edge.calibrate.sensor import calibrate_sensor, recording_from_argument, recordings_in
+    from darkread.edge.calibrate.sensor_profile import save_sensor_profile
+    from darkread.edge.errors import CalibrationError
+    from darkread.edge.sources.evk4.cli import parse_biases
+
+    recordings = recordings_in(args.folder) if args.folder else []
+    bright, dark = args.edge_reflectance
+    for target, items, reflectance in (("card", args.card, args.card_reflectance), ("edge", args.edge, bright),
+                                       ("dark", args.dark, args.card_reflectance)):
+        recordings += [recording_from_argument(target, text, reflectance, dark) for text in items]
+    if not recordings:
+        raise CalibrationError("no calibration recordings: give a FOLDER or --card/--edge FILE.raw@LUX")
+    for name, value in (("--card-reflectance", args.card_reflectance), ("--edge-reflectance", bright), ("--edge-reflectance", dark)):
+        if not 0 < value <= 1:
+            raise CalibrationError(f"{name} {value:g}: a reflectance lies in (0, 1]")
+    result = calibrate_sensor(recordings, f_number=args.f_number, biases=parse_biases(args.bias) if args.bias else None)
+    save_sensor_profile(args.out, result.profile)
+    doc = result.profile.to_dict()
+    if args.json:
+        print(json.dumps({**doc, "written": str(args.out)}, indent=1))
+        return 0
+    pr = doc["photoreceptor"]
+    print(f"  K                        {pr['k_hz_per_chip_lux']:.1f} Hz per chip-lux (+- {pr['k_relative_sd']:.0%}; "
+          f"f_max {pr['f_max_hz']:g} Hz assumed)")
+    for edge in pr["edges"]:
+        print(f"    {edge['recording']:22s} {edge['lux']:g} lux: time constant {edge['time_constant_us']:.0f} us, "
+              f"{edge['tail_events']} events")
+    for point in doc["noise"]["points"]:
+        print(f"  background {point['lux']:>6g} lux     {point['rate_hz']:.3f} Hz per pixel ({point['pixels']} pixels)")
+    if doc["noise"]["dark_floor_hz"] is not None:
+        print(f"  dark floor               {doc['noise']['dark_floor_hz']:.3f} Hz per pixel")
+    print(f"  written                  {args.out}")
     return 0

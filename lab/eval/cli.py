@@ -146,6 +146,9 @@ def _add_make_suite(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--regime", default="standard", choices=REGIMES,
                    help="our simulator's sensor regime (default standard); fast-photoreceptor: a photoreceptor that keeps "
                         "up in the dark (an optimistic ablation); grounded: the laws fitted to published IMX636 measurements")
+    p.add_argument("--sensor-profile", metavar="PROFILE",
+                   help="with --regime grounded: draw the sensor around this measured profile (`darkread calibrate sensor`): "
+                        "K within +-10 %% (or its stated uncertainty), the noise process fitted to its curve")
     p.add_argument("--font", metavar="FAMILY",
                    help="every selected recording not already in this font family made again in it (same seed, light, "
                         "motion, text kind and x-height; named <name-in-FAMILY>_as_<old family>)")
@@ -213,7 +216,8 @@ def _make_suite(args: argparse.Namespace) -> int:
     from darkread.lab.eval.suite import make_suite
 
     entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
-                         subset=args.subset, simulator=args.simulator, font=args.font, regime=args.regime)
+                         subset=args.subset, simulator=args.simulator, font=args.font, regime=args.regime,
+                         sensor_profile=args.sensor_profile)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
     return 0
 

@@ -98,6 +98,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ds.add_argument("--target-time", choices=("end", "evidence"), default="end",
                     help="when each target shows the page: end (the window's newest event, default) or evidence "
                          "(the time, up to 60 ms earlier, its events match best: in the dark events trail the page)")
+    ds.add_argument("--regime", choices=REGIMES, default="standard", help="the sensor regime (default standard)")
+    ds.add_argument("--sensor-profile", metavar="PROFILE",
+                    help="with --regime grounded: draw the sensor around this measured profile (`darkread calibrate sensor`)")
     ds.set_defaults(func=_dataset)
 
     ev = sub.add_parser(
@@ -110,6 +113,43 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ev.add_argument("--draws", type=int, default=12, help="sensors drawn over the band for the shaded area (default 12)")
     ev.add_argument("--fit", action="store_true", help="fit the noise constants first (a few minutes) and print them")
     ev.set_defaults(func=_sensor_evidence)
+
+    sc = sub.add_parser(
+        "sensor-calibration",
+        help="simulated `calibrate sensor` recordings (blank card at several lux, a swept edge) at a known K",
+        description="Write what an EVK4 owner records for `darkread calibrate sensor` (a still blank card at each --lux, "
+        "the lens capped, a bright edge swept over a dark field), made by the grounded simulator at --k. With --check, "
+        "calibrate them too and print the recovered K and noise curve beside the truth (docs/calibration.md).",
+    )
+    sc.add_argument("out", metavar="OUT", help="output folder (created; one sub-folder per recording)")
+    sc.add_argument("--k", type=float, nargs="+", default=[130.0],
+                    help="the photoreceptor's K, Hz per chip-lux (default 130; several with --check)")
+    sc.add_argument("--lux", type=float, nargs="+", default=[1.0, 3.0, 10.0, 30.0], help="the card's light levels")
+    sc.add_argument("--edge-lux", type=float, default=20.0, help="the edge's light (default 20 lux)")
+    sc.add_argument("--seconds", type=float, default=3.0, help="each card recording's length (default 3 s)")
+    sc.add_argument("--card-pixels", type=int, default=32, help="the card's crop, N x N pixels (default 32)")
+    sc.add_argument("--biases", default="factory", metavar="PROFILE", help="bias profile (factory or dark)")
+    sc.add_argument("--seed", type=int, default=0)
+    sc.add_argument("--check", action="store_true", help="calibrate each K's recordings and compare with the truth")
+    sc.set_defaults(func=_sensor_calibration)
+
+
+def _sensor_calibration(args: argparse.Namespace) -> int:
+    from darkread.lab.synth import sensor_calibration as sc
+
+    if len(args.k) > 1 and not args.check:
+        raise ValueError("several --k values are for --check (one recording set per K under OUT)")
+    if min(args.k) <= 0 or min(args.lux) <= 0 or args.seconds <= 0 or args.card_pixels < 4:
+        raise ValueError("--k, --lux and --seconds must be positive and --card-pixels at least 4")
+    specs = [sc.CalibrationSpec(k_hz_per_chip_lux=k, card_lux=tuple(args.lux), edge_lux=args.edge_lux,
+                                card_seconds=args.seconds, card_wh=(args.card_pixels, args.card_pixels),
+                                bias_profile=args.biases, seed=args.seed) for k in args.k]
+    if not args.check:
+        for folder in sc.write_calibration_recordings(args.out, specs[0]):
+            print(folder)
+        return 0
+    print(sc.check_table(sc.run_check(args.out, specs)))
+    return 0
 
 
 def _sensor_evidence(args: argparse.Namespace) -> int:
@@ -145,6 +185,8 @@ def _dataset(args: argparse.Namespace) -> int:
         target_time=args.target_time,
         more_fonts=args.more_fonts,
         lux_range=(args.lux[0], args.lux[1]) if args.lux else LUX_RANGE,
+        regime=args.regime,
+        sensor_profile=args.sensor_profile,
     )
     print(f"{manifest['samples']} samples in {len(manifest['shards'])} shards -> {args.out} "
           f"({manifest['samples_per_s']} samples/s)")

@@ -65,6 +65,7 @@ class RecordingSpec:
     simulator: str = "darkread"  # the name of what turned the scene into events (``write_recording``'s ``simulator``)
     f_number: float = DEFAULT_F_NUMBER  # the lens; what share of the page's light reaches the chip (regime "grounded")
     bias_profile: str = FACTORY  # the IMX636 biases it is made with (edge/sources/evk4/bias_profiles.py)
+    sensor_profile: str | None = None  # a measured sensor profile the grounded sensor is drawn from
 
 
 LAYOUT_NAME = "page.layout.json"
@@ -79,7 +80,7 @@ def session_spec(spec: RecordingSpec) -> SessionSpec:
         split=spec.split, lux=spec.lux, motion=spec.motion, kind=spec.kind, font=spec.font,
         xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
         scanpath=spec.scanpath, scanpath_file=spec.scanpath_file, regime=spec.regime, markers=spec.markers,
-        f_number=spec.f_number, bias_profile=spec.bias_profile,
+        f_number=spec.f_number, bias_profile=spec.bias_profile, sensor_profile=spec.sensor_profile,
     )
 
 
@@ -394,6 +395,7 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
         "lens_f_number": float(spec.f_number),  # only the grounded regime converts light to the chip through it
         "biases": {"profile": spec.bias_profile, "offsets": profile_offsets(spec.bias_profile)},  # from factory
         "simulator": spec.simulator,  # what turned light into events; "sensor" holds its parameters
+        "sensor_profile": spec.sensor_profile,  # the measured profile the sensor was drawn around, if any
     }
     if session.marker_page is not None:
         meta["markers"] = {"layout": LAYOUT_NAME, "pose_truth": POSE_TRUTH_NAME, "n_markers": len(session.marker_page.markers)}

@@ -33,6 +33,12 @@ from functools import lru_cache
 import numpy as np
 
 from darkread.edge.events import EVENT_CD_DTYPE, empty_events
+from darkread.edge.sources.evk4.photoreceptor import (  # the laws, shared with `calibrate sensor`
+    DEFAULT_F_NUMBER,
+    LENS_TRANSMISSION,
+    chip_lux,
+    photoreceptor_cutoff_hz,
+)
 
 
 @dataclass(frozen=True)
@@ -109,21 +115,7 @@ def random_sensor_params(rng: np.random.Generator, lux: float) -> SensorParams:
     )
 
 
-LENS_TRANSMISSION = 0.9
-DEFAULT_F_NUMBER = 2.4  # the glasses' event-camera lens (12 mm, f/2.4)
 PAPER_REFLECTANCE = 0.85  # what the background rate of the unsimulated sensor area is computed at
-
-
-def chip_lux(scene_irradiance: np.ndarray | float, f_number: float, transmission: float = LENS_TRANSMISSION) -> np.ndarray | float:
-    """Illuminance on the chip of a Lambertian surface lit by ``scene_irradiance`` (lux x reflectance):
-    E_chip = E_scene R T / (4 N^2), 3.9 % of the scene's at f/2.4."""
-    return scene_irradiance * (transmission / (4.0 * f_number * f_number))
-
-
-def photoreceptor_cutoff_hz(total_chip_lux: np.ndarray | float, k_hz_per_chip_lux: float, f_max_hz: float) -> np.ndarray | float:
-    """First-order photoreceptor cut-off: linear in the photocurrent (``K E``) below a ceiling
-    ``f_max``, combined as two time constants in series: 1 / (1 / (K E) + 1 / f_max)."""
-    return 1.0 / (1.0 / (k_hz_per_chip_lux * total_chip_lux) + 1.0 / f_max_hz)
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from darkread.models.synth.motion import MOTION_LEVELS, random_motion
 from darkread.models.synth.page import PrintedPage, reflectance, render_page
 from darkread.models.synth.scene import Scene, base_pose
 from darkread.models.synth.sensor import DEFAULT_F_NUMBER, GroundedSensorParams, SensorParams, regime_sensor_params
+from darkread.models.synth.sensor_profile import profile_at, profile_sensor_params
 from darkread.models.synth.text import TEXT_KINDS, make_lines
 
 TEXTURE_OVERSAMPLING = 1.25  # texels per event pixel at the nominal pose
@@ -49,6 +50,7 @@ class SessionSpec:
     more_fonts: bool = False  # split "train": draw from fonts.MORE_TRAIN_FAMILIES too
     f_number: float = DEFAULT_F_NUMBER  # the event camera's lens (the grounded regime's chip illuminance)
     bias_profile: str = FACTORY  # the IMX636 biases (edge/sources/evk4/bias_profiles.py; modelled in "grounded")
+    sensor_profile: str | None = None  # a measured sensor profile the grounded sensor is drawn from (sensor_profile.py)
 
 
 SCANPATHS = ("model", "human")
@@ -82,11 +84,17 @@ class Session:
 def session_sensor(spec: SessionSpec, rng: np.random.Generator, lux: float) -> SensorParams:
     """The sensor of a session: its regime's draw, run with the spec's bias profile.
 
+    With ``sensor_profile`` the grounded sensor is drawn around a measured profile instead of its band.
     Biases are modelled in the grounded regime only; another regime with a profile other than
     factory is a ValueError rather than a silent factory sensor.
     """
     profile_offsets(spec.bias_profile)  # an unknown profile is named before anything is drawn
-    params = regime_sensor_params(spec.regime, rng, lux, spec.f_number)
+    if spec.sensor_profile is not None:
+        if spec.regime != "grounded":
+            raise ValueError(f"a sensor profile is drawn from by the grounded regime only (--regime grounded), not {spec.regime!r}")
+        params: SensorParams = profile_sensor_params(profile_at(spec.sensor_profile), rng, lux, spec.f_number)
+    else:
+        params = regime_sensor_params(spec.regime, rng, lux, spec.f_number)
     if isinstance(params, GroundedSensorParams):
         return apply_profile(params, spec.bias_profile)
     if spec.bias_profile != FACTORY:

@@ -26,6 +26,7 @@ from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES, families_of, font_split
 from darkread.models.synth.scene import Region, Scene
 from darkread.models.synth.sensor import EventSensor, SensorParams, concat_events
+from darkread.models.synth.sensor_profile import profile_at
 from darkread.models.synth.session import LUX_RANGE, Session, SessionSpec, choose_dt_us, make_session, random_lux
 
 log = logging.getLogger(__name__)
@@ -235,11 +236,12 @@ def shard_seed(base_seed: int, split: str, held_out: bool, shard_index: int, pag
     return int(ss.generate_state(1, dtype=np.uint32)[0])
 
 
-def build_shard(args: tuple[Path, int, int, int, str, bool, tuple[float, float], str, bool]) -> dict:
+def build_shard(args: tuple[Path, int, int, int, str, bool, tuple[float, float], str, bool, str, str | None]) -> dict:
     """Make shard ``index`` with ``count`` samples (a multiprocessing task)."""
-    out_dir, index, count, base_seed, split, held_out, lux_range, target_time, more_fonts = args
+    out_dir, index, count, base_seed, split, held_out, lux_range, target_time, more_fonts, regime, sensor_profile = args
     t0 = time.perf_counter()
-    spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0, more_fonts=more_fonts)
+    spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0, more_fonts=more_fonts, regime=regime,
+                       sensor_profile=sensor_profile)
     parts_v: list[np.ndarray] = []
     parts_t: list[np.ndarray] = []
     metas: list[SampleMeta] = []
@@ -292,11 +294,14 @@ def build_dataset(
     lux_range: tuple[float, float] = LUX_RANGE,
     target_time: str = "end",
     more_fonts: bool = False,
+    regime: str = "standard",
+    sensor_profile: str | None = None,
 ) -> dict:
     """Write ``samples`` samples as shards plus ``dataset.json``; deterministic for ``seed`` (any worker count).
     ``lux_range``: the light, log-uniform between the two (a low-light set for the dark end, say 4..40);
     ``target_time``: when each target shows the page (``TARGET_TIMES``); ``more_fonts``: a training set
-    drawn from ``MORE_TRAIN_FAMILIES`` too."""
+    drawn from ``MORE_TRAIN_FAMILIES`` too; ``regime``: the sensor's (``sensor.REGIMES``); ``sensor_profile``:
+    with the grounded regime, the sensor drawn around a measured profile (``sensor_profile.py``)."""
     if target_time not in TARGET_TIMES:
         raise ValueError(f"--target-time {target_time!r}: use one of {', '.join(TARGET_TIMES)}")
     if samples < 1:
@@ -308,12 +313,17 @@ def build_dataset(
         raise ValueError(f"unknown split {split!r}; use 'train' or 'val'")
     if more_fonts and (split != "train" or held_out):
         raise ValueError("--more-fonts is for training sets: not with --split val or --held-out")
+    if sensor_profile is not None:
+        if regime != "grounded":
+            raise ValueError(f"--sensor-profile is drawn from by the grounded regime: add --regime grounded (not {regime})")
+        sensor_profile = str(Path(sensor_profile).resolve())
+        profile_at(sensor_profile)  # missing or wrong: one line before any work
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n_shards = math.ceil(samples / shard_size)
     tasks = [
         (out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out), (lo, hi), target_time,
-         bool(more_fonts))
+         bool(more_fonts), regime, sensor_profile)
         for i in range(n_shards)
     ]
     todo = [t for t in tasks if not (out / f"shard-{t[1]:05d}.npz").exists()]
@@ -362,7 +372,9 @@ def build_dataset(
             "text_kind": {"letters": 0.15, "words": 0.3, "pangram": 0.15, "paragraph": 0.4},
             "xheight_px": "uniform 5..16 (nominal)",
             "samples_per_page": SAMPLES_PER_PAGE,
-            "sensor": "see darkread.models.synth.sensor.random_sensor_params",
+            "sensor": ("see darkread.models.synth.sensor.random_sensor_params" if regime == "standard"
+                       else f"regime {regime} (darkread.models.synth.sensor.regime_sensor_params)"),
+            "sensor_profile": sensor_profile,
         },
         "counts": category_counts(out, [f"shard-{i:05d}.npz" for i in range(n_shards)]),
         "generation_seconds": round(elapsed, 1),
