@@ -31,6 +31,7 @@ from darkread.lab.jobs import run_jobs
 from darkread.lab.synth.rgb_camera import SPEC_NAME
 from darkread.lab.synth.simulators import simulator_for
 from darkread.models.synth.fonts import FACES
+from darkread.models.synth.motion import MOTION_REGIMES
 from darkread.models.synth.recording import RecordingSpec, write_recording
 from darkread.models.synth.sensor import REGIMES
 
@@ -63,6 +64,7 @@ class SuiteEntry:
     scanpath: str = "model"  # "human": the shipped real reader's fixations replayed on the page
     simulator: str = "darkread"  # "hesim": the same scene turned into events by hesim-3d (lab/synth/hesim_sensor.py)
     regime: str = "standard"  # our simulator's sensor regime (sensor.REGIMES), e.g. "fast-photoreceptor"
+    motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES), e.g. "strong"
 
     def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
 
@@ -70,7 +72,7 @@ class SuiteEntry:
             lux=self.lux, motion=self.motion, kind=self.kind, seconds=self.seconds, seed=self.seed, font=self.font,
             xheight_px=self.xheight_px, n_lines=self.n_lines, line_chars=self.line_chars,
             description=f"darkread evaluation suite: {self.name}", split=self.split, read_once=self.read_once,
-            scanpath=self.scanpath, simulator=self.simulator, regime=self.regime,
+            scanpath=self.scanpath, simulator=self.simulator, regime=self.regime, motion_regime=self.motion_regime,
         )
 
 
@@ -133,7 +135,7 @@ def spec_document(entry: SuiteEntry) -> dict:
     """What ``spec.json`` holds: the recording spec, without the fields left at their defaults that
     older suites did not have (so their recordings stay complete)."""
     doc = asdict(entry.recording_spec())
-    for key, default in (("scanpath", "model"), ("scanpath_file", None), ("simulator", "darkread")):
+    for key, default in (("scanpath", "model"), ("scanpath_file", None), ("simulator", "darkread"), ("motion_regime", "standard")):
         if doc.get(key) == default:
             doc.pop(key, None)
     return doc
@@ -165,10 +167,11 @@ def _slug(family: str) -> str:
 
 
 def select_entries(*, small: bool = False, match: str | Sequence[str] | None = None, subset: str | None = None,
-                   simulator: str = "darkread", font: str | None = None, regime: str = "standard") -> list[SuiteEntry]:
+                   simulator: str = "darkread", font: str | None = None, regime: str = "standard",
+                   motion_regime: str = "standard") -> list[SuiteEntry]:
     """The recordings ``make_suite`` writes, in order (its arguments, checked there)."""
     entries = simulator_check_entries() if subset == "simulator-check" else suite_entries(small=small)
-    entries = [replace(e, simulator=simulator, regime=regime) for e in entries]
+    entries = [replace(e, simulator=simulator, regime=regime, motion_regime=motion_regime) for e in entries]
     if match:
 
         patterns = [match] if isinstance(match, str) else list(match)
@@ -183,7 +186,7 @@ def select_entries(*, small: bool = False, match: str | Sequence[str] | None = N
 def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
     match: str | Sequence[str] | None = None, subset: str | None = None, simulator: str = "darkread",
-    font: str | None = None, regime: str = "standard",
+    font: str | None = None, regime: str = "standard", motion_regime: str = "standard",
 ) -> list[SuiteEntry]:
     """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
     ``spec.json`` matches) are kept, so an interrupted run resumes. ``match``: only the recordings
@@ -191,7 +194,8 @@ def make_suite(
     full suite (``simulator-check``); ``simulator``: what turns the scenes into events; ``font``: every
     selected recording not already in this family made again in it (``in_font``), to tell what a
     font costs from what a scene does; ``regime``: our simulator's sensor regime (the same scenes and
-    draws; ``fast-photoreceptor``: what the photoreceptor's speed in the dark decides)."""
+    draws; ``fast-photoreceptor``: what the photoreceptor's speed in the dark decides); ``motion_regime``:
+    the head motion's draws (``quiet``, ``central``, ``strong``: the grounded bands' ends and centre)."""
     from tqdm import tqdm
 
 
@@ -205,16 +209,20 @@ def make_suite(
         raise ValueError(f"--regime {regime!r}: use one of {', '.join(REGIMES)}")
     if regime != "standard" and simulator != "darkread":
         raise ValueError(f"--regime {regime} is our simulator's; leave out --simulator {simulator}")
+    if motion_regime not in MOTION_REGIMES:
+        raise ValueError(f"--motion-regime {motion_regime!r}: use one of {', '.join(MOTION_REGIMES)}")
     if subset is not None and subset not in SUBSETS:
         raise ValueError(f"--subset {subset!r}: use one of {', '.join(SUBSETS)}")
     if subset is not None and small:
         raise ValueError("--subset picks from the full suite; leave out --small")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    entries = select_entries(small=small, match=match, subset=subset, simulator=simulator, font=font, regime=regime)
+    entries = select_entries(small=small, match=match, subset=subset, simulator=simulator, font=font, regime=regime,
+                             motion_regime=motion_regime)
     entries = entries[:only]
     (out / SUITE_NAME).write_text(
-        json.dumps({"small": small, "subset": subset, "simulator": simulator, "regime": regime, "font": font,
+        json.dumps({"small": small, "subset": subset, "simulator": simulator, "regime": regime,
+                    "motion_regime": motion_regime, "font": font,
                     "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )

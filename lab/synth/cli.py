@@ -15,6 +15,7 @@ KINDS = ("letters", "words", "pangram", "paragraph")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from darkread.models.synth.motion import MOTION_REGIMES
     from darkread.models.synth.sensor import REGIMES
 
     synth = subparsers.add_parser(
@@ -65,6 +66,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                           "a stronger low-pass; edge/sources/evk4/bias_profiles.py); modelled in the grounded regime")
     rec.add_argument("--f-number", type=float, default=2.4,
                      help="the lens's f-number (default 2.4): the share of the page's light on the chip (grounded regime)")
+    rec.add_argument("--motion-regime", choices=MOTION_REGIMES, default="standard",
+                     help="the head motion's draws: standard (default, what training saw) or grounded (tremor and reading "
+                          "motion from measurements, drawn across their bands); quiet, central, strong: every band at its "
+                          "low end, centre or high end (docs/head_motion_model.md)")
     rec.add_argument("--markers", action="store_true",
                      help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "
                           "page.layout.json (every recording carries the simulator's true page pose per millisecond, "
@@ -174,6 +179,7 @@ def _recording(args: argparse.Namespace) -> int:
         simulator=args.simulator,
         f_number=args.f_number,
         bias_profile=args.biases,
+        motion_regime=args.motion_regime,
     )
     if args.scanpath_file and not Path(args.scanpath_file).is_file():
         raise FileNotFoundError(f"--scanpath-file {args.scanpath_file}: no such file")
