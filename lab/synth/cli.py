@@ -116,6 +116,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ev.add_argument("--fit", action="store_true", help="fit the noise constants first (a few minutes) and print them")
     ev.set_defaults(func=_sensor_evidence)
 
+    bt = sub.add_parser(
+        "background-table",
+        help="write the table the glasses estimate the light level from (background rate vs lux per bias profile)",
+        description="Run the central grounded sensor under each bias profile on a still page at each lux and write "
+        "background events per pixel and second as JSON (default: edge/sources/evk4/background_rates.json, shipped).",
+    )
+    bt.add_argument("--out", default="edge/sources/evk4/background_rates.json", help="the table (JSON)")
+    bt.add_argument("--pixels", type=int, default=512, help="pixels per light level (default 512)")
+    bt.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per level (default 10)")
+    bt.set_defaults(func=_background_table)
+
+
+def _background_table(args: argparse.Namespace) -> int:
+    from darkread.lab.synth.background_table import write_background_table
+
+    if args.pixels < 1 or args.seconds <= 0:
+        raise ValueError("--pixels and --seconds must be positive")
+    print(write_background_table(args.out, pixels=args.pixels, seconds=args.seconds))
+    return 0
+
 
 def _sensor_evidence(args: argparse.Namespace) -> int:
     from darkread.lab.synth import sensor_evidence
