@@ -19,7 +19,8 @@ from typing import Any
 
 from darkread.core.errors import DarkreadError
 from darkread.core.redact import redact
-from darkread.edge.config import EdgeConfig, GazeConfig, ImuConfig, PipelineConfig, SourceConfig
+from darkread.edge.bias_control import BiasController, profile_named
+from darkread.edge.config import EdgeConfig, GazeConfig, ImuConfig, PipelineConfig, SensorConfig, SourceConfig
 from darkread.edge.errors import RunError, SpoolError, UndeliveredError
 from darkread.edge.frame import FrameResult, Infer
 from darkread.edge.gaze import GazeLookup
@@ -29,6 +30,7 @@ from darkread.edge.pipeline import Pipeline
 from darkread.edge.reconstruct import Reconstructor
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
+from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
 from darkread.edge.steps import FrameHandler, Step
 from darkread.edge.steps.every_window import EveryWindowStep
 from darkread.edge.steps.on_change import OnChangeStep
@@ -185,7 +187,7 @@ def build_edge(
     metrics = EdgeMetrics()
     with contextlib.ExitStack() as undo:  # a failure half-way closes what was opened
         coarse = STEPS[config.pipeline.infer].replay_grid_us is not None
-        source, calibration, gaze_track, imu_track = _open_source(config.source, metrics, coarse=coarse)
+        source, calibration, gaze_track, imu_track, profile = _open_source(config.source, metrics, config.sensor, coarse=coarse)
         close = getattr(source, "close", None)
         if close is not None:
             undo.callback(close)
@@ -214,8 +216,9 @@ def build_edge(
         settings = config.pipeline
         if config.source.kind == "replay" and config.source.speed == 0:
             settings = dataclasses.replace(settings, lossless=True)  # no clock to keep up with: make every window
+        light = open_bias_control(config.sensor, source, metrics, profile)
         pipeline = build_pipeline(source, gaze, reconstructor, on_frame, settings, voxel, metrics, watchdog=watchdog,
-                                  known_motion=known_motion)
+                                  known_motion=known_motion, light=light)
         undo.pop_all()
     return Edge(config, source, pipeline, reconstructor, metrics, uplink=uplink, pages=pages, feeds=feeds)
 
@@ -235,13 +238,15 @@ def build_pipeline(
     *,
     watchdog: Callable[[], object] | None = None,
     known_motion: KnownHeadMotion | None = None,
+    light: BiasController | None = None,
 ) -> Pipeline:
     """The pipeline ``settings`` describe: its windows on a fresh ring, and the step ``infer`` names,
-    chosen here once. ``known_motion``: the head's motion from elsewhere (``edge.head_motion``)."""
+    chosen here once. ``known_motion``: the head's motion from elsewhere (``edge.head_motion``);
+    ``light``: the controller of the sensor's bias profile (``edge.bias_control``)."""
     windows = Windows(EventRing(settings.ring_capacity), source, gaze, infer, settings, voxel, metrics or EdgeMetrics(),
                       known_motion)
     step: Step = STEPS[settings.infer](windows, settings, on_frame)
-    return Pipeline(source, windows, step, settings, watchdog=watchdog)
+    return Pipeline(source, windows, step, settings, watchdog=watchdog, light=light)
 
 
 def _raise_failure(part: str, error: BaseException | None) -> None:
@@ -267,8 +272,22 @@ def _to_pages(pages: Any) -> FrameHandler:
     return add
 
 
-def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) -> tuple[EventSource, Calibration, Any, Any]:
-    """The event source, its calibration and (for a replayed recording) its gaze and IMU track loaders.
+def open_bias_control(cfg: SensorConfig, source: EventSource, metrics: EdgeMetrics, profile: str | None) -> BiasController | None:
+    """The controller of the sensor's bias profile with ``[sensor] profile = "auto"`` (a fixed profile
+    is written when the camera opens); ``profile``: the one the source runs now (None: unknown)."""
+    if cfg.profile != "auto":
+        metrics.set_light(cfg.lux or None, profile or "", not hasattr(source, "set_biases"))
+        return None
+    controller = BiasController(cfg, source, metrics, profile)
+    controller.begin()
+    return controller
+
+
+def _open_source(
+    cfg: SourceConfig, metrics: EdgeMetrics, sensor: SensorConfig, coarse: bool = False,
+) -> tuple[EventSource, Calibration, Any, Any, str | None]:
+    """The event source, its calibration, (for a replayed recording) its gaze and IMU track
+    loaders, and the bias profile it runs (a recording's from its ``meta.json``; None when not stated).
 
     ``coarse``: an as-fast-as-possible replay into a step with its own grid (on-change's
     ``replay_grid_us``) hands over the decoder's chunks whole instead of 1 ms slices: its pipeline
@@ -298,16 +317,22 @@ def _open_source(cfg: SourceConfig, metrics: EdgeMetrics, coarse: bool = False) 
         n_events = recording.meta.get("event_count")
         if isinstance(n_events, int) and n_events > 0:  # the bandwidth ratio against this very stream
             metrics.raw_bytes_per_event = recording.raw_path.stat().st_size / n_events
-        return source, recording.calibration, recording.gaze, recording.imu
+        stated = recording.meta.get("biases")
+        profile = profile_named(stated.get("offsets") if isinstance(stated, dict) else None)
+        if sensor.profile not in ("auto", profile):
+            logger.warning("[sensor] profile %s: a replay cannot change its biases; the recording was made with %s",
+                           sensor.profile, profile or "biases it does not state")
+        return source, recording.calibration, recording.gaze, recording.imu, profile
     # lazy: only the parts this configuration uses load (USB, websockets, numba)
     from darkread.edge.sources.evk4.camera import Evk4Camera
 
     if not cfg.calibration:
         raise ValueError("the camera needs a calibration.json: [source] calibration")
     calibration = load_calibration(cfg.calibration)
-    camera = Evk4Camera(serial=cfg.serial or None)
+    profile = FACTORY if sensor.profile == "auto" else sensor.profile  # auto starts at factory and switches
+    camera = Evk4Camera(serial=cfg.serial or None, biases=profile_offsets(profile))
     camera.open()
-    return camera, calibration, None, None
+    return camera, calibration, None, None, profile
 
 
 def _open_imu(cfg: ImuConfig, calibration: Calibration, imu_track: Any, feeds: list[Any]) -> Any:

@@ -133,6 +133,24 @@ class UplinkConfig:
     stable_connection_s: float = 2.0  # a connection that lasted this long resets the backoff
 
 
+SENSOR_PROFILES = ("auto", "factory", "dark")  # ``[sensor] profile``: the first is the default
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """The event sensor's bias profile (edge/sources/evk4/bias_profiles.py) and when it switches (edge/light.py)."""
+
+    # "auto": the dark profile in dim light, chosen from the light level; "factory" or "dark": that one, always
+    profile: str = SENSOR_PROFILES[0]
+    lux: float = 0.0  # > 0: the light at the page is this (a lux meter's reading) instead of estimated from the events
+    dark_below_lux: float = 15.0  # auto: into the dark profile below this light level ...
+    bright_above_lux: float = 25.0  # ... back to factory above this one ...
+    min_dwell_s: float = 10.0  # ... at most once per this much event time (a switch changes the noise it is read from)
+    estimate_s: float = 1.0  # one estimate per this much event time
+    settle_s: float = 0.5  # events this soon after a bias write are not counted (the pixels settle)
+    stride: int = 4  # every stride-th event is counted (the background is a rate: a sample suffices)
+
+
 @dataclass(frozen=True)
 class MetricsConfig:
     host: str = "127.0.0.1"
@@ -146,6 +164,7 @@ class EdgeConfig:
     gaze: GazeConfig = field(default_factory=GazeConfig)
     imu: ImuConfig = field(default_factory=ImuConfig)
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
     uplink: UplinkConfig = field(default_factory=UplinkConfig)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
 
@@ -155,6 +174,7 @@ _SECTION_TYPES = {
     "gaze": GazeConfig,
     "imu": ImuConfig,
     "pipeline": PipelineConfig,
+    "sensor": SensorConfig,
     "uplink": UplinkConfig,
     "metrics": MetricsConfig,
 }
@@ -285,6 +305,14 @@ def validate(config: EdgeConfig) -> EdgeConfig:
     if not 0 < config.pipeline.renew_fraction <= 1:
         raise ValueError("config [pipeline] renew_fraction is a share of a window's events: above 0, at most 1, "
                          f"not {config.pipeline.renew_fraction:g}")
+    sensor = config.sensor
+    if sensor.profile not in SENSOR_PROFILES:
+        raise ValueError(f"config [sensor] profile must be auto, factory or dark, not {sensor.profile!r}")
+    if sensor.lux < 0 or not 0 < sensor.dark_below_lux < sensor.bright_above_lux:
+        raise ValueError("config [sensor] lux must be >= 0 (0: estimated from the events) and 0 < dark_below_lux < "
+                         f"bright_above_lux, not {sensor.dark_below_lux:g} and {sensor.bright_above_lux:g}")
+    if sensor.estimate_s <= 0 or sensor.min_dwell_s < 0 or sensor.settle_s < 0 or sensor.stride < 1:
+        raise ValueError("config [sensor] estimate_s must be positive, min_dwell_s and settle_s >= 0, stride >= 1")
     if config.pipeline.dither_px < 0 or config.pipeline.settle_max_doubt <= 0:
         raise ValueError("config [pipeline] dither_px must be >= 0 (0: a view's frames all in its window) and settle_max_doubt positive")
     return config

@@ -30,6 +30,7 @@ from collections.abc import Callable
 import numpy as np
 
 from darkread.core.errors import DarkreadError
+from darkread.edge.bias_control import BiasController
 from darkread.edge.config import PipelineConfig
 from darkread.edge.events import Events
 from darkread.edge.fovea import in_window
@@ -66,8 +67,10 @@ class Pipeline:
         step: Step,
         settings: PipelineConfig,
         watchdog: Callable[[], object] | None = None,
+        light: BiasController | None = None,
     ) -> None:
         self.source = source
+        self.light = light  # sees every chunk: the light level, and the sensor's bias profile (edge.bias_control)
         self.windows = windows
         self.ring = windows.ring
         self.step = step
@@ -93,6 +96,9 @@ class Pipeline:
         if events.shape[0] == 0:
             return
         self.windows.push_scene(events)
+        if self.light is not None:
+            origin, fovea = self.windows.origin, self.windows.fovea
+            self.light.push(events, None if origin is None else (origin[0], origin[1], fovea.width, fovea.height))
         if self.settings.lossless:
             self._replay(events)
         else:

@@ -48,6 +48,7 @@ COUNTERS = (
     "failovers",
     "ack_timeouts",
     "pages",
+    "bias_switches",  # the sensor's bias profile changed (or, advisory on a replay, would have: edge.bias_control)
 )
 
 
@@ -68,6 +69,9 @@ class Snapshot:
     shed_level: int = 0
     raw_bytes_per_event: float = RAW_EVT3_BYTES_PER_EVENT
     cpu_s: float = 0.0  # process CPU time over the interval
+    light_lux: float | None = None  # the light at the page, as last estimated (or configured); None: not yet
+    bias_profile: str = ""  # the sensor's bias profile ("" when it has none: a replay without one stated)
+    bias_advisory: bool = False  # bias_profile is what a replay would run, not what it runs
 
     @property
     def cpu_per_reading_s(self) -> float:
@@ -94,10 +98,16 @@ class Snapshot:
             f"skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
             f"roi writes {r['roi_writes']:.1f}/s step lag p99 {self.step_lag_ms_p99:.0f} ms "
             f"shedding level {self.shed_level} (views capped {self.totals['views_capped']}) "
-            f"spool {self.spool_depth} (lost {self.spool_lost}) "
+            f"spool {self.spool_depth} (lost {self.spool_lost}) {self.light_text()}"
             f"sent {r['bytes_sent']/1e3:.1f} kB/s ({self.bandwidth_vs_raw():.1%} of raw events, "
             f"{self.bandwidth_vs_rgb():.1%} of one RGB frame per second)"
         )
+
+    def light_text(self) -> str:
+        """``light 8.1 lux, biases dark`` for the log line ('' before anything is known)."""
+        parts = ([f"light {self.light_lux:.3g} lux"] if self.light_lux is not None else []) + (
+            [f"biases {self.bias_profile}" + (" (advisory)" if self.bias_advisory else "")] if self.bias_profile else [])
+        return ", ".join(parts) + " " if parts else ""
 
     def bandwidth_vs_rgb(self) -> float:
         return self.rates["bytes_sent"] / RGB_FRAME_BYTES_ESTIMATE
@@ -127,6 +137,9 @@ class EdgeMetrics:
         self.spool_depth: Callable[[], int] = lambda: 0
         self.spool_lost: Callable[[], int] = lambda: 0
         self.raw_bytes_per_event = RAW_EVT3_BYTES_PER_EVENT  # the raw stream's size, for the bandwidth ratio
+        self.light_lux: float | None = None  # set by the bias controller (edge.bias_control)
+        self.bias_profile = ""
+        self.bias_advisory = False  # the profile is what the controller would run (a replay cannot switch)
         self._started = clock()
         self._last_time = self._started
         self._last_cpu = time.process_time()
@@ -135,6 +148,10 @@ class EdgeMetrics:
     def add(self, name: str, n: int = 1) -> None:
         with self._lock:
             self.totals[name] += n
+
+    def set_light(self, lux: float | None, profile: str, advisory: bool) -> None:
+        with self._lock:
+            self.light_lux, self.bias_profile, self.bias_advisory = lux, profile, advisory
 
     def observe_inference(self, ms: float) -> None:
         self.inference_ms.append(ms)  # deque.append is atomic
@@ -171,6 +188,9 @@ class EdgeMetrics:
             shed_level=self.shed_level,
             raw_bytes_per_event=self.raw_bytes_per_event,
             cpu_s=cpu_s,
+            light_lux=self.light_lux,
+            bias_profile=self.bias_profile,
+            bias_advisory=self.bias_advisory,
         )
 
     def prometheus_text(self) -> str:
@@ -178,6 +198,7 @@ class EdgeMetrics:
         with self._lock:
             totals = dict(self.totals)
             uptime = self._clock() - self._started
+            light, profile, advisory = self.light_lux, self.bias_profile, self.bias_advisory
         inference, latency = list(self.inference_ms), list(self.latency_ms)
         disagreement = list(self.motion_disagreement_px)
         lines: list[str] = []
@@ -206,6 +227,12 @@ class EdgeMetrics:
         metric("cpu_seconds_per_reading_second", "gauge", "process CPU time per second of event time since start",
                [("", time.process_time() / reading_s if reading_s > 0 else 0.0)])
         metric("uptime_seconds", "gauge", "seconds since start", [("", uptime)])
+        if light is not None:
+            metric("light_lux", "gauge", "the light at the page as last estimated from the events (or configured)", [("", light)])
+        if profile:
+            mode = "advisory" if advisory else "applied"
+            metric("bias_profile", "gauge", "the sensor's bias profile (1 on the current one; advisory: what a replay would run)",
+                   [(f'{{profile="{name}",mode="{mode}"}}', float(name == profile)) for name in sorted({"factory", "dark", profile})])
         return "\n".join(lines) + "\n"
 
 

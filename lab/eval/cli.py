@@ -13,6 +13,7 @@ if TYPE_CHECKING:
 
 from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
 from darkread.lab.synth.simulators import SIMULATORS
+from darkread.models.synth.motion import MOTION_REGIMES
 from darkread.models.synth.sensor import REGIMES
 
 DEFAULT_CONFIDENCE_MODEL = Path(__file__).resolve().parents[2] / "cloud" / "data" / "line_confidence.json"
@@ -149,6 +150,10 @@ def _add_make_suite(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sensor-profile", metavar="PROFILE",
                    help="with --regime grounded: draw the sensor around this measured profile (`darkread calibrate sensor`): "
                         "K within +-10 %% (or its stated uncertainty), the noise process fitted to its curve")
+    p.add_argument("--motion-regime", default="standard", choices=MOTION_REGIMES,
+                   help="the head motion's draws (default standard); grounded: tremor and reading motion from measurements "
+                        "drawn across their bands; quiet, central, strong: every band at its low end, centre or high end "
+                        "(the same scenes; docs/head_motion_model.md)")
     p.add_argument("--font", metavar="FAMILY",
                    help="every selected recording not already in this font family made again in it (same seed, light, "
                         "motion, text kind and x-height; named <name-in-FAMILY>_as_<old family>)")
@@ -217,7 +222,7 @@ def _make_suite(args: argparse.Namespace) -> int:
 
     entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
                          subset=args.subset, simulator=args.simulator, font=args.font, regime=args.regime,
-                         sensor_profile=args.sensor_profile)
+                         sensor_profile=args.sensor_profile, motion_regime=args.motion_regime)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
     return 0
 

@@ -32,6 +32,7 @@ from darkread.lab.jobs import run_jobs
 from darkread.lab.synth.rgb_camera import SPEC_NAME
 from darkread.lab.synth.simulators import simulator_for
 from darkread.models.synth.fonts import FACES
+from darkread.models.synth.motion import MOTION_REGIMES
 from darkread.models.synth.recording import RecordingSpec, write_recording
 from darkread.models.synth.sensor import REGIMES
 
@@ -65,6 +66,7 @@ class SuiteEntry:
     simulator: str = "darkread"  # "hesim": the same scene turned into events by hesim-3d (lab/synth/hesim_sensor.py)
     regime: str = "standard"  # our simulator's sensor regime (sensor.REGIMES), e.g. "fast-photoreceptor"
     sensor_profile: str | None = None  # grounded: drawn around this measured sensor profile (calibrate sensor)
+    motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES), e.g. "strong"
 
     def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
 
@@ -73,6 +75,7 @@ class SuiteEntry:
             xheight_px=self.xheight_px, n_lines=self.n_lines, line_chars=self.line_chars,
             description=f"darkread evaluation suite: {self.name}", split=self.split, read_once=self.read_once,
             scanpath=self.scanpath, simulator=self.simulator, regime=self.regime, sensor_profile=self.sensor_profile,
+            motion_regime=self.motion_regime,
         )
 
 
@@ -135,7 +138,8 @@ def spec_document(entry: SuiteEntry) -> dict:
     """What ``spec.json`` holds: the recording spec, without the fields left at their defaults that
     older suites did not have (so their recordings stay complete)."""
     doc = asdict(entry.recording_spec())
-    for key, default in (("scanpath", "model"), ("scanpath_file", None), ("simulator", "darkread"), ("sensor_profile", None)):
+    for key, default in (("scanpath", "model"), ("scanpath_file", None), ("simulator", "darkread"), ("sensor_profile", None),
+                         ("motion_regime", "standard")):
         if doc.get(key) == default:
             doc.pop(key, None)
     return doc
@@ -168,10 +172,11 @@ def _slug(family: str) -> str:
 
 def select_entries(*, small: bool = False, match: str | Sequence[str] | None = None, subset: str | None = None,
                    simulator: str = "darkread", font: str | None = None, regime: str = "standard",
-                   sensor_profile: str | None = None) -> list[SuiteEntry]:
+                   sensor_profile: str | None = None, motion_regime: str = "standard") -> list[SuiteEntry]:
     """The recordings ``make_suite`` writes, in order (its arguments, checked there)."""
     entries = simulator_check_entries() if subset == "simulator-check" else suite_entries(small=small)
-    entries = [replace(e, simulator=simulator, regime=regime, sensor_profile=sensor_profile) for e in entries]
+    entries = [replace(e, simulator=simulator, regime=regime, sensor_profile=sensor_profile,
+                       motion_regime=motion_regime) for e in entries]
     if match:
 
         patterns = [match] if isinstance(match, str) else list(match)
@@ -187,6 +192,7 @@ def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
     match: str | Sequence[str] | None = None, subset: str | None = None, simulator: str = "darkread",
     font: str | None = None, regime: str = "standard", sensor_profile: str | None = None,
+    motion_regime: str = "standard",
 ) -> list[SuiteEntry]:
     """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
     ``spec.json`` matches) are kept, so an interrupted run resumes. ``match``: only the recordings
@@ -195,7 +201,9 @@ def make_suite(
     selected recording not already in this family made again in it (``in_font``), to tell what a
     font costs from what a scene does; ``regime``: our simulator's sensor regime (the same scenes and
     draws; ``fast-photoreceptor``: what the photoreceptor's speed in the dark decides); ``sensor_profile``:
-    the grounded sensor drawn around a measured profile (``darkread calibrate sensor``) instead of its band."""
+    the grounded sensor drawn around a measured profile (``darkread calibrate sensor``) instead of its band;
+    ``motion_regime``: the head motion's draws (``quiet``, ``central``, ``strong``: the grounded bands'
+    ends and centre)."""
     from tqdm import tqdm
 
 
@@ -214,6 +222,8 @@ def make_suite(
             raise ValueError(f"--sensor-profile is drawn from by the grounded regime: add --regime grounded (not {regime})")
         sensor_profile = str(Path(sensor_profile).resolve())
         load_sensor_profile(sensor_profile)  # missing or wrong: one line before any work
+    if motion_regime not in MOTION_REGIMES:
+        raise ValueError(f"--motion-regime {motion_regime!r}: use one of {', '.join(MOTION_REGIMES)}")
     if subset is not None and subset not in SUBSETS:
         raise ValueError(f"--subset {subset!r}: use one of {', '.join(SUBSETS)}")
     if subset is not None and small:
@@ -221,11 +231,11 @@ def make_suite(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     entries = select_entries(small=small, match=match, subset=subset, simulator=simulator, font=font, regime=regime,
-                             sensor_profile=sensor_profile)
+                             sensor_profile=sensor_profile, motion_regime=motion_regime)
     entries = entries[:only]
     (out / SUITE_NAME).write_text(
         json.dumps({"small": small, "subset": subset, "simulator": simulator, "regime": regime, "font": font,
-                    "sensor_profile": sensor_profile,
+                    "sensor_profile": sensor_profile, "motion_regime": motion_regime,
                     "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )

@@ -15,6 +15,7 @@ KINDS = ("letters", "words", "pangram", "paragraph")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from darkread.models.synth.motion import MOTION_REGIMES
     from darkread.models.synth.sensor import REGIMES
 
     synth = subparsers.add_parser(
@@ -65,6 +66,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                           "a stronger low-pass; edge/sources/evk4/bias_profiles.py); modelled in the grounded regime")
     rec.add_argument("--f-number", type=float, default=2.4,
                      help="the lens's f-number (default 2.4): the share of the page's light on the chip (grounded regime)")
+    rec.add_argument("--motion-regime", choices=MOTION_REGIMES, default="standard",
+                     help="the head motion's draws: standard (default, what training saw) or grounded (tremor and reading "
+                          "motion from measurements, drawn across their bands); quiet, central, strong: every band at its "
+                          "low end, centre or high end (docs/head_motion_model.md)")
     rec.add_argument("--markers", action="store_true",
                      help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "
                           "page.layout.json (every recording carries the simulator's true page pose per millisecond, "
@@ -133,6 +138,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sc.add_argument("--check", action="store_true", help="calibrate each K's recordings and compare with the truth")
     sc.set_defaults(func=_sensor_calibration)
 
+    bt = sub.add_parser(
+        "background-table",
+        help="write the table the glasses estimate the light level from (background rate vs lux per bias profile)",
+        description="Run the central grounded sensor under each bias profile on a still page at each lux and write "
+        "background events per pixel and second as JSON (default: edge/sources/evk4/background_rates.json, shipped).",
+    )
+    bt.add_argument("--out", default="edge/sources/evk4/background_rates.json", help="the table (JSON)")
+    bt.add_argument("--pixels", type=int, default=512, help="pixels per light level (default 512)")
+    bt.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per level (default 10)")
+    bt.set_defaults(func=_background_table)
+
 
 def _sensor_calibration(args: argparse.Namespace) -> int:
     from darkread.lab.synth import sensor_calibration as sc
@@ -149,6 +165,15 @@ def _sensor_calibration(args: argparse.Namespace) -> int:
             print(folder)
         return 0
     print(sc.check_table(sc.run_check(args.out, specs)))
+    return 0
+
+
+def _background_table(args: argparse.Namespace) -> int:
+    from darkread.lab.synth.background_table import write_background_table
+
+    if args.pixels < 1 or args.seconds <= 0:
+        raise ValueError("--pixels and --seconds must be positive")
+    print(write_background_table(args.out, pixels=args.pixels, seconds=args.seconds))
     return 0
 
 
@@ -216,6 +241,7 @@ def _recording(args: argparse.Namespace) -> int:
         simulator=args.simulator,
         f_number=args.f_number,
         bias_profile=args.biases,
+        motion_regime=args.motion_regime,
     )
     if args.scanpath_file and not Path(args.scanpath_file).is_file():
         raise FileNotFoundError(f"--scanpath-file {args.scanpath_file}: no such file")

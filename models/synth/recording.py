@@ -66,6 +66,7 @@ class RecordingSpec:
     f_number: float = DEFAULT_F_NUMBER  # the lens; what share of the page's light reaches the chip (regime "grounded")
     bias_profile: str = FACTORY  # the IMX636 biases it is made with (edge/sources/evk4/bias_profiles.py)
     sensor_profile: str | None = None  # a measured sensor profile the grounded sensor is drawn from
+    motion_regime: str = "standard"  # the head motion's draws (models/synth/motion.py MOTION_REGIMES)
 
 
 LAYOUT_NAME = "page.layout.json"
@@ -81,6 +82,7 @@ def session_spec(spec: RecordingSpec) -> SessionSpec:
         xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
         scanpath=spec.scanpath, scanpath_file=spec.scanpath_file, regime=spec.regime, markers=spec.markers,
         f_number=spec.f_number, bias_profile=spec.bias_profile, sensor_profile=spec.sensor_profile,
+        motion_regime=spec.motion_regime,
     )
 
 
@@ -400,6 +402,8 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     if session.marker_page is not None:
         meta["markers"] = {"layout": LAYOUT_NAME, "pose_truth": POSE_TRUTH_NAME, "n_markers": len(session.marker_page.markers)}
     meta["truth"] = {"pose": POSE_TRUTH_NAME, "ink": LAYOUT_NAME if session.marker_page is not None else PAGE_INK_NAME}
+    if spec.motion_regime != "standard":  # (absent: the standard draws, as in every older recording)
+        meta["motion_regime"] = spec.motion_regime
     if spec.scanpath != "model" or spec.scanpath_file is not None:
         meta["scanpath"] = {"kind": "human", "source": HumanScanpath.load(spec.scanpath_file or SHIPPED).source}
     (out / "meta.json").write_text(json.dumps(meta, indent=2))

@@ -51,6 +51,7 @@ class SessionSpec:
     f_number: float = DEFAULT_F_NUMBER  # the event camera's lens (the grounded regime's chip illuminance)
     bias_profile: str = FACTORY  # the IMX636 biases (edge/sources/evk4/bias_profiles.py; modelled in "grounded")
     sensor_profile: str | None = None  # a measured sensor profile the grounded sensor is drawn from (sensor_profile.py)
+    motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES): "standard" or a grounded band
 
 
 SCANPATHS = ("model", "human")
@@ -151,7 +152,7 @@ def make_session(spec: SessionSpec, seed: int) -> Session:
     surround = float(rng.uniform(0.05, 0.4))  # a desk or clothing around the paper
     if np.random.default_rng([seed, 3]).random() < 0.8 or spec.markers:
         surround = paper  # usually the sheet extends beyond the field of view (no page edge in view)
-    scene = Scene(page, reflect, calib, rot, centre, random_motion(motion_level, rng), lux, surround)
+    scene = Scene(page, reflect, calib, rot, centre, random_motion(motion_level, rng, spec.motion_regime), lux, surround)
     deg_per_texel = math.degrees(texel_m / distance)
     if spec.scanpath == "model" and spec.scanpath_file is None:
         scanpath = reading_scanpath(page, spec.duration_s + 1.0, deg_per_texel, rng, start_line=0)

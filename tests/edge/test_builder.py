@@ -160,3 +160,29 @@ def test_a_recording_with_an_imu_stream_gives_the_edge_the_gyroscopes_head_motio
         assert plain.pipeline.windows.known_motion is None
     finally:
         plain.shutdown(1.0)
+
+
+@pytest.mark.slow  # a whole edge: decoder start-up, model load
+def test_a_replay_knows_its_biases_and_only_advises_a_switch(tmp_path: Path) -> None:
+    """A recording states the biases it was made with; a replay cannot change them, so the controller
+    reads the light on that profile and says (and counts) what it would do."""
+    import json
+
+    from darkread.edge.sources.evk4.bias_profiles import profile_offsets
+
+    recording = synthetic_recording(tmp_path / "rec", n_events=8_000)
+    (recording / "meta.json").write_text(json.dumps({"biases": {"profile": "dark", "offsets": profile_offsets("dark")}}))
+    config = load_config(None, environ={}, overrides={
+        "source": {"kind": "replay", "path": str(recording), "speed": 0.0},
+        "pipeline": {"model": str(sum_bins_model(tmp_path / "m.onnx")), "infer": "every-window"},
+        "sensor": {"lux": 40.0},
+    })
+    edge = build_edge(config, on_frame=lambda frame, arrival: None)
+    light = edge.pipeline.light
+    assert light is not None and light.advisory and light.active == "dark" and light.state.profile == "factory"
+    assert edge.metrics.totals["bias_switches"] == 1
+    snap = edge.metrics.snapshot()
+    assert snap.light_lux == 40.0 and "biases factory (advisory)" in snap.log_line()
+    edge.startup()
+    assert edge.source.wait(10)
+    assert edge.shutdown(1.0)

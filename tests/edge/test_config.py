@@ -130,3 +130,22 @@ def test_fuse_must_name_what_a_view_averages(tmp_path) -> None:
         load_config(path)
     path.write_text('[pipeline]\nfuse = "mask"\n')
     assert load_config(path).pipeline.fuse == "mask"
+
+
+def test_sensor_section_sets_the_bias_profile_and_its_switching(tmp_path: Path) -> None:
+    toml = tmp_path / "edge.toml"
+    toml.write_text('[sensor]\nprofile = "auto"\nlux = 8.0\ndark_below_lux = 12\nbright_above_lux = 30\n')
+    config = load_config(toml, environ={"DARKREAD_EDGE_SENSOR_MIN_DWELL_S": "20"})
+    assert (config.sensor.lux, config.sensor.dark_below_lux, config.sensor.bright_above_lux) == (8.0, 12.0, 30.0)
+    assert config.sensor.min_dwell_s == 20.0 and EdgeConfig().sensor.profile == "auto"
+
+
+@pytest.mark.parametrize("values, message", [
+    ({"profile": "night"}, "profile must be auto, factory or dark"),
+    ({"dark_below_lux": 30.0, "bright_above_lux": 20.0}, "0 < dark_below_lux < bright_above_lux"),
+    ({"lux": -1.0}, "lux must be >= 0"),
+    ({"estimate_s": 0.0}, "estimate_s must be positive"),
+])
+def test_sensor_section_refuses_impossible_values(values: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        load_config(environ={}, overrides={"sensor": values})

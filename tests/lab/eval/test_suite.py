@@ -15,6 +15,8 @@ from darkread.lab.eval.suite import (
     XHEIGHTS_PX,
     load_suite,
     make_suite,
+    select_entries,
+    spec_document,
     suite_entries,
 )
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES
@@ -231,3 +233,11 @@ def test_make_suite_refuses_an_unknown_regime_or_one_for_the_other_simulator(tmp
         make_suite(tmp_path, regime="bright", progress=False)
     with pytest.raises(ValueError, match="leave out --simulator hesim"):
         make_suite(tmp_path, regime="fast-photoreceptor", simulator="hesim", progress=False)
+
+
+def test_make_suite_takes_a_motion_regime_for_every_recording(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="--motion-regime 'wild'"):
+        make_suite(tmp_path, motion_regime="wild", progress=False)
+    entries = select_entries(small=True, motion_regime="strong")
+    assert entries and all(e.motion_regime == "strong" and e.recording_spec().motion_regime == "strong" for e in entries)
+    assert "motion_regime" not in spec_document(select_entries(small=True)[0])  # older suites' spec.json stay complete

@@ -1,0 +1,148 @@
+"""The dark profile on the glasses: the light level read from the event stream, the EVK4's biases switched.
+
+:class:`BiasController` sits on the reader thread (``Pipeline.sink`` hands it every chunk): it counts
+events per tile, and once per ``[sensor] estimate_s`` of event time reads the light at the page from
+the background rate on the curve of the profile the sensor runs (``edge/light.py``), then applies
+the hysteresis rule. On a switch it writes the new profile's biases through the source's own
+``set_biases`` (the EVK4 driver), logs one line with the estimate, counts it (``bias_switches``) and
+leaves the next ``settle_s`` of events out of the count (the pixels settle after a bias write).
+``[sensor] lux`` replaces the estimate by a configured light level (decided once, at the start).
+
+A source that cannot change its biases (a replayed recording) gets the controller in advisory mode:
+it reads the light on the recording's own profile (``meta.json`` ``biases``), logs and counts what it
+would do, and changes nothing. A recording that does not state its biases gives no estimate.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from darkread.core.errors import DarkreadError
+from darkread.edge.config import SensorConfig
+from darkread.edge.events import Events
+from darkread.edge.light import (
+    ProfileRule,
+    ProfileState,
+    RateCurve,
+    TileGrid,
+    background_rate_hz,
+    load_rate_curves,
+    next_profile,
+    usable_tiles,
+)
+from darkread.edge.sources.evk4.bias_profiles import BIAS_PROFILES, FACTORY, profile_offsets
+from darkread.edge.telemetry import EdgeMetrics
+
+logger = logging.getLogger(__name__)
+
+
+def profile_named(offsets: dict[str, int] | None) -> str | None:
+    """The name of the bias profile whose offsets these are (None: no offsets, or a profile of its own)."""
+    if offsets is None:
+        return None
+    full = {name: int(offsets.get(name, 0)) for name in profile_offsets(FACTORY)}
+    return next((name for name in BIAS_PROFILES if profile_offsets(name) == full), None)
+
+
+class BiasController:
+    """Chooses the sensor's bias profile from the light; ``profile`` is the one the source runs now
+    (None: unknown, so the light cannot be read from its events)."""
+
+    def __init__(self, config: SensorConfig, source: Any, metrics: EdgeMetrics, profile: str | None,
+                 curves: dict[str, RateCurve] | None = None) -> None:
+        self.config = config
+        self.rule = ProfileRule(config.dark_below_lux, config.bright_above_lux, config.min_dwell_s)
+        self.source = source
+        self.metrics = metrics
+        self.grid = TileGrid(int(source.width), int(source.height))
+        self._areas = self.grid.areas()
+        self._set_biases: Callable[..., None] | None = getattr(source, "set_biases", None)
+        self.advisory = self._set_biases is None
+        self.active = profile  # what the sensor runs
+        self.state = ProfileState(profile or FACTORY)  # what the rule chose (advisory: what the sensor would run)
+        self.curves = load_rate_curves() if curves is None else curves
+        self.lux: float | None = None
+        self._counts = np.zeros(self.grid.shape, dtype=np.int64)
+        self._touched = np.zeros(self.grid.shape, dtype=bool)  # tiles the gaze window covered in this slice
+        self._slice_start: int | None = None
+        self._settle_until: int | None = None
+        self._estimating = config.lux <= 0 and profile in self.curves
+
+    def begin(self) -> None:
+        """Before the first event: a configured light level decides now; say what the controller will do."""
+        mode = "advisory (the source cannot change its biases)" if self.advisory else "switching the sensor's biases"
+        if self.config.lux > 0:
+            logger.info("light %.3g lux (configured), %s", self.config.lux, mode)
+            self._decide(self.config.lux, 0.0, None)
+        elif self.active is None:
+            logger.info("the source does not state its bias profile: no light estimate, biases left as they are")
+        elif self.active not in self.curves:
+            logger.info("no background curve for bias profile %s: no light estimate", self.active)
+        else:
+            logger.info("light estimated from the background events on the %s profile every %g s, %s",
+                        self.active, self.config.estimate_s, mode)
+        self.metrics.set_light(self.lux, self.state.profile if self.active is not None else "", self.advisory)
+
+    def push(self, events: Events, gaze_window: tuple[int, int, int, int] | None) -> None:
+        """Reader thread: one chunk of events (time-sorted), with the gaze window at the time."""
+        if not self._estimating or events.shape[0] == 0:
+            return
+        t = events["t"]
+        if self._settle_until is not None:
+            if int(t[-1]) < self._settle_until:
+                return
+            events = events[int(np.searchsorted(t, self._settle_until)):]
+            self._slice_start, self._settle_until = int(events["t"][0]), None
+        if self._slice_start is None:
+            self._slice_start = int(events["t"][0])
+        self._counts += self.grid.counts(events, self.config.stride)
+        if gaze_window is not None:
+            self._touched |= self.grid.touching(gaze_window)
+        t_last = int(events["t"][-1])
+        if t_last - self._slice_start >= self.config.estimate_s * 1e6:
+            self._estimate(t_last)
+
+    def _estimate(self, t_last: int) -> None:
+        seconds = (t_last - (self._slice_start or t_last)) / 1e6
+        usable = usable_tiles(self.grid, getattr(self.source, "roi", None), self._touched)
+        rate = background_rate_hz(self._counts, self._areas, usable, seconds)
+        self._counts[:] = 0
+        self._touched[:] = False
+        self._slice_start = t_last
+        if rate is None or self.active is None:
+            return
+        lux = float(self.curves[self.active].lux_of(rate))
+        self._decide(lux, t_last / 1e6, rate)
+        self.metrics.set_light(self.lux, self.state.profile, self.advisory)
+
+    def _decide(self, lux: float, t_s: float, rate: float | None) -> None:
+        self.lux = lux
+        chosen = next_profile(self.state, lux, t_s, self.rule)
+        if chosen.profile == self.state.profile:
+            self.state = chosen
+            return
+        seen = f"{rate:.3g} background events per pixel and s on the {self.active} profile" if rate is not None else "configured"
+        if self.advisory:
+            logger.info("light %.3g lux (%s): would switch the biases %s -> %s (a replay cannot change its biases)",
+                        lux, seen, self.state.profile, chosen.profile)
+            self.state = chosen
+            self.metrics.add("bias_switches")
+            return
+        assert self._set_biases is not None
+        try:
+            self._set_biases(**profile_offsets(chosen.profile))
+        except DarkreadError as exc:  # the camera refused: stay, and try again only after the dwell time
+            logger.warning("light %.3g lux (%s): switching the biases to %s failed: %s", lux, seen, chosen.profile, exc)
+            self.state = ProfileState(self.state.profile, t_s)
+            return
+        logger.info("light %.3g lux (%s): biases switched %s -> %s", lux, seen, self.state.profile, chosen.profile)
+        self.active, self.state = chosen.profile, chosen
+        self.metrics.add("bias_switches")
+        self._estimating = self.config.lux <= 0 and self.active in self.curves
+        self._counts[:] = 0
+        self._touched[:] = False
+        self._settle_until = int(t_s * 1e6 + self.config.settle_s * 1e6)
