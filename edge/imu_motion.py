@@ -16,7 +16,8 @@ where the head is still (the mean over ``still_span_us`` around them is under ``
 head keeps facing the page, so slow motion flagged still averages out). Samples further apart
 than ``gap_us`` are a gap: nothing is integrated across it, and for ``trust_us`` after it the
 motion is unknown (``healthy`` is False): the edge then falls back to the event tracker and the
-deblur's own search.
+deblur's own search. So it does while the head walks: a walking head pitches at the step rate
+(``step_band_rms``), and the page in the hand bobs against it, which no gyroscope sees.
 
 Pure functions of arrays at the core; ``ImuHeadMotion`` holds the integrated track, extended by a
 whole file (replay) or by the live feed's batches (``edge.sources.imu_feed``), under a lock.
@@ -45,6 +46,14 @@ class ImuMotionConfig:
     bias_window_us: int = 10_000_000  # the bias: the mean of the still samples over this long before
     smear_radius_px: float = 2.0  # the deblur searches this far around the predicted smear
     keep_us: int = 30_000_000  # a live stream keeps this much history (a replayed file keeps all)
+    # walking: the head pitches at the step rate, and a held page bobs against it, which no
+    # gyroscope sees (docs/head_motion.md); the edge then measures the motion from the events
+    step_band_hz: tuple[float, float] = (1.4, 2.8)  # walking cadence, 1.6-2.2 steps/s, with margin
+    step_span_us: int = 2_000_000  # the spectrum's span: ~3 steps
+    step_min_span_us: int = 500_000  # less data than this (the stream's start) decides nothing: not trusted
+    step_rad_s: float = 0.0175  # 1 deg/s RMS in the step band: a walking head (reading seated or standing: < 0.5)
+    step_block_us: int = 100_000  # the decision is refreshed this often
+    step_hold_us: int = 1_000_000  # and, once walking, held this long after the last block that said so
 
 
 # -- rotations, vectorised ------------------------------------------------------------------------
@@ -121,6 +130,36 @@ def integrate(t_us: np.ndarray, omega: np.ndarray, gap_us: int) -> np.ndarray:
     return np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
 
 
+def step_band_rms(t_us: np.ndarray, omega: np.ndarray, block_ends_us: np.ndarray,
+                  cfg: ImuMotionConfig = ImuMotionConfig()) -> np.ndarray:
+    """[n_blocks] rad/s: the angular velocity's RMS (all axes) in the walking cadence's band over the
+    ``step_span_us`` before each block end, or what of it the samples cover (at the stream's start);
+    NaN where they cover less than ``step_min_span_us``. Each span resampled to 1 kHz, its linear
+    trend removed (the slow reading drift would leak into the band), a Hann window, one FFT."""
+    out = np.full(block_ends_us.shape[0], np.nan)
+    covered = np.minimum(block_ends_us - int(t_us[0]), cfg.step_span_us) // 1000
+    for n in np.unique(covered[covered >= cfg.step_min_span_us // 1000]):  # (one length for all but the first blocks)
+        rows = np.flatnonzero(covered == n)
+        grid = block_ends_us[rows, None].astype(np.float64) - 1000.0 * np.arange(n - 1, -1, -1)[None, :]
+        spans = np.stack([np.interp(grid, t_us.astype(np.float64), omega[:, k]) for k in range(3)], axis=2)
+        out[rows] = _band_rms(spans, cfg.step_band_hz)
+    return out
+
+
+def _band_rms(spans: np.ndarray, band_hz: tuple[float, float]) -> np.ndarray:
+    """[m] RMS in ``band_hz`` of ``spans`` [m, n, 3] sampled at 1 kHz (linear trend removed, Hann window)."""
+    n = spans.shape[1]
+    x = np.linspace(-1.0, 1.0, n)[None, :, None]
+    slope = (spans * x).sum(axis=1, keepdims=True) / (x ** 2).sum()
+    detrended = spans - spans.mean(axis=1, keepdims=True) - slope * x
+    window = np.hanning(n)
+    spectrum = np.fft.rfft(detrended * window[None, :, None], axis=1)
+    freq = np.fft.rfftfreq(n, 1e-3)
+    band = (freq >= band_hz[0]) & (freq <= band_hz[1])
+    power = (np.abs(spectrum[:, band]) ** 2).sum(axis=(1, 2)) * 2.0 / (np.sum(window ** 2) * n)
+    return np.sqrt(power)
+
+
 def shift_px(calibration: Calibration, centre_px: tuple[float, float], rotvecs: np.ndarray) -> np.ndarray:
     """[n, 2]: where the scene point seen at ``centre_px`` goes in the sensor when the camera turns by
     each rotation vector (camera frame), minus ``centre_px``: the pure-rotation homography at that pixel."""
@@ -152,6 +191,9 @@ class ImuHeadMotion:
         self._raw = np.zeros((0, 3))  # device frame, as received
         self._theta = np.zeros((0, 3))  # camera frame, integrated
         self._gaps = np.zeros(0, np.int64)  # event times where a gap ended (the first sample after it)
+        self._step_t = np.zeros(0, np.int64)  # block ends (event clock) where walking was decided ...
+        self._walked = np.zeros(0, bool)  # ... whether the head walked ...
+        self._unknown = np.zeros(0, bool)  # ... or too little was known to say
         self.received = 0
 
     @classmethod
@@ -187,11 +229,26 @@ class ImuHeadMotion:
             ended = all_t[max(n_old - 1, 0) + 1:][steps > self.cfg.gap_us]
             self._t, self._raw, self._theta = all_t, all_raw, np.concatenate([self._theta, theta])
             self._gaps = np.concatenate([self._gaps, ended])
+            self._decide_walking()
             self.received += int(t.shape[0])
             if self.live and self._t[-1] - self._t[0] > 2 * self.cfg.keep_us:  # amortised trim
                 first = int(np.searchsorted(self._t, self._t[-1] - self.cfg.keep_us))
                 self._t, self._raw, self._theta = self._t[first:], self._raw[first:], self._theta[first:]
                 self._gaps = self._gaps[self._gaps >= self._t[0]]
+                kept = self._step_t >= self._t[0]
+                self._step_t, self._walked, self._unknown = self._step_t[kept], self._walked[kept], self._unknown[kept]
+
+    def _decide_walking(self) -> None:
+        """Walking or not at each new block end up to the newest sample (``step_band_rms``)."""
+        block = self.cfg.step_block_us
+        start = int(self._step_t[-1]) + block if self._step_t.shape[0] else (int(self._t[0]) // block + 1) * block
+        ends = np.arange(start, int(self._t[-1]) + 1, block, dtype=np.int64)
+        if ends.shape[0] == 0:
+            return
+        rms = step_band_rms(self._t, self._raw, ends, self.cfg)
+        self._step_t = np.concatenate([self._step_t, ends])
+        self._walked = np.concatenate([self._walked, rms > self.cfg.step_rad_s])
+        self._unknown = np.concatenate([self._unknown, np.isnan(rms)])
 
     # -- what the edge asks -------------------------------------------------------------------------
     @property
@@ -219,7 +276,23 @@ class ImuHeadMotion:
         if k and t_us - int(self._gaps[k - 1]) < self.cfg.trust_us:
             return False
         nxt = int(np.searchsorted(t, t_us))  # inside a gap: the samples around it are far apart
-        return not (0 < nxt < t.shape[0] and t[nxt] - t[nxt - 1] > self.cfg.gap_us)
+        if 0 < nxt < t.shape[0] and t[nxt] - t[nxt - 1] > self.cfg.gap_us:
+            return False
+        return not self._walking(t_us)
+
+    def _walking(self, t_us: int) -> bool:
+        """The last block decided by ``t_us`` (or one within ``step_hold_us`` before it) said walking,
+        or the last could not tell."""
+        last = int(np.searchsorted(self._step_t, t_us, side="right"))
+        if last == 0 or self._unknown[last - 1]:
+            return True
+        first = int(np.searchsorted(self._step_t, t_us - self.cfg.step_hold_us, side="right"))
+        return bool(self._walked[min(first, last - 1):last].any())
+
+    def walking(self, t_us: int) -> bool:
+        """Whether the head walks at ``t_us`` (its pitch at the step rate), as far as the samples by then tell."""
+        with self._lock:
+            return self._walking(int(t_us))
 
     def rotation_at(self, t_us: np.ndarray) -> np.ndarray:
         """[n, 3]: the camera's integrated rotation vector at event times ``t_us`` (interpolated; held

@@ -24,14 +24,40 @@ ROI_MODES = ("auto", "on", "off")  # ``[pipeline] sensor_roi``: the first is the
 ROI_FOLLOW_MARGIN_PX = 32  # slack around a wanted window so small eye movements need no rewrite
 
 
+def rect_covers(outer: Rect, inner: Rect) -> bool:
+    """Whether ``outer`` holds all of ``inner`` (both x0, y0, width, height)."""
+    ox, oy, ow, oh = outer
+    x0, y0, w, h = inner
+    return ox <= x0 and oy <= y0 and x0 + w <= ox + ow and y0 + h <= oy + oh
+
+
+NOT_YET = 1 << 62  # ``delivered_since`` of a window the sensor has not delivered yet (no event is that new)
+
+
+def delivered_since(writes: list[tuple[int | None, Rect | None]], rect: Rect) -> int | None:
+    """Since when every event of ``rect`` has been delivered, given the ROI writes (in effect from,
+    the window or None for the whole sensor; oldest first; in effect None: not yet): where the
+    oldest of the latest writes that all cover it took effect; ``NOT_YET`` while the newest has not;
+    None when every write held covers it (as far as they tell, it always was)."""
+    since = None
+    for k in range(len(writes) - 1, -1, -1):
+        effective, roi = writes[k]
+        if effective is None:  # not in effect yet (or moved on before it was)
+            if k == len(writes) - 1:
+                return NOT_YET
+            continue
+        if roi is not None and not rect_covers(roi, rect):
+            return since if since is not None else effective
+        since = effective
+    return None
+
+
 def follow_window(requested: Rect, current: Rect | None, margin: int, sensor_wh: tuple[int, int] = (1280, 720)) -> Rect | None:
     """The window to program for the wanted ``requested`` one, or None when ``current`` still covers it:
     the wanted window padded by ``margin`` on every side, clipped to the sensor."""
     x0, y0, w, h = requested
-    if current is not None:
-        cx, cy, cw, ch = current
-        if cx <= x0 and cy <= y0 and x0 + w <= cx + cw and y0 + h <= cy + ch:
-            return None
+    if current is not None and rect_covers(current, requested):
+        return None
     nx0, ny0 = max(0, x0 - margin), max(0, y0 - margin)
     nx1, ny1 = min(sensor_wh[0], x0 + w + margin), min(sensor_wh[1], y0 + h + margin)
     return nx0, ny0, nx1 - nx0, ny1 - ny0

@@ -10,6 +10,7 @@ it cuts one frame's events out of the ring and makes the frame (:mod:`darkread.e
 from __future__ import annotations
 
 import threading
+from collections import deque
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from darkread.edge.gaze import GazeLookup, GazeSample
 from darkread.edge.head_motion import KnownHeadMotion, SmearPrior
 from darkread.edge.imu_motion import JoinedSceneMotion
 from darkread.edge.ring import EventRing
-from darkread.edge.roi import ROI_FOLLOW_MARGIN_PX, Rect, follow_window, motion_healthy, roi_wanted
+from darkread.edge.roi import ROI_FOLLOW_MARGIN_PX, Rect, delivered_since, follow_window, motion_healthy, roi_wanted
 from darkread.edge.scene_motion import SceneMotion
 from darkread.edge.sources.base import EventSource
 from darkread.edge.telemetry import EdgeMetrics
@@ -79,6 +80,7 @@ class Windows:
         self.roi: Rect | None = None  # what the sensor delivers (None: all of it)
         self.shed_level = 0  # live and falling behind: what the steps give up (edge.load)
         self._roi_lock = threading.Lock()  # (placed by the steps, given back by the reader thread)
+        self._roi_writes: deque[tuple[int | None, Rect | None]] = deque(maxlen=64)  # (in effect from, what), newest last
 
     def motion_known(self, t_us: int) -> bool:
         """The head's motion at ``t_us`` comes from the known motion (present and healthy)."""
@@ -90,8 +92,9 @@ class Windows:
         motion that stopped being healthy gets the whole sensor back first (the chunk delivered
         through the ROI is not measured, and the tracker starts afresh)."""
         t = int(events["t"][-1])
+        self._roi_took_effect(events)
         if self.roi is not None and not roi_wanted(self.settings.sensor_roi, self.known_motion, t):
-            self._write_roi(None)
+            self._write_roi(None, t)
             if self._measure_scene:  # its last slices are from before the pause: it starts afresh
                 with self._scene_lock:
                     self.scene = SceneMotion(self.sensor_wh)
@@ -132,21 +135,37 @@ class Windows:
         otherwise the whole sensor."""
         if not roi_wanted(self.settings.sensor_roi, self.known_motion, t_us):
             if self.roi is not None:
-                self._write_roi(None)
+                self._write_roi(None, t_us)
             return
         target = follow_window(wanted, self.roi, ROI_FOLLOW_MARGIN_PX, self.sensor_wh)
         if target is not None:
-            self._write_roi(target)
+            self._write_roi(target, t_us)
 
-    def _write_roi(self, roi: Rect | None) -> None:
-        """Program the source's ROI (None: the whole sensor) and count the write (``roi_writes``)."""
+    def _write_roi(self, roi: Rect | None, t_us: int) -> None:
+        """Program the source's ROI (None: the whole sensor) from ``t_us`` on and count the write (``roi_writes``)."""
         with self._roi_lock:
             if roi == self.roi:
                 return
             x0, y0, w, h = roi if roi is not None else (0, 0, *self.sensor_wh)
             self.source.set_roi(x0, y0, w, h)
             self.roi = roi
+            self._roi_writes.append((None, roi))  # (in effect from its first delivered event: _roi_took_effect)
         self.metrics.add("roi_writes")
+
+    def delivered_since(self, rect: Rect) -> int | None:
+        """Since when the sensor has delivered every event of ``rect`` (``edge.roi.delivered_since``
+        over the ROI writes held). A frame takes no older events there: where an earlier ROI left
+        part of its window dark, it would see half a page."""
+        with self._roi_lock:
+            return delivered_since(list(self._roi_writes), rect)
+
+    def _roi_took_effect(self, events: Events) -> None:
+        """Reader thread: the newest ROI write's first delivered event, as the source tells it (a
+        replay's decoder) or else this chunk's first (the first read after the write)."""
+        with self._roi_lock:
+            if self._roi_writes and self._roi_writes[-1][0] is None:
+                since = getattr(self.source, "roi_since_us", None)
+                self._roi_writes[-1] = (int(events["t"][0]) if since is None else int(since), self._roi_writes[-1][1])
 
     def frame(self, window: Events, origin: tuple[int, int], gaze: GazeSample, t_us: int,
               probability: bool = False) -> FrameResult | None:

@@ -88,6 +88,7 @@ class RawReader:
         self._triggers: list[Triggers] = []
         self._started = False
         self._roi: tuple[int, int, int, int] | None = None
+        self.roi_since_us: int | None = None  # the first event decoded under the current ROI (None: none yet)
 
     def _new_decoder(self) -> Evt3Decoder | Evt2Decoder:
         return make_decoder(self.header, path=str(self.path), time_shift=self._time_shift, strict=self._strict)
@@ -105,6 +106,7 @@ class RawReader:
         (None: all); the words skipped are counted in ``stats.words_outside_roi``."""
         self._decoder.set_roi(roi)
         self._roi = self._decoder.roi
+        self.roi_since_us = None
 
     def __iter__(self) -> Iterator[Events]:
         """Decode from the start of the data; iterating again starts over with fresh counters."""
@@ -120,6 +122,8 @@ class RawReader:
                 if len(triggers):
                     self._triggers.append(triggers)
                 if len(events):
+                    if self.roi_since_us is None:
+                        self.roi_since_us = int(events["t"][0])
                     yield events
         self._decoder.finish()
 

@@ -110,6 +110,12 @@ class ReplaySource:
         if self._reader is not None:
             self._apply_roi(self._reader)
 
+    @property
+    def roi_since_us(self) -> int | None:
+        """The first event delivered under the ROI set last (None: none yet): events decoded before
+        the ROI moved are still in flight after ``set_roi``, as a camera's are."""
+        return self._reader.roi_since_us if self._reader is not None else None
+
     def _apply_roi(self, reader: RawReader) -> None:
         """The decoder's ROI, and its chunk size: small while a ROI is set (a move applies sooner)."""
         reader.set_roi(self._roi)

@@ -127,7 +127,9 @@ class OnChangeStep:
         """One frame of the current fixation (its events only, up to ``n_events``), fused into the
         view; a frame that does not register onto the view sends it and starts the next one."""
         placed = self._dithered(origin, len(self.fuser))
-        window = self.windows.recent_events(placed, t, t_from=t_from)
+        fov = self.windows.fovea
+        delivered = self.windows.delivered_since((placed[0], placed[1], fov.width, fov.height))
+        window = self.windows.recent_events(placed, t, t_from=t_from if delivered is None else max(t_from, delivered))
         if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
             return False
         frame = self.windows.frame(window, placed, gaze, t, probability=self.settings.fuse == "probability")

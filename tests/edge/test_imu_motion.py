@@ -17,6 +17,7 @@ from darkread.edge.imu_motion import (
     rotation_matrices,
     rotation_vectors,
     running_bias,
+    step_band_rms,
     still_samples,
 )
 from darkread.edge.io.calibration import Calibration
@@ -51,10 +52,10 @@ def test_a_steady_turn_moves_the_scene_by_the_homography() -> None:
     rate = 0.1
     motion = ImuHeadMotion.of_track(steady_turn((0.0, rate, 0.0), seconds=1.0), calibration())
     assert isinstance(motion, KnownHeadMotion) and isinstance(motion, SmearPrior)
-    t0, t1 = 5_200_000, 5_700_000
+    t0, t1 = 5_600_000, 5_900_000  # (the first half second decides whether the head walks)
     a, b = motion.scene_px(t0), motion.scene_px(t1)
     assert a is not None and b is not None
-    expected = FX * np.tan(rate * 0.5 + np.arctan(a[0] / FX)) - a[0]  # pure rotation about the optical centre
+    expected = FX * np.tan(rate * 0.3 + np.arctan(a[0] / FX)) - a[0]  # pure rotation about the optical centre
     assert b[0] - a[0] == pytest.approx(expected, rel=1e-3) and abs(b[1] - a[1]) < 1e-6
     # the deblur's smear over 20 ms: the same shift at the window's centre
     smear = motion.smear_prior(t1 - 20_000, t1, (640.0, 360.0))
@@ -90,18 +91,47 @@ def test_a_turning_head_is_not_taken_for_bias() -> None:
 
 
 def test_integration_skips_gaps_and_gaps_are_not_healthy() -> None:
-    t = np.concatenate([np.arange(0, 500_000, 1000), np.arange(600_000, 1_000_000, 1000)]).astype(np.int64)
+    t = np.concatenate([np.arange(0, 900_000, 1000), np.arange(1_000_000, 1_600_000, 1000)]).astype(np.int64)
     omega = np.tile([0.0, 0.2, 0.0], (t.shape[0], 1))
     theta = integrate(t, omega, gap_us=20_000)
-    assert theta[-1, 1] == pytest.approx(0.2 * (0.499 + 0.399))  # nothing integrated across the 101-ms gap
+    assert theta[-1, 1] == pytest.approx(0.2 * (0.899 + 0.599))  # nothing integrated across the 101-ms gap
     motion = ImuHeadMotion.of_track(ImuTrack(t, omega), calibration())
-    assert motion.available and motion.healthy(300_000)
+    assert motion.available and motion.healthy(700_000)
     assert not motion.healthy(50_000)  # the stream's first trust span
-    assert not motion.healthy(550_000)  # inside the gap
-    assert not motion.healthy(650_000)  # just after it
-    assert motion.healthy(750_000)
-    assert not motion.healthy(1_200_000)  # after the file's end
-    assert motion.scene_px(550_000) is None and motion.smear_prior(540_000, 560_000, (640.0, 360.0)) is None
+    assert not motion.healthy(300_000)  # too little yet to tell whether the head walks
+    assert not motion.healthy(950_000)  # inside the gap
+    assert not motion.healthy(1_050_000)  # just after it
+    assert motion.healthy(1_150_000)
+    assert not motion.healthy(1_700_000)  # after the file's end
+    assert motion.scene_px(950_000) is None and motion.smear_prior(940_000, 960_000, (640.0, 360.0)) is None
+
+
+def test_the_step_bands_rms_is_a_sines_amplitude_over_root_two() -> None:
+    t = np.arange(0, 3_000_000, 1000, dtype=np.int64)
+    ends = np.array([1_000_000, 2_000_000, 2_999_000], dtype=np.int64)
+    for hz, inside in ((1.8, True), (0.3, False), (8.0, False)):  # the step rate; reading drift; tremor
+        omega = np.zeros((t.shape[0], 3))
+        omega[:, 0] = 0.1 * np.sin(2 * np.pi * hz * t * 1e-6) + 0.02 * t * 1e-6  # (and a slow trend)
+        rms = step_band_rms(t, omega, ends)
+        if inside:
+            assert rms[1:] == pytest.approx(0.1 / np.sqrt(2), rel=0.1)
+        else:
+            assert (rms < 0.01).all()
+    assert np.isnan(step_band_rms(t, omega, np.array([200_000], dtype=np.int64)))[0]  # too short to tell
+
+
+def test_a_walking_head_is_not_trusted_to_the_gyroscope() -> None:
+    """Walking pitches the head at the step rate and bobs the page against it: the edge then takes the events' motion."""
+    t = np.arange(0, 4_000_000, 1000, dtype=np.int64)
+    seated = np.zeros((t.shape[0], 3))
+    seated[:, 0] = np.radians(0.5) * 2 * np.pi * 0.3 * np.cos(2 * np.pi * 0.3 * t * 1e-6)  # slow reading drift, 0.5 deg
+    walking = seated.copy()
+    walking[2_000:, 0] += np.radians(0.5) * 2 * np.pi * 1.9 * np.cos(2 * np.pi * 1.9 * t[2_000:] * 1e-6)  # walks from 2 s
+    quiet = ImuHeadMotion.of_track(ImuTrack(t, seated), calibration())
+    walker = ImuHeadMotion.of_track(ImuTrack(t, walking), calibration())
+    assert all(quiet.healthy(int(x)) for x in range(600_000, 4_000_000, 100_000))
+    assert walker.healthy(1_500_000) and not walker.walking(1_500_000)
+    assert walker.walking(3_000_000) and not walker.healthy(3_000_000) and walker.scene_px(3_000_000) is None
 
 
 def test_the_tracker_takes_over_in_a_gap_and_the_track_stays_continuous() -> None:

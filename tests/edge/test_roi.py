@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from darkread.edge.config import PipelineConfig, load_config
-from darkread.edge.roi import follow_window, motion_healthy, parse_roi_mode, roi_wanted
+from darkread.edge.roi import NOT_YET, delivered_since, follow_window, motion_healthy, parse_roi_mode, roi_wanted
 
 
 class Known:
@@ -43,3 +43,15 @@ def test_the_mode_reads_booleans_as_on_and_off() -> None:
     assert config.pipeline.sensor_roi == "off"
     with pytest.raises(ValueError, match="sensor_roi: cannot use 'sometimes'"):
         load_config(None, environ={}, overrides={"pipeline": {"sensor_roi": "sometimes"}})
+
+
+def test_a_window_is_delivered_since_the_oldest_of_the_latest_rois_that_all_cover_it() -> None:
+    window = (100, 100, 200, 100)
+    covering, elsewhere = (80, 80, 264, 164), (500, 300, 264, 164)
+    assert delivered_since([], window) is None  # the whole sensor, always
+    assert delivered_since([(1_000, covering)], window) is None  # the whole sensor before, this since
+    assert delivered_since([(1_000, elsewhere), (2_000, covering)], window) == 2_000  # dark before 2 ms
+    assert delivered_since([(1_000, elsewhere), (2_000, covering), (3_000, (90, 90, 264, 164))], window) == 2_000
+    assert delivered_since([(1_000, elsewhere), (2_000, None), (3_000, covering)], window) == 2_000  # whole sensor counts
+    assert delivered_since([(1_000, elsewhere), (None, covering)], window) == NOT_YET  # written, nothing delivered yet
+    assert delivered_since([(1_000, elsewhere), (None, elsewhere), (3_000, covering)], window) == 3_000  # never in effect

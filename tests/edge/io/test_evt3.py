@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from darkread.edge.errors import CorruptRawError
 from darkread.edge.events import TRIGGER_DTYPE, empty_events, make_events
 from darkread.edge.io.evt3 import Evt3Decoder, decode_evt3, encode_evt3
-from darkread.edge.io.raw import read_raw, write_raw
+from darkread.edge.io.raw import RawReader, read_raw, write_raw
 
 
 def w(kind: int, payload: int) -> int:
@@ -363,3 +363,20 @@ def test_both_backends_skip_the_same_words(seed: int, x0: int, y0: int, w_: int,
         outputs.append(decoder.decode(data))
     assert np.array_equal(outputs[0][0], outputs[1][0]) and np.array_equal(outputs[0][1], outputs[1][1])
     assert decoders[0].stats == decoders[1].stats
+
+
+def test_a_readers_roi_is_in_effect_from_the_first_event_decoded_after_it(tmp_path: Path) -> None:
+    """Events decoded before ``set_roi`` are still delivered (in flight, as a camera's are): the reader
+    says from which event on the new ROI holds."""
+    events = random_stream(7, 20_000, 1 << 20, 40, 0.5)
+    path = tmp_path / "r.raw"
+    write_raw(path, events)
+    reader = RawReader(path, chunk_bytes=4096)
+    chunks = iter(reader)
+    first = next(chunks)
+    assert reader.roi_since_us == int(first["t"][0])  # the whole sensor, from the start
+    reader.set_roi((300, 200, 264, 204))
+    assert reader.roi_since_us is None  # written, nothing decoded under it yet
+    second = next(chunks)
+    assert reader.roi_since_us == int(second["t"][0]) > int(first["t"][-1]) - 1
+    assert ((second["x"] >= 300) & (second["x"] < 564) & (second["y"] >= 200) & (second["y"] < 404)).all()

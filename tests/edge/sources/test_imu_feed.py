@@ -37,20 +37,21 @@ def test_udp_feed_receives_batches_and_counts_rejects() -> None:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
             sender.sendto(json.dumps({"clock_offset_us": 1000}).encode(), ("127.0.0.1", feed.port))
             _wait(lambda: motion.clock_offset_us == 1000)
-            for k in range(0, 400, 20):  # 0.4 s at 1 kHz, 20 samples a datagram, turning at 0.1 rad/s about CPF y
+            for k in range(0, 800, 20):  # 0.8 s at 1 kHz, 20 samples a datagram, turning at 0.1 rad/s about CPF y
                 batch = [[1_000_000 + 1000 * i, 0.0, 0.1, 0.0] for i in range(k, k + 20)]
                 data = msgpack.packb({"imu": batch}) if k % 40 else json.dumps({"imu": batch}).encode()
                 sender.sendto(data, ("127.0.0.1", feed.port))
             sender.sendto(b"garbage", ("127.0.0.1", feed.port))
             sender.sendto(json.dumps({"imu": [[1, 0.0, "fast", 0.0]]}).encode(), ("127.0.0.1", feed.port))
             sender.sendto(json.dumps({"imu": [[2, 0.0, 90.0, 0.0]]}).encode(), ("127.0.0.1", feed.port))
-        _wait(lambda: motion.received >= 400 and feed.rejected >= 3)
+        _wait(lambda: motion.received >= 800 and feed.rejected >= 3)
     finally:
         feed.stop()
-    assert feed.stats == {"imu_received": 400.0, "imu_rejected": 3.0}
-    assert motion.span_us == (1_001_000, 1_400_000)  # on the event clock
-    assert motion.healthy(1_300_000) and not motion.healthy(1_500_000)  # (held max_age_us after the newest)
-    a, b = motion.scene_px(1_200_000), motion.scene_px(1_300_000)
+    assert feed.stats == {"imu_received": 800.0, "imu_rejected": 3.0}
+    assert motion.span_us == (1_001_000, 1_800_000)  # on the event clock
+    assert not motion.healthy(1_300_000)  # (too little yet to tell whether the head walks)
+    assert motion.healthy(1_700_000) and not motion.healthy(1_900_000)  # (held max_age_us after the newest)
+    a, b = motion.scene_px(1_600_000), motion.scene_px(1_700_000)
     assert a is not None and b is not None
     assert b[0] - a[0] == pytest.approx(600.0 * 0.1 * 0.1, rel=0.02)  # the camera pans left: the page moves right
 
