@@ -198,6 +198,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     calibrate.add_argument("--model-out", metavar="FILE.json", default=str(DEFAULT_CONFIDENCE_MODEL),
                            help="where the fitted line-confidence model goes (default: the one the cloud ships)")
     _add_head_motion(sub)
+    _add_add_imu(sub)
     calibrate.add_argument("--target-risk", type=float, default=0.05, metavar="R",
                            help="the CER the answered lines of the fitting half may have (sets the answer threshold)")
 
@@ -208,6 +209,30 @@ def _add_head_motion(sub: argparse._SubParsersAction) -> None:
     p.add_argument("recordings", nargs="+", metavar="RECORDING", help="synthetic recordings with closed_loop_trajectory.csv")
     p.add_argument("--out", default=None, metavar="FILE.md", help="also write the table there (and a .json beside it)")
     p.set_defaults(func=_head_motion)
+
+
+def _add_add_imu(sub: argparse._SubParsersAction) -> None:
+    help_text = ("give a suite made before recordings carried a gyroscope the closed_loop_trajectory.csv each would "
+                 "carry now (byte for byte, from its spec.json); nothing else changes, so the same scenes read with "
+                 "and without it")
+    p = sub.add_parser("add-imu", help=help_text, description=help_text)
+    p.add_argument("make_suite_out", metavar="SUITE_DIR", help="a suite made by `darkread eval make-suite`")
+    p.set_defaults(func=_add_imu)
+
+
+def _add_imu(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from darkread.lab.synth.rgb_camera import SPEC_NAME, recording_spec
+    from darkread.models.synth.recording import add_gyroscope
+
+    folders = sorted(p.parent for p in Path(args.make_suite_out).glob(f"*/{SPEC_NAME}"))
+    if not folders:
+        raise ValueError(f"{args.make_suite_out}: no recording with a {SPEC_NAME} (make one with `darkread eval make-suite`)")
+    for folder in tqdm(folders, unit="rec", desc="gyroscope"):
+        add_gyroscope(folder, recording_spec(folder))
+    print(f"{len(folders)} recordings in {args.make_suite_out} carry a gyroscope")
+    return 0
 
 
 def _head_motion(args: argparse.Namespace) -> int:

@@ -256,6 +256,27 @@ def simulate_region(
     return events[events["t"] < int(seconds * 1e6)]
 
 
+def _clock_origins(rng: np.random.Generator) -> tuple[int, int]:
+    """The event clock's and the device clock's times at the recording's start (the first draws of
+    a recording's clock generator)."""
+    return int(rng.integers(0, WRAP_US)), int(rng.integers(5_000_000_000, 20_000_000_000))
+
+
+def _write_gyroscope(out: Path, spec: RecordingSpec, session: Session, seconds: float, device_t0: int) -> None:
+    """``closed_loop_trajectory.csv``, from its own generator: the rest of the recording comes out as without it."""
+    write_imu(out / IMU_NAME, session.scene, seconds, device_t0, np.random.default_rng([spec.seed, 4]))
+
+
+def add_gyroscope(recording_dir: str | Path, spec: RecordingSpec) -> Path:
+    """Give a recording ``write_recording(spec)`` made before recordings carried a gyroscope the
+    ``closed_loop_trajectory.csv`` it would carry now (byte for byte); its other files stay as they are."""
+    out = Path(recording_dir)
+    session = make_session(session_spec(spec), spec.seed)
+    _, device_t0 = _clock_origins(np.random.default_rng([spec.seed, 2]))
+    _write_gyroscope(out, spec, session, recording_seconds(spec, session), device_t0)
+    return out / IMU_NAME
+
+
 class Simulator(Protocol):
     """What turns a session's scene into events: (events of the simulated region, noise events of
     the rest of the sensor, the sensor for ``meta.json``); times in us from the session start."""
@@ -315,8 +336,7 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     seconds = recording_seconds(spec, session)
     rng = np.random.default_rng([spec.seed, 2])
 
-    event_t0 = int(rng.integers(0, WRAP_US))
-    device_t0 = int(rng.integers(5_000_000_000, 20_000_000_000))
+    event_t0, device_t0 = _clock_origins(rng)
     true_offset = event_t0 - device_t0
     written_offset = true_offset + int(round(rng.normal(0.0, 2000.0)))
     calib = replace(session.calib, gaze_to_event_time_offset_us=int(written_offset))
@@ -368,8 +388,7 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     else:
         write_page_ink(out / PAGE_INK_NAME, session)
     write_pose_truth(out / POSE_TRUTH_NAME, session, seconds, event_t0)
-    # the gyroscope's own generator: the rest of the recording comes out as without it
-    write_imu(out / IMU_NAME, session.scene, seconds, device_t0, np.random.default_rng([spec.seed, 4]))
+    _write_gyroscope(out, spec, session, seconds, device_t0)
     (out / "text.txt").write_text(session.page.text, encoding="ascii")
     duration = round(seconds, 3)
     face_family = session.page.font.removesuffix(" Bold")

@@ -241,3 +241,11 @@ def test_make_suite_takes_a_motion_regime_for_every_recording(tmp_path: Path) ->
     entries = select_entries(small=True, motion_regime="strong")
     assert entries and all(e.motion_regime == "strong" and e.recording_spec().motion_regime == "strong" for e in entries)
     assert "motion_regime" not in spec_document(select_entries(small=True)[0])  # older suites' spec.json stay complete
+
+
+def test_add_imu_on_a_folder_without_suite_recordings_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from darkread.cli import main
+
+    assert main(["eval", "add-imu", str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "spec.json" in err[0] and "make-suite" in err[0]

@@ -8,7 +8,7 @@ from darkread.edge.gaze import GazeMapper
 from darkread.edge.io.calibration import load_calibration
 from darkread.edge.io.gaze_csv import read_gaze_csv
 from darkread.edge.io.raw import read_raw
-from darkread.models.synth.recording import RecordingSpec, write_recording
+from darkread.models.synth.recording import RecordingSpec, add_gyroscope, write_recording
 from darkread.models.synth.session import SessionSpec, make_session
 
 SPEC = RecordingSpec(lux=200.0, motion="still", kind="pangram", seconds=0.4, seed=5, xheight_px=8.0, n_lines=3, line_chars=22)
@@ -89,3 +89,13 @@ def test_read_once_recording_ends_after_the_last_line_on_unseen_text(tmp_path):
     assert any(" ".join(first_words) in " ".join(p.split()) for p in paragraphs_for("val"))
     meta = write_recording(tmp_path, replace(spec, seconds=0.5), progress=False)  # the cap bounds a read-once recording
     assert meta["text_split"] == "val" and meta["duration_s"] == 0.5
+
+
+def test_a_recording_made_before_the_gyroscope_gets_the_one_it_would_carry_now(tmp_path):
+    write_recording(tmp_path, SPEC)
+    imu = tmp_path / "closed_loop_trajectory.csv"
+    made = imu.read_bytes()
+    others = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p != imu}
+    imu.unlink()
+    assert add_gyroscope(tmp_path, SPEC) == imu and imu.read_bytes() == made
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p != imu} == others
