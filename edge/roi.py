@@ -21,7 +21,7 @@ from collections.abc import Callable
 Rect = tuple[int, int, int, int]  # x0, y0, width, height
 
 ROI_MODES = ("auto", "on", "off")  # ``[pipeline] sensor_roi``: the first is the default
-ROI_FOLLOW_MARGIN_PX = 32  # slack around a wanted window so small eye movements need no rewrite
+ROI_FOLLOW_MARGIN_PX = 64  # slack around a wanted window so a reading saccade seldom needs a rewrite (docs/edge_cpu.md)
 
 
 def rect_covers(outer: Rect, inner: Rect) -> bool:

@@ -428,9 +428,9 @@ def test_the_roi_moves_only_when_the_window_leaves_its_margin() -> None:
     ev = events_in_box(24_000, 300, 250, 700, 250)
     settings = every_window(lossless=True, sensor_roi="on", scene_motion=False, n_events=200, denoise=False)  # a frame per ~2 ms
     small = ListSource(chunked(ev, 500))
-    _, metrics, _ = run_pipeline(small, MovingGaze(5.0, 2000), settings)  # 5 px a jump: inside the 32-px margin
+    _, metrics, _ = run_pipeline(small, MovingGaze(5.0, 2000), settings)  # 5 px a jump: inside the 64-px margin
     large = ListSource(chunked(ev, 500))
-    _, moved, _ = run_pipeline(large, MovingGaze(40.0, 2000), settings)  # 40 px: out of it every time
+    _, moved, _ = run_pipeline(large, MovingGaze(80.0, 2000), settings)  # 80 px: out of it every time
     assert 1 <= metrics.totals["roi_writes"] <= 3 and moved.totals["roi_writes"] >= 8
     assert len(small.rois) == metrics.totals["roi_writes"] and len(large.rois) == moved.totals["roi_writes"]
 
