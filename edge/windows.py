@@ -160,12 +160,15 @@ class Windows:
         self.metrics.observe_inference(frame.inference_ms)
         return frame
 
-    def recent_events(self, origin: tuple[int, int], t_until: int, t_from: int | None = None) -> Events:
+    def recent_events(self, origin: tuple[int, int], t_until: int, t_from: int | None = None, at_least: int = 0) -> Events:
         """Exactly the window's events for one frame: the newest ``n_events`` inside the window at
         ``origin`` with ``t <= t_until`` (and ``t >= t_from``), searching back through the ring as needed,
         moved back along the head's motion during their span (``edge.deblur``; measured from them and
         the sensor's other events of that span around the window), and in dim light without those
         that have no neighbour: shot noise (``edge.denoise``; a frame may then have fewer events).
+
+        Fewer than ``at_least`` inside are returned as they are: a caller that drops such a window
+        would throw the cleaning away (it never adds events: the window stays too small).
 
         The search starts from twice the depth the previous window needed, so a frame copies a
         few thousand ring events, not the whole history.
@@ -185,6 +188,8 @@ class Windows:
         if used.shape[0]:
             depth = recent.shape[0] - int(used[0])
             self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), MAX_HISTORY_EVENTS))
+        if used.shape[0] < at_least:
+            return recent[used]
         nearby = recent[int(used[0]) :] if used.shape[0] else recent[:0]
         known = self.known_motion if self.motion_known(t_until) else None
         window, deblurred, denoised = clean_window(recent[used], nearby, origin, (cfg.height, cfg.width), self.sensor_wh,

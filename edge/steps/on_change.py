@@ -127,8 +127,9 @@ class OnChangeStep:
         """One frame of the current fixation (its events only, up to ``n_events``), fused into the
         view; a frame that does not register onto the view sends it and starts the next one."""
         placed = self._dithered(origin, len(self.fuser))
-        window = self.windows.recent_events(placed, t, t_from=t_from)
-        if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
+        enough = min(self.settings.min_events, self.settings.n_events)
+        window = self.windows.recent_events(placed, t, t_from=t_from, at_least=enough)
+        if window.shape[0] < enough:
             return False
         frame = self.windows.frame(window, placed, gaze, t, probability=self.settings.fuse == "probability")
         if frame is None:
