@@ -25,6 +25,7 @@ whole file (replay) or by the live feed's batches (``edge.sources.imu_feed``), u
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass
 
@@ -169,6 +170,27 @@ def shift_px(calibration: Calibration, centre_px: tuple[float, float], rotvecs: 
     return calibration.project(moved) - np.asarray(centre_px, np.float64)
 
 
+def shift_px_one(calibration: Calibration, centre_px: tuple[float, float], rotvec: np.ndarray) -> tuple[float, float]:
+    """``shift_px`` for one rotation vector, in plain floats: the same arithmetic in the same order
+    (Rodrigues as ``rotate``, the projection as ``project_point``), for the per-frame predictions
+    where numpy's per-call cost is many times the work."""
+    ray = calibration.unproject(np.asarray([centre_px], np.float64))[0]
+    v0, v1, v2 = float(ray[0]), float(ray[1]), 1.0
+    r0, r1, r2 = (-float(value) for value in np.asarray(rotvec, np.float64).reshape(3))
+    angle = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    safe = angle if angle > 0 else 1.0
+    k0, k1, k2 = r0 / safe, r1 / safe, r2 / safe
+    cos, sin = math.cos(angle), math.sin(angle)
+    dot = k0 * v0 + k1 * v1 + k2 * v2
+    moved = (v0 * cos + (k1 * v2 - k2 * v1) * sin + k0 * dot * (1.0 - cos),
+             v1 * cos + (k2 * v0 - k0 * v2) * sin + k1 * dot * (1.0 - cos),
+             v2 * cos + (k0 * v1 - k1 * v0) * sin + k2 * dot * (1.0 - cos))
+    pixel = calibration.project_point(*moved)
+    if pixel is None:
+        return math.nan, math.nan
+    return pixel[0] - float(centre_px[0]), pixel[1] - float(centre_px[1])
+
+
 class ImuHeadMotion:
     """``KnownHeadMotion`` from the gyroscope, with the deblur's predicted smear (``smear_prior``).
 
@@ -310,8 +332,7 @@ class ImuHeadMotion:
             if not self._healthy(int(t_us)):
                 return None
             theta = self._rotation_at(np.array([float(t_us)]))
-        dx, dy = shift_px(self.calibration, self._centre, theta)[0]
-        return float(dx), float(dy)
+        return shift_px_one(self.calibration, self._centre, theta[0])
 
     def smear_prior(self, t_first_us: int, t_ref_us: int, centre_px: tuple[float, float]) -> tuple[float, float] | None:
         """The page's displacement at ``centre_px`` from ``t_first_us`` to ``t_ref_us`` (the deblur's
@@ -320,8 +341,7 @@ class ImuHeadMotion:
             if not (self._healthy(int(t_first_us)) and self._healthy(int(t_ref_us))):
                 return None
             theta = self._rotation_at(np.array([float(t_first_us), float(t_ref_us)]))
-        dx, dy = shift_px(self.calibration, centre_px, theta[1:] - theta[:1])[0]
-        return float(dx), float(dy)
+        return shift_px_one(self.calibration, centre_px, theta[1] - theta[0])
 
     def warp(self, window: Events, origin: tuple[int, int], shape_hw: tuple[int, int]) -> Events:
         """``window``'s events moved by the rotation between each event and its newest (the window's

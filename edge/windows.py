@@ -157,15 +157,24 @@ class Windows:
         over the ROI writes held). A frame takes no older events there: where an earlier ROI left
         part of its window dark, it would see half a page."""
         with self._roi_lock:
+            self._poll_roi_effect()
             return delivered_since(list(self._roi_writes), rect)
 
     def _roi_took_effect(self, events: Events) -> None:
-        """Reader thread: the newest ROI write's first delivered event, as the source tells it (a
-        replay's decoder) or else this chunk's first (the first read after the write)."""
+        """Reader thread, each chunk: the newest ROI write's first delivered event, as the source
+        tells it (a replay's decoder: ``roi_since_us``) or else this chunk's first (the first read
+        after the write)."""
         with self._roi_lock:
-            if self._roi_writes and self._roi_writes[-1][0] is None:
-                since = getattr(self.source, "roi_since_us", None)
-                self._roi_writes[-1] = (int(events["t"][0]) if since is None else int(since), self._roi_writes[-1][1])
+            if self._roi_writes and self._roi_writes[-1][0] is None and not hasattr(self.source, "roi_since_us"):
+                self._roi_writes[-1] = (int(events["t"][0]), self._roi_writes[-1][1])
+            self._poll_roi_effect()
+
+    def _poll_roi_effect(self) -> None:
+        """(Under the ROI lock.) The newest write in effect once the source says from when."""
+        if self._roi_writes and self._roi_writes[-1][0] is None:
+            since = getattr(self.source, "roi_since_us", None)
+            if since is not None:
+                self._roi_writes[-1] = (int(since), self._roi_writes[-1][1])
 
     def frame(self, window: Events, origin: tuple[int, int], gaze: GazeSample, t_us: int,
               probability: bool = False) -> FrameResult | None:
@@ -179,12 +188,15 @@ class Windows:
         self.metrics.observe_inference(frame.inference_ms)
         return frame
 
-    def recent_events(self, origin: tuple[int, int], t_until: int, t_from: int | None = None) -> Events:
+    def recent_events(self, origin: tuple[int, int], t_until: int, t_from: int | None = None, at_least: int = 0) -> Events:
         """Exactly the window's events for one frame: the newest ``n_events`` inside the window at
         ``origin`` with ``t <= t_until`` (and ``t >= t_from``), searching back through the ring as needed,
         moved back along the head's motion during their span (``edge.deblur``; measured from them and
         the sensor's other events of that span around the window), and in dim light without those
         that have no neighbour: shot noise (``edge.denoise``; a frame may then have fewer events).
+
+        Fewer than ``at_least`` inside are returned as they are: a caller that drops such a window
+        would throw the cleaning away (it never adds events: the window stays too small).
 
         The search starts from twice the depth the previous window needed, so a frame copies a
         few thousand ring events, not the whole history.
@@ -204,6 +216,8 @@ class Windows:
         if used.shape[0]:
             depth = recent.shape[0] - int(used[0])
             self._history = int(min(max(2 * depth, MIN_HISTORY_EVENTS), MAX_HISTORY_EVENTS))
+        if used.shape[0] < at_least:
+            return recent[used]
         nearby = recent[int(used[0]) :] if used.shape[0] else recent[:0]
         known = self.known_motion if self.motion_known(t_until) else None
         window, deblurred, denoised = clean_window(recent[used], nearby, origin, (cfg.height, cfg.width), self.sensor_wh,

@@ -129,8 +129,10 @@ class OnChangeStep:
         placed = self._dithered(origin, len(self.fuser))
         fov = self.windows.fovea
         delivered = self.windows.delivered_since((placed[0], placed[1], fov.width, fov.height))
-        window = self.windows.recent_events(placed, t, t_from=t_from if delivered is None else max(t_from, delivered))
-        if window.shape[0] < min(self.settings.min_events, self.settings.n_events):
+        enough = min(self.settings.min_events, self.settings.n_events)
+        window = self.windows.recent_events(placed, t, t_from=t_from if delivered is None else max(t_from, delivered),
+                                            at_least=enough)
+        if window.shape[0] < enough:
             return False
         frame = self.windows.frame(window, placed, gaze, t, probability=self.settings.fuse == "probability")
         if frame is None:

@@ -46,6 +46,7 @@ class BenchContext:
     scratch: Path
     quick: bool = False
     smoke: bool = False  # tiny inputs, one repetition: checks that every figure is made, not its value
+    cache: Path | None = None  # kept between runs: inputs that take long to make (simulated recordings)
     notes: list[str] = field(default_factory=list)
 
     def runs(self, full: int, quick: int, smoke: int = 1) -> int:

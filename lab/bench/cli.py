@@ -7,6 +7,7 @@ import argparse
 import importlib
 import json
 import logging
+import os
 import sys
 import tempfile
 import time
@@ -26,6 +27,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--smoke", action="store_true",
                         help="tiny inputs, one repetition: every figure is written, none is meaningful (for tests)")
     parser.add_argument("--out", default="bench.json", help="where to write the figures (default bench.json)")
+    parser.add_argument("--cache", default=str(default_cache()), metavar="DIR",
+                        help="where inputs that take minutes to simulate are kept between runs (default %(default)s)")
+
+
+def default_cache() -> Path:
+    """``$XDG_CACHE_HOME/darkread/bench`` (``~/.cache/darkread/bench``)."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "darkread" / "bench"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -39,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
     logging.getLogger().setLevel(logging.WARNING)
     figures: list[Figure] = []
     with tempfile.TemporaryDirectory(prefix="darkread-bench-") as scratch:
-        ctx = BenchContext(shared_data=find_shared_data(), scratch=Path(scratch), quick=args.quick, smoke=args.smoke)
+        ctx = BenchContext(shared_data=find_shared_data(), scratch=Path(scratch), quick=args.quick, smoke=args.smoke,
+                           cache=Path(args.cache))
         for name in BENCH_MODULES:
             short = name.rsplit(".", 1)[-1]
             if args.only and short not in args.only:

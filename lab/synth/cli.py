@@ -70,6 +70,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      help="the head motion's draws: standard (default, what training saw) or grounded (tremor and reading "
                           "motion from measurements, drawn across their bands); quiet, central, strong: every band at its "
                           "low end, centre or high end (docs/head_motion_model.md)")
+    rec.add_argument("--full-view", action="store_true",
+                     help="simulate every pixel of the sensor (the page, its edge and a textured desk around it) "
+                          "instead of the region the gaze reaches plus noise: the stream a sensor ROI is measured on; "
+                          "about ten times slower")
     rec.add_argument("--markers", action="store_true",
                      help="print the text with ArUco markers around it (as `darkread train target` lays it out) and write "
                           "page.layout.json (every recording carries the simulator's true page pose per millisecond, "
@@ -242,6 +246,7 @@ def _recording(args: argparse.Namespace) -> int:
         f_number=args.f_number,
         bias_profile=args.biases,
         motion_regime=args.motion_regime,
+        full_view=args.full_view,
     )
     if args.scanpath_file and not Path(args.scanpath_file).is_file():
         raise FileNotFoundError(f"--scanpath-file {args.scanpath_file}: no such file")

@@ -2,8 +2,10 @@
 
 The region the fovea can reach (every window around the tracker's gaze estimates, plus a margin)
 is simulated pixel by pixel at >= 2 kHz; the rest of the sensor receives noise events at the same
-per-pixel rates (shot, leak, hot pixels), which keeps generation fast. Event times are absolute
-sensor time starting anywhere in the 24-bit range; gaze rows are on the device clock, related to
+per-pixel rates (shot, leak, hot pixels), which keeps generation fast. ``RecordingSpec.full_view``
+simulates the whole sensor instead, with the paper's edge and a textured desk around it, as glasses
+see a page at reading distance (about ten times slower: the stream an on-sensor ROI is measured
+on). Event times are absolute sensor time starting anywhere in the 24-bit range; gaze rows are on the device clock, related to
 the event clock by ``calibration.json``'s offset (written with a few ms of alignment error).
 """
 
@@ -67,6 +69,7 @@ class RecordingSpec:
     bias_profile: str = FACTORY  # the IMX636 biases it is made with (edge/sources/evk4/bias_profiles.py)
     sensor_profile: str | None = None  # a measured sensor profile the grounded sensor is drawn from
     motion_regime: str = "standard"  # the head motion's draws (models/synth/motion.py MOTION_REGIMES)
+    full_view: bool = False  # simulate every pixel of the sensor (the page, its edge, a desk) instead of the reachable region
 
 
 LAYOUT_NAME = "page.layout.json"
@@ -82,7 +85,7 @@ def session_spec(spec: RecordingSpec) -> SessionSpec:
         xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
         scanpath=spec.scanpath, scanpath_file=spec.scanpath_file, regime=spec.regime, markers=spec.markers,
         f_number=spec.f_number, bias_profile=spec.bias_profile, sensor_profile=spec.sensor_profile,
-        motion_regime=spec.motion_regime,
+        motion_regime=spec.motion_regime, full_view=spec.full_view,
     )
 
 
@@ -344,7 +347,9 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     rows = gaze_rows(session, device_t0, seconds, rng)
     uv = gaze_pixels(session, {k: v[~rows["blink"]] for k, v in rows.items()})
     x0, y0, w, h = reachable_region(uv)
-    if session.marker_page is not None:
+    if spec.full_view:
+        x0, y0, w, h = 0, 0, *SENSOR_WH
+    elif session.marker_page is not None:
         x0, y0, w, h = union_region((x0, y0, w, h), page_region(session, seconds))
     region = Region.of(session.calib, x0, y0, w, h)
     log.info("simulating region x=%d..%d y=%d..%d (%d px)", x0, x0 + w, y0, y0 + h, w * h)
@@ -421,6 +426,8 @@ def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = Tr
     if session.marker_page is not None:
         meta["markers"] = {"layout": LAYOUT_NAME, "pose_truth": POSE_TRUTH_NAME, "n_markers": len(session.marker_page.markers)}
     meta["truth"] = {"pose": POSE_TRUTH_NAME, "ink": LAYOUT_NAME if session.marker_page is not None else PAGE_INK_NAME}
+    if spec.full_view:  # (absent: the reachable region simulated, as in every older recording)
+        meta["full_view"] = True
     if spec.motion_regime != "standard":  # (absent: the standard draws, as in every older recording)
         meta["motion_regime"] = spec.motion_regime
     if spec.scanpath != "model" or spec.scanpath_file is not None:

@@ -9,7 +9,7 @@ under lens distortion, and ``cv2.remap`` samples the anti-aliased texture biline
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -46,6 +46,47 @@ class Region:
         return Region(int(x0), int(y0), int(width), int(height), region_rays(calib, x0, y0, width, height))
 
 
+@dataclass(frozen=True)
+class Surround:
+    """A textured surface around the paper, in the page's plane (a desk: grain, blotches, other
+    sheets), tiled: ``texture`` texel (i, j) covers page texels ``(i, j) * scale``."""
+
+    texture: np.ndarray  # float32 [h, w] reflectance, periodic
+    scale: float  # page texels per texel of ``texture``
+
+    def around(self, page: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray:
+        """``page`` (reflectance texture) sampled at texel maps (mx, my), the surround where the maps
+        leave it, the paper's edge anti-aliased as the page's own bilinear border would be."""
+        inside = cv2.remap(page, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+        h, w = page.shape
+        cover = (np.clip(np.minimum(mx + 1.0, w - mx), 0.0, 1.0) * np.clip(np.minimum(my + 1.0, h - my), 0.0, 1.0))
+        scale = np.float32(1.0 / self.scale)
+        desk = cv2.remap(self.texture, mx * scale, my * scale, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+        return (inside + (1.0 - cover) * desk).astype(np.float32)
+
+
+def desk_surround(rng: np.random.Generator, level: float, size: int = 256, scale: float = 4.0) -> Surround:
+    """A desk around the paper at mean reflectance ``level``: wood grain, blotches at two scales and a
+    few darker or lighter rectangles with sharp edges (other sheets, a phone), tileable."""
+    freq = np.fft.fftfreq(size)
+    radius2 = freq[:, None] ** 2 + freq[None, :] ** 2
+
+    def smooth_noise(sigma: float) -> np.ndarray:  # periodic: filtered in the spectrum
+        spectrum = np.fft.fft2(rng.standard_normal((size, size))) * np.exp(-2.0 * (np.pi * sigma) ** 2 * radius2)
+        field = np.fft.ifft2(spectrum).real
+        return (field - field.mean()) / max(float(field.std()), 1e-9)
+
+    y = np.arange(size)[:, None] * np.ones((1, size))
+    grain = np.sin(2.0 * np.pi * int(rng.integers(6, 14)) * y / size + 2.5 * smooth_noise(12.0))
+    tone = 1.0 + 0.25 * smooth_noise(10.0) + 0.1 * smooth_noise(2.0) + 0.15 * grain
+    for _ in range(int(rng.integers(2, 5))):
+        x0, y0 = rng.integers(0, size, 2)
+        w, h = rng.integers(size // 8, size // 3, 2)
+        ys, xs = (np.arange(y0, y0 + h) % size)[:, None], (np.arange(x0, x0 + w) % size)[None, :]
+        tone[ys, xs] *= float(rng.uniform(0.5, 1.8))
+    return Surround(np.clip(level * tone, 0.02, 0.95).astype(np.float32), float(scale))
+
+
 @dataclass
 class Scene:
     page: PrintedPage
@@ -56,6 +97,7 @@ class Scene:
     motion: Motion
     lux: float
     background: float = 0.15  # reflectance of what surrounds the paper
+    surround: Surround | None = field(default=None)  # what surrounds it when not uniform (a desk)
 
     # -- pose ------------------------------------------------------------------------------------
     def pose(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -104,6 +146,8 @@ class Scene:
 
     def reflectance(self, region: Region, t_s: float) -> np.ndarray:
         mx, my = self.texel_maps(region, t_s)
+        if self.surround is not None:
+            return self.surround.around(self.reflect, mx, my)
         return cv2.remap(
             self.reflect, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=float(self.background)
         )

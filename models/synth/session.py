@@ -21,7 +21,7 @@ from darkread.models.synth.human_scanpath import SHIPPED, HumanScanpath, replay_
 from darkread.models.synth.marker_page import MarkerPage, MarkerPageSpec, lay_out, mm_to_px
 from darkread.models.synth.motion import MOTION_LEVELS, random_motion
 from darkread.models.synth.page import PrintedPage, reflectance, render_page
-from darkread.models.synth.scene import Scene, base_pose
+from darkread.models.synth.scene import Scene, base_pose, desk_surround
 from darkread.models.synth.sensor import DEFAULT_F_NUMBER, GroundedSensorParams, SensorParams, regime_sensor_params
 from darkread.models.synth.sensor_profile import profile_at, profile_sensor_params
 from darkread.models.synth.text import TEXT_KINDS, make_lines
@@ -52,6 +52,7 @@ class SessionSpec:
     bias_profile: str = FACTORY  # the IMX636 biases (edge/sources/evk4/bias_profiles.py; modelled in "grounded")
     sensor_profile: str | None = None  # a measured sensor profile the grounded sensor is drawn from (sensor_profile.py)
     motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES): "standard" or a grounded band
+    full_view: bool = False  # the paper's edge in view with a textured desk around it (scene.desk_surround)
 
 
 SCANPATHS = ("model", "human")
@@ -150,9 +151,13 @@ def make_session(spec: SessionSpec, seed: int) -> Session:
     rot, centre = base_pose(rng, distance, max_tilt_deg=12.0 if spec.markers else 20.0)
     lux = float(spec.lux) if spec.lux is not None else random_lux(rng)
     surround = float(rng.uniform(0.05, 0.4))  # a desk or clothing around the paper
-    if np.random.default_rng([seed, 3]).random() < 0.8 or spec.markers:
+    desk = None
+    if spec.full_view:  # the whole view is simulated: the paper's edge and a desk with structure (own generator)
+        desk = desk_surround(np.random.default_rng([seed, 5]), surround)
+    elif np.random.default_rng([seed, 3]).random() < 0.8 or spec.markers:
         surround = paper  # usually the sheet extends beyond the field of view (no page edge in view)
-    scene = Scene(page, reflect, calib, rot, centre, random_motion(motion_level, rng, spec.motion_regime), lux, surround)
+    scene = Scene(page, reflect, calib, rot, centre, random_motion(motion_level, rng, spec.motion_regime), lux, surround,
+                  surround=desk)
     deg_per_texel = math.degrees(texel_m / distance)
     if spec.scanpath == "model" and spec.scanpath_file is None:
         scanpath = reading_scanpath(page, spec.duration_s + 1.0, deg_per_texel, rng, start_line=0)

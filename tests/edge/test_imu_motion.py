@@ -17,6 +17,8 @@ from darkread.edge.imu_motion import (
     rotation_matrices,
     rotation_vectors,
     running_bias,
+    shift_px,
+    shift_px_one,
     step_band_rms,
     still_samples,
 )
@@ -45,6 +47,16 @@ def test_rotation_helpers_agree_with_each_other() -> None:
     matrices = rotation_matrices(rotvecs)
     assert np.allclose(matrices @ np.transpose(matrices, (0, 2, 1)), np.eye(3), atol=1e-12)
     assert np.allclose(rotation_vectors(matrices), rotvecs, atol=1e-9)
+
+
+def test_the_one_rotation_shift_is_the_vectorised_one_bit_for_bit() -> None:
+    lens = Calibration(width=1280, height=720, fx=FX, fy=FX * 1.01, cx=631.5, cy=352.25, distortion=(-0.12, 0.05, 1e-3, -2e-3),
+                       T_event_cpf=CPF_TO_CAMERA)
+    rng = np.random.default_rng(7)
+    for rotvec, centre in zip(rng.normal(0, 0.02, (50, 3)), rng.uniform((0, 0), (1280, 720), (50, 2))):
+        expected = shift_px(lens, (float(centre[0]), float(centre[1])), rotvec[None])[0]
+        assert shift_px_one(lens, (float(centre[0]), float(centre[1])), rotvec) == (float(expected[0]), float(expected[1]))
+    assert shift_px_one(lens, (640.0, 360.0), np.zeros(3)) == pytest.approx((0.0, 0.0), abs=1e-9)  # (the undistortion's residue)
 
 
 def test_a_steady_turn_moves_the_scene_by_the_homography() -> None:

@@ -28,7 +28,8 @@ SYNTH = {"synth_samples_per_s", "synth_sim_s_per_wall_s"}
 EDGE = {
     "edge_realtime_factor", "edge_decode_realtime_factor", "edge_latency_p50_ms", "edge_latency_p99_ms",
     "edge_uplink_kbyte_per_s", "edge_inferences_per_s", "edge_view_latency_p99_ms", "edge_realtime_factor_every_window",
-    "edge_realtime_factor_on_change", "edge_events_decoded_per_s",  # (imu_roi: not in a smoke run, it simulates the sample)
+    "edge_realtime_factor_on_change", "edge_events_decoded_per_s", "edge_events_decoded_per_s_roi",
+    "edge_realtime_factor_full_view", "edge_realtime_factor_imu_roi", "edge_imu_roi_speedup",
 }
 CLOUD = {"cloud_ingest_frames_per_s_1", "cloud_ingest_frames_per_s_10", "cloud_ingest_frames_per_s_50"}
 CLOUD_POSTGRES = {
@@ -97,6 +98,9 @@ def test_edge_benchmark_writes_its_keys(tmp_path: Path) -> None:
     from darkread.edge.config import default_infer_mode
 
     assert figures["edge_realtime_factor"] == figures["edge_realtime_factor_" + default_infer_mode().replace("-", "_")]
+    # the sensor's ROI delivers fewer events than the whole sensor, even on the smoke run's small recording
+    assert figures["edge_events_decoded_per_s_roi"] < figures["edge_events_decoded_per_s"]
+    assert figures["edge_imu_roi_speedup"] == pytest.approx(figures["edge_realtime_factor_imu_roi"] / figures["edge_realtime_factor_full_view"])
 
 
 @pytest.mark.slow  # rapidocr reads the stitched and the naive page

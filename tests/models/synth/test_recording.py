@@ -99,3 +99,21 @@ def test_a_recording_made_before_the_gyroscope_gets_the_one_it_would_carry_now(t
     imu.unlink()
     assert add_gyroscope(tmp_path, SPEC) == imu and imu.read_bytes() == made
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p != imu} == others
+
+
+def test_full_view_recording_simulates_the_page_its_edge_and_a_desk_over_the_whole_sensor(tmp_path):
+    spec = RecordingSpec(lux=100.0, motion="normal", seconds=0.06, seed=46, font="DejaVu Sans", xheight_px=10.0,
+                         n_lines=22, line_chars=80, full_view=True)
+    meta = write_recording(tmp_path / "view", spec, progress=False)
+    assert meta["full_view"] is True and meta["simulated_region_xywh"] == [0, 0, 1280, 720]
+    events = read_raw(tmp_path / "view" / "events.raw").events
+    # signal everywhere, not only where the gaze goes: every quarter of the sensor sees the moving page or desk
+    for x0, y0 in ((0, 0), (640, 0), (0, 360), (640, 360)):
+        inside = (events["x"] >= x0) & (events["x"] < x0 + 640) & (events["y"] >= y0) & (events["y"] < y0 + 360)
+        assert np.count_nonzero(inside) > 0.1 * events.size / 4
+    session = make_session(SessionSpec(full_view=True, lux=100.0, motion="normal", n_lines=22, line_chars=80, xheight_px=10.0,
+                                       font="DejaVu Sans"), 46)
+    desk = session.scene.surround
+    assert desk is not None and 0.02 <= desk.texture.min() < desk.texture.max() <= 0.95
+    # without the option the scene is as it always was: no desk
+    assert make_session(SessionSpec(lux=100.0, motion="normal"), 46).scene.surround is None
