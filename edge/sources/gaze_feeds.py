@@ -169,26 +169,31 @@ def _gaze_sample(payload: Mapping[str, Any]) -> tuple[int, float, float, float |
     return t_us, yaw, pitch, None if depth is None else _finite(depth, "depth_m")
 
 
-class UdpGazeFeed:
-    """Receives gaze datagrams on a UDP port into a :class:`LiveGaze` (its own thread)."""
+class UdpFeed:
+    """A UDP port whose datagrams (JSON objects or msgpack maps) feed a live stream, on its own
+    thread: the gaze's, the gyroscope's. A datagram with ``clock_offset_us`` and no sample sets the
+    stream's clock offset; every other one is handed to ``_accept``. A bad one is counted in
+    ``rejected`` (its reason logged at debug level), never fatal."""
 
-    def __init__(self, live: LiveGaze, host: str = "127.0.0.1", port: int = 7007) -> None:
-        self.live = live
+    what = "datagrams"  # what the port carries, for messages
+    sample_key = "t_us"  # a datagram with this key is a sample, even with a clock offset beside it
+
+    def __init__(self, host: str, port: int) -> None:
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self._sock.bind((host, port))
         except OSError as exc:
             self._sock.close()
-            raise DeviceError(f"cannot listen for gaze on udp://{host}:{port}: {exc}") from exc
+            raise DeviceError(f"cannot listen for {self.what} on udp://{host}:{port}: {exc}") from exc
         self._sock.settimeout(0.2)
         self.port = int(self._sock.getsockname()[1])
         self.rejected = 0
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="gaze-udp", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"{self.what.lower()}-udp", daemon=True)
 
     def start(self) -> None:
         self._thread.start()
-        logger.info("gaze feed listening on udp port %d", self.port)
+        logger.info("%s feed listening on udp port %d", self.what, self.port)
 
     def stop(self) -> None:
         self._stop.set()
@@ -196,15 +201,12 @@ class UdpGazeFeed:
             self._thread.join(timeout=2.0)
         self._sock.close()
 
-    @property
-    def stats(self) -> dict[str, float]:
-        return {"gaze_received": float(self.live.received), "gaze_rejected": float(self.rejected)}
+    def _accept(self, payload: Mapping[str, Any]) -> None:
+        """One sample datagram's payload into the stream (ValueError: rejected)."""
+        raise NotImplementedError
 
-    def _set_offset(self, value: Any) -> None:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"clock_offset_us must be an integer, got {value!r}")
-        logger.info("gaze clock offset %d -> %d us", self.live.clock_offset_us, value)
-        self.live.clock_offset_us = value
+    def _set_clock_offset(self, value: int) -> None:
+        raise NotImplementedError
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -216,14 +218,38 @@ class UdpGazeFeed:
                 return
             try:
                 payload = datagram_payload(data)
-                if "clock_offset_us" in payload and "t_us" not in payload:
-                    self._set_offset(payload["clock_offset_us"])
+                if "clock_offset_us" in payload and self.sample_key not in payload:
+                    value = payload["clock_offset_us"]
+                    if isinstance(value, bool) or not isinstance(value, int):
+                        raise ValueError(f"clock_offset_us must be an integer, got {value!r}")
+                    self._set_clock_offset(value)
                 else:
-                    self.live.push(*_gaze_sample(payload))
+                    self._accept(payload)
             except ValueError as exc:
                 self.rejected += 1
                 if logger.isEnabledFor(logging.DEBUG):
-                    logger.debug("gaze datagram rejected: %s", exc)
+                    logger.debug("%s datagram rejected: %s", self.what, exc)
+
+
+class UdpGazeFeed(UdpFeed):
+    """Receives gaze datagrams on a UDP port into a :class:`LiveGaze` (its own thread)."""
+
+    what = "gaze"
+
+    def __init__(self, live: LiveGaze, host: str = "127.0.0.1", port: int = 7007) -> None:
+        self.live = live
+        super().__init__(host, port)
+
+    @property
+    def stats(self) -> dict[str, float]:
+        return {"gaze_received": float(self.live.received), "gaze_rejected": float(self.rejected)}
+
+    def _set_clock_offset(self, value: int) -> None:
+        logger.info("gaze clock offset %d -> %d us", self.live.clock_offset_us, value)
+        self.live.clock_offset_us = value
+
+    def _accept(self, payload: Mapping[str, Any]) -> None:
+        self.live.push(*_gaze_sample(payload))
 
 
 class AriaGen2GazeFeed:

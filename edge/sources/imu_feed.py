@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import logging
 import math
-import socket
-import threading
 from collections.abc import Mapping
 from typing import Any
 
@@ -27,7 +25,7 @@ import numpy as np
 from darkread.edge.errors import DeviceError
 from darkread.edge.imu_motion import ImuHeadMotion
 from darkread.edge.io.imu_csv import MAX_ANGULAR_SPEED_RAD_S
-from darkread.edge.sources.gaze_feeds import ARIA_SDK_HINT, MAX_DATAGRAM_BYTES, datagram_payload
+from darkread.edge.sources.gaze_feeds import ARIA_SDK_HINT, UdpFeed, datagram_payload
 
 logger = logging.getLogger(__name__)
 
@@ -60,58 +58,25 @@ def parse_imu_datagram(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     return imu_samples(datagram_payload(data))
 
 
-class UdpImuFeed:
+class UdpImuFeed(UdpFeed):
     """Receives gyroscope datagrams on a UDP port into an :class:`ImuHeadMotion` (its own thread)."""
+
+    what = "IMU"
+    sample_key = "imu"
 
     def __init__(self, motion: ImuHeadMotion, host: str = "127.0.0.1", port: int = 7008) -> None:
         self.motion = motion
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            self._sock.bind((host, port))
-        except OSError as exc:
-            self._sock.close()
-            raise DeviceError(f"cannot listen for the IMU on udp://{host}:{port}: {exc}") from exc
-        self._sock.settimeout(0.2)
-        self.port = int(self._sock.getsockname()[1])
-        self.rejected = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="imu-udp", daemon=True)
-
-    def start(self) -> None:
-        self._thread.start()
-        logger.info("IMU feed listening on udp port %d", self.port)
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=2.0)
-        self._sock.close()
+        super().__init__(host, port)
 
     @property
     def stats(self) -> dict[str, float]:
         return {"imu_received": float(self.motion.received), "imu_rejected": float(self.rejected)}
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                data = self._sock.recv(MAX_DATAGRAM_BYTES + 1)
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            try:
-                payload = datagram_payload(data)
-                if "clock_offset_us" in payload and "imu" not in payload:
-                    value = payload["clock_offset_us"]
-                    if isinstance(value, bool) or not isinstance(value, int):
-                        raise ValueError(f"clock_offset_us must be an integer, got {value!r}")
-                    self.motion.clock_offset_us = value
-                else:
-                    self.motion.extend(*imu_samples(payload))
-            except ValueError as exc:
-                self.rejected += 1
-                if logger.isEnabledFor(logging.DEBUG):
-                    logger.debug("IMU datagram rejected: %s", exc)
+    def _set_clock_offset(self, value: int) -> None:
+        self.motion.clock_offset_us = value
+
+    def _accept(self, payload: Mapping[str, Any]) -> None:
+        self.motion.extend(*imu_samples(payload))
 
 
 class AriaGen2ImuFeed:
