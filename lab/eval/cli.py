@@ -12,9 +12,10 @@ if TYPE_CHECKING:
     from darkread.lab.eval.results import RecordingResult
 
 from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
+from darkread.edge.sources.evk4.bias_profiles import BIAS_PROFILES
 from darkread.lab.synth.simulators import SIMULATORS
 from darkread.models.synth.motion import MOTION_REGIMES
-from darkread.models.synth.sensor import REGIMES
+from darkread.models.synth.sensor import K_NAMED, REGIMES
 
 DEFAULT_CONFIDENCE_MODEL = Path(__file__).resolve().parents[2] / "cloud" / "data" / "line_confidence.json"
 
@@ -128,6 +129,17 @@ def _add_run(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.set_defaults(func=_evaluate)
 
 
+def k_of(text: str) -> float:
+    """``--k``: a photoreceptor K in Hz per chip-lux, or one of the band's named points."""
+    if text in K_NAMED:
+        return K_NAMED[text]
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of Hz per chip-lux nor one of "
+                                         f"{', '.join(K_NAMED)}") from None
+
+
 def _add_make_suite(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("make-suite", help="write the evaluation suite (synthetic recordings with fixed seeds)",
                        description="Write the evaluation suite: synthetic recordings with fixed seeds over lux, text kinds, "
@@ -154,6 +166,12 @@ def _add_make_suite(sub: argparse._SubParsersAction) -> None:
                    help="the head motion's draws (default standard); grounded: tremor and reading motion from measurements "
                         "drawn across their bands; quiet, central, strong: every band at its low end, centre or high end "
                         "(the same scenes; docs/head_motion_model.md)")
+    p.add_argument("--biases", default="factory", choices=sorted(BIAS_PROFILES), metavar="PROFILE",
+                   help="with --regime grounded: the IMX636 bias profile the sensor runs (factory, default, or dark: "
+                        "the profile the glasses switch to below 15 lux; docs/sensor_model.md)")
+    p.add_argument("--k", type=k_of, metavar="K",
+                   help="with --regime grounded: the photoreceptor's K fixed instead of drawn over its band, in Hz per "
+                        "chip-lux or by name: slow (40), central (130), fast (400); every other draw stays the same")
     p.add_argument("--font", metavar="FAMILY",
                    help="every selected recording not already in this font family made again in it (same seed, light, "
                         "motion, text kind and x-height; named <name-in-FAMILY>_as_<old family>)")
@@ -247,7 +265,8 @@ def _make_suite(args: argparse.Namespace) -> int:
 
     entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
                          subset=args.subset, simulator=args.simulator, font=args.font, regime=args.regime,
-                         sensor_profile=args.sensor_profile, motion_regime=args.motion_regime)
+                         sensor_profile=args.sensor_profile, motion_regime=args.motion_regime, biases=args.biases,
+                         k=args.k)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
     return 0
 

@@ -28,13 +28,14 @@ from functools import partial
 from pathlib import Path
 
 from darkread.edge.calibrate.sensor_profile import load_sensor_profile
+from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
 from darkread.lab.jobs import run_jobs
 from darkread.lab.synth.rgb_camera import SPEC_NAME
 from darkread.lab.synth.simulators import simulator_for
 from darkread.models.synth.fonts import FACES
 from darkread.models.synth.motion import MOTION_REGIMES
 from darkread.models.synth.recording import RecordingSpec, write_recording
-from darkread.models.synth.sensor import REGIMES
+from darkread.models.synth.sensor import K_BAND_HZ_PER_CHIP_LUX, K_LIMITS, REGIMES
 
 logger = logging.getLogger(__name__)
 
@@ -67,6 +68,8 @@ class SuiteEntry:
     regime: str = "standard"  # our simulator's sensor regime (sensor.REGIMES), e.g. "fast-photoreceptor"
     sensor_profile: str | None = None  # grounded: drawn around this measured sensor profile (calibrate sensor)
     motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES), e.g. "strong"
+    bias_profile: str = FACTORY  # grounded: the IMX636 biases it is made with (edge/sources/evk4/bias_profiles.py)
+    k_hz_per_chip_lux: float | None = None  # grounded: the photoreceptor's K fixed (None: drawn over its band)
 
     def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
 
@@ -75,7 +78,7 @@ class SuiteEntry:
             xheight_px=self.xheight_px, n_lines=self.n_lines, line_chars=self.line_chars,
             description=f"darkread evaluation suite: {self.name}", split=self.split, read_once=self.read_once,
             scanpath=self.scanpath, simulator=self.simulator, regime=self.regime, sensor_profile=self.sensor_profile,
-            motion_regime=self.motion_regime,
+            motion_regime=self.motion_regime, bias_profile=self.bias_profile, k_hz_per_chip_lux=self.k_hz_per_chip_lux,
         )
 
 
@@ -139,7 +142,7 @@ def spec_document(entry: SuiteEntry) -> dict:
     older suites did not have (so their recordings stay complete)."""
     doc = asdict(entry.recording_spec())
     for key, default in (("scanpath", "model"), ("scanpath_file", None), ("simulator", "darkread"), ("sensor_profile", None),
-                         ("motion_regime", "standard")):
+                         ("motion_regime", "standard"), ("k_hz_per_chip_lux", None)):
         if doc.get(key) == default:
             doc.pop(key, None)
     return doc
@@ -172,11 +175,12 @@ def _slug(family: str) -> str:
 
 def select_entries(*, small: bool = False, match: str | Sequence[str] | None = None, subset: str | None = None,
                    simulator: str = "darkread", font: str | None = None, regime: str = "standard",
-                   sensor_profile: str | None = None, motion_regime: str = "standard") -> list[SuiteEntry]:
+                   sensor_profile: str | None = None, motion_regime: str = "standard", biases: str = FACTORY,
+                   k: float | None = None) -> list[SuiteEntry]:
     """The recordings ``make_suite`` writes, in order (its arguments, checked there)."""
     entries = simulator_check_entries() if subset == "simulator-check" else suite_entries(small=small)
     entries = [replace(e, simulator=simulator, regime=regime, sensor_profile=sensor_profile,
-                       motion_regime=motion_regime) for e in entries]
+                       motion_regime=motion_regime, bias_profile=biases, k_hz_per_chip_lux=k) for e in entries]
     if match:
 
         patterns = [match] if isinstance(match, str) else list(match)
@@ -192,7 +196,7 @@ def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
     match: str | Sequence[str] | None = None, subset: str | None = None, simulator: str = "darkread",
     font: str | None = None, regime: str = "standard", sensor_profile: str | None = None,
-    motion_regime: str = "standard",
+    motion_regime: str = "standard", biases: str = FACTORY, k: float | None = None,
 ) -> list[SuiteEntry]:
     """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
     ``spec.json`` matches) are kept, so an interrupted run resumes. ``match``: only the recordings
@@ -203,7 +207,9 @@ def make_suite(
     draws; ``fast-photoreceptor``: what the photoreceptor's speed in the dark decides); ``sensor_profile``:
     the grounded sensor drawn around a measured profile (``darkread calibrate sensor``) instead of its band;
     ``motion_regime``: the head motion's draws (``quiet``, ``central``, ``strong``: the grounded bands'
-    ends and centre)."""
+    ends and centre); ``biases``: the IMX636 bias profile (grounded: ``factory`` or ``dark``); ``k``: the
+    grounded photoreceptor's K fixed (Hz per chip-lux) instead of drawn over its band, every other draw
+    the same."""
     from tqdm import tqdm
 
 
@@ -224,6 +230,12 @@ def make_suite(
         load_sensor_profile(sensor_profile)  # missing or wrong: one line before any work
     if motion_regime not in MOTION_REGIMES:
         raise ValueError(f"--motion-regime {motion_regime!r}: use one of {', '.join(MOTION_REGIMES)}")
+    profile_offsets(biases)  # an unknown profile: one line
+    if (biases != FACTORY or k is not None) and regime != "grounded":
+        raise ValueError(f"--biases and --k are the grounded sensor's: add --regime grounded (not {regime})")
+    if k is not None and not K_LIMITS[0] <= k <= K_LIMITS[1]:
+        raise ValueError(f"--k {k:g}: a photoreceptor K in {K_LIMITS[0]:g}..{K_LIMITS[1]:g} Hz per chip-lux "
+                         f"(the published band is {K_BAND_HZ_PER_CHIP_LUX[0]:g}-{K_BAND_HZ_PER_CHIP_LUX[1]:g})")
     if subset is not None and subset not in SUBSETS:
         raise ValueError(f"--subset {subset!r}: use one of {', '.join(SUBSETS)}")
     if subset is not None and small:
@@ -231,11 +243,12 @@ def make_suite(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     entries = select_entries(small=small, match=match, subset=subset, simulator=simulator, font=font, regime=regime,
-                             sensor_profile=sensor_profile, motion_regime=motion_regime)
+                             sensor_profile=sensor_profile, motion_regime=motion_regime, biases=biases, k=k)
     entries = entries[:only]
     (out / SUITE_NAME).write_text(
         json.dumps({"small": small, "subset": subset, "simulator": simulator, "regime": regime, "font": font,
-                    "sensor_profile": sensor_profile, "motion_regime": motion_regime,
+                    "sensor_profile": sensor_profile, "motion_regime": motion_regime, "biases": biases,
+                    "k_hz_per_chip_lux": k,
                     "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )

@@ -239,6 +239,10 @@ def fast_photoreceptor_params(rng: np.random.Generator, lux: float) -> SensorPar
 # values (NOISE_FIT) with the spread that keeps the curve within the published one.
 K_BAND_HZ_PER_CHIP_LUX: tuple[float, float] = (40.0, 400.0)
 K_CENTRAL_HZ_PER_CHIP_LUX = 130.0
+# K fixed by name (``eval make-suite --k``): the band's slow end, the centre NIST's medians give, the fast end
+K_NAMED: dict[str, float] = {"slow": K_BAND_HZ_PER_CHIP_LUX[0], "central": K_CENTRAL_HZ_PER_CHIP_LUX,
+                             "fast": K_BAND_HZ_PER_CHIP_LUX[1]}
+K_LIMITS: tuple[float, float] = (4.0, 4000.0)  # a K outside a decade of the band is a typo, not a sensor
 F_MAX_BAND_HZ: tuple[float, float] = (4500.0, 6400.0)
 FACTORY_THRESHOLD_BAND: tuple[float, float] = (0.21, 0.25)
 NOISE_FIT = {"noise_k_hz_per_chip_lux": 75.0, "noise_max_hz": 12.0, "noise_electrons_per_s": 3.6e4, "dark_chip_lux": 0.004}

@@ -51,6 +51,7 @@ class SessionSpec:
     f_number: float = DEFAULT_F_NUMBER  # the event camera's lens (the grounded regime's chip illuminance)
     bias_profile: str = FACTORY  # the IMX636 biases (edge/sources/evk4/bias_profiles.py; modelled in "grounded")
     sensor_profile: str | None = None  # a measured sensor profile the grounded sensor is drawn from (sensor_profile.py)
+    k_hz_per_chip_lux: float | None = None  # grounded: the photoreceptor's K fixed here (None: drawn over its band)
     motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES): "standard" or a grounded band
     full_view: bool = False  # the paper's edge in view with a textured desk around it (scene.desk_surround)
 
@@ -86,9 +87,11 @@ class Session:
 def session_sensor(spec: SessionSpec, rng: np.random.Generator, lux: float) -> SensorParams:
     """The sensor of a session: its regime's draw, run with the spec's bias profile.
 
-    With ``sensor_profile`` the grounded sensor is drawn around a measured profile instead of its band.
-    Biases are modelled in the grounded regime only; another regime with a profile other than
-    factory is a ValueError rather than a silent factory sensor.
+    With ``sensor_profile`` the grounded sensor is drawn around a measured profile instead of its band;
+    ``k_hz_per_chip_lux`` fixes its photoreceptor's K after the draw (the same draws otherwise, so a
+    suite made at the band's ends and centre holds the same scenes and sensors but for K).
+    Biases are modelled in the grounded regime only; another regime with a profile other than factory
+    is a ValueError rather than a silent factory sensor.
     """
     profile_offsets(spec.bias_profile)  # an unknown profile is named before anything is drawn
     if spec.sensor_profile is not None:
@@ -98,7 +101,11 @@ def session_sensor(spec: SessionSpec, rng: np.random.Generator, lux: float) -> S
     else:
         params = regime_sensor_params(spec.regime, rng, lux, spec.f_number)
     if isinstance(params, GroundedSensorParams):
+        if spec.k_hz_per_chip_lux is not None:
+            params = replace(params, k_hz_per_chip_lux=float(spec.k_hz_per_chip_lux))
         return apply_profile(params, spec.bias_profile)
+    if spec.k_hz_per_chip_lux is not None:
+        raise ValueError(f"a fixed K is the grounded regime's photoreceptor (--regime grounded), not {spec.regime!r}'s")
     if spec.bias_profile != FACTORY:
         raise ValueError(f"bias profile {spec.bias_profile!r}: biases are modelled in the grounded regime only "
                          f"(--regime grounded), not in {spec.regime!r}")

@@ -249,3 +249,39 @@ def test_add_imu_on_a_folder_without_suite_recordings_is_one_line(tmp_path: Path
     assert main(["eval", "add-imu", str(tmp_path)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "spec.json" in err[0] and "make-suite" in err[0]
+
+
+def test_make_suite_fixes_k_and_biases_for_the_grounded_sensor_only(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="add --regime grounded"):
+        make_suite(tmp_path, biases="dark", progress=False)
+    with pytest.raises(ValueError, match="add --regime grounded"):
+        make_suite(tmp_path, k=130.0, progress=False)
+    with pytest.raises(ValueError, match="--k 1: a photoreceptor K"):
+        make_suite(tmp_path, regime="grounded", k=1.0, progress=False)
+    with pytest.raises(ValueError, match="bias profile 'night'"):
+        make_suite(tmp_path, regime="grounded", biases="night", progress=False)
+    entry = select_entries(small=True, regime="grounded", biases="dark", k=40.0)[0]
+    spec = entry.recording_spec()
+    assert spec.bias_profile == "dark" and spec.k_hz_per_chip_lux == 40.0
+    assert spec_document(entry)["k_hz_per_chip_lux"] == 40.0
+    assert "k_hz_per_chip_lux" not in spec_document(select_entries(small=True)[0])  # older suites' spec.json stay complete
+
+
+def test_a_fixed_k_changes_the_grounded_sensor_in_k_alone() -> None:
+    import numpy as np
+
+    from darkread.models.synth.session import SessionSpec, session_sensor
+
+    drawn = session_sensor(SessionSpec(regime="grounded", lux=5.0), np.random.default_rng(7), 5.0)
+    fixed = session_sensor(SessionSpec(regime="grounded", lux=5.0, k_hz_per_chip_lux=40.0), np.random.default_rng(7), 5.0)
+    assert fixed.k_hz_per_chip_lux == 40.0 != drawn.k_hz_per_chip_lux
+    assert {k: v for k, v in fixed.to_dict().items() if k != "k_hz_per_chip_lux"} == {
+        k: v for k, v in drawn.to_dict().items() if k != "k_hz_per_chip_lux"}
+    with pytest.raises(ValueError, match="fixed K is the grounded"):
+        session_sensor(SessionSpec(regime="standard", lux=5.0, k_hz_per_chip_lux=40.0), np.random.default_rng(7), 5.0)
+
+
+def test_make_suite_k_names_the_band() -> None:
+    from darkread.lab.eval.cli import k_of
+
+    assert (k_of("slow"), k_of("central"), k_of("fast"), k_of("75")) == (40.0, 130.0, 400.0, 75.0)
