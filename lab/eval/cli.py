@@ -15,7 +15,7 @@ from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mo
 from darkread.edge.sources.evk4.bias_profiles import BIAS_PROFILES
 from darkread.lab.synth.simulators import SIMULATORS
 from darkread.models.synth.motion import MOTION_REGIMES
-from darkread.models.synth.sensor import K_NAMED, REGIMES
+from darkread.models.synth.sensor import K_NAMED, REGIMES, STANDARD_LAWS
 
 DEFAULT_CONFIDENCE_MODEL = Path(__file__).resolve().parents[2] / "cloud" / "data" / "line_confidence.json"
 
@@ -172,6 +172,9 @@ def _add_make_suite(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--k", type=k_of, metavar="K",
                    help="with --regime grounded: the photoreceptor's K fixed instead of drawn over its band, in Hz per "
                         "chip-lux or by name: slow (40), central (130), fast (400); every other draw stays the same")
+    p.add_argument("--standard-law", action="append", default=[], choices=STANDARD_LAWS, metavar="LAW",
+                   help="with --regime grounded: put this law back to the standard model's, at its draws' centre "
+                        f"({', '.join(STANDARD_LAWS)}; repeatable): one at a time, the suites tell what each law decides")
     p.add_argument("--font", metavar="FAMILY",
                    help="every selected recording not already in this font family made again in it (same seed, light, "
                         "motion, text kind and x-height; named <name-in-FAMILY>_as_<old family>)")
@@ -266,7 +269,7 @@ def _make_suite(args: argparse.Namespace) -> int:
     entries = make_suite(args.make_suite_out, small=args.small, only=args.limit, jobs=args.jobs, match=args.match,
                          subset=args.subset, simulator=args.simulator, font=args.font, regime=args.regime,
                          sensor_profile=args.sensor_profile, motion_regime=args.motion_regime, biases=args.biases,
-                         k=args.k)
+                         k=args.k, standard_laws=args.standard_law)
     print(f"{len(entries)} recordings in {args.make_suite_out}")
     return 0
 

@@ -35,7 +35,7 @@ from darkread.lab.synth.simulators import simulator_for
 from darkread.models.synth.fonts import FACES
 from darkread.models.synth.motion import MOTION_REGIMES
 from darkread.models.synth.recording import RecordingSpec, write_recording
-from darkread.models.synth.sensor import K_BAND_HZ_PER_CHIP_LUX, K_LIMITS, REGIMES
+from darkread.models.synth.sensor import K_BAND_HZ_PER_CHIP_LUX, K_LIMITS, REGIMES, GroundedSensorParams, with_standard_laws
 
 logger = logging.getLogger(__name__)
 
@@ -70,6 +70,7 @@ class SuiteEntry:
     motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES), e.g. "strong"
     bias_profile: str = FACTORY  # grounded: the IMX636 biases it is made with (edge/sources/evk4/bias_profiles.py)
     k_hz_per_chip_lux: float | None = None  # grounded: the photoreceptor's K fixed (None: drawn over its band)
+    standard_laws: tuple[str, ...] = ()  # grounded: laws put back to the standard model's (attribution)
 
     def recording_spec(self):  # -> RecordingSpec (imported lazily: the synth engine is heavy)
 
@@ -79,6 +80,7 @@ class SuiteEntry:
             description=f"darkread evaluation suite: {self.name}", split=self.split, read_once=self.read_once,
             scanpath=self.scanpath, simulator=self.simulator, regime=self.regime, sensor_profile=self.sensor_profile,
             motion_regime=self.motion_regime, bias_profile=self.bias_profile, k_hz_per_chip_lux=self.k_hz_per_chip_lux,
+            standard_laws=tuple(self.standard_laws),
         )
 
 
@@ -140,9 +142,10 @@ def simulator_check_entries() -> list[SuiteEntry]:
 def spec_document(entry: SuiteEntry) -> dict:
     """What ``spec.json`` holds: the recording spec, without the fields left at their defaults that
     older suites did not have (so their recordings stay complete)."""
-    doc = asdict(entry.recording_spec())
+    doc = json.loads(json.dumps(asdict(entry.recording_spec())))  # as spec.json reads back (tuples as lists)
     for key, default in (("scanpath", "model"), ("scanpath_file", None), ("simulator", "darkread"), ("sensor_profile", None),
-                         ("motion_regime", "standard"), ("k_hz_per_chip_lux", None)):
+                         ("motion_regime", "standard"), ("k_hz_per_chip_lux", None),
+                         ("standard_laws", [])):
         if doc.get(key) == default:
             doc.pop(key, None)
     return doc
@@ -176,11 +179,12 @@ def _slug(family: str) -> str:
 def select_entries(*, small: bool = False, match: str | Sequence[str] | None = None, subset: str | None = None,
                    simulator: str = "darkread", font: str | None = None, regime: str = "standard",
                    sensor_profile: str | None = None, motion_regime: str = "standard", biases: str = FACTORY,
-                   k: float | None = None) -> list[SuiteEntry]:
+                   k: float | None = None, standard_laws: Sequence[str] = ()) -> list[SuiteEntry]:
     """The recordings ``make_suite`` writes, in order (its arguments, checked there)."""
     entries = simulator_check_entries() if subset == "simulator-check" else suite_entries(small=small)
     entries = [replace(e, simulator=simulator, regime=regime, sensor_profile=sensor_profile,
-                       motion_regime=motion_regime, bias_profile=biases, k_hz_per_chip_lux=k) for e in entries]
+                       motion_regime=motion_regime, bias_profile=biases, k_hz_per_chip_lux=k,
+                       standard_laws=tuple(standard_laws)) for e in entries]
     if match:
 
         patterns = [match] if isinstance(match, str) else list(match)
@@ -196,7 +200,7 @@ def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
     match: str | Sequence[str] | None = None, subset: str | None = None, simulator: str = "darkread",
     font: str | None = None, regime: str = "standard", sensor_profile: str | None = None,
-    motion_regime: str = "standard", biases: str = FACTORY, k: float | None = None,
+    motion_regime: str = "standard", biases: str = FACTORY, k: float | None = None, standard_laws: Sequence[str] = (),
 ) -> list[SuiteEntry]:
     """Write the suite under ``out`` with ``jobs`` worker processes; complete recordings (their
     ``spec.json`` matches) are kept, so an interrupted run resumes. ``match``: only the recordings
@@ -209,7 +213,8 @@ def make_suite(
     ``motion_regime``: the head motion's draws (``quiet``, ``central``, ``strong``: the grounded bands'
     ends and centre); ``biases``: the IMX636 bias profile (grounded: ``factory`` or ``dark``); ``k``: the
     grounded photoreceptor's K fixed (Hz per chip-lux) instead of drawn over its band, every other draw
-    the same."""
+    the same; ``standard_laws``: grounded laws put back to the standard model's (``sensor.STANDARD_LAWS``),
+    one at a time to attribute the difference between the two models."""
     from tqdm import tqdm
 
 
@@ -231,8 +236,9 @@ def make_suite(
     if motion_regime not in MOTION_REGIMES:
         raise ValueError(f"--motion-regime {motion_regime!r}: use one of {', '.join(MOTION_REGIMES)}")
     profile_offsets(biases)  # an unknown profile: one line
-    if (biases != FACTORY or k is not None) and regime != "grounded":
-        raise ValueError(f"--biases and --k are the grounded sensor's: add --regime grounded (not {regime})")
+    if (biases != FACTORY or k is not None or standard_laws) and regime != "grounded":
+        raise ValueError(f"--biases, --k and --standard-law are the grounded sensor's: add --regime grounded (not {regime})")
+    with_standard_laws(GroundedSensorParams(), tuple(standard_laws))  # an unknown law: one line
     if k is not None and not K_LIMITS[0] <= k <= K_LIMITS[1]:
         raise ValueError(f"--k {k:g}: a photoreceptor K in {K_LIMITS[0]:g}..{K_LIMITS[1]:g} Hz per chip-lux "
                          f"(the published band is {K_BAND_HZ_PER_CHIP_LUX[0]:g}-{K_BAND_HZ_PER_CHIP_LUX[1]:g})")
@@ -243,12 +249,13 @@ def make_suite(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     entries = select_entries(small=small, match=match, subset=subset, simulator=simulator, font=font, regime=regime,
-                             sensor_profile=sensor_profile, motion_regime=motion_regime, biases=biases, k=k)
+                             sensor_profile=sensor_profile, motion_regime=motion_regime, biases=biases, k=k,
+                             standard_laws=standard_laws)
     entries = entries[:only]
     (out / SUITE_NAME).write_text(
         json.dumps({"small": small, "subset": subset, "simulator": simulator, "regime": regime, "font": font,
                     "sensor_profile": sensor_profile, "motion_regime": motion_regime, "biases": biases,
-                    "k_hz_per_chip_lux": k,
+                    "k_hz_per_chip_lux": k, "standard_laws": list(standard_laws),
                     "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "recordings": [asdict(e) for e in entries]}, indent=1)
     )

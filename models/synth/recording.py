@@ -69,6 +69,7 @@ class RecordingSpec:
     bias_profile: str = FACTORY  # the IMX636 biases it is made with (edge/sources/evk4/bias_profiles.py)
     sensor_profile: str | None = None  # a measured sensor profile the grounded sensor is drawn from
     k_hz_per_chip_lux: float | None = None  # grounded: the photoreceptor's K fixed (None: drawn over its band)
+    standard_laws: tuple[str, ...] = ()  # grounded: laws put back to the standard model's (sensor.STANDARD_LAWS)
     motion_regime: str = "standard"  # the head motion's draws (models/synth/motion.py MOTION_REGIMES)
     full_view: bool = False  # simulate every pixel of the sensor (the page, its edge, a desk) instead of the reachable region
 
@@ -86,7 +87,7 @@ def session_spec(spec: RecordingSpec) -> SessionSpec:
         xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
         scanpath=spec.scanpath, scanpath_file=spec.scanpath_file, regime=spec.regime, markers=spec.markers,
         f_number=spec.f_number, bias_profile=spec.bias_profile, sensor_profile=spec.sensor_profile,
-        k_hz_per_chip_lux=spec.k_hz_per_chip_lux, motion_regime=spec.motion_regime, full_view=spec.full_view,
+        k_hz_per_chip_lux=spec.k_hz_per_chip_lux, standard_laws=tuple(spec.standard_laws), motion_regime=spec.motion_regime, full_view=spec.full_view,
     )
 
 

@@ -26,6 +26,7 @@ thresholds with the same refractory period as the signal.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
@@ -182,6 +183,68 @@ class GroundedSensorParams(SensorParams):
 @lru_cache(maxsize=64)
 def _paper_background_rate_hz(params: GroundedSensorParams) -> float:
     return float(background_rate_curve(params, np.array([PAPER_REFLECTANCE * params.lux]), pixels=512, seconds=4.0)[0])
+
+
+# Attribution (docs/eval, "what each law decides"): a grounded sensor with one of its laws put back to
+# the standard model's, at the centre of the standard draws, so the difference between the two models
+# splits into what each law does. Head motion is the fourth law; its regimes are models/synth/motion.py's.
+STANDARD_LAWS: tuple[str, ...] = ("photoreceptor", "noise", "dark-current")
+STANDARD_CENTRAL = SensorParams(cutoff_hz=650.0, cutoff_half_lux=250.0, dark_lux=1.75, shot_rate_100lux_hz=0.065,
+                                shot_lux_exponent=1.0)
+
+
+@dataclass(frozen=True)
+class MixedLawSensorParams(GroundedSensorParams):
+    """A grounded sensor with the standard model's law for each name in ``standard_laws``:
+
+    * ``photoreceptor``: the cut-off ``cutoff_hz * I / (I + cutoff_half_lux)`` of the light at the page;
+    * ``noise``: background activity as a rate (shot noise ~ 1 / lux, thinned on dark pixels), no noise process;
+    * ``dark-current``: the standard floor ``dark_lux`` (lux at the page) taken through the lens to the chip.
+    """
+
+    standard_laws: tuple[str, ...] = ()
+
+    @property
+    def noise_process(self) -> bool:  # type: ignore[override]  # a class constant elsewhere, a law choice here
+        return "noise" not in self.standard_laws
+
+    def total_chip_lux(self, irradiance: np.ndarray) -> np.ndarray:
+        if "dark-current" not in self.standard_laws:
+            return super().total_chip_lux(irradiance)
+        lens = float(chip_lux(1.0, self.f_number, self.transmission))
+        return (np.asarray(irradiance, np.float32) + np.float32(self.dark_lux)) * np.float32(lens)
+
+    def cutoff_of(self, irradiance: np.ndarray) -> np.ndarray:
+        if "photoreceptor" not in self.standard_laws:
+            return super().cutoff_of(irradiance)
+        return SensorParams.cutoff_of(self, irradiance)
+
+    def background_rate_hz(self) -> float:
+        return SensorParams.background_rate_hz(self) if "noise" in self.standard_laws else super().background_rate_hz()
+
+    def to_dict(self) -> dict[str, float]:
+        doc = dict(super().to_dict())
+        doc["standard_laws"] = list(self.standard_laws)  # type: ignore[assignment]
+        for law, fields in (("photoreceptor", ("cutoff_hz", "cutoff_half_lux")), ("dark-current", ("dark_lux",)),
+                            ("noise", ("shot_rate_100lux_hz", "shot_lux_exponent"))):
+            if law in self.standard_laws:
+                doc.update({f: getattr(self, f) for f in fields})
+        return doc
+
+
+def with_standard_laws(params: GroundedSensorParams, laws: tuple[str, ...]) -> GroundedSensorParams:
+    """``params`` with the standard model's law (at its draws' centre) for each of ``laws``."""
+    unknown = [law for law in laws if law not in STANDARD_LAWS]
+    if unknown:
+        raise ValueError(f"--standard-law {unknown[0]!r}: use one of {', '.join(STANDARD_LAWS)}")
+    if not laws:
+        return params
+    fields = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)}
+    c = STANDARD_CENTRAL
+    fields.update(cutoff_hz=c.cutoff_hz, cutoff_half_lux=c.cutoff_half_lux, dark_lux=c.dark_lux,
+                  shot_rate_100lux_hz=c.shot_rate_100lux_hz if "noise" in laws else 0.0,
+                  shot_lux_exponent=c.shot_lux_exponent, standard_laws=tuple(sorted(laws)))
+    return MixedLawSensorParams(**fields)
 
 
 REGIMES: tuple[str, ...] = ("standard", "shifted", "fast-photoreceptor", "grounded")

@@ -22,7 +22,13 @@ from darkread.models.synth.marker_page import MarkerPage, MarkerPageSpec, lay_ou
 from darkread.models.synth.motion import MOTION_LEVELS, random_motion
 from darkread.models.synth.page import PrintedPage, reflectance, render_page
 from darkread.models.synth.scene import Scene, base_pose, desk_surround
-from darkread.models.synth.sensor import DEFAULT_F_NUMBER, GroundedSensorParams, SensorParams, regime_sensor_params
+from darkread.models.synth.sensor import (
+    DEFAULT_F_NUMBER,
+    GroundedSensorParams,
+    SensorParams,
+    regime_sensor_params,
+    with_standard_laws,
+)
 from darkread.models.synth.sensor_profile import profile_at, profile_sensor_params
 from darkread.models.synth.text import TEXT_KINDS, make_lines
 
@@ -52,6 +58,7 @@ class SessionSpec:
     bias_profile: str = FACTORY  # the IMX636 biases (edge/sources/evk4/bias_profiles.py; modelled in "grounded")
     sensor_profile: str | None = None  # a measured sensor profile the grounded sensor is drawn from (sensor_profile.py)
     k_hz_per_chip_lux: float | None = None  # grounded: the photoreceptor's K fixed here (None: drawn over its band)
+    standard_laws: tuple[str, ...] = ()  # grounded: laws put back to the standard model's (sensor.STANDARD_LAWS)
     motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES): "standard" or a grounded band
     full_view: bool = False  # the paper's edge in view with a textured desk around it (scene.desk_surround)
 
@@ -89,7 +96,8 @@ def session_sensor(spec: SessionSpec, rng: np.random.Generator, lux: float) -> S
 
     With ``sensor_profile`` the grounded sensor is drawn around a measured profile instead of its band;
     ``k_hz_per_chip_lux`` fixes its photoreceptor's K after the draw (the same draws otherwise, so a
-    suite made at the band's ends and centre holds the same scenes and sensors but for K).
+    suite made at the band's ends and centre holds the same scenes and sensors but for K); ``standard_laws``
+    put single laws back to the standard model's, to attribute the two models' difference.
     Biases are modelled in the grounded regime only; another regime with a profile other than factory
     is a ValueError rather than a silent factory sensor.
     """
@@ -103,9 +111,9 @@ def session_sensor(spec: SessionSpec, rng: np.random.Generator, lux: float) -> S
     if isinstance(params, GroundedSensorParams):
         if spec.k_hz_per_chip_lux is not None:
             params = replace(params, k_hz_per_chip_lux=float(spec.k_hz_per_chip_lux))
-        return apply_profile(params, spec.bias_profile)
-    if spec.k_hz_per_chip_lux is not None:
-        raise ValueError(f"a fixed K is the grounded regime's photoreceptor (--regime grounded), not {spec.regime!r}'s")
+        return with_standard_laws(apply_profile(params, spec.bias_profile), tuple(spec.standard_laws))
+    if spec.k_hz_per_chip_lux is not None or spec.standard_laws:
+        raise ValueError(f"a fixed K or a standard law is the grounded regime's (--regime grounded), not {spec.regime!r}'s")
     if spec.bias_profile != FACTORY:
         raise ValueError(f"bias profile {spec.bias_profile!r}: biases are modelled in the grounded regime only "
                          f"(--regime grounded), not in {spec.regime!r}")

@@ -277,7 +277,7 @@ def test_a_fixed_k_changes_the_grounded_sensor_in_k_alone() -> None:
     assert fixed.k_hz_per_chip_lux == 40.0 != drawn.k_hz_per_chip_lux
     assert {k: v for k, v in fixed.to_dict().items() if k != "k_hz_per_chip_lux"} == {
         k: v for k, v in drawn.to_dict().items() if k != "k_hz_per_chip_lux"}
-    with pytest.raises(ValueError, match="fixed K is the grounded"):
+    with pytest.raises(ValueError, match="fixed K or a standard law is the grounded"):
         session_sensor(SessionSpec(regime="standard", lux=5.0, k_hz_per_chip_lux=40.0), np.random.default_rng(7), 5.0)
 
 
@@ -285,3 +285,13 @@ def test_make_suite_k_names_the_band() -> None:
     from darkread.lab.eval.cli import k_of
 
     assert (k_of("slow"), k_of("central"), k_of("fast"), k_of("75")) == (40.0, 130.0, 400.0, 75.0)
+
+
+def test_make_suite_puts_single_laws_back_to_the_standard_model() -> None:
+    with pytest.raises(ValueError, match="--standard-law 'gravity'"):
+        make_suite("/nonexistent-suite", regime="grounded", standard_laws=["gravity"], progress=False)
+    with pytest.raises(ValueError, match="add --regime grounded"):
+        make_suite("/nonexistent-suite", standard_laws=["noise"], progress=False)
+    entry = select_entries(small=True, regime="grounded", standard_laws=["noise"])[0]
+    assert spec_document(entry)["standard_laws"] == ["noise"]
+    assert "standard_laws" not in spec_document(select_entries(small=True, regime="grounded")[0])
