@@ -80,6 +80,12 @@ Seven forms:
       lines (calibration.md, reliability.png with the ECE) to --out; then rebuild the report
       (--report-only) to see coverage and risk under it.
 
+  darkread eval side-by-side LABEL=SUITE_DIR [LABEL=SUITE_DIR ...] --out FILE.md [--reference LABEL]
+      several evaluated suites of the same scenes (made with the same selection, e.g. by another
+      sensor regime, bias profile, K or head motion) side by side: mean CER per light level and per
+      light and motion, each row on the recordings all suites hold, the difference to --reference
+      in points, the RGB snapshot beside, and a CER-vs-lux plot (FILE.png).
+
   Two edge modes side by side: --infer both evaluates the default mode (the edge's own default,
   PipelineConfig().infer) and the other one, each into its own folder (--work and --beside,
   default SUITE_DIR/eval_runs/<mode>), and the report puts the other mode beside the default:
@@ -182,6 +188,36 @@ def _add_make_suite(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_make_suite)
 
 
+def _add_side_by_side(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("side-by-side", help="several evaluated suites of the same scenes side by side (CER by light and motion)",
+                       description="Several evaluated suites of the same scenes side by side: mean CER per light level and "
+                                   "per light and motion, each row on the recordings all suites hold.")
+    p.add_argument("suites", nargs="+", metavar="LABEL=SUITE_DIR",
+                   help="an evaluated suite and its column label (results in SUITE_DIR/eval_runs/<mode>, or "
+                        "LABEL=SUITE_DIR:WORK_DIR)")
+    p.add_argument("--out", required=True, metavar="FILE.md", help="the Markdown page (the plot goes beside it as FILE.png)")
+    p.add_argument("--title", default="Suites side by side", help="the page's title")
+    p.add_argument("--reference", metavar="LABEL", help="a column the others are compared with (difference in points)")
+    p.add_argument("--note", action="append", default=[], metavar="TEXT", help="a paragraph under the title (repeatable)")
+    p.add_argument("--infer", choices=list(INFER_MODES), help="the edge mode whose results are read (default: the edge's)")
+    p.set_defaults(func=_side_by_side)
+
+
+def _side_by_side(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    from darkread.lab.eval.side_by_side import LabelledSuite, write_side_by_side
+
+    mode = args.infer or default_infer_mode()
+    suites = [LabelledSuite.load(spec, mode) for spec in args.suites]
+    command = "darkread " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["eval"] else ""
+    path = write_side_by_side(suites, Path(args.out), title=args.title, reference=args.reference, notes=args.note,
+                              command=command)
+    print(f"{len(suites)} suites side by side: {path}")
+    return 0
+
+
 def _add_compare_simulators(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compare-simulators", help="the same recordings made by two event simulators, side by side",
                        description="Mean CER per lux and per lux x motion of two evaluated suites made by two simulators.")
@@ -211,6 +247,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _add_make_suite(sub)
     _add_run(sub, common)
     _add_compare_simulators(sub)
+    _add_side_by_side(sub)
     _add_one_suite_form(sub, common, "attribute", "where an evaluated suite's errors come from (head motion, stitching, frames)",
                         _attribute)
     _add_one_suite_form(sub, common, "evidence", "how much of the ink the events themselves show", _evidence)
