@@ -179,8 +179,10 @@ def plot_reliability(rows: list[tuple[float, float, int]], ece: float, path: Pat
     return path
 
 
-def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, target_risk: float) -> tuple[ConfidenceModel, float]:
-    """Fit on the fitting half, measure on the held-out half, write the model and calibration.md."""
+def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, target_risk: float,
+              sources: Sequence[str] = ()) -> tuple[ConfidenceModel, float]:
+    """Fit on the fitting half, measure on the held-out half, write the model and calibration.md;
+    ``sources``: the suites the lines came from, as the page names them."""
     fitting, held = split([line for line in lines if line.read])  # bands read as nothing: unclear by rule, not by the model
     if len(fitting) < 20 or len(held) < 10:
         raise ValueError(f"too few judged lines to calibrate ({len(fitting)} to fit, {len(held)} held out); evaluate more recordings")
@@ -191,7 +193,7 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
     low, high = bootstrap_ece(p, right)
     meta = {"fitted_on": f"{len(fitting)} lines of {len({ln.recording for ln in fitting})} recordings (numbered 0-3, 8-11, 16-19, ...)",
             "held_out_ece": round(ece, 4), "held_out_ece_90": [round(low, 4), round(high, 4)], "held_out_lines": len(held),
-            "target_risk": target_risk}
+            "target_risk": target_risk, **({"suites": list(sources)} if sources else {})}
     model_out.parent.mkdir(parents=True, exist_ok=True)
     model_out.write_text(model_json(model, meta))
     report_dir.mkdir(parents=True, exist_ok=True)
@@ -204,6 +206,7 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
          f"at most 4 % (one character in a suite line). Answer threshold {model.answer_threshold:g} (the lowest whose "
          f"answered lines on the fitting half read at {100 * target_risk:g} % CER or better)."),
         "",
+        *([f"Lines from: {'; '.join(sources)}.", ""] if len(sources) > 1 else []),
         (f"**Held-out ECE: {ece:.3f}** (10 equal-width bins; {100 * right.mean():.0f} % of the {len(held)} held-out lines right; "
          f"90 % bootstrap interval over the held-out lines {low:.3f}-{high:.3f}: with this few lines the estimate is coarse)."),
         "",

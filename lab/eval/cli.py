@@ -259,6 +259,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _add_add_imu(sub)
     calibrate.add_argument("--target-risk", type=float, default=0.05, metavar="R",
                            help="the CER the answered lines of the fitting half may have (sets the answer threshold)")
+    calibrate.add_argument("--also", action="append", default=[], metavar="SUITE_DIR",
+                           help="another evaluated suite whose lines join the fit and the held-out measure, split by the "
+                                "same recording numbers (e.g. the suite re-made on another sensor model; repeatable)")
 
 
 def _add_head_motion(sub: argparse._SubParsersAction) -> None:
@@ -368,7 +371,15 @@ def _calibrate(args: argparse.Namespace) -> int:
     if not 0 < args.target_risk < 1:
         raise ValueError(f"--target-risk {args.target_risk:g}: give a CER between 0 and 1")
     lines = outcomes(load_results(work))
-    model, ece = calibrate(lines, Path(args.model_out), Path(args.out), args.target_risk)
+    sources = [f"{suite} ({len(lines)} lines)"]
+    for other in args.also:
+        folder = Path(other) / "eval_runs" / _first_mode(args)
+        more = outcomes(load_results(folder))
+        if not more:
+            raise FileNotFoundError(f"--also {other}: no judged lines in {folder}; run `darkread eval run {other}` first")
+        lines += more
+        sources.append(f"{other} ({len(more)} lines)")
+    model, ece = calibrate(lines, Path(args.model_out), Path(args.out), args.target_risk, sources=sources)
     print(f"{len(lines)} lines; held-out ECE {ece:.3f}; answer threshold {model.answer_threshold:g}; "
           f"model: {args.model_out}; calibration: {Path(args.out) / 'calibration.md'}")
     return 0

@@ -65,3 +65,27 @@ def test_answer_lines_are_matched_to_their_closest_reference_line() -> None:
     matched = match_lines("the quick brown\nfox jumps over\n", [{"text": "fox jumps ovor"}, {"text": "the quick brown"}])
     assert matched[0]["line_cer"] == round(1 / 14, 4) and matched[0]["line_ref_chars"] == 14
     assert matched[1]["line_cer"] == 0.0
+
+
+def test_calibrate_pools_the_lines_of_several_suites_and_names_them(tmp_path: Path) -> None:
+    from darkread.cli import main
+
+    def suite(root: Path, line_cer: float) -> Path:
+        for i in range(24):
+            folder = root / "eval_runs" / "on-change" / f"{i:03d}_lux5_still"
+            folder.mkdir(parents=True)
+            lines = [{"text": "a line", "line_cer": line_cer if j % 2 else 0.0, "line_ref_chars": 20,
+                      "evidence": {"ocr_min": 0.2 if j % 2 else 0.9, "ocr_mean": 0.5 if j % 2 else 0.95}} for j in range(4)]
+            (folder / "result.json").write_text(json.dumps({"name": folder.name, "lux": 5.0, "motion": "still", "kind": "words",
+                                                            "darkread": {"text": "a line", "cer": 0.1, "lines": lines}}))
+        return root
+
+    first, second = suite(tmp_path / "a", 0.3), suite(tmp_path / "b", 0.5)
+    out = tmp_path / "report"
+    assert main(["eval", "calibrate", str(first), "--also", str(second), "--out", str(out),
+                 "--model-out", str(tmp_path / "m.json")]) == 0
+    doc = json.loads((tmp_path / "m.json").read_text())
+    assert doc["suites"] == [f"{first} (96 lines)", f"{second} (96 lines)"]
+    assert "Lines from:" in (out / "calibration.md").read_text()
+    assert main(["eval", "calibrate", str(first), "--also", str(tmp_path / "none"), "--out", str(out),
+                 "--model-out", str(tmp_path / "m.json")]) != 0
