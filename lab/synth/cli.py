@@ -110,6 +110,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ds.add_argument("--regime", choices=REGIMES, default="standard", help="the sensor regime (default standard)")
     ds.add_argument("--sensor-profile", metavar="PROFILE",
                     help="with --regime grounded: draw the sensor around this measured profile (`darkread calibrate sensor`)")
+    ds.add_argument("--biases", nargs="+", default=["factory"], metavar="PROFILE",
+                    help="with --regime grounded: the IMX636 bias profiles the pages are made under, each page one of them "
+                         "(default factory; `--biases factory dark` for a network that reads under both profiles the glasses "
+                         "switch between)")
+    ds.add_argument("--motion-regime", choices=MOTION_REGIMES, default="standard",
+                    help="the head motion's draws (default standard; grounded: from measurements, docs/head_motion_model.md)")
     ds.set_defaults(func=_dataset)
 
     ev = sub.add_parser(
@@ -216,6 +222,8 @@ def _dataset(args: argparse.Namespace) -> int:
         lux_range=(args.lux[0], args.lux[1]) if args.lux else LUX_RANGE,
         regime=args.regime,
         sensor_profile=args.sensor_profile,
+        biases=tuple(args.biases),
+        motion_regime=args.motion_regime,
     )
     print(f"{manifest['samples']} samples in {len(manifest['shards'])} shards -> {args.out} "
           f"({manifest['samples_per_s']} samples/s)")

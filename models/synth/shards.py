@@ -12,7 +12,7 @@ import logging
 import math
 import multiprocessing as mp
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -21,9 +21,11 @@ import numpy as np
 from darkread.core.mask_bits import pack_rows
 from darkread.edge.config import PipelineConfig
 from darkread.edge.fovea import FoveaConfig, window_origin
+from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
 from darkread.edge.voxel import VoxelConfig, voxel_grid
 from darkread.models.synth.camera import SENSOR_WH, pixels_per_degree
 from darkread.models.synth.fonts import HELD_OUT_FAMILIES, TRAIN_FAMILIES, families_of, font_split
+from darkread.models.synth.motion import MOTION_REGIMES
 from darkread.models.synth.scene import Region, Scene
 from darkread.models.synth.sensor import EventSensor, SensorParams, concat_events
 from darkread.models.synth.sensor_profile import profile_at
@@ -236,29 +238,56 @@ def shard_seed(base_seed: int, split: str, held_out: bool, shard_index: int, pag
     return int(ss.generate_state(1, dtype=np.uint32)[0])
 
 
-def build_shard(args: tuple[Path, int, int, int, str, bool, tuple[float, float], str, bool, str, str | None]) -> dict:
-    """Make shard ``index`` with ``count`` samples (a multiprocessing task)."""
-    out_dir, index, count, base_seed, split, held_out, lux_range, target_time, more_fonts, regime, sensor_profile = args
+@dataclass(frozen=True)
+class ShardTask:
+    """One shard of a dataset (a worker's task): where, which, how many, and how its pages are drawn."""
+
+    out_dir: Path
+    index: int
+    count: int
+    base_seed: int
+    split: str
+    held_out: bool
+    lux_range: tuple[float, float]
+    target_time: str
+    more_fonts: bool
+    regime: str
+    sensor_profile: str | None
+    biases: tuple[str, ...] = (FACTORY,)  # each page's IMX636 bias profile, drawn from these by its seed
+    motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES)
+
+    @property
+    def path(self) -> Path:
+        return Path(self.out_dir) / f"shard-{self.index:05d}.npz"
+
+
+def page_biases(biases: tuple[str, ...], page_seed: int) -> str:
+    """The bias profile of the page with this seed: one of ``biases``, a pure function of the seed."""
+    return biases[page_seed % len(biases)]
+
+
+def build_shard(task: ShardTask) -> dict:
+    """Make one shard (a multiprocessing task)."""
     t0 = time.perf_counter()
-    spec = SessionSpec(split=split, held_out=held_out, duration_s=4.0, more_fonts=more_fonts, regime=regime,
-                       sensor_profile=sensor_profile)
+    spec = SessionSpec(split=task.split, held_out=task.held_out, duration_s=4.0, more_fonts=task.more_fonts,
+                       regime=task.regime, sensor_profile=task.sensor_profile, motion_regime=task.motion_regime)
     parts_v: list[np.ndarray] = []
     parts_t: list[np.ndarray] = []
     metas: list[SampleMeta] = []
     page = 0
-    while len(metas) < count:
-        k = min(SAMPLES_PER_PAGE, count - len(metas))
-        v, t, m = make_samples(spec, shard_seed(base_seed, split, held_out, index, page), k, lux_range=lux_range,
-                               target_time=target_time)
+    while len(metas) < task.count:
+        k = min(SAMPLES_PER_PAGE, task.count - len(metas))
+        seed = shard_seed(task.base_seed, task.split, task.held_out, task.index, page)
+        v, t, m = make_samples(replace(spec, bias_profile=page_biases(task.biases, seed)), seed, k,
+                               lux_range=task.lux_range, target_time=task.target_time)
         parts_v.append(v)
         parts_t.append(t)
         metas.extend(m)
         page += 1
-    path = Path(out_dir) / f"shard-{index:05d}.npz"
-    tmp = path.with_suffix(".tmp.npz")
+    tmp = task.path.with_suffix(".tmp.npz")
     write_shard(tmp, np.concatenate(parts_v), np.concatenate(parts_t), metas)
-    tmp.replace(path)
-    return {"index": index, "count": len(metas), "seconds": time.perf_counter() - t0, "path": path.name}
+    tmp.replace(task.path)
+    return {"index": task.index, "count": len(metas), "seconds": time.perf_counter() - t0, "path": task.path.name}
 
 
 def category_counts(out_dir: str | Path, shard_names: list[str]) -> dict[str, dict[str, int]]:
@@ -296,12 +325,16 @@ def build_dataset(
     more_fonts: bool = False,
     regime: str = "standard",
     sensor_profile: str | None = None,
+    biases: tuple[str, ...] = (FACTORY,),
+    motion_regime: str = "standard",
 ) -> dict:
     """Write ``samples`` samples as shards plus ``dataset.json``; deterministic for ``seed`` (any worker count).
     ``lux_range``: the light, log-uniform between the two (a low-light set for the dark end, say 4..40);
     ``target_time``: when each target shows the page (``TARGET_TIMES``); ``more_fonts``: a training set
     drawn from ``MORE_TRAIN_FAMILIES`` too; ``regime``: the sensor's (``sensor.REGIMES``); ``sensor_profile``:
-    with the grounded regime, the sensor drawn around a measured profile (``sensor_profile.py``)."""
+    with the grounded regime, the sensor drawn around a measured profile (``sensor_profile.py``); ``biases``: the
+    IMX636 bias profiles pages are made under (grounded; each page one of them, by its seed: a network for
+    both profiles the glasses switch between); ``motion_regime``: the head motion's draws."""
     if target_time not in TARGET_TIMES:
         raise ValueError(f"--target-time {target_time!r}: use one of {', '.join(TARGET_TIMES)}")
     if samples < 1:
@@ -318,19 +351,28 @@ def build_dataset(
             raise ValueError(f"--sensor-profile is drawn from by the grounded regime: add --regime grounded (not {regime})")
         sensor_profile = str(Path(sensor_profile).resolve())
         profile_at(sensor_profile)  # missing or wrong: one line before any work
+    biases = tuple(biases)
+    if not biases:
+        raise ValueError("--biases: name at least one bias profile")
+    for name in biases:
+        profile_offsets(name)  # an unknown profile: one line before any work
+    if biases != (FACTORY,) and regime != "grounded":
+        raise ValueError(f"--biases {' '.join(biases)}: biases are modelled in the grounded regime only (add --regime grounded)")
+    if motion_regime not in MOTION_REGIMES:
+        raise ValueError(f"--motion-regime {motion_regime!r}: use one of {', '.join(MOTION_REGIMES)}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n_shards = math.ceil(samples / shard_size)
     tasks = [
-        (out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out), (lo, hi), target_time,
-         bool(more_fonts), regime, sensor_profile)
+        ShardTask(out, i, min(shard_size, samples - i * shard_size), int(seed), split, bool(held_out), (lo, hi), target_time,
+                  bool(more_fonts), regime, sensor_profile, biases, motion_regime)
         for i in range(n_shards)
     ]
-    todo = [t for t in tasks if not (out / f"shard-{t[1]:05d}.npz").exists()]
+    todo = [t for t in tasks if not t.path.exists()]
     t0 = time.perf_counter()
     from tqdm import tqdm
 
-    bar = tqdm(total=samples, initial=samples - sum(t[2] for t in todo), unit="sample", disable=not progress)
+    bar = tqdm(total=samples, initial=samples - sum(t.count for t in todo), unit="sample", disable=not progress)
     results = []
     if workers <= 1:
         for task in todo:
@@ -375,6 +417,8 @@ def build_dataset(
             "sensor": ("see darkread.models.synth.sensor.random_sensor_params" if regime == "standard"
                        else f"regime {regime} (darkread.models.synth.sensor.regime_sensor_params)"),
             "sensor_profile": sensor_profile,
+            "biases": list(biases),
+            "motion_regime": motion_regime,
         },
         "counts": category_counts(out, [f"shard-{i:05d}.npz" for i in range(n_shards)]),
         "generation_seconds": round(elapsed, 1),

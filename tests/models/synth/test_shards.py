@@ -121,3 +121,25 @@ def test_a_sets_font_split_is_named_once_for_sessions_and_manifests():
     assert families_of("all") == TRAIN_FAMILIES + HELD_OUT_FAMILIES
     with pytest.raises(ValueError, match="unknown font split 'bold'"):
         families_of("bold")
+
+
+def test_pages_are_made_under_each_named_bias_profile_by_their_seed(tmp_path):
+    from darkread.models.synth.shards import page_biases, shard_seed
+
+    seeds = [shard_seed(5, "train", False, 0, page) for page in range(40)]
+    drawn = [page_biases(("factory", "dark"), s) for s in seeds]
+    assert {"factory", "dark"} == set(drawn) and 10 < drawn.count("dark") < 30
+    assert all(page_biases(("factory",), s) == "factory" for s in seeds)
+    manifest = build_dataset(tmp_path, 2, workers=1, seed=5, shard_size=2, progress=False, lux_range=(5.0, 6.0),
+                             regime="grounded", biases=("factory", "dark"), motion_regime="grounded")
+    assert manifest["parameters"]["biases"] == ["factory", "dark"] and manifest["parameters"]["motion_regime"] == "grounded"
+    assert load_dataset(tmp_path).voxels.shape[0] == 2
+
+
+def test_biases_other_than_factory_need_the_grounded_sensor(tmp_path):
+    with pytest.raises(ValueError, match="grounded regime only"):
+        build_dataset(tmp_path, 2, workers=1, progress=False, biases=("dark",))
+    with pytest.raises(ValueError, match="bias profile 'night'"):
+        build_dataset(tmp_path, 2, workers=1, progress=False, regime="grounded", biases=("night",))
+    with pytest.raises(ValueError, match="--motion-regime 'wild'"):
+        build_dataset(tmp_path, 2, workers=1, progress=False, motion_regime="wild")
