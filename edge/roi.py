@@ -37,19 +37,33 @@ NOT_YET = 1 << 62  # ``delivered_since`` of a window the sensor has not delivere
 def delivered_since(writes: list[tuple[int | None, Rect | None]], rect: Rect) -> int | None:
     """Since when every event of ``rect`` has been delivered, given the ROI writes (in effect from,
     the window or None for the whole sensor; oldest first; in effect None: not yet): where the
-    oldest of the latest writes that all cover it took effect; ``NOT_YET`` while the newest has not;
-    None when every write held covers it (as far as they tell, it always was)."""
+    oldest of the latest writes that all cover it took effect; ``NOT_YET`` while the newest, which does
+    not cover it, has not; None when every write held covers it (as far as they tell, it always was).
+
+    A newest write not yet in effect that covers ``rect``, over an ROI in effect that covers it too,
+    changes nothing for it: its events go on being delivered whenever the switch happens, so the
+    answer is the earlier writes' (and does not depend on how soon the source tells when the write
+    took effect)."""
     since = None
     for k in range(len(writes) - 1, -1, -1):
         effective, roi = writes[k]
         if effective is None:  # not in effect yet (or moved on before it was)
-            if k == len(writes) - 1:
+            if k == len(writes) - 1 and not (_covers(roi, rect) and _covers(_in_effect(writes[:-1]), rect)):
                 return NOT_YET
             continue
         if roi is not None and not rect_covers(roi, rect):
             return since if since is not None else effective
         since = effective
     return None
+
+
+def _covers(roi: Rect | None, rect: Rect) -> bool:
+    return roi is None or rect_covers(roi, rect)
+
+
+def _in_effect(writes: list[tuple[int | None, Rect | None]]) -> Rect | None:
+    """The ROI the newest write in effect set (None: the whole sensor, also before any write)."""
+    return next((roi for effective, roi in reversed(writes) if effective is not None), None)
 
 
 def follow_window(requested: Rect, current: Rect | None, margin: int, sensor_wh: tuple[int, int] = (1280, 720)) -> Rect | None:

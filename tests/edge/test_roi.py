@@ -53,5 +53,10 @@ def test_a_window_is_delivered_since_the_oldest_of_the_latest_rois_that_all_cove
     assert delivered_since([(1_000, elsewhere), (2_000, covering)], window) == 2_000  # dark before 2 ms
     assert delivered_since([(1_000, elsewhere), (2_000, covering), (3_000, (90, 90, 264, 164))], window) == 2_000
     assert delivered_since([(1_000, elsewhere), (2_000, None), (3_000, covering)], window) == 2_000  # whole sensor counts
-    assert delivered_since([(1_000, elsewhere), (None, covering)], window) == NOT_YET  # written, nothing delivered yet
+    assert delivered_since([(1_000, elsewhere), (None, elsewhere)], window) == NOT_YET  # moving away: not yet known
+    # a pending write that covers the window changes nothing for it: the earlier writes answer
+    assert delivered_since([(1_000, elsewhere), (None, covering)], window) == NOT_YET  # dark until it takes effect
+    assert delivered_since([(None, covering)], window) is None  # the whole sensor before, and after the switch
+    assert delivered_since([(1_000, covering), (None, (90, 90, 264, 164))], window) is None
+    assert delivered_since([(1_000, elsewhere), (2_000, covering), (None, covering)], window) == 2_000
     assert delivered_since([(1_000, elsewhere), (None, elsewhere), (3_000, covering)], window) == 3_000  # never in effect
