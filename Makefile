@@ -15,7 +15,7 @@ DEMO_STAMP := $(VENV)/.installed-demo
 HESIM  := hesim-3d==0.1.0
 PYTEST_ARGS ?=  # e.g. make test PYTEST_ARGS="-m postgres"
 
-.PHONY: help venv venv-demo hesim test lint typecheck test-fast bench demo eval eval-small eval-hesim eval-photoreceptor train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
+.PHONY: help venv venv-demo hesim test lint typecheck test-fast bench demo eval eval-small eval-hesim eval-photoreceptor eval-grounded train clean system-deps speech-deps browser-deps ocr-deps postgres-deps
 
 help:  ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | sed 's/:.*## /\t/' | column -t -s "$$(printf '\t')"
@@ -130,6 +130,53 @@ eval-photoreceptor: $(STAMP)  ## what the photoreceptor's speed in the dark deci
 	$(VENV)/bin/darkread eval make-suite runs/eval_photoreceptor --regime fast-photoreceptor --match '*_lux10_*' --match '*_lux5_*' --jobs 2
 	$(VENV)/bin/darkread eval evidence runs/eval_photoreceptor --out runs/eval_photoreceptor_report --jobs 2
 	$(VENV)/bin/darkread eval run runs/eval_photoreceptor --out runs/eval_photoreceptor_report --infer both --no-rgb --jobs 2
+
+# the grounded suite (issue 48): the suite's grid made again on the sensor model and head motion of published
+# measurements, the same scenes; dark-profile, K-band, head-motion-band and one-law-at-a-time variants at 10 and 5 lux
+G_SUITE := runs/grounded
+G_MAKE  := $(VENV)/bin/darkread eval make-suite --jobs 2
+G_RUN   := $(VENV)/bin/darkread eval run --compare --jobs 2
+G_GRID  := --regime grounded --motion-regime grounded
+G_DARK  := --match '*_lux10_*' --match '*_lux5_*' --limit 24
+G_FIVE  := --match '*_lux5_*' --limit 12
+G_STD   := --match '*_lux30_*' --match '*_lux10_*' --match '*_lux5_*' --limit 36
+eval-grounded: $(STAMP)  ## the suite re-made on the grounded sensor model and head motion (~2.5 h on 2 cores): factory and dark biases, K's band and the head motion's at their ends, one law at a time; docs/eval/grounded*.md
+	$(G_MAKE) $(G_SUITE)/central_factory $(G_GRID) --k central --limit 60
+	$(G_RUN) $(G_SUITE)/central_factory --out $(G_SUITE)/report_central_factory
+	$(G_MAKE) $(G_SUITE)/standard $(G_STD)
+	$(VENV)/bin/darkread eval add-imu $(G_SUITE)/standard
+	$(G_RUN) $(G_SUITE)/standard --out $(G_SUITE)/report_standard --no-rgb
+	for v in "central_dark --k central --biases dark" "slow_dark --k slow --biases dark" "slow_factory --k slow" \
+	         "fast_dark --k fast --biases dark" "fast_factory --k fast"; do \
+		set -- $$v; name=$$1; shift; \
+		$(G_MAKE) $(G_SUITE)/$$name $(G_GRID) $$* $(G_DARK) && $(G_RUN) $(G_SUITE)/$$name --out $(G_SUITE)/report_$$name --no-rgb || exit 1; \
+	done
+	for m in quiet strong; do \
+		$(G_MAKE) $(G_SUITE)/central_dark_$$m --regime grounded --motion-regime $$m --k central --biases dark $(G_DARK) && \
+		$(G_RUN) $(G_SUITE)/central_dark_$$m --out $(G_SUITE)/report_central_dark_$$m --no-rgb || exit 1; \
+	done
+	$(G_MAKE) $(G_SUITE)/law_motion --regime grounded --motion-regime standard --k central $(G_FIVE)
+	$(G_RUN) $(G_SUITE)/law_motion --out $(G_SUITE)/report_law_motion --no-rgb
+	for law in photoreceptor noise dark-current; do \
+		$(G_MAKE) $(G_SUITE)/law_$$law $(G_GRID) --k central --standard-law $$law $(G_FIVE) && \
+		$(G_RUN) $(G_SUITE)/law_$$law --out $(G_SUITE)/report_law_$$law --no-rgb || exit 1; \
+	done
+	$(MAKE) --no-print-directory grounded-pages G_SUITE=$(G_SUITE)
+
+grounded-pages: $(STAMP)  ## the pages of docs/eval/grounded/ from the evaluated grounded suites (runs/grounded)
+	$(VENV)/bin/darkread eval side-by-side "grounded=$(G_SUITE)/central_factory" "standard (old)=$(G_SUITE)/standard" \
+		--reference "standard (old)" --out docs/eval/grounded/model.md --title "The grounded model against the old standard one"
+	$(VENV)/bin/darkread eval side-by-side "factory, K 130=$(G_SUITE)/central_factory" "dark, K 130=$(G_SUITE)/central_dark" \
+		"factory, K 40=$(G_SUITE)/slow_factory" "dark, K 40=$(G_SUITE)/slow_dark" "factory, K 400=$(G_SUITE)/fast_factory" \
+		"dark, K 400=$(G_SUITE)/fast_dark" --out docs/eval/grounded/dark_profile.md \
+		--title "The dark bias profile across the photoreceptor's band"
+	$(VENV)/bin/darkread eval side-by-side "quiet head=$(G_SUITE)/central_dark_quiet" "grounded head=$(G_SUITE)/central_dark" \
+		"strong head=$(G_SUITE)/central_dark_strong" --reference "grounded head" --out docs/eval/grounded/head_motion.md \
+		--title "The head motion's band (dark profile, K 130)"
+	$(VENV)/bin/darkread eval side-by-side "grounded=$(G_SUITE)/central_factory" "photoreceptor=$(G_SUITE)/law_photoreceptor" \
+		"noise=$(G_SUITE)/law_noise" "dark current=$(G_SUITE)/law_dark-current" "head motion=$(G_SUITE)/law_motion" \
+		"standard (old)=$(G_SUITE)/standard" --reference grounded --out docs/eval/grounded/attribution.md \
+		--title "One law at a time: the grounded model with each law put back to the standard one's (5 lux)"
 
 train: $(STAMP)  ## reproduce the shipped model from scratch
 	$(VENV)/bin/darkread train all
