@@ -72,12 +72,9 @@ def smear_of(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int
     """``estimate_smear`` of events given as their coordinates and times: the fields of a
     caller's events, not a copy of its records. Those inside ``region`` vote; with ``t_first_us``
     only those of [``t_first_us``, ``t_ref_us``]."""
-    clock = np.iinfo(np.int64)
-    t_first, t_last = (int(clock.min), int(clock.max)) if t_first_us is None else (int(t_first_us), int(t_ref_us))
     if span_us <= 0:
         return 0.0, 0.0
-    x0, y0, width, height = region
-    n, earliest = voters(x, y, t, x0, y0, width, height, t_first, t_last)
+    t_first, t_last, n, earliest = _voting(x, y, t, region, t_ref_us, t_first_us)
     if n < cfg.min_events:
         return 0.0, 0.0
     r = int(min(max(math.ceil(cfg.max_speed_px_s * span_us / 1e6), 1), cfg.max_shift_px))
@@ -104,12 +101,9 @@ def smear_near(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, i
     """``smear_of`` searched only within ``radius_px`` of a predicted smear ``prior`` (the gyroscope's,
     ``edge.imu_motion``): no coarse search and no test against a still page, the motion is known to be
     near it; with too few events to sharpen, the prediction itself."""
-    clock = np.iinfo(np.int64)
-    t_first, t_last = (int(clock.min), int(clock.max)) if t_first_us is None else (int(t_first_us), int(t_ref_us))
     if span_us <= 0:
         return 0.0, 0.0
-    x0, y0, width, height = region
-    n, earliest = voters(x, y, t, x0, y0, width, height, t_first, t_last)
+    t_first, t_last, n, earliest = _voting(x, y, t, region, t_ref_us, t_first_us)
     r = int(math.ceil(max(abs(prior[0]), abs(prior[1])) + radius_px + 1))
     if n < cfg.min_events or r > 4 * cfg.max_shift_px:
         return prior
@@ -119,6 +113,17 @@ def smear_near(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, i
     dx, dy = _displacements(float(radius_px), cfg.step_px)
     found, _ = _best(pairs, dx + np.float32(prior[0]), dy + np.float32(prior[1]), cv2.INTER_CUBIC)
     return found
+
+
+def _voting(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int, int, int], t_ref_us: int,
+            t_first_us: int | None) -> tuple[int, int, int, int]:
+    """(first, last time that vote, how many events of ``region`` do, the earliest of them): every
+    time without ``t_first_us``, else [``t_first_us``, ``t_ref_us``]."""
+    clock = np.iinfo(np.int64)
+    t_first, t_last = (int(clock.min), int(clock.max)) if t_first_us is None else (int(t_first_us), int(t_ref_us))
+    x0, y0, width, height = region
+    n, earliest = voters(x, y, t, x0, y0, width, height, t_first, t_last)
+    return t_first, t_last, n, earliest
 
 
 def _slice_pairs(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int, int, int], t_ref_us: int,
