@@ -27,6 +27,7 @@ any gaze row at 11-100 ms), however large the chunks the source hands over: the 
 the same views, whatever the replay's chunking."""
 
 
+
 class OnChangeStep:
     """One view per fixation, fused from the frames that changed it."""
 
@@ -44,6 +45,7 @@ class OnChangeStep:
         self._fixation: int | None = None  # the current fixation's key (its first row, event clock)
         self._fixation_events = 0  # window events since it started
         self._since_infer = 0  # window events since the last inference
+        self._retry_at = 0  # after a window too thin to infer: _fixation_events it may be tried again at
         self._view_origin: tuple[int, int] | None = None  # the current view's window (placed once per view)
         self._capped = False  # the current view was denied a frame (edge.load)
 
@@ -65,15 +67,15 @@ class OnChangeStep:
         if key is None:
             return  # saccade, blink, no gaze: nothing to infer
         if self._fixation is None:
-            self._fixation, self._fixation_events, self._since_infer = key, 0, 0
+            self._fixation, self._fixation_events, self._since_infer, self._retry_at = key, 0, 0, 0
             self.trigger.reset()
             self._roi_at_landing(t)
         self._fixation_events += pending.foveated
         self._since_infer += pending.foveated
         if len(self.fuser) and t - self.fuser.t0_us >= self.settings.view_every_ms * 1e3:
             self._send_view(arrival)  # a long fixation: its view so far, the next one starts afresh
-        if not self.trigger.ready(t, self._fixation):
-            return  # the bounded rate (and the landing's wait), checked before anything costs
+        if not self.trigger.ready(t, self._fixation) or self._fixation_events < self._retry_at:
+            return  # the bounded rate (and the landing's wait, a thin window's retry), checked before anything costs
         window = self._view_window(t)
         if window is None:
             return
@@ -133,6 +135,10 @@ class OnChangeStep:
         window = self.windows.recent_events(placed, t, t_from=t_from if delivered is None else max(t_from, delivered),
                                             at_least=enough)
         if window.shape[0] < enough:
+            # too thin once cleaned (noise in the dark, a blank stretch): a few milliseconds more of the
+            # same events clean down the same way, and each try costs a deblur and a denoise; try again
+            # once as many are new as a frame needs to be renewed
+            self._retry_at = self._fixation_events + max(1, round(self.settings.renew_fraction * self.settings.n_events))
             return False
         frame = self.windows.frame(window, placed, gaze, t, probability=self.settings.fuse == "probability")
         if frame is None:

@@ -70,3 +70,48 @@ def test_the_sample_makes_the_same_views_however_the_replay_is_cut() -> None:
         cut, cut_totals = replay(slice_us)
         assert fingerprint(cut) == fingerprint(whole), f"{slice_us} µs slices changed the views"
         assert cut_totals["events_foveated"] == totals["events_foveated"]
+
+
+@pytest.mark.slow  # simulates 2 s of a dim page
+def test_a_window_too_thin_to_infer_waits_for_a_renewals_worth_of_new_events(
+        monkeypatch: pytest.MonkeyPatch, tmp_path_factory: pytest.TempPathFactory) -> None:
+    """In the dark a window often cleans down to fewer than ``min_events``; the same window a few
+    milliseconds later cleans down the same way, so it is tried again only once as many events are
+    new as a frame needs to be renewed (each try costs a deblur and a denoise)."""
+    from darkread.edge.steps.on_change import OnChangeStep
+    from darkread.models.synth.recording import RecordingSpec, write_recording
+
+    recording = tmp_path_factory.mktemp("dim") / "rec"
+    write_recording(recording, RecordingSpec(lux=5.0, motion="normal", seconds=2.0, seed=5, n_lines=3, line_chars=20,
+                                             xheight_px=8.0), progress=False)
+    tries: list[tuple[int | None, int, bool]] = []
+    ending: list[bool] = [False]
+    infer_into_view, end_view = OnChangeStep._infer_into_view, OnChangeStep._end_view
+
+    def logged(self: OnChangeStep, *args: object) -> bool:
+        made = infer_into_view(self, *args)  # type: ignore[arg-type]
+        if not ending[0]:  # (a fixation too short for a frame gets one last try as it ends)
+            tries.append((self._fixation, self._fixation_events, made))
+        return made
+
+    def ended(self: OnChangeStep, *args: object) -> None:
+        ending[0] = True
+        try:
+            end_view(self, *args)  # type: ignore[arg-type]
+        finally:
+            ending[0] = False
+
+    monkeypatch.setattr(OnChangeStep, "_infer_into_view", logged)
+    monkeypatch.setattr(OnChangeStep, "_end_view", ended)
+    config = load_config(None, environ={}, overrides={
+        "source": {"kind": "replay", "path": str(recording), "speed": 0.0},
+        "pipeline": {"infer": "on-change", "min_events": 1200},  # many dim windows too thin once cleaned
+    })
+    edge = build_edge(config, on_frame=lambda view, arrival: None)
+    edge.startup()
+    edge.source.wait()
+    edge.shutdown(5.0)
+    renewal = config.pipeline.renew_fraction * config.pipeline.n_events
+    thin = [(a, b) for a, b in zip(tries, tries[1:]) if not a[2] and a[0] == b[0]]
+    assert thin, f"a 5-lux page should give windows too thin for min_events 1200: {tries}"
+    assert all(b[1] - a[1] >= renewal for a, b in thin), [(a, b) for a, b in thin if b[1] - a[1] < renewal]
