@@ -162,6 +162,10 @@ eval-grounded: $(STAMP)  ## the suite re-made on the grounded sensor model and h
 		$(G_RUN) $(G_SUITE)/law_$$law --out $(G_SUITE)/report_law_$$law --no-rgb || exit 1; \
 	done
 	$(MAKE) --no-print-directory grounded-pages G_SUITE=$(G_SUITE)
+	# the line-confidence model the cloud ships, fitted on the suite's lines and the grounded suites' (make eval first)
+	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval --also $(G_SUITE)/central_factory \
+		--also $(G_SUITE)/central_dark --also $(G_SUITE)/standard
+	$(VENV)/bin/darkread eval run runs/eval_suite --out docs/eval --infer on-change --report-only --before docs/eval/before/results.json
 
 grounded-pages: $(STAMP)  ## the pages of docs/eval/grounded/ from the evaluated grounded suites (runs/grounded)
 	$(VENV)/bin/darkread eval side-by-side "grounded=$(G_SUITE)/central_factory" "standard (old)=$(G_SUITE)/standard" \
