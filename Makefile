@@ -143,6 +143,8 @@ G_STD   := --match '*_lux30_*' --match '*_lux10_*' --match '*_lux5_*' --limit 36
 eval-grounded: $(STAMP)  ## the suite re-made on the grounded sensor model and head motion (~2.5 h on 2 cores): factory and dark biases, K's band and the head motion's at their ends, one law at a time; docs/eval/grounded*.md
 	$(G_MAKE) $(G_SUITE)/central_factory $(G_GRID) --k central --limit 60
 	$(G_RUN) $(G_SUITE)/central_factory --out $(G_SUITE)/report_central_factory
+	$(G_MAKE) $(G_SUITE)/central_factory_30 $(G_GRID) --k central --match '*_lux30_*' --limit 21
+	$(G_RUN) $(G_SUITE)/central_factory_30 --out $(G_SUITE)/report_central_factory_30
 	$(G_MAKE) $(G_SUITE)/standard $(G_STD)
 	$(VENV)/bin/darkread eval add-imu $(G_SUITE)/standard
 	$(G_RUN) $(G_SUITE)/standard --out $(G_SUITE)/report_standard --no-rgb
@@ -170,6 +172,8 @@ eval-grounded: $(STAMP)  ## the suite re-made on the grounded sensor model and h
 grounded-pages: $(STAMP)  ## the pages of docs/eval/grounded/ from the evaluated grounded suites (runs/grounded)
 	$(VENV)/bin/darkread eval side-by-side "grounded=$(G_SUITE)/central_factory" "standard (old)=$(G_SUITE)/standard" \
 		--reference "standard (old)" --out docs/eval/grounded/model.md --title "The grounded model against the old standard one"
+	$(VENV)/bin/darkread eval side-by-side "grounded=$(G_SUITE)/central_factory_30" "today=runs/eval_suite" --reference today \
+		--out docs/eval/grounded/thirty_lux.md --title "Every 30-lux recording of the suite, grounded against today's (make eval)"
 	$(VENV)/bin/darkread eval side-by-side "factory, K 130=$(G_SUITE)/central_factory" "dark, K 130=$(G_SUITE)/central_dark" \
 		"factory, K 40=$(G_SUITE)/slow_factory" "dark, K 40=$(G_SUITE)/slow_dark" "factory, K 400=$(G_SUITE)/fast_factory" \
 		"dark, K 400=$(G_SUITE)/fast_dark" --out docs/eval/grounded/dark_profile.md \
