@@ -163,6 +163,9 @@ eval-grounded: $(STAMP)  ## the suite re-made on the grounded sensor model and h
 		$(G_MAKE) $(G_SUITE)/law_$$law $(G_GRID) --k central --standard-law $$law $(G_FIVE) && \
 		$(G_RUN) $(G_SUITE)/law_$$law --out $(G_SUITE)/report_law_$$law --no-rgb || exit 1; \
 	done
+	$(G_MAKE) $(G_SUITE)/law_photoreceptor_dark-current $(G_GRID) --k central --standard-law photoreceptor \
+		--standard-law dark-current $(G_FIVE)
+	$(G_RUN) $(G_SUITE)/law_photoreceptor_dark-current --out $(G_SUITE)/report_law_pd --no-rgb
 	$(MAKE) --no-print-directory grounded-pages G_SUITE=$(G_SUITE)
 	# the line-confidence model the cloud ships, fitted on the suite's lines and the grounded suites' (make eval first)
 	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval --also $(G_SUITE)/central_factory \
@@ -182,7 +185,8 @@ grounded-pages: $(STAMP)  ## the pages of docs/eval/grounded/ from the evaluated
 		"strong head=$(G_SUITE)/central_dark_strong" --reference "grounded head" --out docs/eval/grounded/head_motion.md \
 		--title "The head motion's band (dark profile, K 130)"
 	$(VENV)/bin/darkread eval side-by-side "grounded=$(G_SUITE)/central_factory" "photoreceptor=$(G_SUITE)/law_photoreceptor" \
-		"noise=$(G_SUITE)/law_noise" "dark current=$(G_SUITE)/law_dark-current" "head motion=$(G_SUITE)/law_motion" \
+		"noise=$(G_SUITE)/law_noise" "dark current=$(G_SUITE)/law_dark-current" \
+		"photoreceptor and dark current=$(G_SUITE)/law_photoreceptor_dark-current" "head motion=$(G_SUITE)/law_motion" \
 		"standard (old)=$(G_SUITE)/standard" --reference grounded --out docs/eval/grounded/attribution.md \
 		--title "One law at a time: the grounded model with each law put back to the standard one's (5 lux)"
 
