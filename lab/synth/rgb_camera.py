@@ -274,6 +274,8 @@ def recording_spec(recording_dir: str | Path) -> RecordingSpec:
             "`darkread eval make-suite`, which writes it"
         )
     doc = json.loads(path.read_text(encoding="utf-8"))
+    if "standard_laws" in doc:  # (a tuple, which JSON writes as a list)
+        doc["standard_laws"] = tuple(doc["standard_laws"])
     return RecordingSpec(**doc)
 
 

@@ -69,6 +69,7 @@ def make_rehearsal(out: str | Path, count: int = 18, seed: int = 601, every_ms: 
     previous = _previous(out)
     settings = {"count": count, "first_seed": seed, "every_ms": every_ms,
                 "spec": {k: v for k, v in asdict(specs[0]).items() if k not in ("lux", "motion", "seed")}}
+    settings = json.loads(json.dumps(settings))  # as rehearsal.json reads back (tuples as lists)
     if previous and any(previous.get(k) != v for k, v in settings.items()):
         raise ValueError(f"{out} holds rehearsal windows made with other settings ({previous.get('count')} sessions from seed "
                          f"{previous.get('first_seed')}, every {previous.get('every_ms')} ms); give another output directory")
