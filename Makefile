@@ -139,6 +139,10 @@ G_RUN   := $(VENV)/bin/darkread eval run --compare --jobs 2
 G_GRID  := --regime grounded --motion-regime grounded
 G_DARK  := --match '*_lux10_*' --match '*_lux5_*' --limit 24
 G_FIVE  := --match '*_lux5_*' --limit 12
+# the grounded suites whose lines the line-confidence model is fitted on beside the suite's (central_factory_30
+# holds the same 30-lux scenes as central_factory: left out so that no scene counts twice)
+G_CALIBRATE := central_factory central_dark standard slow_dark central_dark_quiet law_motion law_noise \
+	law_photoreceptor law_dark-current law_photoreceptor_dark-current
 G_STD   := --match '*_lux30_*' --match '*_lux10_*' --match '*_lux5_*' --limit 36
 eval-grounded: $(STAMP)  ## the suite re-made on the grounded sensor model and head motion (~2.5 h on 2 cores): factory and dark biases, K's band and the head motion's at their ends, one law at a time; docs/eval/grounded*.md
 	$(G_MAKE) $(G_SUITE)/central_factory $(G_GRID) --k central --limit 60
@@ -168,8 +172,7 @@ eval-grounded: $(STAMP)  ## the suite re-made on the grounded sensor model and h
 	$(G_RUN) $(G_SUITE)/law_photoreceptor_dark-current --out $(G_SUITE)/report_law_pd --no-rgb
 	$(MAKE) --no-print-directory grounded-pages G_SUITE=$(G_SUITE)
 	# the line-confidence model the cloud ships, fitted on the suite's lines and the grounded suites' (make eval first)
-	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval --also $(G_SUITE)/central_factory \
-		--also $(G_SUITE)/central_dark --also $(G_SUITE)/standard
+	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval $(foreach s,$(G_CALIBRATE),--also $(G_SUITE)/$(s))
 	$(VENV)/bin/darkread eval run runs/eval_suite --out docs/eval --infer on-change --report-only --before docs/eval/before/results.json
 
 grounded-pages: $(STAMP)  ## the pages of docs/eval/grounded/ from the evaluated grounded suites (runs/grounded)

@@ -179,6 +179,25 @@ def plot_reliability(rows: list[tuple[float, float, int]], ece: float, path: Pat
     return path
 
 
+def _by_suite(held: Sequence[LineOutcome], p: np.ndarray, right: np.ndarray) -> list[str]:
+    """The held-out lines of each suite apart: is the model calibrated in each, not only pooled?"""
+    suites = sorted({line.suite for line in held})
+    if len(suites) < 2:
+        return []
+    md = ["By suite (held-out lines; an ECE over a few dozen lines is coarse):", "",
+          "| suite | lines | mean confidence | share right | ECE |", "|---|---:|---:|---:|---:|"]
+    for suite in suites:
+        pick = np.array([line.suite == suite for line in held])
+        ece, _ = reliability(p[pick], right[pick])
+        md.append(f"| {suite} | {int(pick.sum())} | {p[pick].mean():.2f} | {right[pick].mean():.2f} | {ece:.3f} |")
+    return [*md, ""]
+
+
+def _recordings(lines: Sequence[LineOutcome]) -> int:
+    """How many recordings the lines come from (a scene in two suites is two recordings)."""
+    return len({(line.suite, line.recording) for line in lines})
+
+
 def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, target_risk: float,
               sources: Sequence[str] = ()) -> tuple[ConfidenceModel, float]:
     """Fit on the fitting half, measure on the held-out half, write the model and calibration.md;
@@ -191,7 +210,7 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
     right = np.array([line.right for line in held], dtype=np.float64)
     ece, rows = reliability(p, right)
     low, high = bootstrap_ece(p, right)
-    meta = {"fitted_on": f"{len(fitting)} lines of {len({ln.recording for ln in fitting})} recordings (numbered 0-3, 8-11, 16-19, ...)",
+    meta = {"fitted_on": f"{len(fitting)} lines of {_recordings(fitting)} recordings (numbered 0-3, 8-11, 16-19, ...)",
             "held_out_ece": round(ece, 4), "held_out_ece_90": [round(low, 4), round(high, 4)], "held_out_lines": len(held),
             "target_risk": target_risk, **({"suites": list(sources)} if sources else {})}
     model_out.parent.mkdir(parents=True, exist_ok=True)
@@ -202,7 +221,7 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
         "# Line confidence: calibration",
         "",
         (f"Fitted by `darkread eval calibrate` on {meta['fitted_on']}; measured on the {len(held)} lines of the "
-         f"{len({ln.recording for ln in held})} recordings it was not fitted on (4-7, 12-15, ...). A line is right when its CER is "
+         f"{_recordings(held)} recordings it was not fitted on (4-7, 12-15, ...). A line is right when its CER is "
          f"at most 4 % (one character in a suite line). Answer threshold {model.answer_threshold:g} (the lowest whose "
          f"answered lines on the fitting half read at {100 * target_risk:g} % CER or better)."),
         "",
@@ -212,6 +231,7 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
         "",
         "![reliability diagram](reliability.png)",
         "",
+        *_by_suite(held, p, right),
         "| confidence bin (mean) | share right | lines |",
         "|---:|---:|---:|",
         *[f"| {conf:.2f} | {acc:.2f} | {n} |" for conf, acc, n in rows],

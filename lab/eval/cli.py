@@ -370,11 +370,11 @@ def _calibrate(args: argparse.Namespace) -> int:
     work = Path(args.work) if args.work else suite / "eval_runs" / _first_mode(args)
     if not 0 < args.target_risk < 1:
         raise ValueError(f"--target-risk {args.target_risk:g}: give a CER between 0 and 1")
-    lines = outcomes(load_results(work))
+    lines = outcomes(load_results(work), suite=str(suite))
     sources = [f"{suite} ({len(lines)} lines)"]
     for other in args.also:
         folder = Path(other) / "eval_runs" / _first_mode(args)
-        more = outcomes(load_results(folder))
+        more = outcomes(load_results(folder), suite=str(other))
         if not more:
             raise FileNotFoundError(f"--also {other}: no judged lines in {folder}; run `darkread eval run {other}` first")
         lines += more

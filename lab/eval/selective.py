@@ -50,14 +50,15 @@ class LineOutcome:
     ref_chars: int
     evidence: dict[str, float]
     read: bool = True  # False: a band of ink the engine read nothing in (unclear whatever the model says)
+    suite: str = ""  # the suite the recording belongs to (several suites hold the same scenes under the same names)
 
     @property
     def right(self) -> bool:
         return self.cer <= RIGHT_MAX_CER
 
 
-def outcomes(results: Sequence[Any]) -> list[LineOutcome]:
-    """Every judged line of the results (``RecordingResult``) with its CER and evidence."""
+def outcomes(results: Sequence[Any], suite: str = "") -> list[LineOutcome]:
+    """Every judged line of the results (``RecordingResult``) with its CER and evidence; ``suite``: where they came from."""
     out = []
     for r in results:
         doc = r.raw.get("darkread") if isinstance(r.raw.get("darkread"), Mapping) else {}
@@ -65,7 +66,7 @@ def outcomes(results: Sequence[Any]) -> list[LineOutcome]:
             if "line_cer" in line and line.get("evidence"):
                 out.append(LineOutcome(str(r.name), r.lux, r.motion, r.kind, float(line["line_cer"]),
                                        int(line.get("line_ref_chars") or 1), dict(line["evidence"]),
-                                       read=bool(str(line.get("text", "")).strip())))
+                                       read=bool(str(line.get("text", "")).strip()), suite=suite))
     return out
 
 
