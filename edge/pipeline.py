@@ -85,6 +85,13 @@ class Pipeline:
         self._started_at = 0.0
         self._ring_overwritten = 0
         self._last_t: int | None = None
+        self._arrived_t: int | None = None  # live: the newest event time handed over
+        self._gathered: list[Events] = []  # live: chunks held back until they cross a line of the step's grid
+        self._gathered_n = 0
+        self._gather_cell = 0
+        self._gather_since = 0.0
+        self._gather_lock = threading.Lock()
+        self._stepped_t: int | None = None  # live: the event time of the last step
         self._cond = threading.Condition()
         self._step_lock = threading.Lock()
         self._source_done = threading.Event()
@@ -92,9 +99,55 @@ class Pipeline:
 
     # -- reader thread ----------------------------------------------------------------------
     def sink(self, events: Events) -> None:
-        """Reader thread: one chunk of events, seen by the scene tracker, then live or lossless."""
+        """Reader thread: one chunk of events; live, gathered up to the step's grid (``_gather``)."""
         if events.shape[0] == 0:
             return
+        if not self.settings.lossless:
+            gathered = self._gather(events)
+            if gathered is None:
+                return
+            events = gathered
+        self._take(events)
+
+    def _gather(self, events: Events) -> Events | None:
+        """Live, on a strategy with a grid: chunks held back until they cross one of its lines (or
+        wait a grid's worth of wall clock, or fill a sixteenth of the ring), then handed on as one.
+
+        A camera's chunks can be far shorter than a step (a paced replay hands over 1-ms slices);
+        everything a chunk costs before the step (the scene tracker, the light estimate, the ring,
+        the window's count, waking the step) is then paid once per grid cell, as in a lossless
+        replay. No step runs between two lines anyway (``_live_due``), so nothing waits longer."""
+        grid = self.step.replay_grid_us
+        if grid is None:
+            return events
+        with self._gather_lock:
+            if not self._gathered:
+                self._gather_cell = int(events["t"][0]) // grid
+                self._gather_since = time.monotonic()
+            self._gathered.append(events)
+            self._gathered_n += int(events.shape[0])
+            if (int(events["t"][-1]) // grid == self._gather_cell and self._gathered_n < self.ring.capacity // 16
+                    and time.monotonic() - self._gather_since < grid / 1e6):
+                return None
+            return self._release_gathered()
+
+    def _release_gathered(self) -> Events | None:
+        """The chunks held back, as one (gather lock held); None when there are none."""
+        if not self._gathered:
+            return None
+        if len(self._gathered) == 1:
+            events = self._gathered[0]
+        else:  # filled piece by piece: np.concatenate of a structured dtype first promotes its fields, per call
+            events = np.empty(self._gathered_n, dtype=self._gathered[0].dtype)
+            at = 0
+            for piece in self._gathered:
+                events[at:at + piece.shape[0]] = piece
+                at += piece.shape[0]
+        self._gathered, self._gathered_n = [], 0
+        return events
+
+    def _take(self, events: Events) -> None:
+        """A chunk, seen by the scene tracker and the light estimate, then live or lossless."""
         self.windows.push_scene(events)
         if self.light is not None:
             origin, fovea = self.windows.origin, self.windows.fovea
@@ -114,8 +167,21 @@ class Pipeline:
             # before the first window is placed every event counts, so the loop wakes to place it
             self._pending.add(n_foveated if origin is not None else int(events.shape[0]), int(events.shape[0]),
                               time.monotonic())
-            if self.step.due(self._pending):
+            self._arrived_t = int(events["t"][-1])
+            if self._live_due():
                 self._cond.notify()
+
+    def _live_due(self) -> bool:
+        """Live (condition held): the step is due, and on a strategy with a grid the events crossed
+        one of its lines since the last step. A camera hands over chunks of any length (a paced
+        replay 1-ms slices); stepping on the lossless replay's grid keeps a live step's work per
+        second of events what the replays measure, whatever the chunking."""
+        if not self.step.due(self._pending):
+            return False
+        grid = self.step.replay_grid_us
+        if grid is None or self._stepped_t is None or self._arrived_t is None:
+            return True
+        return self._arrived_t // grid != self._stepped_t // grid
 
     def _replay(self, events: Events) -> None:
         """Lossless: the chunk into the ring at once, then the steps it makes due, right here, each
@@ -209,6 +275,10 @@ class Pipeline:
     def stop(self) -> None:
         """Stop the source, then let the loop make the last frame from what is buffered."""
         self.source.stop()
+        with self._gather_lock:
+            rest = self._release_gathered()
+        if rest is not None:  # the last chunks a live source handed over, not yet across a line
+            self._take(rest)
         self._source_done.set()
         with self._cond:
             self._cond.notify_all()
@@ -235,7 +305,7 @@ class Pipeline:
         live = not self.settings.lossless  # lossless: the reader steps; this loop feeds the watchdog and steps the end
         while True:
             with self._cond:
-                self._cond.wait_for(lambda: (live and self.step.due(self._pending)) or self._source_done.is_set(),
+                self._cond.wait_for(lambda: (live and self._live_due()) or self._source_done.is_set(),
                                     timeout=period_s)
                 final = self._source_done.is_set()
             if self.watchdog is not None and self._alive():
@@ -266,6 +336,7 @@ class Pipeline:
                 self.metrics.add("frames_skipped", skipped)
             t = self.ring.newest_t
             if t is not None:
+                self._stepped_t = t
                 self.step.step(t, pending, final)
 
     def _observe_lag(self, pending: Pending) -> None:

@@ -145,7 +145,9 @@ class PacedReplay:
 
     A slice's time is the source's ``get_current_time()`` when it has one (the window end, so empty
     windows pace too), else its last event's time. ``max_lag_s`` records how far behind the
-    consumer fell (wall-clock seconds).
+    consumer fell (wall-clock seconds), beyond ``batch_s``: when a slice is due the replay sleeps
+    that much longer and then hands over every slice due meanwhile at once, as a camera's buffer
+    does (never early, at most ``batch_s`` late), so a replay of short slices wakes no more often.
     """
 
     def __init__(
@@ -154,10 +156,14 @@ class PacedReplay:
         speed: float | None = 1.0,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], object] = time.sleep,
+        batch_s: float = 0.0,
     ) -> None:
         if speed is not None and speed <= 0:
             raise ValueError(f"speed must be positive or None, got {speed}")
+        if batch_s < 0:
+            raise ValueError(f"batch_s must not be negative, got {batch_s}")
         self.slices, self.speed, self.clock, self.sleep = slices, speed, clock, sleep
+        self.batch_s = batch_s
         self.max_lag_s = 0.0
 
     def _slice_time(self, events: Events) -> int | None:
@@ -177,7 +183,7 @@ class PacedReplay:
                 due = origin[0] + (sensor_us - origin[1]) / 1e6 / self.speed
                 wait = due - self.clock()
                 if wait > 0:
-                    self.sleep(wait)
-                else:
-                    self.max_lag_s = max(self.max_lag_s, -wait)
+                    self.sleep(wait + self.batch_s)
+                elif -wait > self.batch_s:
+                    self.max_lag_s = max(self.max_lag_s, -wait - self.batch_s)
             yield events

@@ -31,12 +31,17 @@ class TimeCheck:
     jump_at_us: int = 0
 
     def add(self, t: np.ndarray) -> None:
+        """The steps into and within ``t`` (a replay calls this per 1-ms slice: no copies beyond one difference)."""
         if t.shape[0] == 0:
             return
-        steps = np.diff(t, prepend=t[0] if self.last_t is None else self.last_t)
-        i = int(np.argmax(steps))
-        if int(steps[i]) > self.max_jump_us:
-            self.max_jump_us, self.jump_at_us = int(steps[i]), int(t[i])
+        first = int(t[0])
+        if self.last_t is not None and first - self.last_t > self.max_jump_us:
+            self.max_jump_us, self.jump_at_us = first - self.last_t, first
+        if t.shape[0] > 1:
+            steps = t[1:] - t[:-1]
+            i = int(steps.argmax())
+            if int(steps[i]) > self.max_jump_us:
+                self.max_jump_us, self.jump_at_us = int(steps[i]), int(t[i + 1])
         self.last_t = int(t[-1])
 
 

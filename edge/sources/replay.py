@@ -31,6 +31,9 @@ from darkread.edge.sources.base import EventSink
 logger = logging.getLogger(__name__)
 
 DEFAULT_SLICE_US = 1_000
+# a paced replay sleeps until a slice is due and this much longer, then hands over what came due
+# meanwhile: as a camera's USB buffer delivers (late, never early), and one wake-up per 2 ms, not per slice
+PACE_BATCH_S = 0.002
 ROI_CHUNK_BYTES = 1 << 15  # a chunk of a full-sensor stream at 300 kev/s: about 18 ms of events
 
 
@@ -147,7 +150,7 @@ class ReplaySource:
         self._reader = slices.reader
         assert self._reader is not None  # (a file's iterator has its reader)
         self._apply_roi(self._reader)
-        return PacedReplay(slices, self.speed, clock=time.perf_counter, sleep=self._stop.wait)
+        return PacedReplay(slices, self.speed, clock=time.perf_counter, sleep=self._stop.wait, batch_s=PACE_BATCH_S)
 
     def _judge(self) -> None:
         """After the replay: name what makes the stream implausible (``problems``)."""

@@ -123,6 +123,7 @@ class QuotaRun:
     rss_max_mb: float
     rss_growth_mb: float  # the last sample against the first one in the quota
     throttled_s: float
+    cpu_s: float  # the edge's CPU time in the quota (sampled every 0.1 s until it exits)
     log_tail: str
 
 
@@ -147,6 +148,15 @@ def _rss_mb(pid: int) -> float | None:
     return None
 
 
+def _cpu_s(pid: int) -> float | None:
+    """The process's user and system CPU time so far (``/proc/PID/stat``), None once it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def run_under_quota(share: float, recording: Path = SAMPLE_RECORDING, *, timeout_s: float = 120.0,
                     extra_args: tuple[str, ...] = ()) -> QuotaRun:
     """One paced replay of ``recording`` by ``darkread edge run`` in ``share`` of one core."""
@@ -161,6 +171,7 @@ def run_under_quota(share: float, recording: Path = SAMPLE_RECORDING, *, timeout
             proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
             lines: list[str] = []
             rss: list[float] = []
+            cpu: list[float] = []
             ready = threading.Event()
 
             def read_stderr() -> None:
@@ -178,6 +189,9 @@ def run_under_quota(share: float, recording: Path = SAMPLE_RECORDING, *, timeout
                     value = _rss_mb(proc.pid)
                     if value is not None:
                         rss.append(value)
+                    used = _cpu_s(proc.pid)
+                    if used is not None:
+                        cpu.append(used)
                 time.sleep(0.1)
             if proc.poll() is None:
                 proc.kill()
@@ -204,7 +218,7 @@ def run_under_quota(share: float, recording: Path = SAMPLE_RECORDING, *, timeout
         views_capped=int(number("capped")) if final else -1,
         shed_changes=sum("falling behind" in line for line in lines),
         rss_max_mb=max(rss, default=float("nan")), rss_growth_mb=(rss[-1] - rss[0]) if len(rss) > 1 else 0.0,
-        throttled_s=throttled, log_tail="\n".join(lines[-6:]),
+        throttled_s=throttled, cpu_s=(cpu[-1] - cpu[0]) if len(cpu) > 1 else float("nan"), log_tail="\n".join(lines[-6:]),
     )
 
 
@@ -232,11 +246,11 @@ def run(args: argparse.Namespace) -> int:
     # the wall clock beside the recording's length: a replay in too small a quota is slowed (its reader
     # shares the quota) rather than losing events, so "nothing lost" means real time only when they agree
     print(f"{'quota':>6} {'views':>6} {'lost':>5} {'view p99 ms':>12} {'step lag p99 ms':>16} {'shed':>5} "
-          f"{'capped':>7} {'RSS max MB':>11} {'RSS growth MB':>14} {'throttled s':>12} {f'wall s ({duration:g} s)':>16}")
+          f"{'capped':>7} {'RSS max MB':>11} {'RSS growth MB':>14} {'throttled s':>12} {'CPU s':>6} {f'wall s ({duration:g} s)':>16}")
     for share in args.quota:
         r = run_under_quota(share, recording, timeout_s=max(120.0, 10 * duration))
         print(f"{share:>6.0%} {r.views:>6} {r.frames_lost:>5} {r.view_latency_p99_ms:>12.1f} {r.step_lag_p99_ms:>16.0f} "
-              f"{r.shed_level:>5} {r.views_capped:>7} {r.rss_max_mb:>11.0f} {r.rss_growth_mb:>14.1f} {r.throttled_s:>12.1f}"
+              f"{r.shed_level:>5} {r.views_capped:>7} {r.rss_max_mb:>11.0f} {r.rss_growth_mb:>14.1f} {r.throttled_s:>12.1f} {r.cpu_s:>6.2f}"
               f" {r.wall_s:>16.1f}  ({r.cgroup}, exit {r.exit_code})", flush=True)
         if r.exit_code != 0:
             print(r.log_tail, file=sys.stderr)

@@ -474,3 +474,38 @@ def test_a_healthy_known_motion_leaves_the_event_tracker_idle() -> None:
     assert frames and pipeline.windows.scene is not None  # standing by ...
     assert pipeline.windows.scene.at(int(ev["t"][-1])) is None  # ... and fed nothing
     assert all(f.scene_px == (f.t_us / 1000.0, 0.0) for f in frames)
+
+
+class StillRows(FixedGaze):
+    """A still gaze as the tracker's 60-Hz rows too (what the on-change step reads)."""
+
+    def rows(self, t0: int, t1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.arange((t0 // 16_667 + 1) * 16_667, t1 + 1, 16_667, dtype=np.int64)
+        return t, np.full(t.shape, 0.01), np.full(t.shape, -0.02)
+
+
+def test_live_chunks_are_gathered_to_the_step_grid_and_none_is_lost() -> None:
+    """A live source's 1-ms chunks reach the pipeline's per-chunk work (scene tracker, light, ring,
+    count) gathered into pieces that cross one line of the on-change step's 5-ms grid, and the last
+    chunks, which cross no line, are handed on when the pipeline stops."""
+    ev = events_in_box(20_000, 540, 310, 200, 100)  # 1 M events/s: 20 ms
+    ev["t"] += 3_000  # the stream starts inside a grid cell
+    cuts = np.searchsorted(ev["t"], np.arange(ev["t"][0], ev["t"][-1] + 1, 1_000))[1:]
+    source = ListSource(np.split(ev, cuts))
+    pipeline = build_pipeline(source, StillRows(), ink_where_events, lambda f, t: None,
+                              PipelineConfig(infer="on-change", ring_capacity=1 << 16), metrics=EdgeMetrics())
+    grid = pipeline.step.replay_grid_us
+    assert grid == 5_000
+    taken: list[Events] = []
+    take = pipeline._take
+    pipeline._take = lambda events: (taken.append(events.copy()), take(events))  # type: ignore[method-assign]
+    for chunk in source.chunks:  # the reader's calls, from here: no step runs between them
+        pipeline.sink(chunk)
+    pipeline.stop()
+    assert pipeline.error is None
+    assert np.array_equal(np.concatenate(taken), ev)  # every event, once, in order
+    # 21 chunks; a piece per 5-ms cell crossed and the rest (a pause of 5 ms of wall clock would cut one more)
+    assert len(source.chunks) >= 20 and len(taken) <= 7
+    for piece in taken[:-1]:  # each piece ends with the chunk that crossed a line (or after a grid's worth of wall clock)
+        assert int(piece["t"][-1]) // grid >= int(piece["t"][0]) // grid
+    assert pipeline.metrics.totals["events_in"] == ev.shape[0]

@@ -109,6 +109,24 @@ def test_paced_replay_speed_scales_and_none_never_sleeps() -> None:
     assert clock2.sleeps == []
 
 
+def test_paced_replay_in_batches_hands_over_late_never_early() -> None:
+    """With ``batch_s`` the replay sleeps past a slice's time by that much and hands over every slice
+    due meanwhile at once: fewer wake-ups, each slice at most ``batch_s`` late and never early."""
+    clock = FakeClock()
+    times_us = [0, 1_000, 2_000, 3_000, 4_000, 10_000]
+    slices = [make_events(0, 0, 0, [t]) for t in times_us]
+    handed: list[float] = []
+    replay = PacedReplay(slices, speed=1.0, clock=clock, sleep=clock.sleep, batch_s=0.002)
+    for _ in replay:
+        handed.append(clock.now - 100.0)
+    assert clock.sleeps == [0.003, 0.003, 0.006]  # 1 ms due at 0: 1 + 2; 4 ms due at 3 ms: 1 + 2; 10 ms due at 6 ms: 4 + 2
+    assert handed == pytest.approx([0.0, 0.003, 0.003, 0.003, 0.006, 0.012])
+    assert all(0 <= h - t / 1e6 <= 0.002 + 1e-12 for h, t in zip(handed, times_us))
+    assert replay.max_lag_s == 0.0  # lateness within the batch is not the consumer's lag
+    with pytest.raises(ValueError):
+        PacedReplay(slices, batch_s=-0.001)
+
+
 def test_paced_replay_does_not_sleep_when_the_consumer_is_late() -> None:
     clock = FakeClock()
     slices = [make_events(0, 0, 0, [0]), make_events(0, 0, 0, [100_000]), make_events(0, 0, 0, [200_000])]
