@@ -273,10 +273,7 @@ def recording_spec(recording_dir: str | Path) -> RecordingSpec:
             f"{path} is missing: the RGB baseline re-creates the scene of recordings made by "
             "`darkread eval make-suite`, which writes it"
         )
-    doc = json.loads(path.read_text(encoding="utf-8"))
-    if "standard_laws" in doc:  # (a tuple, which JSON writes as a list)
-        doc["standard_laws"] = tuple(doc["standard_laws"])
-    return RecordingSpec(**doc)
+    return RecordingSpec(**json.loads(path.read_text(encoding="utf-8")))
 
 
 def session_for(spec: RecordingSpec) -> Session:

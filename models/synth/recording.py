@@ -73,6 +73,10 @@ class RecordingSpec:
     motion_regime: str = "standard"  # the head motion's draws (models/synth/motion.py MOTION_REGIMES)
     full_view: bool = False  # simulate every pixel of the sensor (the page, its edge, a desk) instead of the reachable region
 
+    def __post_init__(self) -> None:
+        # a spec read back from JSON (spec.json, suite.json) holds a list here: the same spec, so equal
+        object.__setattr__(self, "standard_laws", tuple(self.standard_laws))
+
 
 LAYOUT_NAME = "page.layout.json"
 POSE_TRUTH_NAME = "pose_truth.npz"
@@ -87,7 +91,7 @@ def session_spec(spec: RecordingSpec) -> SessionSpec:
         xheight_px=spec.xheight_px, n_lines=spec.n_lines, line_chars=spec.line_chars, duration_s=spec.seconds,
         scanpath=spec.scanpath, scanpath_file=spec.scanpath_file, regime=spec.regime, markers=spec.markers,
         f_number=spec.f_number, bias_profile=spec.bias_profile, sensor_profile=spec.sensor_profile,
-        k_hz_per_chip_lux=spec.k_hz_per_chip_lux, standard_laws=tuple(spec.standard_laws), motion_regime=spec.motion_regime, full_view=spec.full_view,
+        k_hz_per_chip_lux=spec.k_hz_per_chip_lux, standard_laws=spec.standard_laws, motion_regime=spec.motion_regime, full_view=spec.full_view,
     )
 
 

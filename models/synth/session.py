@@ -62,6 +62,10 @@ class SessionSpec:
     motion_regime: str = "standard"  # the head motion's draws (motion.MOTION_REGIMES): "standard" or a grounded band
     full_view: bool = False  # the paper's edge in view with a textured desk around it (scene.desk_surround)
 
+    def __post_init__(self) -> None:
+        # a spec read back from JSON (spec.json, suite.json) holds a list here: the same spec, so equal
+        object.__setattr__(self, "standard_laws", tuple(self.standard_laws))
+
 
 SCANPATHS = ("model", "human")
 

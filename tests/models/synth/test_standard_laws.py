@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import json
+from dataclasses import asdict
+
 import numpy as np
 import pytest
 
+from darkread.models.synth.recording import RecordingSpec
 from darkread.models.synth.sensor import (
     STANDARD_CENTRAL,
     GroundedSensorParams,
@@ -12,6 +16,7 @@ from darkread.models.synth.sensor import (
     background_rate_curve,
     with_standard_laws,
 )
+from darkread.models.synth.session import SessionSpec
 
 PAGE = np.array([0.05 * 5.0, 0.85 * 5.0], np.float32)  # ink and paper at 5 lux
 
@@ -52,3 +57,11 @@ def test_the_standard_noise_is_a_rate_again() -> None:
     rate = background_rate_curve(mixed, np.array([0.85 * 5.0]), pixels=256, seconds=2.0)[0]
     assert rate == pytest.approx(mixed.background_rate_hz(), rel=0.35)  # the simulated paper fires near the rate
     assert mixed.to_dict()["standard_laws"] == ["noise"] and "shot_rate_100lux_hz" in mixed.to_dict()
+
+
+def test_a_spec_read_back_from_json_names_the_same_laws() -> None:
+    """JSON writes the laws' tuple as a list; a spec read back (spec.json, suite.json) is still equal."""
+    spec = RecordingSpec(lux=5.0, regime="grounded", k_hz_per_chip_lux=130.0, standard_laws=("noise", "photoreceptor"))
+    again = RecordingSpec(**json.loads(json.dumps(asdict(spec))))
+    assert again == spec and again.standard_laws == ("noise", "photoreceptor")
+    assert SessionSpec(standard_laws=["noise"]).standard_laws == ("noise",)  # type: ignore[arg-type]
