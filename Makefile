@@ -140,7 +140,8 @@ G_GRID  := --regime grounded --motion-regime grounded
 G_DARK  := --match '*_lux10_*' --match '*_lux5_*' --limit 24
 G_FIVE  := --match '*_lux5_*' --limit 12
 # the grounded suites whose lines the line-confidence model is fitted on beside the suite's (central_factory_30
-# holds the same 30-lux scenes as central_factory: left out so that no scene counts twice)
+# holds the same 30-lux scenes as central_factory: left out so that no scene counts twice; slow_factory,
+# fast_dark, fast_factory and central_dark_strong are kept out as a check on suites it never saw, docs/eval/grounded.md)
 G_CALIBRATE := central_factory central_dark standard slow_dark central_dark_quiet law_motion law_noise \
 	law_photoreceptor law_dark-current law_photoreceptor_dark-current
 G_STD   := --match '*_lux30_*' --match '*_lux10_*' --match '*_lux5_*' --limit 36
