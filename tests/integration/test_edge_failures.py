@@ -34,6 +34,11 @@ def model(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return sum_bins_model(tmp_path_factory.mktemp("model") / "tiny.onnx")
 
 
+def staying(n: int) -> str:
+    """How the edge's last line says how many messages stay in the spool (one, or several)."""
+    return "1 message stays in the spool" if n == 1 else f"{n} messages stay in the spool"
+
+
 def spool_counts(spool: Path) -> tuple[int, int]:
     """(messages the spool ever numbered, messages still waiting in it); the file is closed after
     (an open database keeps its file system from being remounted read-only)."""
@@ -116,7 +121,7 @@ def test_unreachable_cloud_keeps_frames_in_the_default_spool_and_says_so(
     made, pending = spool_counts(spool)  # on disk by default, under the user's state directory
     line = the_line(first)
     assert first.returncode == 3
-    assert url in line and str(spool) in line and f"{pending} messages stay in the spool" in line, line
+    assert url in line and str(spool) in line and staying(pending) in line, line
     assert made == pending > 0
     assert final_spool(first) == (pending, 0)
     assert [int(n) for n in SPOOLED.findall(first.stderr)] == [pending] * len(SPOOLED.findall(first.stderr))
@@ -164,7 +169,7 @@ def test_a_wrong_key_ends_the_run_with_counts_that_agree(tmp_path: Path, recordi
     finally:
         cloud.stop()
     line = the_line(first)
-    assert first.returncode == 1 and "API key" in line and f"{pending} messages stay in the spool" in line, line
+    assert first.returncode == 1 and "API key" in line and staying(pending) in line, line
     counts = [int(n) for n in SPOOLED.findall(first.stderr)]
     assert counts and set(counts) == {pending}, first.stderr[-3000:]  # no "0 messages stay" before "6 in the spool"
     assert second.returncode == 0, second.stderr[-3000:]
