@@ -32,7 +32,7 @@ import numpy as np
 from darkread.core.errors import DarkreadError
 from darkread.edge.bias_control import BiasController
 from darkread.edge.config import PipelineConfig
-from darkread.edge.events import Events
+from darkread.edge.events import Events, concat_events
 from darkread.edge.fovea import in_window
 from darkread.edge.frame import count_in_window
 from darkread.edge.load import LoadShedder
@@ -135,14 +135,7 @@ class Pipeline:
         """The chunks held back, as one (gather lock held); None when there are none."""
         if not self._gathered:
             return None
-        if len(self._gathered) == 1:
-            events = self._gathered[0]
-        else:  # filled piece by piece: np.concatenate of a structured dtype first promotes its fields, per call
-            events = np.empty(self._gathered_n, dtype=self._gathered[0].dtype)
-            at = 0
-            for piece in self._gathered:
-                events[at:at + piece.shape[0]] = piece
-                at += piece.shape[0]
+        events = self._gathered[0] if len(self._gathered) == 1 else concat_events(self._gathered)
         self._gathered, self._gathered_n = [], 0
         return events
 

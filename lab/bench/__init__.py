@@ -8,6 +8,7 @@ for the smallest inputs and a single repetition: every figure is produced, none 
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -54,3 +55,9 @@ class BenchContext:
         return smoke if self.smoke else quick if self.quick else full
 
 
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU of a process so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")

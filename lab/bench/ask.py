@@ -51,7 +51,7 @@ from darkread.cloud.settings import Settings
 from darkread.cloud.store import SessionSpec, SqliteStore, StoredFrame
 from darkread.core.paths import SAMPLE_RECORDING
 from darkread.edge.config import default_infer_mode
-from darkread.lab.bench import BenchContext, Figure
+from darkread.lab.bench import BenchContext, Figure, cpu_seconds
 from darkread.lab.bench.cloud import API_KEY, start_server, stop_server
 from darkread.proto.messages import Ack, Frame, Hello, View, Welcome, decode, encode
 from darkread.read import read_recording
@@ -152,12 +152,6 @@ def preload(data_dir: Path, session_id: str, frames: list[StoredFrame]) -> None:
             await store.close()
 
     asyncio.run(write())
-
-
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU of a process so far (Linux /proc)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 async def stream_and_ask(base: str, session_id: str, frames: list[StoredFrame], ask_every_s: float) -> list[float]:

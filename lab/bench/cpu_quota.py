@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from darkread.core.paths import SAMPLE_RECORDING
+from darkread.lab.bench import cpu_seconds
 from darkread.lab.bench.ack_server import AckServer
 
 CGROUP_ROOTS = (Path("/sys/fs/cgroup"), Path("/sys/fs/cgroup/unified"))  # cgroup v2: alone, or beside v1
@@ -149,12 +150,11 @@ def _rss_mb(pid: int) -> float | None:
 
 
 def _cpu_s(pid: int) -> float | None:
-    """The process's user and system CPU time so far (``/proc/PID/stat``), None once it is gone."""
+    """The process's CPU time so far (``cpu_seconds``), None once it is gone."""
     try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return cpu_seconds(pid)
     except (OSError, IndexError):
         return None
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def run_under_quota(share: float, recording: Path = SAMPLE_RECORDING, *, timeout_s: float = 120.0,
