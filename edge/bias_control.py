@@ -38,6 +38,7 @@ from darkread.edge.sources.evk4.bias_profiles import BIAS_PROFILES, FACTORY, pro
 from darkread.edge.telemetry import EdgeMetrics
 
 logger = logging.getLogger(__name__)
+MIN_READ_SHARE = 0.25  # a slice read whole for less of its time than this (a ROI the rest) gives no estimate
 
 
 def profile_named(offsets: dict[str, int] | None) -> str | None:
@@ -68,6 +69,8 @@ class BiasController:
         self.lux: float | None = None
         self._counts = np.zeros(self.grid.shape, dtype=np.int64)
         self._touched = np.zeros(self.grid.shape, dtype=bool)  # tiles the gaze window covered in this slice
+        self._read_s = 0.0  # how much of this slice the sensor was read whole (not through a ROI)
+        self._covered_to: int | None = None  # the slice's time accounted for so far
         self._slice_start: int | None = None
         self._settle_until: int | None = None
         self._estimating = config.lux <= 0 and profile in self.curves
@@ -97,21 +100,34 @@ class BiasController:
                 return
             events = events[int(np.searchsorted(t, self._settle_until)):]
             self._slice_start, self._settle_until = int(events["t"][0]), None
+            self._covered_to = self._slice_start
         if self._slice_start is None:
-            self._slice_start = int(events["t"][0])
-        self._counts += self.grid.counts(events, self.config.stride)
-        if gaze_window is not None:
-            self._touched |= self.grid.touching(gaze_window)
+            self._slice_start = self._covered_to = int(events["t"][0])
         t_last = int(events["t"][-1])
+        if self._whole(getattr(self.source, "roi", None)):
+            self._counts += self.grid.counts(events, self.config.stride)
+            self._read_s += (t_last - (self._covered_to or t_last)) / 1e6
+            if gaze_window is not None:
+                self._touched |= self.grid.touching(gaze_window)
+        self._covered_to = t_last
         if t_last - self._slice_start >= self.config.estimate_s * 1e6:
             self._estimate(t_last)
 
+    def _whole(self, readout: tuple[int, int, int, int] | None) -> bool:
+        """Whether the sensor delivers all its pixels. Through a ROI it delivers the page around the
+        gaze only, whose text edges a moving head makes fire at any light (read as background they
+        called a 30-lux page 10 lux): those chunks are not counted, and a slice read mostly through
+        the ROI gives no estimate; the light is read again whenever the sensor is whole (the
+        session's start, walking, the gyroscope not trusted)."""
+        return readout is None or tuple(readout) == (0, 0, self.grid.width, self.grid.height)
+
     def _estimate(self, t_last: int) -> None:
         seconds = (t_last - (self._slice_start or t_last)) / 1e6
-        usable = usable_tiles(self.grid, getattr(self.source, "roi", None), self._touched)
-        rate = background_rate_hz(self._counts, self._areas, usable, seconds)
+        usable = usable_tiles(self.grid, self._touched)
+        rate = background_rate_hz(self._counts, self._areas, usable, self._read_s) if self._read_s >= MIN_READ_SHARE * seconds else None
         self._counts[:] = 0
         self._touched[:] = False
+        self._read_s = 0.0
         self._slice_start = t_last
         if rate is None or self.active is None:
             return

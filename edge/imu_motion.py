@@ -212,6 +212,8 @@ class ImuHeadMotion:
         self._t = np.zeros(0, np.int64)  # event clock
         self._raw = np.zeros((0, 3))  # device frame, as received
         self._theta = np.zeros((0, 3))  # camera frame, integrated
+        self._t_float = np.zeros(0)  # ``_t`` and ``_theta``'s columns as ``np.interp`` takes them: made once per
+        self._theta_columns = np.zeros((3, 0))  # batch, not per question (each copied 60,000 samples a minute)
         self._gaps = np.zeros(0, np.int64)  # event times where a gap ended (the first sample after it)
         self._step_t = np.zeros(0, np.int64)  # block ends (event clock) where walking was decided ...
         self._walked = np.zeros(0, bool)  # ... whether the head walked ...
@@ -259,6 +261,8 @@ class ImuHeadMotion:
                 self._gaps = self._gaps[self._gaps >= self._t[0]]
                 kept = self._step_t >= self._t[0]
                 self._step_t, self._walked, self._unknown = self._step_t[kept], self._walked[kept], self._unknown[kept]
+            self._t_float = self._t.astype(np.float64)
+            self._theta_columns = np.ascontiguousarray(self._theta.T)
 
     def _decide_walking(self) -> None:
         """Walking or not at each new block end up to the newest sample (``step_band_rms``)."""
@@ -323,8 +327,7 @@ class ImuHeadMotion:
             return self._rotation_at(np.asarray(t_us, np.float64).reshape(-1))
 
     def _rotation_at(self, t: np.ndarray) -> np.ndarray:
-        times = self._t.astype(np.float64)
-        return np.stack([np.interp(t, times, self._theta[:, k]) for k in range(3)], axis=1)
+        return np.stack([np.interp(t, self._t_float, column) for column in self._theta_columns], axis=1)
 
     def scene_px(self, t_us: int) -> tuple[float, float] | None:
         """The scene's shift at the principal point since the stream's first sample (None where not healthy)."""

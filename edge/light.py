@@ -87,15 +87,6 @@ class TileGrid:
         index = (picked["y"].astype(np.int64) // self.tile_px) * cols + picked["x"].astype(np.int64) // self.tile_px
         return np.bincount(index, minlength=rows * cols).reshape(rows, cols) * stride
 
-    def inside(self, rect: tuple[int, int, int, int]) -> np.ndarray:
-        """Tiles lying wholly inside ``rect`` = (x0, y0, w, h), as a boolean [rows, cols] mask."""
-        x0, y0, w, h = rect
-        ys = np.arange(self.shape[0]) * self.tile_px
-        xs = np.arange(self.shape[1]) * self.tile_px
-        in_y = (ys >= y0) & (np.minimum(ys + self.tile_px, self.height) <= y0 + h)
-        in_x = (xs >= x0) & (np.minimum(xs + self.tile_px, self.width) <= x0 + w)
-        return np.outer(in_y, in_x)
-
     def touching(self, rect: tuple[int, int, int, int]) -> np.ndarray:
         """Tiles that share any pixel with ``rect``."""
         x0, y0, w, h = rect
@@ -104,17 +95,10 @@ class TileGrid:
         return np.outer((ys < y0 + h) & (ys + self.tile_px > y0), (xs < x0 + w) & (xs + self.tile_px > x0))
 
 
-def usable_tiles(grid: TileGrid, readout: tuple[int, int, int, int] | None, excluded: np.ndarray | None,
-                 min_tiles: int = MIN_TILES) -> np.ndarray:
-    """Tiles whose events tell the background: inside what the sensor reads out and not ``excluded``
-    (those the gaze window touched: the page being read), unless that leaves fewer than ``min_tiles``
-    (a sensor ROI around the window): then every tile inside the readout, the quantile keeping the
-    text's edges out."""
-    inside = grid.inside(readout) if readout is not None else np.ones(grid.shape, dtype=bool)
-    if excluded is None:
-        return inside
-    away = inside & ~excluded
-    return away if int(away.sum()) >= min_tiles else inside
+def usable_tiles(grid: TileGrid, excluded: np.ndarray | None) -> np.ndarray:
+    """Tiles whose events tell the background: all but ``excluded`` (those the gaze window touched:
+    the page being read). Too few of them give no estimate (``background_rate_hz``)."""
+    return np.ones(grid.shape, dtype=bool) if excluded is None else ~excluded
 
 
 def background_rate_hz(counts: np.ndarray, areas: np.ndarray, usable: np.ndarray, seconds: float,

@@ -114,6 +114,11 @@ class ReplaySource:
             self._apply_roi(self._reader)
 
     @property
+    def roi(self) -> tuple[int, int, int, int]:
+        """The window the replay delivers (x0, y0, width, height): the whole sensor without a ROI."""
+        return self._roi or (0, 0, self.width, self.height)
+
+    @property
     def roi_since_us(self) -> int | None:
         """The first event delivered under the ROI set last (None: none yet): events decoded before
         the ROI moved are still in flight after ``set_roi``, as a camera's are."""

@@ -52,7 +52,7 @@ def estimate(events: Events, wh: tuple[int, int], seconds: float, curve: RateCur
              gaze_window: tuple[int, int, int, int] | None = None) -> float:
     grid = TileGrid(*wh)
     excluded = grid.touching(gaze_window) if gaze_window is not None else None
-    rate = background_rate_hz(grid.counts(events), grid.areas(), usable_tiles(grid, None, excluded), seconds)
+    rate = background_rate_hz(grid.counts(events), grid.areas(), usable_tiles(grid, excluded), seconds)
     assert rate is not None
     return float(curve.lux_of(rate))
 
@@ -111,8 +111,9 @@ def test_a_moving_page_and_the_gaze_window_do_not_bias_the_estimate() -> None:
 
 def test_too_few_usable_tiles_give_no_estimate() -> None:
     grid = TileGrid(1280, 720)
-    readout = (0, 0, 120, 120)  # a sensor ROI of 9 tiles
-    usable = usable_tiles(grid, readout, None)
+    touched = np.ones(grid.shape, dtype=bool)
+    touched[:3, :3] = False  # the gaze window's tiles all but 9
+    usable = usable_tiles(grid, touched)
     assert int(usable.sum()) == 9 < MIN_TILES
     assert background_rate_hz(np.zeros(grid.shape), grid.areas(), usable, 1.0) is None
 
@@ -190,6 +191,52 @@ def test_a_configured_lux_decides_at_the_start() -> None:
     assert controller.state.profile == DARK and controller.lux == 4.0
     controller.push(still_scene(0.01, 2.0, (320, 240), np.random.default_rng(0)), None)  # events do not override it
     assert controller.lux == 4.0
+
+
+class RoiReplayLike:
+    """A replay whose sensor ROI the test moves: the controller reads ``roi`` as the edge's sources give it."""
+
+    width, height = 640, 480
+
+    def __init__(self) -> None:
+        self.roi: tuple[int, int, int, int] = (0, 0, self.width, self.height)
+
+
+def inside(events: Events, rect: tuple[int, int, int, int]) -> Events:
+    x0, y0, w, h = rect
+    keep = (events["x"] >= x0) & (events["x"] < x0 + w) & (events["y"] >= y0) & (events["y"] < y0 + h)
+    return events[keep]
+
+
+def test_tiles_read_out_for_part_of_a_slice_count_at_their_own_rate() -> None:
+    # the whole sensor for 0.4 s (the gyroscope not yet trusted), then a ROI around the window: the
+    # tiles outside it were read out 0.4 s of the 1-s slice and their rate is counts over that time
+    source, rng = RoiReplayLike(), np.random.default_rng(5)
+    controller = BiasController(SensorConfig(stride=1), source, EdgeMetrics(), FACTORY)
+    controller.begin()
+    window, roi = (260, 200, 100, 80), (200, 140, 240, 200)
+    rate = curve_rate(FACTORY, 8.0)
+    for k in range(20):  # 50-ms chunks over 1 s, the page under the gaze firing hard
+        chunk = still_scene(rate, 0.05, (640, 480), rng, t0_us=k * 50_000, edge_rect=roi, edge_rate_hz=40.0)
+        if k == 8:
+            source.roi = roi
+        controller.push(chunk if k < 8 else inside(chunk, roi), window)
+    controller.push(inside(still_scene(rate, 0.01, (640, 480), rng, t0_us=1_000_000), roi), window)
+    assert controller.lux == pytest.approx(8.0, rel=0.2)
+
+
+def test_a_roi_over_the_page_gives_no_estimate_rather_than_the_texts_edges() -> None:
+    # a ROI through the whole slice: its tiles hold the page's moving text, which fires at any light;
+    # a bright page read from them would read as dark (and switch the glasses to the dark profile)
+    source, rng = RoiReplayLike(), np.random.default_rng(6)
+    source.roi = (200, 140, 240, 200)
+    controller = BiasController(SensorConfig(stride=1), source, EdgeMetrics(), FACTORY)
+    controller.begin()
+    for k in range(3):
+        chunk = still_scene(curve_rate(FACTORY, 100.0), 1.0, (640, 480), rng, t0_us=k * 1_000_000,
+                            edge_rect=source.roi, edge_rate_hz=1.0)
+        controller.push(inside(chunk, source.roi), (260, 200, 100, 80))
+    assert controller.lux is None and controller.state.profile == FACTORY
 
 
 def test_recordings_name_their_profile_by_offsets() -> None:

@@ -92,7 +92,9 @@ def test_stop_interrupts_a_slow_replay(raw_file) -> None:
 def test_roi_is_applied_in_the_decoder_as_the_sensor_would_deliver_it(raw_file, slice_us) -> None:
     path, expected = raw_file
     source = ReplaySource(path, speed=None, slice_us=slice_us)
+    assert source.roi == (0, 0, source.width, source.height)  # read out as the camera's: the whole sensor
     source.set_roi(100, 50, 200, 100)
+    assert source.roi == (100, 50, 200, 100)
     sink = Collector()
     source.start(sink)
     source.wait(5)
