@@ -34,7 +34,7 @@ from darkread.edge.light import (
     next_profile,
     usable_tiles,
 )
-from darkread.edge.sources.evk4.bias_profiles import BIAS_PROFILES, DARK, FACTORY, profile_offsets
+from darkread.edge.sources.evk4.bias_profiles import BIAS_PROFILES, FACTORY, profile_offsets
 from darkread.edge.telemetry import EdgeMetrics
 
 logger = logging.getLogger(__name__)
@@ -113,10 +113,6 @@ class BiasController:
         if t_last - self._slice_start >= self.config.estimate_s * 1e6:
             self._estimate(t_last)
 
-    def in_the_dark(self) -> bool:
-        """Whether the sensor runs the dark profile (a replay: the biases its recording was made with)."""
-        return self.active == DARK
-
     def _whole(self, readout: tuple[int, int, int, int] | None) -> bool:
         """Whether the sensor delivers all its pixels. Through a ROI it delivers the page around the
         gaze only, whose text edges a moving head makes fire at any light (read as background they
@@ -165,5 +161,4 @@ class BiasController:
         self._estimating = self.config.lux <= 0 and self.active in self.curves
         self._counts[:] = 0
         self._touched[:] = False
-        self._read_s = 0.0
         self._settle_until = int(t_s * 1e6 + self.config.settle_s * 1e6)

@@ -30,7 +30,7 @@ from darkread.edge.pipeline import Pipeline
 from darkread.edge.reconstruct import Reconstructor
 from darkread.edge.ring import EventRing
 from darkread.edge.sources.base import EventSource
-from darkread.edge.sources.evk4.bias_profiles import DARK, FACTORY, profile_offsets
+from darkread.edge.sources.evk4.bias_profiles import FACTORY, profile_offsets
 from darkread.edge.steps import FrameHandler, Step
 from darkread.edge.steps.every_window import EveryWindowStep
 from darkread.edge.steps.on_change import OnChangeStep
@@ -217,9 +217,8 @@ def build_edge(
         if config.source.kind == "replay" and config.source.speed == 0:
             settings = dataclasses.replace(settings, lossless=True)  # no clock to keep up with: make every window
         light = open_bias_control(config.sensor, source, metrics, profile)
-        fixed_dark = profile == DARK  # (a fixed profile, or one the controller does not follow)
         pipeline = build_pipeline(source, gaze, reconstructor, on_frame, settings, voxel, metrics, watchdog=watchdog,
-                                  known_motion=known_motion, light=light, in_the_dark=None if light is not None else lambda: fixed_dark)
+                                  known_motion=known_motion, light=light)
         undo.pop_all()
     return Edge(config, source, pipeline, reconstructor, metrics, uplink=uplink, pages=pages, feeds=feeds)
 
@@ -240,14 +239,12 @@ def build_pipeline(
     watchdog: Callable[[], object] | None = None,
     known_motion: KnownHeadMotion | None = None,
     light: BiasController | None = None,
-    in_the_dark: Callable[[], bool] | None = None,
 ) -> Pipeline:
     """The pipeline ``settings`` describe: its windows on a fresh ring, and the step ``infer`` names,
     chosen here once. ``known_motion``: the head's motion from elsewhere (``edge.head_motion``);
-    ``light``: the controller of the sensor's bias profile (``edge.bias_control``), which also says
-    whether the sensor runs its dark profile (``in_the_dark``, else: a fixed profile's answer)."""
+    ``light``: the controller of the sensor's bias profile (``edge.bias_control``)."""
     windows = Windows(EventRing(settings.ring_capacity), source, gaze, infer, settings, voxel, metrics or EdgeMetrics(),
-                      known_motion, in_the_dark=in_the_dark or (light.in_the_dark if light is not None else None))
+                      known_motion)
     step: Step = STEPS[settings.infer](windows, settings, on_frame)
     return Pipeline(source, windows, step, settings, watchdog=watchdog, light=light)
 

@@ -91,18 +91,13 @@ def motion_healthy(known: object | None, t_us: int) -> bool:
     return bool(healthy(t_us))
 
 
-def roi_wanted(mode: str, known: object | None, t_us: int, dark: bool = False) -> bool:
-    """Whether the sensor should deliver only the window now (``mode`` is ``[pipeline] sensor_roi``).
-
-    "auto": while the head's motion is known and healthy, and not while the sensor runs its dark
-    profile (``dark``): there a window needs long to gather its events and each ROI move cuts the
-    history a frame may take, so the whole sensor reads better (the grounded dark suite: 10 lux 5.4
-    -> 4.3 %, 5 lux 16.3 -> 14.6 %; docs/edge_cpu.md), and the light keeps being read."""
+def roi_wanted(mode: str, known: object | None, t_us: int) -> bool:
+    """Whether the sensor should deliver only the window now (``mode`` is ``[pipeline] sensor_roi``)."""
     if mode == "on":
         return True
     if mode == "off":
         return False
-    return not dark and motion_healthy(known, t_us)
+    return motion_healthy(known, t_us)
 
 
 def parse_roi_mode(raw: object) -> str:

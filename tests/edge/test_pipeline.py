@@ -187,14 +187,13 @@ def chunked(events: Events, size: int) -> list[Events]:
     return [events[i : i + size] for i in range(0, events.shape[0], size)]
 
 
-def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, infer=ink_where_events, known_motion=None,
-                 in_the_dark=None):
+def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, infer=ink_where_events, known_motion=None):
     frames: list[tuple[FrameResult, float]] = []
     metrics = EdgeMetrics()
     pings = []
     pipeline = build_pipeline(
         source, gaze, infer, lambda f, t: frames.append((f, t)), dataclasses.replace(settings, ring_capacity=1 << 16),
-        metrics=metrics, watchdog=lambda: pings.append(1), known_motion=known_motion, in_the_dark=in_the_dark,
+        metrics=metrics, watchdog=lambda: pings.append(1), known_motion=known_motion,
     )
     assert isinstance(source, EventSource)
     pipeline.start()
@@ -460,16 +459,6 @@ def test_the_roi_is_on_while_a_known_motion_is_healthy_and_given_back_when_it_fa
     warped_before = sum(1 for f, _ in frames if f.t_us < t_fail)
     assert len(known.windows) == warped_before  # after the failure the deblur searches the events again
     assert metrics.totals["frames_deblurred"] == len(frames)
-
-
-def test_the_roi_stays_off_while_the_sensor_runs_its_dark_profile() -> None:
-    # in the dark the whole sensor reads better (docs/edge_cpu.md): a healthy motion places no ROI
-    ev = moving_strokes((300.0, 100.0), span_ms=60.0)
-    for dark, narrowed in ((True, False), (False, True)):
-        source = ListSource(chunked(ev, 2000))
-        frames, metrics, _ = run_pipeline(source, FixedGaze(), every_window(lossless=True, denoise=False),
-                                          known_motion=ShiftRight(), in_the_dark=lambda dark=dark: dark)
-        assert frames and bool(source.rois) == narrowed and metrics.totals["roi_writes"] == len(source.rois)
 
 
 def test_a_healthy_known_motion_leaves_the_event_tracker_idle() -> None:

@@ -33,7 +33,6 @@ def test_the_roi_is_wanted_while_a_known_motion_is_healthy() -> None:
     assert [roi_wanted("auto", Gapped(), t) for t in (50, 150, 250)] == [True, False, True]
     assert not roi_wanted("auto", None, 0)
     assert roi_wanted("on", None, 0) and not roi_wanted("off", Known(), 0)
-    assert not roi_wanted("auto", Known(), 0, dark=True) and roi_wanted("on", Known(), 0, dark=True)  # the dark profile: whole
 
 
 def test_the_mode_reads_booleans_as_on_and_off() -> None:
