@@ -39,6 +39,7 @@ from darkread.edge.telemetry import EdgeMetrics
 
 logger = logging.getLogger(__name__)
 MIN_READ_SHARE = 0.25  # a slice read whole for less of its time than this (a ROI the rest) gives no estimate
+# (``[sensor] probe_s`` is held to at least this share of ``estimate_s``: edge/config.py)
 
 
 def profile_named(offsets: dict[str, int] | None) -> str | None:
@@ -71,6 +72,8 @@ class BiasController:
         self._touched = np.zeros(self.grid.shape, dtype=bool)  # tiles the gaze window covered in this slice
         self._read_s = 0.0  # how much of this slice the sensor was read whole (not through a ROI)
         self._covered_to: int | None = None  # the slice's time accounted for so far
+        self._light_read_at: int | None = None  # event time of the last estimate (or of the first event)
+        self.probing = False  # the whole sensor is wanted for a light reading (``wants_whole``)
         self._slice_start: int | None = None
         self._settle_until: int | None = None
         self._estimating = config.lux <= 0 and profile in self.curves
@@ -104,14 +107,35 @@ class BiasController:
         if self._slice_start is None:
             self._slice_start = self._covered_to = int(events["t"][0])
         t_last = int(events["t"][-1])
+        if self._light_read_at is None:
+            self._light_read_at = t_last
         if self._whole(getattr(self.source, "roi", None)):
             self._counts += self.grid.counts(events, self.config.stride)
             self._read_s += (t_last - (self._covered_to or t_last)) / 1e6
             if gaze_window is not None:
                 self._touched |= self.grid.touching(gaze_window)
+        elif self._read_s == 0.0:  # nothing read whole yet: the slice begins when the sensor is whole again
+            self._slice_start = t_last
         self._covered_to = t_last
+        self._probe(t_last)
         if t_last - self._slice_start >= self.config.estimate_s * 1e6:
             self._estimate(t_last)
+
+    def wants_whole(self) -> bool:
+        """Whether the sensor should deliver all its pixels now, for a light reading (any thread)."""
+        return self.probing
+
+    def _probe(self, t_last: int) -> None:
+        """Through a ROI the light goes unread: once none was read for ``probe_every_s``, ask for the
+        whole sensor until ``probe_s`` of it is counted (the slice then ends with an estimate)."""
+        every = self.config.probe_every_s
+        if self.probing:
+            if self._read_s >= self.config.probe_s:
+                self.probing = False
+        elif every > 0 and self._light_read_at is not None and t_last - self._light_read_at >= every * 1e6:
+            self.probing = True
+            self._light_read_at = t_last  # (asked once per period, whether or not the source obliges)
+            logger.debug("no light read for %g s: the whole sensor for %g s", every, self.config.probe_s)
 
     def _whole(self, readout: tuple[int, int, int, int] | None) -> bool:
         """Whether the sensor delivers all its pixels. Through a ROI it delivers the page around the
@@ -125,6 +149,8 @@ class BiasController:
         seconds = (t_last - (self._slice_start or t_last)) / 1e6
         usable = usable_tiles(self.grid, self._touched)
         rate = background_rate_hz(self._counts, self._areas, usable, self._read_s) if self._read_s >= MIN_READ_SHARE * seconds else None
+        if rate is not None:
+            self._light_read_at = t_last
         self._counts[:] = 0
         self._touched[:] = False
         self._read_s = 0.0

@@ -244,7 +244,7 @@ def build_pipeline(
     chosen here once. ``known_motion``: the head's motion from elsewhere (``edge.head_motion``);
     ``light``: the controller of the sensor's bias profile (``edge.bias_control``)."""
     windows = Windows(EventRing(settings.ring_capacity), source, gaze, infer, settings, voxel, metrics or EdgeMetrics(),
-                      known_motion)
+                      known_motion, light_probe=light.wants_whole if light is not None else None)
     step: Step = STEPS[settings.infer](windows, settings, on_frame)
     return Pipeline(source, windows, step, settings, watchdog=watchdog, light=light)
 

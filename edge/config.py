@@ -149,6 +149,10 @@ class SensorConfig:
     estimate_s: float = 1.0  # one estimate per this much event time
     settle_s: float = 0.5  # events this soon after a bias write are not counted (the pixels settle)
     stride: int = 4  # every stride-th event is counted (the background is a rate: a sample suffices)
+    # auto: through a sensor ROI the light cannot be read (edge/bias_control.py), so when none was read for
+    # probe_every_s of event time the whole sensor is delivered for probe_s (0: never; ~0.5 % more time whole)
+    probe_every_s: float = 60.0
+    probe_s: float = 0.3
 
 
 @dataclass(frozen=True)
@@ -313,6 +317,9 @@ def validate(config: EdgeConfig) -> EdgeConfig:
                          f"bright_above_lux, not {sensor.dark_below_lux:g} and {sensor.bright_above_lux:g}")
     if sensor.estimate_s <= 0 or sensor.min_dwell_s < 0 or sensor.settle_s < 0 or sensor.stride < 1:
         raise ValueError("config [sensor] estimate_s must be positive, min_dwell_s and settle_s >= 0, stride >= 1")
+    if sensor.probe_every_s < 0 or not sensor.estimate_s / 4 <= sensor.probe_s <= sensor.estimate_s:
+        raise ValueError(f"config [sensor] probe_every_s must be >= 0 (0: never) and probe_s between a quarter of estimate_s "
+                         f"and estimate_s ({sensor.estimate_s / 4:g}-{sensor.estimate_s:g} s), not {sensor.probe_s:g}")
     if config.pipeline.dither_px < 0 or config.pipeline.settle_max_doubt <= 0:
         raise ValueError("config [pipeline] dither_px must be >= 0 (0: a view's frames all in its window) and settle_max_doubt positive")
     return config

@@ -91,13 +91,15 @@ def motion_healthy(known: object | None, t_us: int) -> bool:
     return bool(healthy(t_us))
 
 
-def roi_wanted(mode: str, known: object | None, t_us: int) -> bool:
-    """Whether the sensor should deliver only the window now (``mode`` is ``[pipeline] sensor_roi``)."""
+def roi_wanted(mode: str, known: object | None, t_us: int, light_probe: bool = False) -> bool:
+    """Whether the sensor should deliver only the window now (``mode`` is ``[pipeline] sensor_roi``):
+    "auto" while the head's motion is known and healthy, except while the light is read
+    (``light_probe``: through the ROI it cannot be, edge/bias_control.py)."""
     if mode == "on":
         return True
     if mode == "off":
         return False
-    return motion_healthy(known, t_us)
+    return not light_probe and motion_healthy(known, t_us)
 
 
 def parse_roi_mode(raw: object) -> str:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 
@@ -34,6 +35,10 @@ MIN_HISTORY_EVENTS = 4096
 MAX_HISTORY_EVENTS = 1 << 16  # usual cap of the ring events searched for a window's events
 
 
+def _never() -> bool:
+    return False
+
+
 class Windows:
     """The ring, the gaze and the window's place; one frame's events and the frame itself.
 
@@ -52,6 +57,7 @@ class Windows:
         voxel: VoxelConfig,
         metrics: EdgeMetrics,
         known_motion: KnownHeadMotion | None = None,
+        light_probe: Callable[[], bool] | None = None,
     ) -> None:
         self.ring = ring
         self.source = source  # (its ROI follows the window while ``roi_wanted``: ``place_roi``)
@@ -72,6 +78,7 @@ class Windows:
         # (a SmearPrior) is searched around, and while the whole sensor is delivered the tracker runs
         # beside it as a check
         self.known_motion = known_motion
+        self.light_probe = light_probe or _never  # the light is being read: the whole sensor (edge.bias_control)
         self.imu = known_motion if isinstance(known_motion, SmearPrior) else None
         self._measure_scene = settings.scene_motion and settings.sensor_roi != "on"
         self.scene = SceneMotion(self.sensor_wh) if self._measure_scene else None
@@ -93,7 +100,7 @@ class Windows:
         through the ROI is not measured, and the tracker starts afresh)."""
         t = int(events["t"][-1])
         self._roi_took_effect(events)
-        if self.roi is not None and not roi_wanted(self.settings.sensor_roi, self.known_motion, t):
+        if self.roi is not None and not roi_wanted(self.settings.sensor_roi, self.known_motion, t, self.light_probe()):
             self._write_roi(None, t)
             if self._measure_scene:  # its last slices are from before the pause: it starts afresh
                 with self._scene_lock:
@@ -133,7 +140,7 @@ class Windows:
         while ``[pipeline] sensor_roi`` wants the ROI (``edge.roi.roi_wanted``) the sensor delivers
         it with a margin, rewritten only once ``wanted`` leaves the window delivered (hysteresis);
         otherwise the whole sensor."""
-        if not roi_wanted(self.settings.sensor_roi, self.known_motion, t_us):
+        if not roi_wanted(self.settings.sensor_roi, self.known_motion, t_us, self.light_probe()):
             if self.roi is not None:
                 self._write_roi(None, t_us)
             return

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from darkread.edge.bias_control import BiasController, profile_named
-from darkread.edge.config import SensorConfig
+from darkread.edge.config import SensorConfig, load_config
 from darkread.edge.events import Events, empty_events
 from darkread.edge.light import (
     MIN_TILES,
@@ -237,6 +237,32 @@ def test_a_roi_over_the_page_gives_no_estimate_rather_than_the_texts_edges() -> 
                             edge_rect=source.roi, edge_rate_hz=1.0)
         controller.push(inside(chunk, source.roi), (260, 200, 100, 80))
     assert controller.lux is None and controller.state.profile == FACTORY
+
+
+def test_through_a_roi_the_whole_sensor_is_asked_for_now_and_then_to_read_the_light() -> None:
+    # the ROI on from the start (a still head, its gyroscope trusted): no light read, so after
+    # probe_every_s the controller asks for the whole sensor, gets probe_s of it, and reads the light
+    source, rng = RoiReplayLike(), np.random.default_rng(7)
+    roi, window = (200, 140, 240, 200), (260, 200, 100, 80)
+    config = SensorConfig(stride=1, probe_every_s=2.0, probe_s=0.3)
+    controller = BiasController(config, source, EdgeMetrics(), FACTORY)
+    controller.begin()
+    whole_s, asked = 0.0, []
+    for k in range(100):  # 50-ms chunks over 5 s at 8 lux, the sensor following what the controller wants
+        source.roi = (0, 0, 640, 480) if controller.wants_whole() else roi
+        chunk = still_scene(curve_rate(FACTORY, 8.0), 0.05, (640, 480), rng, t0_us=k * 50_000, edge_rect=roi, edge_rate_hz=40.0)
+        whole_s += 0.05 if source.roi == (0, 0, 640, 480) else 0.0
+        controller.push(chunk if source.roi == (0, 0, 640, 480) else inside(chunk, roi), window)
+        asked.append(controller.wants_whole())
+    assert controller.lux == pytest.approx(8.0, rel=0.2)  # read in the probe
+    assert not asked[0] and any(asked) and not asked[-1]  # asked after 2 s, given back once read
+    assert 0.3 <= whole_s <= 0.5  # about probe_s of the 5 s whole (the second probe is due at 4.3 s + 2)
+
+
+def test_the_probe_settings_are_checked() -> None:
+    with pytest.raises(ValueError, match="probe_s between a quarter of estimate_s"):
+        load_config(None, environ={}, overrides={"sensor": {"probe_s": 0.1}})
+    assert load_config(None, environ={"DARKREAD_EDGE_SENSOR_PROBE_EVERY_S": "0"}).sensor.probe_every_s == 0
 
 
 def test_recordings_name_their_profile_by_offsets() -> None:

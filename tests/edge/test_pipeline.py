@@ -187,13 +187,14 @@ def chunked(events: Events, size: int) -> list[Events]:
     return [events[i : i + size] for i in range(0, events.shape[0], size)]
 
 
-def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, infer=ink_where_events, known_motion=None):
+def run_pipeline(source: ListSource, gaze: FixedGaze, settings: PipelineConfig, infer=ink_where_events, known_motion=None,
+                 light=None):
     frames: list[tuple[FrameResult, float]] = []
     metrics = EdgeMetrics()
     pings = []
     pipeline = build_pipeline(
         source, gaze, infer, lambda f, t: frames.append((f, t)), dataclasses.replace(settings, ring_capacity=1 << 16),
-        metrics=metrics, watchdog=lambda: pings.append(1), known_motion=known_motion,
+        metrics=metrics, watchdog=lambda: pings.append(1), known_motion=known_motion, light=light,
     )
     assert isinstance(source, EventSource)
     pipeline.start()
@@ -459,6 +460,28 @@ def test_the_roi_is_on_while_a_known_motion_is_healthy_and_given_back_when_it_fa
     warped_before = sum(1 for f, _ in frames if f.t_us < t_fail)
     assert len(known.windows) == warped_before  # after the failure the deblur searches the events again
     assert metrics.totals["frames_deblurred"] == len(frames)
+
+
+class ReadingTheLight:
+    """A light controller that wants the whole sensor the whole time (a light reading in progress)."""
+
+    def __init__(self) -> None:
+        self.pushed = 0
+
+    def push(self, events: Events, gaze_window: object) -> None:
+        self.pushed += 1
+
+    def wants_whole(self) -> bool:
+        return True
+
+
+def test_while_the_light_is_read_the_roi_gives_way_to_the_whole_sensor() -> None:
+    ev = moving_strokes((300.0, 100.0), span_ms=60.0)
+    light = ReadingTheLight()
+    source = ListSource(chunked(ev, 2000))
+    frames, metrics, _ = run_pipeline(source, FixedGaze(), every_window(lossless=True, denoise=False),
+                                      known_motion=ShiftRight(), light=light)
+    assert frames and light.pushed and not source.rois and metrics.totals["roi_writes"] == 0
 
 
 def test_a_healthy_known_motion_leaves_the_event_tracker_idle() -> None:

@@ -33,6 +33,8 @@ def test_the_roi_is_wanted_while_a_known_motion_is_healthy() -> None:
     assert [roi_wanted("auto", Gapped(), t) for t in (50, 150, 250)] == [True, False, True]
     assert not roi_wanted("auto", None, 0)
     assert roi_wanted("on", None, 0) and not roi_wanted("off", Known(), 0)
+    assert not roi_wanted("auto", Known(), 0, light_probe=True)  # the light is read on the whole sensor ...
+    assert roi_wanted("on", Known(), 0, light_probe=True)  # ... unless the ROI is forced on
 
 
 def test_the_mode_reads_booleans_as_on_and_off() -> None:
