@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from darkread.edge.events import EVENT_CD_DTYPE, Events
+from darkread.edge.events import EVENT_CD_DTYPE, Events, concat_events
 from darkread.edge.io.raw import write_raw
 from darkread.edge.io.raw_header import read_raw_header
 from darkread.edge.roi import NOT_YET, Rect
@@ -49,13 +49,8 @@ class Deliveries:
 
     @property
     def events(self) -> Events:
-        """The chunks as one array (``EVENT_CD_DTYPE``: its padding kept, which concatenating drops)."""
-        out = np.empty(sum(chunk.shape[0] for chunk in self.chunks), EVENT_CD_DTYPE)
-        at = 0
-        for chunk in self.chunks:
-            out[at : at + chunk.shape[0]] = chunk
-            at += chunk.shape[0]
-        return out
+        """The chunks as one array (whole records, ``EVENT_CD_DTYPE``'s padding kept)."""
+        return concat_events(self.chunks) if self.chunks else np.empty(0, EVENT_CD_DTYPE)
 
     def newest_t(self) -> int:
         return int(self.chunks[-1]["t"][-1]) if self.chunks else -1

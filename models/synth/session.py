@@ -115,7 +115,7 @@ def session_sensor(spec: SessionSpec, rng: np.random.Generator, lux: float) -> S
     if isinstance(params, GroundedSensorParams):
         if spec.k_hz_per_chip_lux is not None:
             params = replace(params, k_hz_per_chip_lux=float(spec.k_hz_per_chip_lux))
-        return with_standard_laws(apply_profile(params, spec.bias_profile), tuple(spec.standard_laws))
+        return with_standard_laws(apply_profile(params, spec.bias_profile), spec.standard_laws)
     if spec.k_hz_per_chip_lux is not None or spec.standard_laws:
         raise ValueError(f"a fixed K or a standard law is the grounded regime's (--regime grounded), not {spec.regime!r}'s")
     if spec.bias_profile != FACTORY:
