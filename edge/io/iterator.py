@@ -148,7 +148,12 @@ class PacedReplay:
     consumer fell (wall-clock seconds), beyond ``batch_s``: when a slice is due the replay sleeps
     that much longer and then hands over every slice due meanwhile at once, as a camera's buffer
     does (never early, at most ``batch_s`` late), so a replay of short slices wakes no more often.
+    ``coalesce``: those slices are handed over joined, one array per wake-up (empty ones dropped,
+    at most ``MAX_COALESCED`` slices each), as a camera's driver hands over what its USB transfers
+    queued: a consumer that fell behind gets fewer, larger chunks and catches up.
     """
+
+    MAX_COALESCED = 64
 
     def __init__(
         self,
@@ -157,6 +162,7 @@ class PacedReplay:
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], object] = time.sleep,
         batch_s: float = 0.0,
+        coalesce: bool = False,
     ) -> None:
         if speed is not None and speed <= 0:
             raise ValueError(f"speed must be positive or None, got {speed}")
@@ -164,6 +170,7 @@ class PacedReplay:
             raise ValueError(f"batch_s must not be negative, got {batch_s}")
         self.slices, self.speed, self.clock, self.sleep = slices, speed, clock, sleep
         self.batch_s = batch_s
+        self.coalesce = coalesce
         self.max_lag_s = 0.0
 
     def _slice_time(self, events: Events) -> int | None:
@@ -175,6 +182,7 @@ class PacedReplay:
 
     def __iter__(self) -> Iterator[Events]:
         origin: tuple[float, int] | None = None  # (wall clock, sensor µs) of the first timed slice
+        due_now: list[Events] = []  # (coalescing) the slices due at this wake-up
         for events in self.slices:
             sensor_us = self._slice_time(events)
             if self.speed is not None and sensor_us is not None:
@@ -183,7 +191,22 @@ class PacedReplay:
                 due = origin[0] + (sensor_us - origin[1]) / 1e6 / self.speed
                 wait = due - self.clock()
                 if wait > 0:
+                    if due_now:
+                        yield _joined(due_now)
+                        due_now = []
                     self.sleep(wait + self.batch_s)
                 elif -wait > self.batch_s:
                     self.max_lag_s = max(self.max_lag_s, -wait - self.batch_s)
-            yield events
+            if not self.coalesce:
+                yield events
+            elif events.shape[0]:
+                due_now.append(events)
+                if len(due_now) >= self.MAX_COALESCED:
+                    yield _joined(due_now)
+                    due_now = []
+        if due_now:
+            yield _joined(due_now)
+
+
+def _joined(slices: list[Events]) -> Events:
+    return slices[0] if len(slices) == 1 else concat_events(slices)

@@ -155,7 +155,8 @@ class ReplaySource:
         self._reader = slices.reader
         assert self._reader is not None  # (a file's iterator has its reader)
         self._apply_roi(self._reader)
-        return PacedReplay(slices, self.speed, clock=time.perf_counter, sleep=self._stop.wait, batch_s=PACE_BATCH_S)
+        return PacedReplay(slices, self.speed, clock=time.perf_counter, sleep=self._stop.wait, batch_s=PACE_BATCH_S,
+                           coalesce=True)
 
     def _judge(self) -> None:
         """After the replay: name what makes the stream implausible (``problems``)."""

@@ -127,6 +127,26 @@ def test_paced_replay_in_batches_hands_over_late_never_early() -> None:
         PacedReplay(slices, batch_s=-0.001)
 
 
+def test_a_coalescing_replay_joins_what_came_due_at_one_wake_up() -> None:
+    """As a camera's driver hands over what its transfers queued: one array per wake-up, every event
+    once and in order, empty slices dropped; a consumer that fell behind gets larger chunks."""
+    clock = FakeClock()
+    times_us = [0, 1_000, 2_000, 3_000, 4_000, 10_000]
+    slices = [make_events(0, 0, 0, [t]) for t in times_us] + [make_events(0, 0, 0, [])]
+    replay = PacedReplay(slices, speed=1.0, clock=clock, sleep=clock.sleep, batch_s=0.002, coalesce=True)
+    chunks = [(chunk["t"].tolist(), round(clock.now - 100.0, 6)) for chunk in replay]
+    # due at 0 ms; woken at 3 ms: 1, 2, 3 ms due; woken at 6 ms: 4 ms; woken at 12 ms: 10 ms
+    assert chunks == [([0], 0.0), ([1_000, 2_000, 3_000], 0.003), ([4_000], 0.006), ([10_000], 0.012)]
+    late = FakeClock()
+    many = [make_events(0, 0, 0, [t]) for t in range(0, 200_000, 1_000)]
+    behind = PacedReplay(many, speed=1.0, clock=late, sleep=late.sleep, batch_s=0.002, coalesce=True)
+    sizes = []
+    for chunk in behind:
+        sizes.append(chunk.shape[0])
+        late.now += 0.1  # each chunk takes the consumer 100 ms: more came due than a chunk holds
+    assert sum(sizes) == 200 and max(sizes) == PacedReplay.MAX_COALESCED and len(sizes) < 20
+
+
 def test_paced_replay_does_not_sleep_when_the_consumer_is_late() -> None:
     clock = FakeClock()
     slices = [make_events(0, 0, 0, [0]), make_events(0, 0, 0, [100_000]), make_events(0, 0, 0, [200_000])]
