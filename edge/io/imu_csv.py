@@ -13,7 +13,7 @@ velocity, gravity, quality) are read when present and not needed.
 from __future__ import annotations
 
 import csv
-import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -78,35 +78,59 @@ def read_imu_csv(path: str | Path) -> ImuTrack:
     path = Path(path)
     try:
         with open(path, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
+            first = next(csv.reader(fh), None)
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise ImuCsvError(f"{path}: cannot read the head-motion CSV: {exc}") from exc
-    if not rows:
+    if not first:
         raise ImuCsvError(f"{path}, line 1: empty file, expected a header row with {TIMESTAMP}")
-    header = [name.strip() for name in rows[0]]
+    header = [name.strip() for name in first]
     missing = [name for name in (TIMESTAMP, *ANGULAR_VELOCITY) if name not in header]
     if missing:
         raise ImuCsvError(f"{path}, line 1: missing column(s) {', '.join(missing)} "
                           "(expected Aria MPS closed_loop_trajectory.csv)")
     columns = [header.index(name) for name in (TIMESTAMP, *ANGULAR_VELOCITY)]
-    body = rows[1:]
+    try:  # numpy's parser (a minute of samples in 0.2 s); anything it cannot read is read again row by row
+        data = path.read_bytes()
+        rows = data.count(b"\n") + (not data.endswith(b"\n"))
+        if data.count(b",") != rows * (len(header) - 1):  # a row with more or fewer cells than the header
+            raise ValueError("ragged rows")
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # (an empty body warns)
+            t_us = np.loadtxt(path, delimiter=",", skiprows=1, usecols=columns[:1], dtype=np.int64, ndmin=1, encoding="utf-8")
+            omega = np.loadtxt(path, delimiter=",", skiprows=1, usecols=columns[1:], dtype=np.float64, ndmin=2, encoding="utf-8")
+    except (ValueError, UserWarning):
+        t_us, omega = _read_rows(path, header, columns)
+    return _checked(path, t_us, omega)
+
+
+def _read_rows(path: Path, header: list[str], columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The samples read row by row, each row checked: the first that is wrong is named."""
+    with open(path, newline="", encoding="utf-8") as fh:
+        body = list(csv.reader(fh))[1:]
     if not body:
         raise ImuCsvError(f"{path}: no samples after the header")
-    t_us = np.empty(len(body), np.int64)
-    omega = np.empty((len(body), 3), np.float64)
-    for i, row in enumerate(body):  # (I/O, once per recording: a file of minutes is read in a second)
-        line = i + 2
+    for i, row in enumerate(body):
         if len(row) != len(header):
-            raise ImuCsvError(f"{path}, line {line}: {len(row)} cells, the header has {len(header)}")
+            raise ImuCsvError(f"{path}, line {i + 2}: {len(row)} cells, the header has {len(header)}")
         try:
-            t_us[i] = int(row[columns[0]])
-            omega[i] = [float(row[k]) for k in columns[1:]]
+            int(row[columns[0]]), [float(row[k]) for k in columns[1:]]
         except ValueError:
-            raise ImuCsvError(f"{path}, line {line}: {TIMESTAMP} must be an integer and the angular velocities "
+            raise ImuCsvError(f"{path}, line {i + 2}: {TIMESTAMP} must be an integer and the angular velocities "
                               f"numbers, got {[row[k] for k in columns]}") from None
-        if not all(math.isfinite(v) for v in omega[i]) or float(np.abs(omega[i]).max()) > MAX_ANGULAR_SPEED_RAD_S:
-            raise ImuCsvError(f"{path}, line {line}: angular velocity {omega[i].tolist()} rad/s is not finite or "
-                              f"beyond {MAX_ANGULAR_SPEED_RAD_S:g} rad/s (degrees instead of radians?)")
+    cells = list(zip(*body))  # (a column per cell of the header)
+    t_us = np.array(cells[columns[0]]).astype(np.int64)
+    return t_us, np.stack([np.array(cells[k]).astype(np.float64) for k in columns[1:]], axis=1)
+
+
+def _checked(path: Path, t_us: np.ndarray, omega: np.ndarray) -> ImuTrack:
+    """The track, once its samples are plausible: finite rates in rad/s, increasing microseconds."""
+    if t_us.shape[0] == 0:
+        raise ImuCsvError(f"{path}: no samples after the header")
+    wrong = ~np.isfinite(omega).all(axis=1) | (np.abs(np.nan_to_num(omega, nan=0.0)).max(axis=1) > MAX_ANGULAR_SPEED_RAD_S)
+    if wrong.any():
+        i = int(np.flatnonzero(wrong)[0])
+        raise ImuCsvError(f"{path}, line {i + 2}: angular velocity {omega[i].tolist()} rad/s is not finite or "
+                          f"beyond {MAX_ANGULAR_SPEED_RAD_S:g} rad/s (degrees instead of radians?)")
     steps = np.diff(t_us)
     if steps.size and (steps <= 0).any():
         bad = int(np.flatnonzero(steps <= 0)[0])

@@ -53,6 +53,7 @@ def test_reads_an_mps_file_by_column_name(tmp_path: Path) -> None:
     (f"{TIMESTAMP},{','.join(ANGULAR_VELOCITY)}\n", "no samples after the header"),
     (f"{TIMESTAMP},{','.join(ANGULAR_VELOCITY)}\n1000,0,0,0\n1000,0,0,0\n", "line 3: tracking_timestamp_us 1000 does not increase"),
     (f"{TIMESTAMP},{','.join(ANGULAR_VELOCITY)}\n1000,0,0\n", "line 2: 3 cells, the header has 4"),
+    (f"{TIMESTAMP},{','.join(ANGULAR_VELOCITY)}\n1000,0,0,0\n2000,0,0,0,0\n", "line 3: 5 cells, the header has 4"),
     (f"{TIMESTAMP},{','.join(ANGULAR_VELOCITY)}\n1000,a,0,0\n", "line 2: tracking_timestamp_us must be an integer"),
     (f"{TIMESTAMP},{','.join(ANGULAR_VELOCITY)}\n1000,0,90,0\n", "line 2: angular velocity [0.0, 90.0, 0.0] rad/s"),
     (f"{TIMESTAMP},{','.join(ANGULAR_VELOCITY)}\n1000,0,nan,0\n", "is not finite"),
@@ -65,6 +66,14 @@ def test_a_bad_file_is_one_clear_error(tmp_path: Path, body: str, message: str) 
         read_imu_csv(path)
     assert message in str(caught.value) and str(path) in str(caught.value)
     assert isinstance(caught.value, RecordingError) and "\n" not in str(caught.value)
+
+
+def test_a_file_numpy_cannot_parse_is_read_row_by_row_to_the_same_track(tmp_path: Path) -> None:
+    t, omega = _written(tmp_path / "imu.csv")
+    text = (tmp_path / "imu.csv").read_text()
+    (tmp_path / "quoted.csv").write_text(text.replace(f",{t[3]},", f',"{t[3]}",', 1))  # valid CSV, quoted cell
+    plain, quoted = read_imu_csv(tmp_path / "imu.csv"), read_imu_csv(tmp_path / "quoted.csv")
+    assert np.array_equal(plain.t_us, quoted.t_us) and np.array_equal(plain.omega, quoted.omega)
 
 
 def test_an_unreadable_file(tmp_path: Path) -> None:
