@@ -148,7 +148,7 @@ class PacedReplay:
     consumer fell (wall-clock seconds), beyond ``batch_s``: when a slice is due the replay sleeps
     that much longer and then hands over every slice due meanwhile at once, as a camera's buffer
     does (never early, at most ``batch_s`` late), so a replay of short slices wakes no more often.
-    ``coalesce``: those slices are handed over joined, one array per wake-up (empty ones dropped,
+    ``coalesce`` (paced only): those slices are handed over joined, one array per wake-up (empty ones dropped,
     at most ``MAX_COALESCED`` slices each), as a camera's driver hands over what its USB transfers
     queued: a consumer that fell behind gets fewer, larger chunks and catches up.
     """
@@ -197,7 +197,7 @@ class PacedReplay:
                     self.sleep(wait + self.batch_s)
                 elif -wait > self.batch_s:
                     self.max_lag_s = max(self.max_lag_s, -wait - self.batch_s)
-            if not self.coalesce:
+            if not self.coalesce or self.speed is None:  # (unpaced: each slice as it comes, for a lossless replay)
                 yield events
             elif events.shape[0]:
                 due_now.append(events)

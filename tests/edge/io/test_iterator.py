@@ -145,6 +145,8 @@ def test_a_coalescing_replay_joins_what_came_due_at_one_wake_up() -> None:
         sizes.append(chunk.shape[0])
         late.now += 0.1  # each chunk takes the consumer 100 ms: more came due than a chunk holds
     assert sum(sizes) == 200 and max(sizes) == PacedReplay.MAX_COALESCED and len(sizes) < 20
+    unpaced = list(PacedReplay(many, speed=None, coalesce=True))  # a lossless replay: slice by slice, as before
+    assert len(unpaced) == 200 and all(a is b for a, b in zip(unpaced, many))
 
 
 def test_paced_replay_does_not_sleep_when_the_consumer_is_late() -> None:
