@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -191,6 +191,34 @@ def _by_suite(held: Sequence[LineOutcome], p: np.ndarray, right: np.ndarray) -> 
         ece, _ = reliability(p[pick], right[pick])
         md.append(f"| {suite} | {int(pick.sum())} | {p[pick].mean():.2f} | {right[pick].mean():.2f} | {ece:.3f} |")
     return [*md, ""]
+
+
+@dataclass(frozen=True)
+class CalibrationCheck:
+    """A model's calibration on lines it may never have seen (``check``)."""
+
+    lines: int
+    recordings: int
+    ece: float
+    right_share: float
+    held_lines: int  # the lines of the held-out recording numbers (``split``): unseen in fitting even by scene
+    held_ece: float | None
+
+
+def check(lines: Sequence[LineOutcome], model: ConfidenceModel) -> CalibrationCheck:
+    """ECE of ``model`` on the read lines given, and on their held-out half (bands read as nothing are
+    unclear by rule, not by the model, so they are left out as in fitting)."""
+    read = [line for line in lines if line.read]
+    if not read:
+        raise ValueError("no judged lines to check the model on: evaluate the suite first (`darkread eval run`)")
+    held = split(read)[1]
+
+    def ece_of(group: Sequence[LineOutcome]) -> float:
+        p = np.array([model.probability(line.evidence) for line in group])
+        return reliability(p, np.array([line.right for line in group], dtype=np.float64))[0]
+
+    return CalibrationCheck(len(read), _recordings(read), ece_of(read), float(np.mean([line.right for line in read])),
+                            len(held), ece_of(held) if held else None)
 
 
 def _recordings(lines: Sequence[LineOutcome]) -> int:

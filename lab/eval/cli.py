@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from darkread.lab.eval.calibrate import CalibrationCheck
     from darkread.lab.eval.results import RecordingResult
 
 from darkread.edge.config import INFER_MODES, default_infer_mode, other_infer_mode
@@ -79,6 +80,10 @@ Seven forms:
       cloud/data/line_confidence.json, what the cloud ships) and its calibration on the held-out
       lines (calibration.md, reliability.png with the ECE) to --out; then rebuild the report
       (--report-only) to see coverage and risk under it.
+
+  darkread eval check-confidence SUITE_DIR [SUITE_DIR ...] [--model FILE.json]
+      the line-confidence model's calibration (ECE) on evaluated suites, e.g. ones it was not fitted
+      on: each suite's read lines and their held-out half, then all of them pooled.
 
   darkread eval side-by-side LABEL=SUITE_DIR [LABEL=SUITE_DIR ...] --out FILE.md [--reference LABEL]
       several evaluated suites of the same scenes (made with the same selection, e.g. by another
@@ -257,11 +262,49 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                            help="where the fitted line-confidence model goes (default: the one the cloud ships)")
     _add_head_motion(sub)
     _add_add_imu(sub)
+    _add_check_confidence(sub)
     calibrate.add_argument("--target-risk", type=float, default=0.05, metavar="R",
                            help="the CER the answered lines of the fitting half may have (sets the answer threshold)")
     calibrate.add_argument("--also", action="append", default=[], metavar="SUITE_DIR",
                            help="another evaluated suite whose lines join the fit and the held-out measure, split by the "
                                 "same recording numbers (e.g. the suite re-made on another sensor model; repeatable)")
+
+
+def _add_check_confidence(sub: argparse._SubParsersAction) -> None:
+    help_text = "the line-confidence model's calibration (ECE) on evaluated suites, e.g. ones it was not fitted on"
+    p = sub.add_parser("check-confidence", help=help_text, description=help_text + ": every suite's read lines, "
+                       "and their held-out half (the recording numbers `darkread eval calibrate` holds out).")
+    p.add_argument("suites", nargs="+", metavar="SUITE_DIR", help="evaluated suites (results in SUITE_DIR/eval_runs/<mode>)")
+    p.add_argument("--model", metavar="FILE.json", help="the model to check (default: the one the cloud ships)")
+    p.add_argument("--infer", choices=list(INFER_MODES), help="the edge mode whose results are read (default: the edge's)")
+    p.set_defaults(func=_check_confidence)
+
+
+def _check_confidence(args: argparse.Namespace) -> int:
+    from darkread.cloud.confidence import load_model
+    from darkread.lab.eval.calibrate import check
+    from darkread.lab.eval.runner import load_results
+    from darkread.lab.eval.selective import outcomes
+
+    model = load_model(args.model)
+    mode = args.infer or default_infer_mode()
+    pooled = []
+    for suite in map(Path, args.suites):
+        folder = suite / "eval_runs" / mode
+        if not folder.is_dir():
+            raise FileNotFoundError(f"{suite}: no results in {folder}; run `darkread eval run {suite}` first")
+        lines = outcomes(load_results(folder), suite=str(suite))
+        pooled += lines
+        if lines and len(args.suites) > 1:
+            print(_check_line(str(suite), check(lines, model)))
+    print(_check_line("all" if len(args.suites) > 1 else args.suites[0], check(pooled, model)))
+    return 0
+
+
+def _check_line(label: str, result: CalibrationCheck) -> str:
+    held = f"{result.held_ece:.3f} on its held-out {result.held_lines}" if result.held_ece is not None else "no held-out lines"
+    return (f"{label}: {result.lines} lines of {result.recordings} recordings, {100 * result.right_share:.0f} % right; "
+            f"ECE {result.ece:.3f} ({held})")
 
 
 def _add_head_motion(sub: argparse._SubParsersAction) -> None:

@@ -6,9 +6,10 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from darkread.cloud.confidence import ConfidenceModel
-from darkread.lab.eval.calibrate import calibrate, fit_logistic, split
+from darkread.lab.eval.calibrate import calibrate, check, fit_logistic, split
 from darkread.lab.eval.selective import LineOutcome, match_lines, reliability, risk_coverage, selective
 
 
@@ -89,3 +90,23 @@ def test_calibrate_pools_the_lines_of_several_suites_and_names_them(tmp_path: Pa
     assert "Lines from:" in (out / "calibration.md").read_text()
     assert main(["eval", "calibrate", str(first), "--also", str(tmp_path / "none"), "--out", str(out),
                  "--model-out", str(tmp_path / "m.json")]) != 0
+
+
+def test_a_model_is_checked_on_lines_it_was_not_fitted_on(tmp_path: Path) -> None:
+    model, _ = calibrate(synthetic_lines(seed=3), tmp_path / "model.json", tmp_path / "report", target_risk=0.05)
+    unseen = synthetic_lines(n=400, seed=9)  # other lines of the same law: calibrated there too
+    result = check(unseen, model)
+    assert result.lines == 400 and result.recordings == 400 and result.held_lines == len(split(unseen)[1])
+    assert result.ece < 0.08 and result.held_ece is not None and 0.3 < result.right_share < 0.7
+    overconfident = model.__class__(**{**model.__dict__, "intercept": model.intercept + 4.0})
+    assert check(unseen, overconfident).ece > 0.2  # a model sure of everything is told so
+    with pytest.raises(ValueError, match="evaluate the suite first"):
+        check([], model)
+
+
+def test_check_confidence_names_a_suite_without_results(tmp_path: Path, capsys) -> None:
+    from darkread.cli import main
+
+    assert main(["eval", "check-confidence", str(tmp_path)]) != 0
+    err = capsys.readouterr().err
+    assert "no results in" in err and "darkread eval run" in err and "Traceback" not in err
