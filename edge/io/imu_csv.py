@@ -13,6 +13,7 @@ velocity, gravity, quality) are read when present and not needed.
 from __future__ import annotations
 
 import csv
+import io
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -79,8 +80,8 @@ def read_imu_csv(path: str | Path) -> ImuTrack:
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             first = next(csv.reader(fh), None)
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise ImuCsvError(f"{path}: cannot read the head-motion CSV: {exc}") from exc
+    except UNREADABLE as exc:
+        raise _unreadable(path, exc) from exc
     if not first:
         raise ImuCsvError(f"{path}, line 1: empty file, expected a header row with {TIMESTAMP}")
     header = [name.strip() for name in first]
@@ -89,15 +90,16 @@ def read_imu_csv(path: str | Path) -> ImuTrack:
         raise ImuCsvError(f"{path}, line 1: missing column(s) {', '.join(missing)} "
                           "(expected Aria MPS closed_loop_trajectory.csv)")
     columns = [header.index(name) for name in (TIMESTAMP, *ANGULAR_VELOCITY)]
-    try:  # numpy's parser (a minute of samples in 0.2 s); anything it cannot read is read again row by row
+    try:  # numpy's compiled parser, one pass; anything it cannot read is read again row by row
         data = path.read_bytes()
         rows = data.count(b"\n") + (not data.endswith(b"\n"))
         if data.count(b",") != rows * (len(header) - 1):  # a row with more or fewer cells than the header
             raise ValueError("ragged rows")
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # (an empty body warns)
-            t_us = np.loadtxt(path, delimiter=",", skiprows=1, usecols=columns[:1], dtype=np.int64, ndmin=1, encoding="utf-8")
-            omega = np.loadtxt(path, delimiter=",", skiprows=1, usecols=columns[1:], dtype=np.float64, ndmin=2, encoding="utf-8")
+            samples = np.loadtxt(io.StringIO(data.decode("utf-8")), delimiter=",", skiprows=1, usecols=columns, ndmin=1,
+                                 dtype=[("t", np.int64), ("omega", np.float64, (3,))])
+        t_us, omega = np.ascontiguousarray(samples["t"]), np.ascontiguousarray(samples["omega"])
     except (ValueError, UserWarning):
         t_us, omega = _read_rows(path, header, columns)
     return _checked(path, t_us, omega)
@@ -105,8 +107,11 @@ def read_imu_csv(path: str | Path) -> ImuTrack:
 
 def _read_rows(path: Path, header: list[str], columns: list[int]) -> tuple[np.ndarray, np.ndarray]:
     """The samples read row by row, each row checked: the first that is wrong is named."""
-    with open(path, newline="", encoding="utf-8") as fh:
-        body = list(csv.reader(fh))[1:]
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            body = list(csv.reader(fh))[1:]
+    except UNREADABLE as exc:  # (a bad byte past the header)
+        raise _unreadable(path, exc) from exc
     if not body:
         raise ImuCsvError(f"{path}: no samples after the header")
     for i, row in enumerate(body):
@@ -120,6 +125,13 @@ def _read_rows(path: Path, header: list[str], columns: list[int]) -> tuple[np.nd
     cells = list(zip(*body))  # (a column per cell of the header)
     t_us = np.array(cells[columns[0]]).astype(np.int64)
     return t_us, np.stack([np.array(cells[k]).astype(np.float64) for k in columns[1:]], axis=1)
+
+
+UNREADABLE = (OSError, UnicodeDecodeError, csv.Error)
+
+
+def _unreadable(path: Path, exc: Exception) -> ImuCsvError:
+    return ImuCsvError(f"{path}: cannot read the head-motion CSV: {exc}")
 
 
 def _checked(path: Path, t_us: np.ndarray, omega: np.ndarray) -> ImuTrack:

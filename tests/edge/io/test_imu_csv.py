@@ -81,3 +81,9 @@ def test_an_unreadable_file(tmp_path: Path) -> None:
     path.write_bytes(b"\xff\xfe\x00bad")
     with pytest.raises(ImuCsvError, match="cannot read the head-motion CSV"):
         read_imu_csv(path)
+    # a bad byte far past the header (the header row read alone is fine): still named with the file
+    _written(path, n=400)
+    path.write_bytes(path.read_bytes() + b"1,2,\xff\n")
+    with pytest.raises(ImuCsvError, match="cannot read the head-motion CSV") as caught:
+        read_imu_csv(path)
+    assert str(path) in str(caught.value)
