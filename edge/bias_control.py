@@ -73,7 +73,7 @@ class BiasController:
         self._read_s = 0.0  # how much of this slice the sensor was read whole (not through a ROI)
         self._covered_to: int | None = None  # the slice's time accounted for so far
         self._light_read_at: int | None = None  # event time of the last estimate (or of the first event)
-        self.probing = False  # the whole sensor is wanted for a light reading (``wants_whole``)
+        self._probing = False  # the whole sensor is wanted for a light reading (``wants_whole``)
         self._slice_start: int | None = None
         self._settle_until: int | None = None
         self._estimating = config.lux <= 0 and profile in self.curves
@@ -123,24 +123,24 @@ class BiasController:
 
     def wants_whole(self) -> bool:
         """Whether the sensor should deliver all its pixels now, for a light reading (any thread)."""
-        return self.probing
+        return self._probing
 
     def _probe(self, t_last: int) -> None:
         """Through a ROI the light goes unread: once none was read for ``probe_every_s``, ask for the
         whole sensor until ``probe_s`` of it is counted (the slice then ends with an estimate)."""
         every = self.config.probe_every_s
-        if self.probing:
+        if self._probing:
             if self._read_s >= self.config.probe_s:
-                self.probing = False
+                self._probing = False
         elif every > 0 and self._light_read_at is not None and t_last - self._light_read_at >= every * 1e6:
-            self.probing = True
+            self._probing = True
             self._light_read_at = t_last  # (asked once per period, whether or not the source obliges)
             logger.debug("no light read for %g s: the whole sensor for %g s", every, self.config.probe_s)
 
     def _whole(self, readout: tuple[int, int, int, int] | None) -> bool:
         """Whether the sensor delivers all its pixels. Through a ROI it delivers the page around the
-        gaze only, whose text edges a moving head makes fire at any light (read as background they
-        called a 30-lux page 10 lux): those chunks are not counted, and a slice read mostly through
+        gaze only, whose text edges a moving head makes fire at any light (read as background they make
+        a lit page read dark; docs/sensor_model.md): those chunks are not counted, and a slice read mostly through
         the ROI gives no estimate; the light is read again whenever the sensor is whole (the
         session's start, walking, the gyroscope not trusted)."""
         return readout is None or tuple(readout) == (0, 0, self.grid.width, self.grid.height)

@@ -150,7 +150,7 @@ class SensorConfig:
     settle_s: float = 0.5  # events this soon after a bias write are not counted (the pixels settle)
     stride: int = 4  # every stride-th event is counted (the background is a rate: a sample suffices)
     # auto: through a sensor ROI the light cannot be read (edge/bias_control.py), so when none was read for
-    # probe_every_s of event time the whole sensor is delivered for probe_s (0: never; ~0.5 % more time whole)
+    # probe_every_s of event time the whole sensor is delivered for probe_s (0: never)
     probe_every_s: float = 60.0
     probe_s: float = 0.3
 

@@ -213,7 +213,7 @@ class ImuHeadMotion:
         self._raw = np.zeros((0, 3))  # device frame, as received
         self._theta = np.zeros((0, 3))  # camera frame, integrated
         self._t_float = np.zeros(0)  # ``_t`` and ``_theta``'s columns as ``np.interp`` takes them: made once per
-        self._theta_columns = np.zeros((3, 0))  # batch, not per question (each copied 60,000 samples a minute)
+        self._theta_columns = np.zeros((3, 0))  # batch, not per question (each would copy the whole track held)
         self._gaps = np.zeros(0, np.int64)  # event times where a gap ended (the first sample after it)
         self._step_t = np.zeros(0, np.int64)  # block ends (event clock) where walking was decided ...
         self._walked = np.zeros(0, bool)  # ... whether the head walked ...

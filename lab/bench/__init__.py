@@ -55,8 +55,6 @@ class BenchContext:
         return smoke if self.smoke else quick if self.quick else full
 
 
-
-
 def cpu_seconds(pid: int) -> float:
     """User + system CPU of a process so far (Linux /proc)."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
