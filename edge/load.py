@@ -5,9 +5,12 @@ fixed size, so memory never grows with the lag; but views would come later and l
 frames would be cut from events the ring has already overwritten. The lag is visible at each live
 step (:meth:`darkread.edge.pipeline.Pipeline._step_now`): how long the oldest data it takes has
 waited. When it stays too long the edge sheds the work it can best afford to lose, a view's later
-frames: first a view takes at most its dithered pair, then only its first frame. What was already
-made and handed to the uplink (the spool's promise) is never touched. It recovers a level at a
-time once the steps are prompt again for a while.
+frames: first a view takes at most its dithered pair, then only its first frame, then a fixation
+whose window the last view already mostly covers gets no view of its own (reading moves the gaze
+a third to a half of a window per fixation, so every other view still covers the line, and the
+stitcher registers views that overlap by half). What was already made and handed to the uplink
+(the spool's promise) is never touched. It recovers a level at a time once the steps are prompt
+again for a while.
 
 The decision is the pure :func:`shed_level`; :class:`LoadShedder` keeps its state, counts and logs.
 """
@@ -19,8 +22,11 @@ from dataclasses import dataclass
 
 logger = logging.getLogger(__name__)
 
-LEVELS = ("none", "a view's frames capped at its dithered pair", "one frame per view")
-FRAMES_PER_VIEW = (None, 2, 1)  # a view's frame budget at each level (None: as the view trigger decides)
+LEVELS = ("none", "a view's frames capped at its dithered pair", "one frame per view",
+          "one frame per view, and none where the last view covers the window")
+FRAMES_PER_VIEW = (None, 2, 1, 1)  # a view's frame budget at each level (None: as the view trigger decides)
+SKIP_COVERED_FROM = 3  # the level from which a fixation inside the last view gets no view
+COVERED_SHARE = 0.5  # "inside the last view": this share of the window or more lies in the last view's
 
 
 @dataclass(frozen=True)
@@ -47,6 +53,21 @@ def shed_level(lag_s: float, level: int, calm: int, cfg: ShedConfig = ShedConfig
 def frames_per_view(level: int) -> int | None:
     """How many frames a view may take at ``level`` (None: no cap)."""
     return FRAMES_PER_VIEW[level]
+
+
+def overlap_share(window: tuple[int, int, int, int], other: tuple[int, int, int, int]) -> float:
+    """The share of ``window``'s area (x0, y0, width, height) that lies inside ``other``."""
+    x0, y0, w, h = window
+    ox, oy, ow, oh = other
+    dx = max(0, min(x0 + w, ox + ow) - max(x0, ox))
+    dy = max(0, min(y0 + h, oy + oh) - max(y0, oy))
+    return dx * dy / max(w * h, 1)
+
+
+def skip_covered(level: int, window: tuple[int, int, int, int], last_view: tuple[int, int, int, int] | None) -> bool:
+    """Whether, at ``level``, a new fixation's ``window`` gets no view: the last view sent covers
+    at least ``COVERED_SHARE`` of it."""
+    return level >= SKIP_COVERED_FROM and last_view is not None and overlap_share(window, last_view) >= COVERED_SHARE
 
 
 class LoadShedder:

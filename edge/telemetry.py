@@ -39,6 +39,7 @@ COUNTERS = (
     "events_overwritten",  # ring history overwritten by newer events: normal once the ring is full, no loss
     "shed_changes",  # live: the shedding level changed (edge.load; the level is a gauge)
     "views_capped",  # live, shedding: views denied a frame the view trigger wanted
+    "views_shed",  # live, shedding: fixations given no view, the last view covering their window
     "roi_writes",  # the sensor's ROI moved (or given back to the whole sensor): register writes (edge.roi)
     "messages_sent",
     "bytes_sent",
@@ -97,7 +98,7 @@ class Snapshot:
             f"deblurred {self.totals['frames_deblurred']} denoised {self.totals['frames_denoised']} "
             f"skips {self.totals['frames_skipped']} no-gaze {self.totals['frames_no_gaze']} "
             f"roi writes {r['roi_writes']:.1f}/s step lag p99 {self.step_lag_ms_p99:.0f} ms "
-            f"shedding level {self.shed_level} (views capped {self.totals['views_capped']}) "
+            f"shedding level {self.shed_level} (views capped {self.totals['views_capped']}, shed {self.totals['views_shed']}) "
             f"spool {self.spool_depth} (lost {self.spool_lost}) {self.light_text()}"
             f"sent {r['bytes_sent']/1e3:.1f} kB/s ({self.bandwidth_vs_raw():.1%} of raw events, "
             f"{self.bandwidth_vs_rgb():.1%} of one RGB frame per second)"
@@ -218,7 +219,8 @@ class EdgeMetrics:
                    "gyroscope vs event tracker: px between their scene motions from frame to frame",
                    [(f'{{quantile="{q}"}}', percentile(disagreement, q * 100)) for q in (0.5, 0.9)])
         metric("spool_depth", "gauge", "messages waiting for an ack", [("", self.spool_depth())])
-        metric("shed_level", "gauge", "live and falling behind: 0 none, 1 a view's frames capped at two, 2 at one",
+        metric("shed_level", "gauge", "live and falling behind: 0 none, 1 a view's frames capped at two, 2 at one, 3 at one and "
+               "no view where the last covers the window",
                [("", self.shed_level)])
         metric("step_lag_ms", "gauge", f"how long a live step's oldest data waited, over the last {RESERVOIR} steps",
                [(f'{{quantile="{q}"}}', percentile(list(self.step_lag_ms), q * 100)) for q in (0.5, 0.99)])

@@ -15,7 +15,7 @@ import numpy as np
 from darkread.edge.config import PipelineConfig
 from darkread.edge.fovea import window_origin
 from darkread.edge.gaze import GazeSample
-from darkread.edge.load import frames_per_view
+from darkread.edge.load import frames_per_view, skip_covered
 from darkread.edge.steps import FrameHandler, Pending
 from darkread.edge.view_fusion import MARGIN_PX, ViewFuser
 from darkread.edge.view_trigger import GazeGate, ViewTrigger, fixation_key
@@ -25,6 +25,11 @@ LOSSLESS_STEP_US = 5_000
 """Lossless replays take one step per this much event time (a grid on the event clock, finer than
 any gaze row at 11-100 ms), however large the chunks the source hands over: the same steps, and so
 the same views, whatever the replay's chunking."""
+
+CATCH_UP_US = 2 * LOSSLESS_STEP_US
+"""A live step that comes this much event time or more after the last one (the edge fell behind,
+edge.load) first steps through the gaze rows in between: a fixation that began and ended while the
+step waited still ends its view (or is counted as shed), instead of passing unseen."""
 
 
 
@@ -48,6 +53,9 @@ class OnChangeStep:
         self._retry_at = 0  # after a window too thin to infer: _fixation_events it may be tried again at
         self._view_origin: tuple[int, int] | None = None  # the current view's window (placed once per view)
         self._capped = False  # the current view was denied a frame (edge.load)
+        self._last_view: tuple[int, int, int, int] | None = None  # the window of the last view sent
+        self._shed_fixation = False  # the current fixation gets no view (edge.load: the last one covers it)
+        self._stepped_us: int | None = None  # the event time of the last step
 
     def due(self, pending: Pending) -> bool:
         return pending.events > 0  # every chunk: the gaze may have changed
@@ -56,7 +64,17 @@ class OnChangeStep:
         return 0  # a step looks at all that arrived: nothing is skipped
 
     def step(self, t_us: int, pending: Pending, final: bool = False) -> None:
-        """Feed the gaze classifier up to ``t_us``; end, extend or start the fixation's view."""
+        """Feed the gaze classifier up to ``t_us``; end, extend or start the fixation's view. A live
+        step late by ``CATCH_UP_US`` or more first takes each gaze row in between as a step of its own
+        (with no new events: what arrived counts at ``t_us``)."""
+        last, self._stepped_us = self._stepped_us, t_us
+        if last is not None and not self.settings.lossless and t_us - last >= CATCH_UP_US:
+            rows, _, _ = self.windows.gaze.rows(last, t_us - 1)
+            for row_t in rows.tolist():
+                self._step_at(int(row_t), Pending(arrival=pending.arrival))
+        self._step_at(t_us, pending, final)
+
+    def _step_at(self, t_us: int, pending: Pending, final: bool = False) -> None:
         t, arrival = t_us, pending.arrival
         status = self.gate.update(t)
         key = None if final else fixation_key(status)
@@ -68,6 +86,7 @@ class OnChangeStep:
             return  # saccade, blink, no gaze: nothing to infer
         if self._fixation is None:
             self._fixation, self._fixation_events, self._since_infer, self._retry_at = key, 0, 0, 0
+            self._shed_fixation = False
             self.trigger.reset()
             self._roi_at_landing(t)
         self._fixation_events += pending.foveated
@@ -102,12 +121,16 @@ class OnChangeStep:
         would put it tens of pixels off), so its frames all see the same stretch of text."""
         w = self.windows
         gaze = w.gaze.at(t)
-        if gaze is None:
+        if gaze is None or self._shed_fixation:
             return None
         if len(self.fuser) and self._view_origin is not None:
             return self._view_origin, gaze
         centre = self._fixation_centre(t) or gaze.pixel
         origin = window_origin(centre, w.sensor_wh, w.fovea)
+        if skip_covered(w.shed_level, (*origin, w.fovea.width, w.fovea.height), self._last_view):
+            self._shed_fixation = True  # shed (edge.load): the last view already holds most of this window
+            w.metrics.add("views_shed")
+            return None
         if origin != w.origin:
             self._roi_for_view(origin, t)
         w.origin = self._view_origin = origin
@@ -193,6 +216,9 @@ class OnChangeStep:
     def _send_view(self, arrival: float) -> None:
         view = self.fuser.view(self.views_made)
         self.fuser = self.fuser.fresh()
+        if self._view_origin is not None:
+            fov = self.windows.fovea
+            self._last_view = (*self._view_origin, fov.width, fov.height)
         self._view_origin = None
         self._capped = False
         self.views_made += 1

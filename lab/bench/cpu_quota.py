@@ -120,6 +120,7 @@ class QuotaRun:
     step_lag_p99_ms: float
     shed_level: int  # at the end
     views_capped: int
+    views_shed: int  # fixations given no view (level 3: the last view covered their window)
     shed_changes: int
     rss_max_mb: float
     rss_growth_mb: float  # the last sample against the first one in the quota
@@ -136,6 +137,7 @@ FIELDS = {
     "lag_p99": r"step lag p99 (\d+) ms",
     "level": r"shedding level (\d+)",
     "capped": r"views capped (\d+)",
+    "views_shed": r"views capped \d+, shed (\d+)",
 }
 
 
@@ -215,7 +217,7 @@ def run_under_quota(share: float, recording: Path = SAMPLE_RECORDING, *, timeout
     return QuotaRun(
         share=share, cgroup=quota.kind, exit_code=code, wall_s=wall, views=acked, frames_lost=lost,
         view_latency_p99_ms=number("wire_p99"), step_lag_p99_ms=number("lag_p99"), shed_level=int(number("level")) if final else -1,
-        views_capped=int(number("capped")) if final else -1,
+        views_capped=int(number("capped")) if final else -1, views_shed=int(number("views_shed")) if final else -1,
         shed_changes=sum("falling behind" in line for line in lines),
         rss_max_mb=max(rss, default=float("nan")), rss_growth_mb=(rss[-1] - rss[0]) if len(rss) > 1 else 0.0,
         throttled_s=throttled, cpu_s=(cpu[-1] - cpu[0]) if len(cpu) > 1 else float("nan"), log_tail="\n".join(lines[-6:]),
@@ -245,12 +247,13 @@ def run(args: argparse.Namespace) -> int:
     duration = _duration_s(recording)
     # the wall clock beside the recording's length: a replay in too small a quota is slowed (its reader
     # shares the quota) rather than losing events, so "nothing lost" means real time only when they agree
-    print(f"{'quota':>6} {'views':>6} {'lost':>5} {'view p99 ms':>12} {'step lag p99 ms':>16} {'shed':>5} "
-          f"{'capped':>7} {'RSS max MB':>11} {'RSS growth MB':>14} {'throttled s':>12} {'CPU s':>6} {f'wall s ({duration:g} s)':>16}")
+    print(f"{'quota':>6} {'views':>6} {'lost':>5} {'view p99 ms':>12} {'step lag p99 ms':>16} {'level':>5} "
+          f"{'capped':>7} {'no view':>7} {'RSS max MB':>11} {'RSS growth MB':>14} {'throttled s':>12} {'CPU s':>6} {f'wall s ({duration:g} s)':>16}")
     for share in args.quota:
         r = run_under_quota(share, recording, timeout_s=max(120.0, 10 * duration))
         print(f"{share:>6.0%} {r.views:>6} {r.frames_lost:>5} {r.view_latency_p99_ms:>12.1f} {r.step_lag_p99_ms:>16.0f} "
-              f"{r.shed_level:>5} {r.views_capped:>7} {r.rss_max_mb:>11.0f} {r.rss_growth_mb:>14.1f} {r.throttled_s:>12.1f} {r.cpu_s:>6.2f}"
+              f"{r.shed_level:>5} {r.views_capped:>7} {r.views_shed:>7} {r.rss_max_mb:>11.0f} {r.rss_growth_mb:>14.1f} "
+              f"{r.throttled_s:>12.1f} {r.cpu_s:>6.2f}"
               f" {r.wall_s:>16.1f}  ({r.cgroup}, exit {r.exit_code})", flush=True)
         if r.exit_code != 0:
             print(r.log_tail, file=sys.stderr)

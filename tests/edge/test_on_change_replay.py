@@ -28,7 +28,7 @@ SAMPLE_FRAMES = 26  # with the shipped network (27 with the one before it, binar
 # looked above and below the window, 28 before doubtful frames stopped settling views, 32 with binary_unet_full.onnx)
 
 
-def replay(slice_us: int | None) -> tuple[list[ViewRecord], dict[str, int]]:
+def replay(slice_us: int | None, shed_level: int = 0) -> tuple[list[ViewRecord], dict[str, int]]:
     """The sample through ``build_edge`` in the on-change mode as fast as possible; ``slice_us``
     None hands the decoder's chunks over whole (the builder's choice), else slices of that length."""
     config = load_config(None, environ={}, overrides={
@@ -44,6 +44,7 @@ def replay(slice_us: int | None) -> tuple[list[ViewRecord], dict[str, int]]:
         edge.source = source
         edge.pipeline = build_pipeline(source, windows.gaze, windows.infer, lambda view, arrival: views.append(view),
                                        edge.pipeline.settings, windows.voxel, edge.metrics)
+    edge.pipeline.windows.shed_level = shed_level  # (a lossless replay never sheds of itself)
     edge.startup()
     source.wait()
     edge.shutdown(5.0)
@@ -115,3 +116,47 @@ def test_a_window_too_thin_to_infer_waits_for_a_renewals_worth_of_new_events(
     thin = [(a, b) for a, b in zip(tries, tries[1:]) if not a[2] and a[0] == b[0]]
     assert thin, f"a 5-lux page should give windows too thin for min_events 1200: {tries}"
     assert all(b[1] - a[1] >= renewal for a, b in thin), [(a, b) for a, b in thin if b[1] - a[1] < renewal]
+
+
+@pytest.mark.slow  # a replay of 3 s of events with the shipped model
+def test_the_last_shedding_level_gives_a_fixation_inside_the_last_view_no_view_of_its_own() -> None:
+    """A live edge starved of CPU (edge.load) ends at one frame per view and no view for a fixation
+    whose window the last view already mostly covers: the views left still step along the lines."""
+    from darkread.edge.load import COVERED_SHARE, LEVELS, overlap_share
+
+    views, totals = replay(None, shed_level=len(LEVELS) - 1)
+    assert totals["views_shed"] > 0 and len(views) + totals["views_shed"] <= SAMPLE_VIEWS  # (7 and 6 on the sample)
+    assert 0 < len(views) < SAMPLE_VIEWS and all(view.frames == 1 for view in views)
+    for before, after in zip(views, views[1:]):
+        h, w = after.mask.shape
+        assert overlap_share((*after.origin, w, h), (*before.origin, *before.mask.shape[::-1])) < COVERED_SHARE
+
+
+@pytest.mark.slow  # 3 s of the sample paced at real time
+def test_a_late_live_step_still_ends_the_views_of_the_fixations_it_waited_through(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A starved edge steps late: each live step then spans several gaze rows, and a fixation that
+    began and ended in between still gets its view (edge.steps.on_change.CATCH_UP_US; without the
+    catch-up, 11 of the sample's 13 views)."""
+    import time
+
+    from darkread.edge import pipeline
+
+    step_now = pipeline.Pipeline._step_now
+
+    def late(self: pipeline.Pipeline, final: bool = False) -> None:
+        if not final:
+            time.sleep(0.2)  # the CPU went elsewhere: every step comes 200 ms late
+        step_now(self, final)
+
+    monkeypatch.setattr(pipeline.Pipeline, "_step_now", late)
+    config = load_config(None, environ={}, overrides={
+        "source": {"kind": "replay", "path": str(SAMPLE_RECORDING), "speed": 1.0},
+        "pipeline": {"infer": "on-change"},
+    })
+    views: list[ViewRecord] = []
+    edge = build_edge(config, on_frame=lambda view, arrival: views.append(view))
+    edge.startup()
+    edge.source.wait()
+    edge.shutdown(5.0)
+    assert edge.pipeline.error is None
+    assert len(views) + edge.metrics.totals["views_shed"] >= SAMPLE_VIEWS - 1
