@@ -3,9 +3,12 @@
 :class:`BiasController` sits on the reader thread (``Pipeline.sink`` hands it every chunk): it counts
 events per tile, and once per ``[sensor] estimate_s`` of event time reads the light at the page from
 the background rate on the curve of the profile the sensor runs (``edge/light.py``), then applies
-the hysteresis rule. On a switch it writes the new profile's biases through the source's own
-``set_biases`` (the EVK4 driver), logs one line with the estimate, counts it (``bias_switches``) and
-leaves the next ``settle_s`` of events out of the count (the pixels settle after a bias write).
+the hysteresis rule. The rate is read per ``PART_S`` of the slice and the slice's estimate is its
+stillest part's (the lowest rate): a head moving over a page that fills the view sweeps text edges
+(and dark ink) across nearly every tile in a second, seldom in every quarter of one. On a switch it
+writes the new profile's biases through the source's own ``set_biases`` (the EVK4 driver), logs one
+line with the estimate, counts it (``bias_switches``) and leaves the next ``settle_s`` of events out
+of the count (the pixels settle after a bias write).
 ``[sensor] lux`` replaces the estimate by a configured light level (decided once, at the start).
 
 A source that cannot change its biases (a replayed recording) gets the controller in advisory mode:
@@ -38,8 +41,14 @@ from darkread.edge.sources.evk4.bias_profiles import BIAS_PROFILES, FACTORY, pro
 from darkread.edge.telemetry import EdgeMetrics
 
 logger = logging.getLogger(__name__)
-MIN_READ_SHARE = 0.25  # a slice read whole for less of its time than this (a ROI the rest) gives no estimate
+MIN_READ_SHARE = 0.25  # a part read whole for less of its time than this (a ROI the rest) gives no rate
+PART_S = 0.25  # the background is read per this much of a slice, the slice's estimate its stillest part's
 # (``[sensor] probe_s`` is held to at least this share of ``estimate_s``: edge/config.py)
+
+
+def _since_s(start_us: int | None, t_us: int) -> float:
+    """Seconds from ``start_us`` (None: not started, none) to ``t_us`` (0 is an event time like any other)."""
+    return 0.0 if start_us is None else (t_us - start_us) / 1e6
 
 
 def profile_named(offsets: dict[str, int] | None) -> str | None:
@@ -68,9 +77,12 @@ class BiasController:
         self.state = ProfileState(profile or FACTORY)  # what the rule chose (advisory: what the sensor would run)
         self.curves = load_rate_curves() if curves is None else curves
         self.lux: float | None = None
-        self._counts = np.zeros(self.grid.shape, dtype=np.int64)
-        self._touched = np.zeros(self.grid.shape, dtype=bool)  # tiles the gaze window covered in this slice
-        self._read_s = 0.0  # how much of this slice the sensor was read whole (not through a ROI)
+        self._counts = np.zeros(self.grid.shape, dtype=np.int64)  # this part's
+        self._touched = np.zeros(self.grid.shape, dtype=bool)  # tiles the gaze window covered in this part
+        self._part_read_s = 0.0  # how much of this part the sensor was read whole (not through a ROI) ...
+        self._read_s = 0.0  # ... and of this slice
+        self._part_start: int | None = None
+        self._rates: list[float] = []  # the slice's parts' background rates
         self._covered_to: int | None = None  # the slice's time accounted for so far
         self._light_read_at: int | None = None  # event time of the last estimate (or of the first event)
         self._probing = False  # the whole sensor is wanted for a light reading (``wants_whole``)
@@ -103,21 +115,25 @@ class BiasController:
                 return
             events = events[int(np.searchsorted(t, self._settle_until)):]
             self._slice_start, self._settle_until = int(events["t"][0]), None
-            self._covered_to = self._slice_start
+            self._covered_to = self._part_start = self._slice_start
         if self._slice_start is None:
-            self._slice_start = self._covered_to = int(events["t"][0])
+            self._slice_start = self._covered_to = self._part_start = int(events["t"][0])
         t_last = int(events["t"][-1])
         if self._light_read_at is None:
             self._light_read_at = t_last
         if self._whole(getattr(self.source, "roi", None)):
             self._counts += self.grid.counts(events, self.config.stride)
-            self._read_s += (t_last - (self._covered_to or t_last)) / 1e6
+            read = _since_s(self._covered_to, t_last)
+            self._read_s += read
+            self._part_read_s += read
             if gaze_window is not None:
                 self._touched |= self.grid.touching(gaze_window)
         elif self._read_s == 0.0:  # nothing read whole yet: the slice begins when the sensor is whole again
-            self._slice_start = t_last
+            self._slice_start = self._part_start = t_last
         self._covered_to = t_last
         self._probe(t_last)
+        if _since_s(self._part_start, t_last) >= PART_S:
+            self._end_part(t_last)
         if t_last - self._slice_start >= self.config.estimate_s * 1e6:
             self._estimate(t_last)
 
@@ -145,16 +161,30 @@ class BiasController:
         session's start, walking, the gyroscope not trusted)."""
         return readout is None or tuple(readout) == (0, 0, self.grid.width, self.grid.height)
 
+    def _end_part(self, t_last: int) -> None:
+        """A part of the slice ends: its background rate, if it was read whole for long enough."""
+        seconds = _since_s(self._part_start, t_last)
+        if self._part_read_s >= MIN_READ_SHARE * seconds:
+            rate = background_rate_hz(self._counts, self._areas, usable_tiles(self.grid, self._touched), self._part_read_s,
+                                      stride=self.config.stride)
+            if rate is not None:
+                self._rates.append(rate)
+        self._counts[:] = 0
+        self._touched[:] = False
+        self._part_read_s = 0.0
+        self._part_start = t_last
+
     def _estimate(self, t_last: int) -> None:
-        seconds = (t_last - (self._slice_start or t_last)) / 1e6
-        usable = usable_tiles(self.grid, self._touched)
-        rate = background_rate_hz(self._counts, self._areas, usable, self._read_s) if self._read_s >= MIN_READ_SHARE * seconds else None
+        if _since_s(self._part_start, t_last) >= PART_S / 2:  # the slice's last part, if not too short
+            self._end_part(t_last)
+        rate = min(self._rates) if self._rates else None
         if rate is not None:
             self._light_read_at = t_last
         self._counts[:] = 0
         self._touched[:] = False
-        self._read_s = 0.0
-        self._slice_start = t_last
+        self._read_s = self._part_read_s = 0.0
+        self._rates = []
+        self._slice_start = self._part_start = t_last
         if rate is None or self.active is None:
             return
         lux = float(self.curves[self.active].lux_of(rate))
@@ -187,4 +217,6 @@ class BiasController:
         self._estimating = self.config.lux <= 0 and self.active in self.curves
         self._counts[:] = 0
         self._touched[:] = False
+        self._rates = []
+        self._read_s = self._part_read_s = 0.0
         self._settle_until = int(t_s * 1e6 + self.config.settle_s * 1e6)

@@ -2,8 +2,11 @@
 
 Where the scene is still an event camera still fires: background activity, whose rate per pixel
 depends on the light (docs/sensor_model.md). The glasses count every event in coarse tiles over a
-slice of event time; tiles a moving edge crossed fire far more, so the background is a low quantile
-of the tiles' rates (the gaze window's tiles left out: the page being read moves most). The grounded
+slice of event time; tiles a moving edge crossed fire far more, and so do dark surfaces (the ink, a
+desk: a pixel's background rate follows the light on *it*), so the background is a low quantile of
+the tiles' rates, the brightest still surfaces in view (the gaze window's tiles left out: the page
+being read moves most). At that low a quantile a tile's own counting noise pulls the rate down, so
+the quantile is read as a Poisson count's (:func:`poisson_mean_of_quantile`). The grounded
 sensor model's curve of that rate against lux, per bias profile, is shipped as data
 (``edge/sources/evk4/background_rates.json``, made by ``darkread synth background-table``): the
 estimator reads it on the profile the sensor runs, since the ``dark`` profile is itself noisier.
@@ -23,6 +26,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from statistics import NormalDist
 
 import numpy as np
 
@@ -31,7 +35,7 @@ from darkread.edge.sources.evk4.bias_profiles import DARK, FACTORY
 
 BACKGROUND_RATES = Path(__file__).resolve().parent / "sources" / "evk4" / "background_rates.json"
 TILE_PX = 40  # 1280x720 -> 32x18 tiles of 1600 pixels: ~160-2,000 background events each per second
-STILL_QUANTILE = 0.25  # the background: this quantile of the tiles' rates (moving edges make the top ones)
+STILL_QUANTILE = 0.05  # the background: this quantile of the tiles' rates (moving edges and dark surfaces make the rest)
 MIN_TILES = 12  # fewer usable tiles than this: no estimate
 
 
@@ -101,14 +105,24 @@ def usable_tiles(grid: TileGrid, excluded: np.ndarray | None) -> np.ndarray:
     return np.ones(grid.shape, dtype=bool) if excluded is None else ~excluded
 
 
+def poisson_mean_of_quantile(count: float, z: float) -> float:
+    """The mean of a Poisson count whose quantile at the standard normal's ``z`` is ``count`` (the
+    normal approximation, mean + z sqrt(mean) = count, solved for the mean)."""
+    root = (-z + math.sqrt(z * z + 4.0 * max(count, 0.0))) / 2.0
+    return root * root
+
+
 def background_rate_hz(counts: np.ndarray, areas: np.ndarray, usable: np.ndarray, seconds: float,
-                       quantile: float = STILL_QUANTILE, min_tiles: int = MIN_TILES) -> float | None:
-    """The still scene's events per pixel and second: the ``quantile`` of the usable tiles' rates
-    (None with fewer than ``min_tiles`` of them or no time)."""
+                       quantile: float = STILL_QUANTILE, min_tiles: int = MIN_TILES, stride: int = 1) -> float | None:
+    """The still scene's events per pixel and second: the ``quantile`` of the usable tiles' rates, as
+    the mean of the Poisson count of a typical tile that has it at that quantile (``counts`` made of
+    every ``stride``-th event scaled back up; None with fewer than ``min_tiles`` tiles or no time)."""
     if seconds <= 0 or int(usable.sum()) < min_tiles:
         return None
     rates = counts[usable] / (areas[usable] * seconds)
-    return float(np.quantile(rates, quantile))
+    scale = float(np.median(areas[usable])) * seconds / stride  # a typical tile's events counted per unit of rate
+    z = float(NormalDist().inv_cdf(quantile))
+    return poisson_mean_of_quantile(float(np.quantile(rates, quantile)) * scale, z) / scale
 
 
 @dataclass(frozen=True)

@@ -269,3 +269,29 @@ def test_recordings_name_their_profile_by_offsets() -> None:
     assert profile_named(profile_offsets(DARK)) == DARK
     assert profile_named({}) == FACTORY
     assert profile_named({"diff_on": 7}) is None and profile_named(None) is None
+
+
+def test_a_page_filling_the_view_swept_by_the_head_reads_at_its_stillest_part() -> None:
+    """A head moving over a page that fills the view sweeps text edges over every tile, but not all
+    the time: the slice is read in parts and the stillest one gives the light. Read over the whole
+    second (the parts' counts together), the 30-lux page would read as dark."""
+    rng = np.random.default_rng(8)
+    wh = (640, 480)
+    rate = curve_rate(FACTORY, 30.0)
+    controller = BiasController(SensorConfig(stride=1), ReplayLike640(), EdgeMetrics(), FACTORY)
+    controller.begin()
+    chunks = []
+    for k in range(21):  # 50-ms chunks; the head sweeps the page for 150 ms of every 250 but the last
+        moving = k < 15 and k % 5 < 3
+        chunks.append(still_scene(rate, 0.05, wh, rng, t0_us=k * 50_000, edge_rect=(0, 0) + wh if moving else None,
+                                  edge_rate_hz=3.0))
+    for chunk in chunks:
+        controller.push(chunk, None)
+    assert controller.lux is not None and controller.lux > 25.0  # bright: the factory profile stays
+    assert controller.state.profile == FACTORY
+    whole = np.sort(np.concatenate(chunks[:20]), order="t")
+    assert estimate(whole, wh, 1.0, CURVES[FACTORY]) < 15.0  # the whole second at once: into the dark profile
+
+
+class ReplayLike640:
+    width, height = 640, 480
