@@ -131,6 +131,9 @@ def integrate(t_us: np.ndarray, omega: np.ndarray, gap_us: int) -> np.ndarray:
     return np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
 
 
+STEP_BLOCKS_AT_ONCE = 256  # spectra taken together: 256 spans of 2 s at 1 kHz, 3 axes, about 12 MB
+
+
 def step_band_rms(t_us: np.ndarray, omega: np.ndarray, block_ends_us: np.ndarray,
                   cfg: ImuMotionConfig = ImuMotionConfig()) -> np.ndarray:
     """[n_blocks] rad/s: the angular velocity's RMS (all axes) in the walking cadence's band over the
@@ -139,11 +142,14 @@ def step_band_rms(t_us: np.ndarray, omega: np.ndarray, block_ends_us: np.ndarray
     trend removed (the slow reading drift would leak into the band), a Hann window, one FFT."""
     out = np.full(block_ends_us.shape[0], np.nan)
     covered = np.minimum(block_ends_us - int(t_us[0]), cfg.step_span_us) // 1000
+    t_float = t_us.astype(np.float64)
     for n in np.unique(covered[covered >= cfg.step_min_span_us // 1000]):  # (one length for all but the first blocks)
-        rows = np.flatnonzero(covered == n)
-        grid = block_ends_us[rows, None].astype(np.float64) - 1000.0 * np.arange(n - 1, -1, -1)[None, :]
-        spans = np.stack([np.interp(grid, t_us.astype(np.float64), omega[:, k]) for k in range(3)], axis=2)
-        out[rows] = _band_rms(spans, cfg.step_band_hz)
+        same = np.flatnonzero(covered == n)
+        for start in range(0, same.shape[0], STEP_BLOCKS_AT_ONCE):  # memory bounded however long the track
+            rows = same[start:start + STEP_BLOCKS_AT_ONCE]
+            grid = block_ends_us[rows, None].astype(np.float64) - 1000.0 * np.arange(n - 1, -1, -1)[None, :]
+            spans = np.stack([np.interp(grid, t_float, omega[:, k]) for k in range(3)], axis=2)
+            out[rows] = _band_rms(spans, cfg.step_band_hz)
     return out
 
 

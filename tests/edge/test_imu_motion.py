@@ -132,6 +132,21 @@ def test_the_step_bands_rms_is_a_sines_amplitude_over_root_two() -> None:
     assert np.isnan(step_band_rms(t, omega, np.array([200_000], dtype=np.int64)))[0]  # too short to tell
 
 
+def test_the_step_band_is_the_same_taken_a_few_blocks_at_a_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A long track's spectra are taken in batches (one array of every block's 2-s span would take
+    gigabytes for an hour of samples); the batches change nothing."""
+    import darkread.edge.imu_motion as imu_motion
+
+    rng = np.random.default_rng(4)
+    t = np.arange(0, 6_000_000, 1000, dtype=np.int64)
+    omega = rng.normal(0.0, 0.02, (t.shape[0], 3))
+    ends = np.arange(100_000, 6_000_000, 100_000, dtype=np.int64)
+    whole = step_band_rms(t, omega, ends)
+    monkeypatch.setattr(imu_motion, "STEP_BLOCKS_AT_ONCE", 7)
+    np.testing.assert_array_equal(step_band_rms(t, omega, ends), whole)
+    assert np.isnan(whole[:4]).all() and np.isfinite(whole[4:]).all()  # (the first half second tells nothing)
+
+
 def test_a_walking_head_is_not_trusted_to_the_gyroscope() -> None:
     """Walking pitches the head at the step rate and bobs the page against it: the edge then takes the events' motion."""
     t = np.arange(0, 4_000_000, 1000, dtype=np.int64)
