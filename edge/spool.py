@@ -141,7 +141,7 @@ class Spool:
 
     # -- sequence and session -------------------------------------------------------------
     def allocate_seq(self) -> int:
-        """The next sequence number (strictly increasing across restarts)."""
+        """The next sequence number (strictly increasing across restarts within a session)."""
         with self._lock:
             seq = self._next_seq
             self._next_seq += 1
@@ -156,10 +156,16 @@ class Spool:
             return self._meta("session_id")
 
     def set_session_id(self, session_id: str) -> None:
-        """Bind the spool to ``session_id``; a new session gets a new stream id (seq space)."""
+        """Bind the spool to ``session_id``; a new session gets a new stream id (seq space), whose
+        seqs start at 0 again when nothing is waiting: a session's seqs are contiguous from 0 (the
+        cloud refuses gaps), so continuing the spool's count would make the uplink fill the new
+        session with a placeholder for every message the spool ever sent."""
         with self._lock, self._writing(f"record session {session_id}"):
             if self._meta("session_id") != session_id or self._meta("stream_id") is None:
                 self._set_meta("stream_id", uuid.uuid4().hex)
+                if self._depth == 0:
+                    self._set_meta("last_seq", "-1")
+                    self._next_seq = 0
             self._set_meta("session_id", session_id)
 
     def stream_id(self) -> str:

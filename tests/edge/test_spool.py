@@ -59,6 +59,31 @@ def test_seq_never_reused_after_everything_was_acked(tmp_path: Path) -> None:
     assert reopened.allocate_seq() == 3
 
 
+def test_a_new_session_on_an_empty_spool_numbers_from_zero(tmp_path: Path) -> None:
+    """Every seq the spool ever sent would otherwise reach the new session as a placeholder."""
+    spool = Spool(tmp_path)
+    spool.set_session_id("s-1")
+    fill(spool, 3)
+    spool.ack(2)
+    spool.close()
+    reopened = Spool(tmp_path)
+    reopened.set_session_id("s-1")  # the same session resumed: its count goes on
+    assert reopened.allocate_seq() == 3
+    reopened.set_session_id("s-2")
+    assert reopened.allocate_seq() == 0
+    reopened.close()
+    again = Spool(tmp_path)
+    assert again.session_id() == "s-2" and again.allocate_seq() == 0  # (nothing was stored under seq 0 yet)
+
+
+def test_a_new_session_with_messages_waiting_keeps_counting() -> None:
+    spool = Spool(None)
+    spool.set_session_id("s-1")
+    fill(spool, 2)
+    spool.set_session_id("s-2")  # (an explicit session while the old one's messages wait)
+    assert spool.allocate_seq() == 2
+
+
 def test_ack_beyond_local_counter_moves_counter_forward() -> None:
     spool = Spool(None)
     spool.ack(41)

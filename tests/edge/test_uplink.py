@@ -258,9 +258,9 @@ def test_edge_restart_resends_from_disk_spool(tmp_path: Path, server: ProtoServe
     third = make_uplink(settings(server.url), Spool(tmp_path))  # nothing pending: a new session
     assert third.session_id != first.session_id
     third.start()
-    assert third.submit(frame(15)) == 15  # seqs never go back
+    assert third.submit(frame(15)) == 0  # its own seqs, from 0: no placeholder for the 15 sent before
     assert third.stop(drain_timeout_s=5)
-    assert server.stored[third.session_id] == [15]
+    assert server.stored[third.session_id] == [0]
 
 
 def test_wrong_key_is_refused_and_kept_in_spool(server: ProtoServer) -> None:
