@@ -197,6 +197,36 @@ def shift_px_one(calibration: Calibration, centre_px: tuple[float, float], rotve
     return pixel[0] - float(centre_px[0]), pixel[1] - float(centre_px[1])
 
 
+KEEP_SLACK = 2  # a live stream's history is trimmed back to ``keep_us`` once it holds this many times as much
+
+
+class Rows:
+    """A growable array of rows, appended at the end and trimmed from the front, both amortised: a
+    live stream appends a datagram's samples 50 times a second, and copying the whole history held
+    at each would cost more than everything else the gyroscope does."""
+
+    def __init__(self, first: np.ndarray) -> None:
+        self._buf = np.array(first, copy=True)
+        self._start, self._end = 0, self._buf.shape[0]
+
+    @property
+    def view(self) -> np.ndarray:
+        return self._buf[self._start:self._end]
+
+    def append(self, rows: np.ndarray) -> None:
+        n = rows.shape[0]
+        if self._end + n > self._buf.shape[0]:
+            held = self._end - self._start
+            grown = np.empty((max(2 * (held + n), 1024),) + self._buf.shape[1:], self._buf.dtype)
+            grown[:held] = self._buf[self._start:self._end]
+            self._buf, self._start, self._end = grown, 0, held
+        self._buf[self._end:self._end + n] = rows
+        self._end += n
+
+    def drop_front(self, n: int) -> None:
+        self._start += n
+
+
 class ImuHeadMotion:
     """``KnownHeadMotion`` from the gyroscope, with the deblur's predicted smear (``smear_prior``).
 
@@ -215,16 +245,37 @@ class ImuHeadMotion:
         self._rotation = np.asarray(calibration.T_event_cpf, np.float64)[:3, :3]  # device (CPF) -> event camera
         self._centre = (float(calibration.cx), float(calibration.cy))
         self._lock = threading.Lock()
-        self._t = np.zeros(0, np.int64)  # event clock
-        self._raw = np.zeros((0, 3))  # device frame, as received
-        self._theta = np.zeros((0, 3))  # camera frame, integrated
-        self._t_float = np.zeros(0)  # ``_t`` and ``_theta``'s columns as ``np.interp`` takes them: made once per
-        self._theta_columns = np.zeros((3, 0))  # batch, not per question (each would copy the whole track held)
+        self._t_rows = Rows(np.zeros(0, np.int64))  # event clock
+        self._t_float_rows = Rows(np.zeros(0))  # the same as ``np.interp`` takes it (each question would copy it)
+        self._raw_rows = Rows(np.zeros((0, 3)))  # device frame, as received
+        self._theta_rows = [Rows(np.zeros(0)) for _ in range(3)]  # camera frame, integrated: one per axis, contiguous
+        # cumulative sums with a leading row, for the moving means: the angular velocity, the still
+        # samples' and how many were still (``still_samples``, ``running_bias``, one sample at a time)
+        self._cum_raw = Rows(np.zeros((1, 3)))
+        self._cum_still = Rows(np.zeros((1, 3)))
+        self._cum_count = Rows(np.zeros((1, 1)))
+        self._last_corrected = np.zeros(3)  # the newest sample's bias-corrected velocity (camera frame)
         self._gaps = np.zeros(0, np.int64)  # event times where a gap ended (the first sample after it)
         self._step_t = np.zeros(0, np.int64)  # block ends (event clock) where walking was decided ...
         self._walked = np.zeros(0, bool)  # ... whether the head walked ...
         self._unknown = np.zeros(0, bool)  # ... or too little was known to say
         self.received = 0
+
+    @property
+    def _t(self) -> np.ndarray:
+        return self._t_rows.view
+
+    @property
+    def _raw(self) -> np.ndarray:
+        return self._raw_rows.view
+
+    @property
+    def _t_float(self) -> np.ndarray:
+        return self._t_float_rows.view
+
+    @property
+    def _theta_columns(self) -> list[np.ndarray]:
+        return [rows.view for rows in self._theta_rows]
 
     @classmethod
     def of_track(cls, track: ImuTrack, calibration: Calibration, cfg: ImuMotionConfig = ImuMotionConfig(),
@@ -247,28 +298,52 @@ class ImuHeadMotion:
             if t.shape[0] == 0:
                 return
             n_old = self._t.shape[0]
-            all_t = np.concatenate([self._t, t])
-            all_raw = np.concatenate([self._raw, omega])
-            # the bias from the history held, then the new samples integrated onto the last angle
-            bias = running_bias(all_t, all_raw, still_samples(all_t, all_raw, self.cfg), self.cfg.bias_window_us)[max(n_old - 1, 0):]
-            corrected = (all_raw[max(n_old - 1, 0):] - bias) @ self._rotation.T
-            theta = integrate(all_t[max(n_old - 1, 0):], corrected, self.cfg.gap_us)
+            self._t_rows.append(t)
+            self._t_float_rows.append(t.astype(np.float64))
+            self._raw_rows.append(omega)
+            all_t = self._t
+            # the bias (``running_bias`` of ``still_samples``, causal) of each new sample from the
+            # cumulative sums held: the same arithmetic as over the whole track, a datagram at a time
+            index = np.arange(n_old, n_old + t.shape[0])
+            cum_raw = self._append_cumulative(self._cum_raw, omega)
+            first = np.searchsorted(all_t, t - self.cfg.still_span_us, side="right")
+            mean = (cum_raw[index + 1] - cum_raw[first]) / np.maximum(index + 1 - first, 1)[:, None]
+            weight = (np.linalg.norm(mean, axis=1) < self.cfg.still_rad_s).astype(np.float64)[:, None]
+            cum_still = self._append_cumulative(self._cum_still, omega * weight)
+            cum_count = self._append_cumulative(self._cum_count, weight)
+            first = np.searchsorted(all_t, t - self.cfg.bias_window_us, side="right")
+            count = cum_count[index + 1] - cum_count[first]
+            bias = np.where(count > 0, (cum_still[index + 1] - cum_still[first]) / np.maximum(count, 1), 0.0)
+            corrected = (omega - bias) @ self._rotation.T
+            # integrated onto the newest angle held (from the newest sample: its trapezoid)
             if n_old:
-                theta = theta[1:] + self._theta[-1]
+                theta = integrate(all_t[n_old - 1:], np.concatenate([self._last_corrected[None, :], corrected]), self.cfg.gap_us)[1:]
+                theta += np.array([float(rows.view[-1]) for rows in self._theta_rows])
+            else:
+                theta = integrate(t, corrected, self.cfg.gap_us)
+            self._last_corrected = corrected[-1]
+            for k, rows in enumerate(self._theta_rows):
+                rows.append(theta[:, k])
             steps = np.diff(all_t[max(n_old - 1, 0):])
             ended = all_t[max(n_old - 1, 0) + 1:][steps > self.cfg.gap_us]
-            self._t, self._raw, self._theta = all_t, all_raw, np.concatenate([self._theta, theta])
             self._gaps = np.concatenate([self._gaps, ended])
             self._decide_walking()
             self.received += int(t.shape[0])
-            if self.live and self._t[-1] - self._t[0] > 2 * self.cfg.keep_us:  # amortised trim
-                first = int(np.searchsorted(self._t, self._t[-1] - self.cfg.keep_us))
-                self._t, self._raw, self._theta = self._t[first:], self._raw[first:], self._theta[first:]
+            if self.live and self._t[-1] - self._t[0] > KEEP_SLACK * self.cfg.keep_us:  # amortised trim
+                first_kept = int(np.searchsorted(self._t, self._t[-1] - self.cfg.keep_us))
+                for rows in (self._t_rows, self._t_float_rows, self._raw_rows, self._cum_raw, self._cum_still,
+                             self._cum_count, *self._theta_rows):
+                    rows.drop_front(first_kept)
                 self._gaps = self._gaps[self._gaps >= self._t[0]]
                 kept = self._step_t >= self._t[0]
                 self._step_t, self._walked, self._unknown = self._step_t[kept], self._walked[kept], self._unknown[kept]
-            self._t_float = self._t.astype(np.float64)
-            self._theta_columns = np.ascontiguousarray(self._theta.T)
+
+    @staticmethod
+    def _append_cumulative(rows: Rows, values: np.ndarray) -> np.ndarray:
+        """Append ``values``' running sums, continuing the held ones (one addition after another, as
+        ``np.cumsum`` over the whole track adds them); the sums held, with their leading row."""
+        rows.append(np.cumsum(np.concatenate([rows.view[-1:], values]), axis=0)[1:])
+        return rows.view
 
     def _decide_walking(self) -> None:
         """Walking or not at each new block end up to the newest sample (``step_band_rms``)."""
@@ -277,7 +352,9 @@ class ImuHeadMotion:
         ends = np.arange(start, int(self._t[-1]) + 1, block, dtype=np.int64)
         if ends.shape[0] == 0:
             return
-        rms = step_band_rms(self._t, self._raw, ends, self.cfg)
+        # (the samples the new blocks' spans reach, and the stream's first one while it is short)
+        tail = max(int(np.searchsorted(self._t, int(ends[0]) - self.cfg.step_span_us, side="right")) - 2, 0)
+        rms = step_band_rms(self._t[tail:], self._raw[tail:], ends, self.cfg) if tail else step_band_rms(self._t, self._raw, ends, self.cfg)
         self._step_t = np.concatenate([self._step_t, ends])
         self._walked = np.concatenate([self._walked, rms > self.cfg.step_rad_s])
         self._unknown = np.concatenate([self._unknown, np.isnan(rms)])

@@ -11,6 +11,7 @@ from darkread.edge.deblur import DeblurConfig, deblur_window, smear_near, smear_
 from darkread.edge.head_motion import KnownHeadMotion, SmearPrior
 from darkread.edge.imu_motion import (
     ImuHeadMotion,
+    Rows,
     ImuMotionConfig,
     JoinedSceneMotion,
     integrate,
@@ -145,6 +146,43 @@ def test_the_step_band_is_the_same_taken_a_few_blocks_at_a_time(monkeypatch: pyt
     monkeypatch.setattr(imu_motion, "STEP_BLOCKS_AT_ONCE", 7)
     np.testing.assert_array_equal(step_band_rms(t, omega, ends), whole)
     assert np.isnan(whole[:4]).all() and np.isfinite(whole[4:]).all()  # (the first half second tells nothing)
+
+
+def test_a_live_stream_a_datagram_at_a_time_is_the_file_read_at_once() -> None:
+    """Each datagram's bias, integration and walking decision come from the sums held, not from the
+    whole history again (which cost most of a core once a minute was held): the same track either way."""
+    rng = np.random.default_rng(9)
+    n = 12_000
+    t = 5_000_000 + np.arange(n, dtype=np.int64) * 1000
+    omega = rng.normal(0.0, 0.01, (n, 3)) + 0.004 + 0.05 * np.sin(2 * np.pi * 0.3 * np.arange(n) / 1000)[:, None]
+    omega[6000:6100] += 0.4  # a quick turn
+    at_once = ImuHeadMotion.of_track(ImuTrack(t, omega), calibration())
+    live = ImuHeadMotion(calibration(), live=True)
+    for k in range(0, n, 20):
+        live.extend(t[k:k + 20], omega[k:k + 20])
+    asked = np.linspace(t[0], t[-1], 5000)
+    np.testing.assert_allclose(live.rotation_at(asked), at_once.rotation_at(asked), rtol=0, atol=1e-12)
+    assert [live.healthy(int(x)) for x in asked[::25]] == [at_once.healthy(int(x)) for x in asked[::25]]
+    assert live.walking(int(t[-1])) == at_once.walking(int(t[-1]))
+
+
+def test_a_live_streams_history_is_trimmed_and_its_buffers_stay_bounded() -> None:
+    cfg = ImuMotionConfig(keep_us=2_000_000)
+    live = ImuHeadMotion(calibration(), cfg, live=True)
+    t = 5_000_000 + np.arange(20_000, dtype=np.int64) * 1000
+    for k in range(0, t.shape[0], 20):
+        live.extend(t[k:k + 20], np.full((20, 3), 0.01))
+    assert live.span_us is not None and live.span_us[1] - live.span_us[0] <= 2 * cfg.keep_us
+    assert live._t_rows._buf.shape[0] <= 4 * 2 * 2_000 + 1024  # samples of keep_us at 1 kHz, grown by doubling
+    assert live.healthy(int(t[-1])) and not live.healthy(int(t[0]))
+
+
+def test_rows_grow_and_trim_from_the_front() -> None:
+    rows = Rows(np.zeros((0, 2)))
+    rows.append(np.ones((3, 2)))
+    rows.drop_front(2)
+    rows.append(np.arange(4.0).reshape(2, 2))
+    np.testing.assert_array_equal(rows.view, [[1.0, 1.0], [0.0, 1.0], [2.0, 3.0]])
 
 
 def test_a_walking_head_is_not_trusted_to_the_gyroscope() -> None:
