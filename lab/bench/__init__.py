@@ -17,6 +17,7 @@ BENCH_MODULES: tuple[str, ...] = (
     "darkread.lab.bench.decode",
     "darkread.lab.bench.fovea",
     "darkread.lab.bench.gaze",
+    "darkread.lab.bench.imu",
     "darkread.lab.bench.synth",
     "darkread.lab.bench.inference",
     "darkread.lab.bench.edge",

@@ -11,9 +11,9 @@ from darkread.edge.deblur import DeblurConfig, deblur_window, smear_near, smear_
 from darkread.edge.head_motion import KnownHeadMotion, SmearPrior
 from darkread.edge.imu_motion import (
     ImuHeadMotion,
-    Rows,
     ImuMotionConfig,
     JoinedSceneMotion,
+    Rows,
     integrate,
     rotation_matrices,
     rotation_vectors,

@@ -25,6 +25,7 @@ FOVEA = {
     "voxel_reused_out_us_per_window", "voxel_add_at_us_per_window", "voxel_speedup_vs_add_at_x",
 }
 SYNTH = {"synth_samples_per_s", "synth_sim_s_per_wall_s"}
+IMU = {"edge_imu_live_ms_per_s"}
 EDGE = {
     "edge_realtime_factor", "edge_decode_realtime_factor", "edge_latency_p50_ms", "edge_latency_p99_ms",
     "edge_uplink_kbyte_per_s", "edge_inferences_per_s", "edge_view_latency_p99_ms", "edge_realtime_factor_every_window",
@@ -78,7 +79,7 @@ def run_smoke(name: str, tmp_path: Path) -> dict[str, float]:
     return figures
 
 
-@pytest.mark.parametrize(("name", "keys"), [("decode", DECODE), ("fovea", FOVEA), ("synth", SYNTH)])
+@pytest.mark.parametrize(("name", "keys"), [("decode", DECODE), ("fovea", FOVEA), ("synth", SYNTH), ("imu", IMU)])
 def test_benchmark_writes_its_keys(name: str, keys: set[str], tmp_path: Path) -> None:
     assert set(run_smoke(name, tmp_path)) == keys
 
@@ -143,7 +144,7 @@ def test_ask_benchmark_writes_its_keys(tmp_path: Path) -> None:
 
 
 def test_every_benchmark_module_is_tested() -> None:
-    tested = {"decode", "fovea", "synth", "gaze", "cloud", "ask", "speech", "inference", "edge", "stitch", "ocr"}
+    tested = {"decode", "fovea", "synth", "imu", "gaze", "cloud", "ask", "speech", "inference", "edge", "stitch", "ocr"}
     assert {name.rsplit(".", 1)[-1] for name in BENCH_MODULES} == tested
 
 
