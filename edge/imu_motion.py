@@ -98,29 +98,37 @@ def quaternions_xyzw(matrices: np.ndarray) -> np.ndarray:
 
 # -- the gyroscope's track ------------------------------------------------------------------------
 
-def moving_mean(t_us: np.ndarray, values: np.ndarray, span_us: int, cum: np.ndarray) -> np.ndarray:
-    """The mean of ``values`` [n, d] over the ``span_us`` up to each sample (causal); ``cum`` [n + 1, d]
-    their cumulative sums with a leading zero row."""
-    first = np.searchsorted(t_us, t_us - span_us, side="right")
-    count = (np.arange(1, t_us.shape[0] + 1) - first)[:, None]
-    return (cum[1:] - cum[first]) / np.maximum(count, 1)
+def cumulative(values: np.ndarray) -> np.ndarray:
+    """[n + 1, d]: the running sums of ``values`` [n, d] with a leading zero row."""
+    return np.concatenate([np.zeros((1,) + values.shape[1:]), np.cumsum(values, axis=0)])
 
 
-def still_samples(t_us: np.ndarray, omega: np.ndarray, cfg: ImuMotionConfig = ImuMotionConfig()) -> np.ndarray:
-    """bool [n]: the head was still at each sample (its mean angular velocity over ``still_span_us`` small)."""
-    cum = np.concatenate([np.zeros((1, 3)), np.cumsum(omega, axis=0)])
-    mean = moving_mean(t_us, omega, cfg.still_span_us, cum)
+def still_at(t_us: np.ndarray, cum_omega: np.ndarray, index: np.ndarray, cfg: ImuMotionConfig = ImuMotionConfig()) -> np.ndarray:
+    """bool [len(index)]: the head was still at those samples, its mean angular velocity over the
+    ``still_span_us`` up to each small (``cum_omega``: the track's ``cumulative``, causal)."""
+    first = np.searchsorted(t_us, t_us[index] - cfg.still_span_us, side="right")
+    mean = (cum_omega[index + 1] - cum_omega[first]) / np.maximum(index + 1 - first, 1)[:, None]
     return np.linalg.norm(mean, axis=1) < cfg.still_rad_s
 
 
+def bias_at(t_us: np.ndarray, cum_still: np.ndarray, cum_count: np.ndarray, index: np.ndarray, window_us: int) -> np.ndarray:
+    """[len(index), 3]: the bias at those samples, the mean of the still samples over ``window_us`` up
+    to each (0 before any); ``cum_still`` and ``cum_count`` the ``cumulative`` of the still samples'
+    velocity (the others 0) and of how many were still."""
+    first = np.searchsorted(t_us, t_us[index] - window_us, side="right")
+    count = cum_count[index + 1] - cum_count[first]
+    return np.where(count > 0, (cum_still[index + 1] - cum_still[first]) / np.maximum(count, 1), 0.0)
+
+
+def still_samples(t_us: np.ndarray, omega: np.ndarray, cfg: ImuMotionConfig = ImuMotionConfig()) -> np.ndarray:
+    """bool [n]: the head was still at each sample of a whole track (``still_at``)."""
+    return still_at(t_us, cumulative(omega), np.arange(t_us.shape[0]), cfg)
+
+
 def running_bias(t_us: np.ndarray, omega: np.ndarray, still: np.ndarray, window_us: int) -> np.ndarray:
-    """[n, 3]: each sample's bias estimate, the mean of the still samples over ``window_us`` up to it (0 before any)."""
+    """[n, 3]: each sample's bias over a whole track (``bias_at``)."""
     weight = still.astype(np.float64)[:, None]
-    cum_w = np.concatenate([np.zeros((1, 3)), np.cumsum(omega * weight, axis=0)])
-    cum_n = np.concatenate([np.zeros((1, 1)), np.cumsum(weight, axis=0)])
-    first = np.searchsorted(t_us, t_us - window_us, side="right")
-    n = cum_n[1:] - cum_n[first]
-    return np.where(n > 0, (cum_w[1:] - cum_w[first]) / np.maximum(n, 1), 0.0)
+    return bias_at(t_us, cumulative(omega * weight), cumulative(weight), np.arange(t_us.shape[0]), window_us)
 
 
 def integrate(t_us: np.ndarray, omega: np.ndarray, gap_us: int) -> np.ndarray:
@@ -306,14 +314,10 @@ class ImuHeadMotion:
             # cumulative sums held: the same arithmetic as over the whole track, a datagram at a time
             index = np.arange(n_old, n_old + t.shape[0])
             cum_raw = self._append_cumulative(self._cum_raw, omega)
-            first = np.searchsorted(all_t, t - self.cfg.still_span_us, side="right")
-            mean = (cum_raw[index + 1] - cum_raw[first]) / np.maximum(index + 1 - first, 1)[:, None]
-            weight = (np.linalg.norm(mean, axis=1) < self.cfg.still_rad_s).astype(np.float64)[:, None]
+            weight = still_at(all_t, cum_raw, index, self.cfg).astype(np.float64)[:, None]
             cum_still = self._append_cumulative(self._cum_still, omega * weight)
             cum_count = self._append_cumulative(self._cum_count, weight)
-            first = np.searchsorted(all_t, t - self.cfg.bias_window_us, side="right")
-            count = cum_count[index + 1] - cum_count[first]
-            bias = np.where(count > 0, (cum_still[index + 1] - cum_still[first]) / np.maximum(count, 1), 0.0)
+            bias = bias_at(all_t, cum_still, cum_count, index, self.cfg.bias_window_us)
             corrected = (omega - bias) @ self._rotation.T
             # integrated onto the newest angle held (from the newest sample: its trapezoid)
             if n_old:
