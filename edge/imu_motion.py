@@ -294,9 +294,12 @@ class ImuHeadMotion:
 
     # -- samples in ---------------------------------------------------------------------------------
     def extend(self, t_device_us: np.ndarray, omega_device: np.ndarray) -> None:
-        """Append samples (device clock, rad/s in the device frame); older than the newest held are dropped."""
+        """Append samples (device clock, rad/s in the device frame); older than the newest held are
+        dropped, and so are samples that are not finite (one would stay in the running sums held)."""
         t = np.asarray(t_device_us, np.int64).reshape(-1) + self.clock_offset_us
         omega = np.asarray(omega_device, np.float64).reshape(-1, 3)
+        finite = np.isfinite(omega).all(axis=1)
+        t, omega = t[finite], omega[finite]
         with self._lock:
             if self._t.shape[0]:
                 newer = t > self._t[-1]

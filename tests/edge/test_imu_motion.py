@@ -177,6 +177,20 @@ def test_a_live_streams_history_is_trimmed_and_its_buffers_stay_bounded() -> Non
     assert live.healthy(int(t[-1])) and not live.healthy(int(t[0]))
 
 
+def test_a_sample_that_is_not_a_number_is_dropped_not_summed_into_every_later_one() -> None:
+    t = 5_000_000 + np.arange(3000, dtype=np.int64) * 1000
+    omega = np.full((3000, 3), 0.01)
+    omega[1000] = np.nan  # (a feed that does not check, e.g. a hardware callback)
+    broken = ImuHeadMotion(calibration(), live=True)
+    for k in range(0, 3000, 20):
+        broken.extend(t[k:k + 20], omega[k:k + 20])
+    clean = ImuHeadMotion(calibration(), live=True)
+    clean.extend(np.delete(t, 1000), np.delete(omega, 1000, axis=0))
+    asked = np.linspace(t[0], t[-1], 200)
+    assert np.isfinite(broken.rotation_at(asked)).all()
+    np.testing.assert_allclose(broken.rotation_at(asked), clean.rotation_at(asked), rtol=0, atol=1e-12)
+
+
 def test_rows_grow_and_trim_from_the_front() -> None:
     rows = Rows(np.zeros((0, 2)))
     rows.append(np.ones((3, 2)))
