@@ -361,7 +361,7 @@ class ImuHeadMotion:
             return
         # (the samples the new blocks' spans reach, and the stream's first one while it is short)
         tail = max(int(np.searchsorted(self._t, int(ends[0]) - self.cfg.step_span_us, side="right")) - 2, 0)
-        rms = step_band_rms(self._t[tail:], self._raw[tail:], ends, self.cfg) if tail else step_band_rms(self._t, self._raw, ends, self.cfg)
+        rms = step_band_rms(self._t[tail:], self._raw[tail:], ends, self.cfg)
         self._step_t = np.concatenate([self._step_t, ends])
         self._walked = np.concatenate([self._walked, rms > self.cfg.step_rad_s])
         self._unknown = np.concatenate([self._unknown, np.isnan(rms)])
