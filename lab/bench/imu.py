@@ -2,8 +2,9 @@
 
 A live IMU feed (``edge.sources.imu_feed``) hands ``ImuHeadMotion.extend`` a datagram of 20 samples
 every 20 ms (1 kHz). ``edge_imu_live_ms_per_s``: CPU per second of samples fed that way, over the
-last 10 s of a track of ``SECONDS`` (the history held by then is a minute: ``keep_us`` and its slack).
-Reference, same run: the same track read at once, as a replay does, per second of samples.
+last ``MEASURED_S`` of a ``TRACK_S`` track: the most history a live stream holds (``keep_us`` and
+its slack, just short of the trim). Reference, same run: the same track read at once, as a replay
+does, per second of samples.
 """
 
 from __future__ import annotations
@@ -12,11 +13,13 @@ import time
 
 import numpy as np
 
-from darkread.edge.imu_motion import ImuHeadMotion
+from darkread.edge.imu_motion import KEEP_SLACK, ImuHeadMotion, ImuMotionConfig
 from darkread.edge.io.calibration import Calibration
 from darkread.lab.bench import BenchContext, Figure
 
 DATAGRAM = 20  # samples per datagram (edge.sources.imu_feed: 20 ms at 1 kHz)
+TRACK_S = KEEP_SLACK * ImuMotionConfig().keep_us / 1e6 - 0.1  # a live stream trims its history past this: just before
+MEASURED_S = 10.0
 
 
 def _track(seconds: float) -> tuple[np.ndarray, np.ndarray]:
@@ -34,10 +37,10 @@ def _calibration() -> Calibration:
 
 
 def run(ctx: BenchContext) -> list[Figure]:
-    seconds = float(ctx.runs(70, 70, 12))
+    seconds = TRACK_S if not ctx.smoke else 12.0
     t, omega = _track(seconds)
     live = ImuHeadMotion(_calibration(), live=True)
-    measured_from = t.shape[0] - 10_000 if seconds > 20 else 0
+    measured_from = t.shape[0] - int(MEASURED_S * 1000) if not ctx.smoke else 0
     cpu = 0.0
     for k in range(0, t.shape[0], DATAGRAM):
         started = time.process_time()
