@@ -107,12 +107,19 @@ demo: $(DEMO_STAMP) speech-deps  ## read the shipped sample recording aloud and 
 	@echo "demo: darkread read --demo --say"
 	@$(VENV)/bin/darkread read --demo --say
 
+# the suite read again by an edge held at the shedding levels that cost reading (edge.load: one frame per view, and no
+# view where the last one covers the window), as a live edge starved of CPU makes them: lines the confidence model
+# learns a starved page from (docs/edge_cpu.md)
+SHED_RUNS = for l in 2 3; do $(VENV)/bin/darkread eval run runs/eval_suite --work runs/shed/level$$l --out runs/shed/report$$l \
+	--edge-shed-level $$l --no-rgb --compare --jobs 2 || exit 1; done
+SHED_ALSO := --also runs/shed/level2 --also runs/shed/level3
 eval: $(STAMP)  ## the full suite (93 recordings) in both edge modes (~30 min on 2 cores, half of it making the suite): report in docs/eval, the default mode first, with how much ink the events show; then the line-confidence model fitted (cloud/data/line_confidence.json, docs/eval/calibration.md) and the report rebuilt with coverage and risk under it
 	$(VENV)/bin/darkread eval make-suite runs/eval_suite --jobs 2
 	$(VENV)/bin/darkread eval evidence runs/eval_suite --out docs/eval --jobs 2
 	$(VENV)/bin/darkread eval run runs/eval_suite --out docs/eval --infer both --jobs 2
+	$(SHED_RUNS)
 	# the line-confidence model the cloud ships, fitted on half the recordings' lines and measured on the other half
-	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval
+	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval $(SHED_ALSO)
 	$(VENV)/bin/darkread eval run runs/eval_suite --out docs/eval --infer both --report-only --before docs/eval/before/results.json
 
 eval-small: $(STAMP)  ## the small suite (17 recordings) in both edge modes (a few minutes); report in runs/eval_small_report
@@ -173,7 +180,8 @@ eval-grounded: $(STAMP)  ## the suite re-made on the grounded sensor model and h
 	$(G_RUN) $(G_SUITE)/law_photoreceptor_dark-current --out $(G_SUITE)/report_law_pd --no-rgb
 	$(MAKE) --no-print-directory grounded-pages G_SUITE=$(G_SUITE)
 	# the line-confidence model the cloud ships, fitted on the suite's lines and the grounded suites' (make eval first)
-	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval $(foreach s,$(G_CALIBRATE),--also $(G_SUITE)/$(s))
+	$(SHED_RUNS)
+	$(VENV)/bin/darkread eval calibrate runs/eval_suite --out docs/eval $(foreach s,$(G_CALIBRATE),--also $(G_SUITE)/$(s)) $(SHED_ALSO)
 	$(VENV)/bin/darkread eval run runs/eval_suite --out docs/eval --infer on-change --report-only --before docs/eval/before/results.json
 
 grounded-pages: $(STAMP)  ## the pages of docs/eval/grounded/ from the evaluated grounded suites (runs/grounded)

@@ -3,8 +3,9 @@
 Each line's *evidence* is what the pipeline knows about it: the recogniser's per-character
 probabilities, how many frames covered its ink and how much they agreed (dark pixels where all
 frames saw ink, grey where they disagreed), its height, how often frames came while the page was
-read and how fast the head moved, and
-whether its words are dictionary words. A small logistic model (``line_confidence.json``, fitted
+read and how fast the head moved, how much the glasses were shedding (a live edge that cannot keep
+up makes fewer frames and views: ``edge.load``, said in each view), and whether its words are
+dictionary words. A small logistic model (``line_confidence.json``, fitted
 on the synthetic suite by ``darkread eval calibrate``) turns the evidence into the probability
 that the line was read right. A line below the model's ``answer_threshold`` is ``unclear``: the
 answer does not guess at it, and says what would help (``REASONS``) from the same evidence.
@@ -24,10 +25,11 @@ from typing import Literal
 
 import numpy as np
 
-Reason = Literal["too_dark", "too_much_motion", "too_small", "look_again"]
+Reason = Literal["glasses_busy", "too_dark", "too_much_motion", "too_small", "look_again"]
 # reason code -> what the spoken answer says: plain words that survive the synthetic voice (an
 # offline recogniser hears "please stop moving" word for word, "hold still" as "pulled deal")
 REASONS: dict[str, str] = {
+    "glasses_busy": "The glasses could not keep up. Look at that line again.",
     "too_dark": "Please add more light.",
     "too_much_motion": "Please stop moving.",
     "too_small": "The text is too small: come closer.",
@@ -35,11 +37,13 @@ REASONS: dict[str, str] = {
 }
 FEATURES: tuple[str, ...] = (
     "ocr_mean", "ocr_min", "ocr_low_share", "log_chars", "height_px", "ink_solid", "log_views",
-    "log_frame_rate", "log_head_speed", "known_share", "corrected_share",
+    "log_frame_rate", "log_head_speed", "known_share", "corrected_share", "edge_shed",
 )
 MODEL_FILE = "line_confidence.json"
 _WORD = re.compile(r"[A-Za-z]+")
 LOW_CHAR_PROB = 0.6  # a character read with less than this probability counts as doubtful
+BUSY_SHED_LEVEL = 1.5  # the page's views made at this mean shedding level or deeper (one frame per view and
+# less, ``edge.load``): a line is unclear first because the glasses could not keep up
 
 
 @dataclass(frozen=True)
@@ -63,6 +67,11 @@ class ConfidenceModel:
     dark_ink_solid: float  # with a still head, frames agreeing on less of the ink than this: the light is the likely cause
     fast_head_speed: float  # log(1 + px/s) above which motion is the likely cause
     small_height_px: float  # lines lower than this are too small to read
+    # the thresholds of pages the glasses made while shedding, by level (the page's mean shedding level,
+    # rounded; ``edge.load``); a level not listed: ``answer_threshold``. One threshold for every page is set
+    # by the pages of glasses that kept up, and a starved page's lines fail in ways the rest of its
+    # evidence sees less (a skipped fixation leaves a line fewer looks)
+    shed_thresholds: tuple[tuple[int, float], ...] = ()
 
     @classmethod
     def from_json(cls, data: dict) -> ConfidenceModel:
@@ -70,7 +79,13 @@ class ConfidenceModel:
             tuple(data["features"]), tuple(data["mean"]), tuple(data["scale"]), tuple(data["weights"]),
             float(data["intercept"]), float(data["answer_threshold"]), float(data["dark_ink_solid"]),
             float(data["fast_head_speed"]), float(data["small_height_px"]),
+            tuple((int(level), float(t)) for level, t in sorted(data.get("shed_thresholds", {}).items())),
         )
+
+    def threshold_for(self, evidence: dict[str, float]) -> float:
+        """The answer threshold for a line with this evidence: its shedding level's (never below the model's)."""
+        level = round(evidence.get("edge_shed", 0.0))
+        return max([self.answer_threshold, *(t for at, t in self.shed_thresholds if at == level)])
 
     def probability(self, evidence: dict[str, float]) -> float:
         x = np.array([evidence.get(name, mean) for name, mean in zip(self.features, self.mean)], dtype=np.float64)
@@ -91,6 +106,7 @@ class PageConditions:
 
     frame_rate_hz: float | None = None
     head_speed_px_s: float | None = None
+    shed_level: float | None = None  # the mean shedding level of its frames and views (``edge.load``)
 
 
 def line_evidence(
@@ -120,6 +136,8 @@ def line_evidence(
         evidence["log_frame_rate"] = math.log(conditions.frame_rate_hz)
     if conditions.head_speed_px_s is not None:
         evidence["log_head_speed"] = math.log1p(conditions.head_speed_px_s)
+    if conditions.shed_level is not None:
+        evidence["edge_shed"] = conditions.shed_level
     return evidence
 
 
@@ -132,17 +150,23 @@ def known_word_share(text: str, known: Callable[[str], bool] | None) -> float:
 def judge(evidence: dict[str, float], model: ConfidenceModel) -> LineJudgement:
     """The line's calibrated confidence, whether it is answered, and if not what would help."""
     p = model.probability(evidence)
-    if p >= model.answer_threshold:
+    if p >= model.threshold_for(evidence):
         return LineJudgement(round(p, 4), "read", (), evidence)
     return LineJudgement(round(p, 4), "unclear", reasons_for(evidence, model), evidence)
 
 
+def busy(evidence: dict[str, float]) -> bool:
+    """Whether the line's page was made by glasses shedding at ``BUSY_SHED_LEVEL`` or deeper."""
+    return evidence.get("edge_shed", 0.0) >= BUSY_SHED_LEVEL
+
+
 def reasons_for(evidence: dict[str, float], model: ConfidenceModel) -> tuple[str, ...]:
-    """What would help an unclear line, from its evidence: stillness, light, size; else a second look.
+    """What would help an unclear line, from its evidence: glasses that keep up, stillness, light,
+    size; else a second look.
 
     Frames disagree in dim light and when the head moves fast; only with a still head is the
     disagreement put down to the light."""
-    reasons = []
+    reasons = ["glasses_busy"] if busy(evidence) else []
     moving = evidence.get("log_head_speed", -math.inf) > model.fast_head_speed
     if evidence.get("ink_solid", math.inf) < model.dark_ink_solid and not moving:
         reasons.append("too_dark")

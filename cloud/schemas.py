@@ -37,7 +37,7 @@ class LineModel(BaseModel):
     box: tuple[int, int, int, int] | None = Field(None, description="x0, y0, x1, y1 in page pixels")
     confidence: float | None = Field(None, description="probability the line reads right (calibrated; a remote engine's own score)")
     status: Literal["read", "unclear"] = Field("read", description="unclear: too unsure to say; the spoken answer does not guess at it")
-    reasons: list[str] = Field([], description="what would help an unclear line: too_dark, too_much_motion, too_small, look_again")
+    reasons: list[str] = Field([], description="what would help an unclear line: glasses_busy, too_dark, too_much_motion, too_small, look_again")
     evidence: dict[str, float] = Field({}, description="what the confidence was judged from")
 
 

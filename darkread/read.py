@@ -18,14 +18,18 @@ import secrets
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from darkread.cloud.ocr.base import OCR_BACKENDS
 from darkread.core.text_metrics import error_rates
 from darkread.edge.config import INFER_MODES, default_infer_mode
 from darkread.edge.head_motion import KnownHeadMotion
+
+if TYPE_CHECKING:
+    from darkread.edge.builder import Edge
 
 logger = logging.getLogger(__name__)
 
@@ -93,6 +97,7 @@ def read_recording(
     known_motion: KnownHeadMotion | None = None,
     gaze_csv: str | Path | None = None,
     calibration: str | Path | None = None,
+    prepare_edge: Callable[[Edge], None] | None = None,
 ) -> ReadResult:
     """Replay ``path`` through a real edge into a real cloud on loopback and ask what it says.
 
@@ -101,6 +106,8 @@ def read_recording(
     the edge takes the head's motion from that source (an inertial sensor, or in the lab the simulator's
     truth) instead of measuring it from the events. ``gaze_csv`` and
     ``calibration`` go with a bare ``.raw`` file (or override a recording directory's own).
+    ``prepare_edge`` is called with the built edge before it runs (the lab holds it in a state a
+    live edge reaches, e.g. a shedding level).
     """
     import httpx
     from pydantic import SecretStr
@@ -122,7 +129,7 @@ def read_recording(
             result = read_recording(path, backend=backend, mode=mode, model=model, out_dir=scratch,
                                     drain_timeout_s=drain_timeout_s, lexicon=lexicon, infer=infer,
                                     speech_wav=speech_wav, known_motion=known_motion, gaze_csv=gaze_csv,
-                                    calibration=calibration)
+                                    calibration=calibration, prepare_edge=prepare_edge)
         result.page_png = ""
         return result
     started = time.perf_counter()
@@ -148,6 +155,8 @@ def read_recording(
         }
         t0 = time.perf_counter()
         edge = build_edge(load_config(None, environ={}, overrides=overrides), known_motion=known_motion)
+        if prepare_edge is not None:
+            prepare_edge(edge)
         daemon = Daemon(edge, Notifier(environ={}), tick_s=0.02, shutdown_timeout_s=drain_timeout_s, handle_signals=False)
         drained = daemon.run() == 0
         stages["edge"] = time.perf_counter() - t0

@@ -22,7 +22,7 @@ from typing import Any, ClassVar, Literal, TypeAlias
 import msgpack
 import numpy as np
 
-from darkread.core.frame_record import MAX_VIEW_GROWTH, FrameRecord, threshold_levels
+from darkread.core.frame_record import MAX_SHED_LEVEL, MAX_VIEW_GROWTH, FrameRecord, threshold_levels
 from darkread.core.mask_bits import pack_bits, packed_length, unpack_bits
 
 from .codecs import LEVEL_ENCODINGS, MASK_ENCODINGS, compress_bits, compress_levels, decompress_bits, decompress_levels
@@ -382,6 +382,8 @@ class View(_Checked):
     levels: bytes = _spec(_bytes, repr=False)  # one level index per pixel, row-major (decoded form)
     enc: str = _spec(_choice(LEVEL_ENCODINGS), "png")
     scene_px: tuple[float, float] | None = _spec(_optional(_pair_float), None)  # the scene's motion so far, sensor px
+    # a live edge that could not keep up: how much it was giving up (1-3, ``edge.load``); absent: nothing
+    shed_level: int | None = _spec(_optional(lambda v, n: _int(v, n, 1, MAX_SHED_LEVEL)), None)
 
     @classmethod
     def of(
@@ -397,7 +399,7 @@ class View(_Checked):
             seq=seq, view_id=record.frame_id, t0_us=record.t_us if t0_us is None else t0_us, t_us=record.t_us,
             origin=record.origin, gaze_px=record.gaze_px, gaze_rad=gaze_rad, frames=record.frames, events_used=events_used,
             shape=(int(levels.shape[0]), int(levels.shape[1])), n_levels=record.n_levels, levels=levels.tobytes(), enc=enc,
-            scene_px=record.scene_px,
+            scene_px=record.scene_px, shed_level=record.shed_level or None,
         )
 
     def ink(self) -> np.ndarray:
@@ -409,7 +411,8 @@ class View(_Checked):
         as that many frames), with ``mask`` the ink where the probability is at least one half."""
         levels = self.ink()
         return FrameRecord(self.view_id, self.t_us, threshold_levels(levels, self.n_levels), self.origin, self.gaze_px,
-                           levels=levels, n_levels=self.n_levels, frames=self.frames, scene_px=self.scene_px)  # fmt: skip
+                           levels=levels, n_levels=self.n_levels, frames=self.frames, scene_px=self.scene_px,
+                           shed_level=self.shed_level or 0)  # fmt: skip
 
     def as_frame(self) -> Frame:
         """The thresholded view as a binary ``frame`` of the same seq (for a reader of binary frames)."""

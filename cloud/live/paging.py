@@ -71,9 +71,13 @@ class PageMotion:
     last_us: int | None = None
     path_px: float = 0.0  # the scene's travel in the sensor
     last_scene: tuple[float, float] | None = None
+    records: int = 0  # frames and views as they came
+    shed_sum: int = 0  # their shedding levels summed (a live edge falling behind says how far: edge.load)
 
     def add(self, frame: FrameRecord) -> None:
         self.frames += frame.frames
+        self.records += 1
+        self.shed_sum += frame.shed_level
         self.first_us = frame.t_us if self.first_us is None else min(self.first_us, frame.t_us)
         self.last_us = frame.t_us if self.last_us is None else max(self.last_us, frame.t_us)
         if frame.scene_px is not None:
@@ -87,6 +91,10 @@ class PageMotion:
     def frame_rate_hz(self) -> float | None:
         span = self.span_s()
         return self.frames / span if span > 0 else None
+
+    def shed_level(self) -> float | None:
+        """The mean shedding level of the page's frames and views (0: the glasses kept up)."""
+        return self.shed_sum / self.records if self.records else None
 
     def head_speed_px_s(self) -> float | None:
         span = self.span_s()

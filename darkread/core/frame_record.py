@@ -18,6 +18,7 @@ import numpy as np
 MAX_VIEW_GROWTH = 2
 """A fused view is the union of its frames' windows: at most this many windows per side (the
 glasses cut it so, protocol version 4 refuses larger ones)."""
+MAX_SHED_LEVEL = 3  # the deepest of the live edge's shedding levels (``edge.load.LEVELS``)
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,10 @@ class FrameRecord:
     # how far the whole scene had moved in the sensor by ``t_us`` (sensor px, since the stream began;
     # ``edge.scene_motion``): the head's motion, from which the stitcher predicts the frame's place
     scene_px: tuple[float, float] | None = field(default=None, kw_only=True)
+    # how much a live edge that could not keep up was giving up while it made this record
+    # (``edge.load``: 0 none .. 3 one frame per view and fixations left without one): the cloud
+    # trusts a starved page's lines less
+    shed_level: int = field(default=0, kw_only=True)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mask", ink_mask(self.mask, f"frame {self.frame_id}"))
@@ -49,6 +54,9 @@ class FrameRecord:
         if int(self.frames) < 1:
             raise ValueError(f"frame {self.frame_id}: frames must be >= 1, got {self.frames}")
         object.__setattr__(self, "frames", int(self.frames))
+        if not 0 <= int(self.shed_level) <= MAX_SHED_LEVEL:
+            raise ValueError(f"frame {self.frame_id}: shed_level must be 0..{MAX_SHED_LEVEL}, got {self.shed_level}")
+        object.__setattr__(self, "shed_level", int(self.shed_level))
         if self.scene_px is not None:
             object.__setattr__(self, "scene_px", (float(self.scene_px[0]), float(self.scene_px[1])))
         if self.levels is not None:

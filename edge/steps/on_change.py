@@ -55,6 +55,7 @@ class OnChangeStep:
         self._capped = False  # the current view was denied a frame (edge.load)
         self._last_view: tuple[int, int, int, int] | None = None  # the window of the last view sent
         self._shed_fixation = False  # the current fixation gets no view (edge.load: the last one covers it)
+        self._view_shed = 0  # the deepest shedding level the current view (or a fixation skipped before it) was made at
         self._stepped_us: int | None = None  # the event time of the last step
 
     def due(self, pending: Pending) -> bool:
@@ -129,6 +130,7 @@ class OnChangeStep:
         origin = window_origin(centre, w.sensor_wh, w.fovea)
         if skip_covered(w.shed_level, (*origin, w.fovea.width, w.fovea.height), self._last_view):
             self._shed_fixation = True  # shed (edge.load): the last view already holds most of this window
+            self._view_shed = max(self._view_shed, w.shed_level)
             w.metrics.add("views_shed")
             return None
         if origin != w.origin:
@@ -151,6 +153,7 @@ class OnChangeStep:
     def _infer_into_view(self, origin: tuple[int, int], gaze: GazeSample, t: int, t_from: int, arrival: float) -> bool:
         """One frame of the current fixation (its events only, up to ``n_events``), fused into the
         view; a frame that does not register onto the view sends it and starts the next one."""
+        self._view_shed = max(self._view_shed, self.windows.shed_level)
         placed = self._dithered(origin, len(self.fuser))
         fov = self.windows.fovea
         delivered = self.windows.delivered_since((placed[0], placed[1], fov.width, fov.height))
@@ -214,7 +217,9 @@ class OnChangeStep:
             self._send_view(arrival)
 
     def _send_view(self, arrival: float) -> None:
-        view = self.fuser.view(self.views_made)
+        # the view says how starved the edge was (the cloud trusts a starved page's lines less)
+        view = self.fuser.view(self.views_made, shed_level=max(self._view_shed, self.windows.shed_level))
+        self._view_shed = 0
         self.fuser = self.fuser.fresh()
         if self._view_origin is not None:
             fov = self.windows.fovea

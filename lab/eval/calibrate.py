@@ -24,14 +24,17 @@ from typing import Any
 
 import numpy as np
 
-from darkread.cloud.confidence import FEATURES, ConfidenceModel
+from darkread.cloud.confidence import BUSY_SHED_LEVEL, FEATURES, ConfidenceModel, judge
 from darkread.lab.eval.plots import _pyplot
 from darkread.lab.eval.selective import LineOutcome, reliability, weighted_cer
 
 # on standardised evidence; the one with the best Brier score in two-fold cross-validation on the fitting half is used
 RIDGES = (0.1, 0.3, 1.0, 3.0, 10.0)
 DIM_LUX = 10.0
+MIN_SHED_LINES = 50  # fewer lines of pages made at a shedding level (``--edge-shed-level`` runs): too few to set a threshold by
 SMALL_HEIGHT_PX = 9.0  # a line band lower than this holds glyphs of about 4 px x-height: below what the network resolves
+SHED = "edge_shed"  # fitted apart, on the lines of pages made while the glasses shed (see ``fit_model``)
+BASE_FEATURES = tuple(name for name in FEATURES if name != SHED)
 
 
 def split(lines: Sequence[LineOutcome]) -> tuple[list[LineOutcome], list[LineOutcome]]:
@@ -45,7 +48,7 @@ def split(lines: Sequence[LineOutcome]) -> tuple[list[LineOutcome], list[LineOut
 
 
 def _matrix(lines: Sequence[LineOutcome], fill: np.ndarray | None = None) -> np.ndarray:
-    x = np.array([[line.evidence.get(name, np.nan) for name in FEATURES] for line in lines], dtype=np.float64)
+    x = np.array([[line.evidence.get(name, np.nan) for name in BASE_FEATURES] for line in lines], dtype=np.float64)
     if fill is None:  # a missing piece of evidence counts as its mean (what the cloud assumes too)
         seen = ~np.isnan(x)
         fill = np.where(seen, x, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
@@ -108,34 +111,67 @@ def choose_ridge(lines: Sequence[LineOutcome]) -> float:
     return min(RIDGES, key=brier)
 
 
+def fit_shed_weight(base_logit: np.ndarray, shed: np.ndarray, y: np.ndarray, ridge: float = 1.0, steps: int = 50) -> float:
+    """The one weight of the shedding level added to fixed logits (a ridge logistic regression with an offset)."""
+    w = 0.0
+    for _ in range(steps):
+        p = 1.0 / (1.0 + np.exp(-np.clip(base_logit + w * shed, -50, 50)))
+        step = (float(np.dot(y - p, shed)) - ridge * w) / (float(np.dot(p * (1 - p), shed * shed)) + ridge)
+        w += step
+        if abs(step) < 1e-10:
+            break
+    return w
+
+
 def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceModel:
+    """The logistic model on the lines of glasses that kept up, then the shedding level's weight on the
+    lines of glasses that shed with the rest held: a page made without shedding is judged as if the
+    starved pages had never been seen, and a starved one pays for how much was shed."""
+    starved = [ln for ln in lines if ln.evidence.get(SHED, 0.0) > 0]
+    lines = [ln for ln in lines if ln.evidence.get(SHED, 0.0) <= 0]
     x, y, mean, scale = _standardised(lines)
     weights, intercept = fit_logistic(x, y, choose_ridge(lines))
+    shed_weight = 0.0
+    if starved:
+        base_logit = ((_matrix(starved, mean) - mean) / scale) @ weights + intercept
+        shed_weight = fit_shed_weight(base_logit, np.array([ln.evidence[SHED] for ln in starved]),
+                                      np.array([ln.right for ln in starved], dtype=np.float64))
+    order = [BASE_FEATURES.index(name) if name != SHED else -1 for name in FEATURES]
+
+    def full(values: np.ndarray, shed_value: float) -> tuple[float, ...]:  # every feature's, the shedding level's as given
+        return tuple(float(values[i]) if i >= 0 else shed_value for i in order)
+
     still = [ln for ln in lines if ln.motion != "walking" and "ink_solid" in ln.evidence]
     solid_dim = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) <= DIM_LUX]
     solid_lit = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) > DIM_LUX]
     fast = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion == "walking"]
     calm = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion != "walking"]
-    model = ConfidenceModel(
-        FEATURES, tuple(map(float, mean)), tuple(map(float, scale)), tuple(map(float, weights)), intercept, 0.0,
-        _dark_limit(solid_dim, solid_lit), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX,
-    )
-    return _with_threshold(model, lines, target_risk)
+    model = ConfidenceModel(FEATURES, full(mean, 0.0), full(scale, 1.0), full(weights, shed_weight), intercept, 0.0,
+                            _dark_limit(solid_dim, solid_lit), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX)
+    return replace(model, answer_threshold=lowest_threshold(model, lines, target_risk),
+                   shed_thresholds=shed_thresholds(model, starved, target_risk))
 
 
-def _with_threshold(model: ConfidenceModel, lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceModel:
+def shed_thresholds(model: ConfidenceModel, starved: Sequence[LineOutcome], target_risk: float) -> tuple[tuple[int, float], ...]:
+    """The answer threshold of each shedding level (the page's mean, rounded) with ``MIN_SHED_LINES``
+    lines: the lowest at which its lines read at ``target_risk`` (one frame per view costs little, no
+    view for a covered fixation much more)."""
+    by_level: dict[int, list[LineOutcome]] = {}
+    for line in starved:
+        by_level.setdefault(round(line.evidence[SHED]), []).append(line)
+    return tuple((level, lowest_threshold(model, group, target_risk)) for level, group in sorted(by_level.items())
+                 if level > 0 and len(group) >= MIN_SHED_LINES)
+
+
+def lowest_threshold(model: ConfidenceModel, lines: Sequence[LineOutcome], target_risk: float) -> float:
     """The lowest threshold whose answered lines read at ``target_risk`` CER or better."""
     p = np.array([model.probability(line.evidence) for line in lines])
     for threshold in np.round(np.arange(0.0, 1.0, 0.01), 2):
         answered = [line for line, q in zip(lines, p) if q >= threshold]
         risk = weighted_cer(answered)
         if risk is not None and risk <= target_risk:
-            return _replace_threshold(model, float(threshold))
-    return _replace_threshold(model, 0.99)
-
-
-def _replace_threshold(model: ConfidenceModel, threshold: float) -> ConfidenceModel:
-    return replace(model, answer_threshold=threshold)
+            return float(threshold)
+    return 0.99
 
 
 def model_json(model: ConfidenceModel, meta: dict[str, Any]) -> str:
@@ -144,7 +180,9 @@ def model_json(model: ConfidenceModel, meta: dict[str, Any]) -> str:
                  "fitted by `darkread eval calibrate`", **meta,
         "features": list(model.features), "mean": [round(v, 6) for v in model.mean], "scale": [round(v, 6) for v in model.scale],
         "weights": [round(v, 6) for v in model.weights], "intercept": round(model.intercept, 6),
-        "answer_threshold": model.answer_threshold, "dark_ink_solid": round(model.dark_ink_solid, 4),
+        "answer_threshold": model.answer_threshold,
+        **({"shed_thresholds": {str(level): t for level, t in model.shed_thresholds}} if model.shed_thresholds else {}),
+        "dark_ink_solid": round(model.dark_ink_solid, 4),
         "fast_head_speed": round(model.fast_head_speed, 4), "small_height_px": model.small_height_px,
     }
     return json.dumps(doc, indent=1) + "\n"
@@ -193,6 +231,24 @@ def _by_suite(held: Sequence[LineOutcome], p: np.ndarray, right: np.ndarray) -> 
     return [*md, ""]
 
 
+def _by_shedding(held: Sequence[LineOutcome], model: ConfidenceModel) -> list[str]:
+    """Coverage and risk of the held-out lines at each shedding level the glasses reported (none when
+    no line's page was made while shedding)."""
+    levels = sorted({round(line.evidence.get(SHED, 0.0)) for line in held})
+    if levels == [0]:
+        return []
+    md = ["Pages made while the glasses shed work (`edge.load`; the suite read with `darkread eval run --edge-shed-level`), "
+          "held-out lines, read or not:", "",
+          "| shedding level | lines | CER, all lines | answered | CER of the answered |", "|---:|---:|---:|---:|---:|"]
+    for level in levels:
+        group = [line for line in held if round(line.evidence.get(SHED, 0.0)) == level]
+        answered = [line for line in group if line.read and judge(line.evidence, model).status == "read"]
+        risk = weighted_cer(answered)
+        md.append(f"| {level} | {len(group)} | {100 * (weighted_cer(group) or 0):.1f} % | {100 * len(answered) / len(group):.1f} % | "
+                  + (f"{100 * risk:.1f} % |" if risk is not None else "- |"))
+    return [*md, ""]
+
+
 @dataclass(frozen=True)
 class CalibrationCheck:
     """A model's calibration on lines it may never have seen (``check``)."""
@@ -231,6 +287,7 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
     """Fit on the fitting half, measure on the held-out half, write the model and calibration.md;
     ``sources``: the suites the lines came from, as the page names them."""
     fitting, held = split([line for line in lines if line.read])  # bands read as nothing: unclear by rule, not by the model
+    held_all = split(lines)[1]
     if len(fitting) < 20 or len(held) < 10:
         raise ValueError(f"too few judged lines to calibrate ({len(fitting)} to fit, {len(held)} held out); evaluate more recordings")
     model = fit_model(fitting, target_risk)
@@ -251,7 +308,10 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
         (f"Fitted by `darkread eval calibrate` on {meta['fitted_on']}; measured on the {len(held)} lines of the "
          f"{_recordings(held)} recordings it was not fitted on (4-7, 12-15, ...). A line is right when its CER is "
          f"at most 4 % (one character in a suite line). Answer threshold {model.answer_threshold:g} (the lowest whose "
-         f"answered lines on the fitting half read at {100 * target_risk:g} % CER or better)."),
+         f"answered lines on the fitting half read at {100 * target_risk:g} % CER or better)."
+         + (" On a page the glasses made while shedding work (`edge.load`; the page's mean level rounded), the lowest "
+            "whose answered lines on the fitting half's pages of that level read so: "
+            + ", ".join(f"level {level} {t:g}" for level, t in model.shed_thresholds) + "." if model.shed_thresholds else "")),
         "",
         *([f"Lines from: {'; '.join(sources)}.", ""] if len(sources) > 1 else []),
         (f"**Held-out ECE: {ece:.3f}** (10 equal-width bins; {100 * right.mean():.0f} % of the {len(held)} held-out lines right; "
@@ -260,6 +320,7 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
         "![reliability diagram](reliability.png)",
         "",
         *_by_suite(held, p, right),
+        *_by_shedding(held_all, model),
         "| confidence bin (mean) | share right | lines |",
         "|---:|---:|---:|",
         *[f"| {conf:.2f} | {acc:.2f} | {n} |" for conf, acc, n in rows],
@@ -270,7 +331,9 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
         "|---|---:|",
         *[f"| {name} | {w:+.2f} |" for name, w in zip(model.features, model.weights)],
         "",
-        (f"Reasons: too much motion above {math.expm1(model.fast_head_speed):.0f} px/s of head motion; else too dark when "
+        (f"Reasons: the glasses could not keep up when the page's frames came at a mean shedding level of "
+         f"{BUSY_SHED_LEVEL:g} or more (first); too much motion above"
+         f" {math.expm1(model.fast_head_speed):.0f} px/s of head motion; else too dark when "
          f"frames agree on less than {100 * model.dark_ink_solid:.0f} % of the ink (solid ink: all frames saw it), "
          f"too small below {model.small_height_px:g} px line height."),
         "",

@@ -134,6 +134,11 @@ def _add_run(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--no-rgb", action="store_true",
                    help="leave out the RGB baseline and the bandwidth figures (they need its snapshot): darkread's "
                         "reading only, e.g. for a second simulator's suite whose scenes another suite already has")
+    p.add_argument("--edge-shed-level", type=int, choices=range(4), default=0, metavar="{0,1,2,3}",
+                   help="hold the edge at this shedding level for every read (edge.load: 1 a view's frames capped at "
+                        "two, 2 at one, 3 also no view where the last one covers the window), as a live edge starved of "
+                        "CPU sheds; the views say so and the cloud's line confidence takes it in (default 0: none); give "
+                        "it its own --work folder")
     p.add_argument("--before", metavar="RESULTS.json",
                    help="an earlier report's results.json of the same suite: the report compares darkread's CER by lux "
                         "and kind on the recordings both hold (e.g. docs/eval/before/results.json)")
@@ -266,8 +271,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     calibrate.add_argument("--target-risk", type=float, default=0.05, metavar="R",
                            help="the CER the answered lines of the fitting half may have (sets the answer threshold)")
     calibrate.add_argument("--also", action="append", default=[], metavar="SUITE_DIR",
-                           help="another evaluated suite whose lines join the fit and the held-out measure, split by the "
-                                "same recording numbers (e.g. the suite re-made on another sensor model; repeatable)")
+                           help="another evaluated suite (or a --work folder of results) whose lines join the fit and the "
+                                "held-out measure, split by the same recording numbers (e.g. the suite re-made on another "
+                                "sensor model, or read with --edge-shed-level; repeatable)")
 
 
 def _add_check_confidence(sub: argparse._SubParsersAction) -> None:
@@ -406,7 +412,7 @@ def _evidence(args: argparse.Namespace) -> int:
 
 def _calibrate(args: argparse.Namespace) -> int:
     from darkread.lab.eval.calibrate import calibrate
-    from darkread.lab.eval.runner import load_results
+    from darkread.lab.eval.runner import RESULT_NAME, load_results
     from darkread.lab.eval.selective import outcomes
 
     suite = _one_suite(args, "give one evaluated suite: darkread eval calibrate SUITE_DIR [--work DIR] [--model-out FILE.json]")
@@ -417,6 +423,8 @@ def _calibrate(args: argparse.Namespace) -> int:
     sources = [f"{suite} ({len(lines)} lines)"]
     for other in args.also:
         folder = Path(other) / "eval_runs" / _first_mode(args)
+        if not folder.is_dir() and any(Path(other).glob(f"*/{RESULT_NAME}")):
+            folder = Path(other)  # a --work folder of its own (e.g. the suite read by a shedding edge)
         more = outcomes(load_results(folder), suite=str(other))
         if not more:
             raise FileNotFoundError(f"--also {other}: no judged lines in {folder}; run `darkread eval run {other}` first")
@@ -464,7 +472,7 @@ def _results(suite: Path, work: Path, mode: str, args: argparse.Namespace, *, ev
 
     if evaluate:
         return evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model, rgb=not args.no_rgb,
-                              force=args.force, jobs=args.jobs, infer=mode)
+                              force=args.force, jobs=args.jobs, infer=mode, shed_level=args.edge_shed_level)
     results = load_results(work)
     if not results:
         raise FileNotFoundError(f"{work}: no stored results; run `darkread eval run {suite} --infer {mode} --work {work}` first")

@@ -23,13 +23,16 @@ def stored_mode(doc: Mapping[str, Any]) -> str:
     return str(doc.get("infer") or LEGACY_MODE)
 
 
-def why_evaluate_again(doc: Mapping[str, Any], infer: str, model: str) -> str | None:
-    """Why a stored result cannot stand for this run (None: it can): another edge mode, or weights
-    other than ``model`` (a sha256 prefix, ``provenance.model_digest``) or not recorded."""
+def why_evaluate_again(doc: Mapping[str, Any], infer: str, model: str, shed_level: int = 0) -> str | None:
+    """Why a stored result cannot stand for this run (None: it can): another edge mode, weights
+    other than ``model`` (a sha256 prefix, ``provenance.model_digest``) or not recorded, or the edge
+    held at another shedding level."""
     if stored_mode(doc) != infer:
         return f"holds a {stored_mode(doc)} result"
     if doc.get("model") != model:
         return f"was read with network {doc.get('model') or '(not recorded)'}"
+    if int(doc.get("edge_shed_level", 0)) != shed_level:
+        return f"was read with the edge at shedding level {int(doc.get('edge_shed_level', 0))}"
     return None
 
 

@@ -114,9 +114,12 @@ def evaluate_recording(
     ocr_cache: dict[str, Any] | None = None,
     infer: str = "every-window",
     rgb: bool = True,
+    shed_level: int = 0,
 ) -> dict[str, Any]:
     """Everything the report needs about one recording (errors are recorded per stage); ``rgb=False``
-    leaves out the RGB baseline and the bandwidth figures (which need its snapshot)."""
+    leaves out the RGB baseline and the bandwidth figures (which need its snapshot); ``shed_level``
+    holds the edge at that shedding level (``edge.load``) for the whole read, as a live edge starved
+    of CPU would shed."""
 
     recording_dir, run_dir = Path(recording_dir), Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -131,7 +134,7 @@ def evaluate_recording(
 
     result: dict[str, Any] = {**conditions(recording_dir), "backend": backend, "commit": git_commit(),
                               "evaluated": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "infer": infer,
-                              "model": network_digest(model)}
+                              "model": network_digest(model), **({"edge_shed_level": shed_level} if shed_level else {})}
     read: dict[str, Any] = {}
 
     def run_darkread() -> dict[str, Any]:
@@ -139,7 +142,8 @@ def evaluate_recording(
         # a fresh read: an earlier run's cloud data (another session of the same page) would stay
         # beside this one and the attribution could not tell which session the report read
         shutil.rmtree(run_dir / "read", ignore_errors=True)
-        r = read_recording(recording_dir, backend=backend, model=model, out_dir=run_dir / "read", infer=infer)
+        r = read_recording(recording_dir, backend=backend, model=model, out_dir=run_dir / "read", infer=infer,
+                           prepare_edge=partial(hold_shed_level, level=shed_level) if shed_level else None)
         read["result"] = r
         return {
             "text": r.text, "cer": r.cer, "wer": r.wer, "frames": r.frames, "messages_sent": r.messages_sent,
@@ -213,6 +217,7 @@ def evaluate_suite(
     jobs: int = 1,
     infer: str = "every-window",
     rgb: bool = True,
+    shed_level: int = 0,
 ) -> list[RecordingResult]:
     """Evaluate every recording of a suite with ``jobs`` worker processes; stored results are reused
     unless ``force``.
@@ -233,7 +238,7 @@ def evaluate_suite(
     for folder in folders:
         stored = runs / folder.name / RESULT_NAME
         doc = json.loads(stored.read_text()) if stored.is_file() and not force else None
-        reason = None if doc is None else why_evaluate_again(doc, infer, network)
+        reason = None if doc is None else why_evaluate_again(doc, infer, network, shed_level)
         if reason is not None:
             logger.warning("%s %s; evaluating it again in %s mode with network %s", stored.parent, reason, infer, network)
             doc = None
@@ -244,11 +249,17 @@ def evaluate_suite(
     bar = tqdm(total=len(folders), initial=len(by_name), desc=f"evaluating ({infer})", unit="rec", disable=not progress)
     # one process reads in turn with one set of OCR engines; each worker process makes its own
     task = partial(_evaluate_in, runs=runs, backend=backend, compare=engines, model=model,
-                   ocr_cache={} if jobs <= 1 else None, infer=infer, rgb=rgb)
+                   ocr_cache={} if jobs <= 1 else None, infer=infer, rgb=rgb, shed_level=shed_level)
     for folder, doc in zip(todo, run_jobs(task, todo, jobs, bar.update), strict=True):
         by_name[folder.name] = doc
     bar.close()
     return [RecordingResult.from_dict(by_name[f.name]) for f in folders]
+
+
+def hold_shed_level(edge: Any, level: int) -> None:
+    """Hold a built edge at shedding ``level`` (``edge.load``): a lossless replay never sheds by
+    itself (it waits for inference), so this is how the lab reads a page as a starved edge makes it."""
+    edge.pipeline.windows.shed_level = edge.metrics.shed_level = level
 
 
 def _evaluate_in(folder: Path, runs: Path, **options: Any) -> dict[str, Any]:

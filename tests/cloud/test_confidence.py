@@ -44,6 +44,10 @@ def test_evidence_describes_the_line_and_the_page() -> None:
     assert evidence["log_frame_rate"] == math.log(20.0) and evidence["log_head_speed"] == math.log1p(50.0)
     grey_line = line_evidence(page(), (0, 23, 100, 37), "x", "x", (0.9,), known_share=1.0)
     assert grey_line["ink_solid"] == 0.0 and "log_views" not in grey_line and "log_frame_rate" not in grey_line
+    assert "edge_shed" not in evidence  # the page did not say
+    starved = line_evidence(page(), (0, 8, 100, 22), "the fox", "the fox", (0.9,), known_share=1.0,
+                            conditions=PageConditions(frame_rate_hz=5.0, head_speed_px_s=50.0, shed_level=2.5))
+    assert starved["edge_shed"] == 2.5 and "edge_shed" not in grey_line  # unknown (a glasses page): not evidence
 
 
 def test_unsure_lines_are_unclear_with_what_would_help() -> None:
@@ -56,6 +60,10 @@ def test_unsure_lines_are_unclear_with_what_would_help() -> None:
     small = judge({"ocr_min": 0.2, "height_px": 7.0}, model())
     assert small.reasons == ("too_small",)
     assert judge({"ocr_min": 0.2}, model()).reasons == ("look_again",)
+    busy = judge({"ocr_min": 0.2, "edge_shed": 3.0}, model())
+    assert busy.reasons == ("glasses_busy",)  # the glasses shed work: that, not the reader, is what to fix first
+    assert judge({"ocr_min": 0.2, "edge_shed": 1.0}, model()).reasons == ("look_again",)  # its dithered pair kept: not the cause
+    assert spoken_answer([("x", busy)]) == "One line unclear.\nThe glasses could not keep up. Look at that line again."
 
 
 def test_lines_without_character_scores_are_answered_unjudged() -> None:

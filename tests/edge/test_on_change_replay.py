@@ -66,6 +66,7 @@ def test_the_sample_makes_the_same_views_however_the_replay_is_cut() -> None:
     assert (len(whole), totals["frames"], totals["views"]) == (SAMPLE_VIEWS, SAMPLE_FRAMES, SAMPLE_VIEWS)
     assert totals["events_in"] == 903_373
     assert sum(view.frames for view in whole) == SAMPLE_FRAMES
+    assert {view.shed_level for view in whole} == {0} and all(view.to_message().shed_level is None for view in whole)
     assert all(0.005 < float(view.mask.mean()) < 0.5 for view in whole)  # ink on paper, not noise or nothing
     for slice_us in (5_000, 1_000):  # the grid's own slices, and the paced replays' 1 ms slices
         cut, cut_totals = replay(slice_us)
@@ -127,6 +128,8 @@ def test_the_last_shedding_level_gives_a_fixation_inside_the_last_view_no_view_o
     views, totals = replay(None, shed_level=len(LEVELS) - 1)
     assert totals["views_shed"] > 0 and len(views) + totals["views_shed"] <= SAMPLE_VIEWS  # (7 and 6 on the sample)
     assert 0 < len(views) < SAMPLE_VIEWS and all(view.frames == 1 for view in views)
+    assert {view.shed_level for view in views} == {len(LEVELS) - 1}  # each view tells the cloud how starved the edge was
+    assert {view.to_message().shed_level for view in views} == {len(LEVELS) - 1}
     for before, after in zip(views, views[1:]):
         h, w = after.mask.shape
         assert overlap_share((*after.origin, w, h), (*before.origin, *before.mask.shape[::-1])) < COVERED_SHARE

@@ -1,26 +1,31 @@
-"""An honest answer in the dark: a 5-lux page read while walking, asked through the real cloud.
+"""An honest answer in the dark, and from glasses that could not keep up, asked through the real cloud.
 
 The small suite's 5-lux walking recording (synthetic, fixed seed) is replayed by a real edge into
 a real uvicorn cloud on loopback; the JSON answer marks the lines it is unsure of as unclear with
 a reason, and the spoken answer (espeak-ng), transcribed back with PocketSphinx, says so in plain
-words and says what would help.
+words and says what would help. The same for the sample read by an edge shedding work as a
+starved live one does (``edge.load``): its views say so, and the answer blames the glasses.
 """
 
 from __future__ import annotations
 
 import json
+from functools import partial
 from pathlib import Path
 
 import pytest
 from speech_measure import require_espeak, transcribe
 
 from darkread.cloud.confidence import REASONS
+from darkread.core.paths import SAMPLE_RECORDING
+from darkread.lab.eval.runner import hold_shed_level
 from darkread.lab.eval.suite import make_suite, suite_entries
 from darkread.read import read_recording
 
 pytestmark = pytest.mark.slow
 
 HEARD = {  # words of each reason's guidance that the recogniser hears reliably
+    "glasses_busy": {"keep", "up"},
     "too_dark": {"add", "more"},
     "too_much_motion": {"stop", "moving"},
     "too_small": {"small", "closer"},
@@ -49,3 +54,18 @@ def test_a_dim_walking_page_says_what_is_unclear_and_what_would_help(tmp_path: P
     assert heard & {"unclear", "line", "lines"}, heard
     if 2 * len(unclear) >= len(result.answer_lines):
         assert heard & set().union(*(HEARD[r] for r in reasons)), (heard, reasons)
+
+
+def test_a_page_from_glasses_that_shed_work_blames_the_glasses_not_the_reader(tmp_path: Path) -> None:
+    """At the last shedding level (one frame per view, no view for a fixation the last one covers)
+    every view says so, the cloud's confidence takes it in, and the unclear lines say why."""
+    require_espeak()
+    result = read_recording(SAMPLE_RECORDING, out_dir=tmp_path / "read", speech_wav=tmp_path / "answer.wav", infer="on-change",
+                            prepare_edge=partial(hold_shed_level, level=3))
+    assert result.answer_lines and all(line["evidence"]["edge_shed"] == 3.0 for line in result.answer_lines)
+    unclear = [line for line in result.answer_lines if line["status"] == "unclear"]
+    assert unclear and all(line["reasons"][0] == "glasses_busy" for line in unclear), result.answer_lines
+    assert REASONS["glasses_busy"] in result.spoken, result.spoken
+    assert result.speech_wav is not None
+    heard = set(transcribe(Path(result.speech_wav).read_bytes()).split())
+    assert heard >= HEARD["glasses_busy"], heard

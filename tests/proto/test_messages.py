@@ -385,3 +385,21 @@ def test_the_scene_motion_is_an_optional_field_of_frames_and_views() -> None:
         payload["scene_px"] = bad
         with pytest.raises(InvalidFieldError, match="scene_px"):
             decode(msgpack.packb(payload), max_bytes=LIMIT)
+
+
+def test_a_starved_edge_says_how_much_it_shed_in_an_optional_field_of_views() -> None:
+    """A view made while the live edge was shedding (edge.load) carries the level; one made by an edge
+    that kept up omits it (no bytes, no version bump), and a peer that does not know it ignores it."""
+    levels = np.array([[0, 3, 7, 0, 1]] * 4, np.uint8)
+    kept_up = View(seq=1, view_id=2, t0_us=0, t_us=3, origin=(1, 2), gaze_px=(0.5, 0.5), gaze_rad=(0.0, 0.0), frames=1,
+                   events_used=4, shape=(4, 5), n_levels=8, levels=levels.tobytes())  # fmt: skip
+    assert "shed_level" not in msgpack.unpackb(encode(kept_up)) and decode(encode(kept_up), max_bytes=LIMIT).record().shed_level == 0
+    starved = View(**{**kept_up.__dict__, "shed_level": 3})
+    back = decode(encode(starved), max_bytes=LIMIT)
+    assert back.shed_level == 3 and back.record().shed_level == 3
+    assert View.of(back.record()).shed_level == 3 and View.of(kept_up.record()).shed_level is None
+    for bad in (0, 4, True, 1.5, "3"):
+        payload = msgpack.unpackb(encode(starved))
+        payload["shed_level"] = bad
+        with pytest.raises(InvalidFieldError, match="shed_level"):
+            decode(msgpack.packb(payload), max_bytes=LIMIT)

@@ -191,7 +191,7 @@ function watchSession(sessionId) {
     }
   }
 
-  const REASON_WORDS = { too_dark: "too dark", too_much_motion: "hold still", too_small: "too small", look_again: "look again" };
+  const REASON_WORDS = { glasses_busy: "glasses busy", too_dark: "too dark", too_much_motion: "hold still", too_small: "too small", look_again: "look again" };
   const shownLine = (line) => (line.status === "unclear"
     ? { text: `Unclear line (${(line.reasons || []).map((r) => REASON_WORDS[r] || r).join(", ") || "look again"})`, unclear: true }
     : { text: line.text, unclear: false });

@@ -167,3 +167,14 @@ def test_only_the_lines_whose_crop_read_nothing_take_the_in_place_text() -> None
     texts = [line.text for line in reading.lines]
     assert texts[0] == "crop 1" and texts[2] == "crop 3" and texts[1].startswith("ink at")
     assert len(ocr.shapes) == 1 and ocr.lines_in_place == len(LINES)  # one reading in place, of all three lines
+
+
+def test_a_page_knows_how_much_the_glasses_shed_while_its_frames_came() -> None:
+    """The mean shedding level of a page's frames and views (edge.load) is evidence for its lines."""
+    from dataclasses import replace
+
+    records = frames()
+    kept_up = paginate(records).pages[0].motion
+    assert kept_up.shed_level() == 0.0
+    starved = paginate([replace(r, shed_level=3 if k % 2 else 1) for k, r in enumerate(records)]).pages[0].motion
+    assert starved.records == len(records) and starved.shed_level() == pytest.approx(2.0, abs=0.1)

@@ -101,6 +101,16 @@ async def test_the_scene_motion_a_frame_carries_comes_back_and_its_absence_too(s
     assert moved.scene_px == (-3.5, 120.25) and plain.scene_px is None
 
 
+async def test_a_view_keeps_the_shedding_level_the_glasses_made_it_at(store: SessionStore) -> None:
+    import dataclasses
+
+    await store.open_session(spec("s"))
+    await store.add_frame("s", dataclasses.replace(frame(0), shed_level=3))
+    await store.add_frame("s", frame(1))
+    starved, kept_up = await store.frames("s")
+    assert (starved.shed_level, kept_up.shed_level) == (3, 0)
+
+
 async def test_concurrent_streams_each_get_every_write(store: SessionStore) -> None:
     await asyncio.gather(*(store.open_session(spec(f"s{i}")) for i in range(10)))
     results = await asyncio.gather(*(store.add_frame(f"s{i}", frame(seq)) for seq in range(40) for i in range(10)))

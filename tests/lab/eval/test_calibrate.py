@@ -110,3 +110,31 @@ def test_check_confidence_names_a_suite_without_results(tmp_path: Path, capsys) 
     assert main(["eval", "check-confidence", str(tmp_path)]) != 0
     err = capsys.readouterr().err
     assert "no results in" in err and "darkread eval run" in err and "Traceback" not in err
+
+
+def test_pages_of_glasses_that_shed_get_a_weight_and_a_threshold_of_their_own(tmp_path: Path) -> None:
+    """Lines of starved pages (evidence ``edge_shed``) leave the model of pages that kept up as it was,
+    fit the shedding level's weight with the rest held, and set each level's threshold."""
+    from dataclasses import replace
+
+    from darkread.cloud.confidence import FEATURES, judge
+    from darkread.lab.eval.calibrate import fit_model, model_json
+
+    kept_up = [replace(ln, evidence={**ln.evidence, "edge_shed": 0.0}) for ln in synthetic_lines()]
+    rng = np.random.default_rng(5)
+    starved = []
+    for k, line in enumerate(synthetic_lines(300, seed=4)):  # the same law, but level 3 makes half the sure lines wrong
+        wrong = line.cer > 0 or rng.random() < 0.5
+        starved.append(replace(line, recording=f"{k:03d}_s", cer=0.3 if wrong else 0.0, evidence={**line.evidence, "edge_shed": 3.0}))
+    alone = fit_model(kept_up, target_risk=0.05)
+    both = fit_model(kept_up + starved, target_risk=0.05)
+    shed = FEATURES.index("edge_shed")
+    assert both.weights[:shed] == alone.weights[:shed] and both.intercept == alone.intercept
+    assert both.answer_threshold == alone.answer_threshold and alone.shed_thresholds == ()
+    assert both.weights[shed] < 0 and (both.mean[shed], both.scale[shed]) == (0.0, 1.0)
+    (level, threshold), = both.shed_thresholds
+    assert level == 3 and threshold > both.answer_threshold
+    sure = {"ocr_min": 0.95, "ink_solid": 0.3, "log_head_speed": 2.0}
+    assert judge({**sure, "edge_shed": 0.0}, both).confidence == judge(sure, alone).confidence
+    assert judge({**sure, "edge_shed": 3.0}, both).confidence < judge(sure, both).confidence
+    assert ConfidenceModel.from_json(json.loads(model_json(both, {}))).shed_thresholds == both.shed_thresholds
