@@ -8,7 +8,12 @@ stillest part's (the lowest rate): a head moving over a page that fills the view
 (and dark ink) across nearly every tile in a second, seldom in every quarter of one. On a switch it
 writes the new profile's biases through the source's own ``set_biases`` (the EVK4 driver), logs one
 line with the estimate, counts it (``bias_switches``) and leaves the next ``settle_s`` of events out
-of the count (the pixels settle after a bias write).
+of the count (the pixels settle after a bias write). The stream's first ``settle_s`` are left out
+too: a sensor that starts streaming settles as after a bias write (the simulated one's first
+quarter second reads a 30-lux page as 1.6 lux), and until the first estimate the controller wants
+the whole sensor until one part of the slice is read, rather than waiting
+``probe_every_s``: the first estimate comes within the session's first seconds even when a ROI
+follows the gaze.
 ``[sensor] lux`` replaces the estimate by a configured light level (decided once, at the start).
 
 A source that cannot change its biases (a replayed recording) gets the controller in advisory mode:
@@ -88,6 +93,8 @@ class BiasController:
         self._probing = False  # the whole sensor is wanted for a light reading (``wants_whole``)
         self._slice_start: int | None = None
         self._settle_until: int | None = None
+        self._started = False  # the first event came (the sensor's start settles as a bias write does)
+        self._starting = False  # no light read yet: the whole sensor wanted until a part of the slice is read
         self._estimating = config.lux <= 0 and profile in self.curves
 
     def begin(self) -> None:
@@ -110,6 +117,10 @@ class BiasController:
         if not self._estimating or events.shape[0] == 0:
             return
         t = events["t"]
+        if not self._started:
+            self._started = True
+            if self.config.settle_s > 0:
+                self._settle_until = int(t[0]) + int(self.config.settle_s * 1e6)
         if self._settle_until is not None:
             if int(t[-1]) < self._settle_until:
                 return
@@ -139,17 +150,22 @@ class BiasController:
 
     def wants_whole(self) -> bool:
         """Whether the sensor should deliver all its pixels now, for a light reading (any thread)."""
-        return self._probing
+        return self._probing or self._starting
 
     def _probe(self, t_last: int) -> None:
         """Through a ROI the light goes unread: once none was read for ``probe_every_s``, ask for the
-        whole sensor until ``probe_s`` of it is counted (the slice then ends with an estimate)."""
+        whole sensor until ``probe_s`` of it is counted (the slice then ends with an estimate). Before
+        the first estimate (the session's start) the whole sensor is wanted until one part of the
+        slice is read (``PART_S``: its whole length where the session's first whole-sensor moments
+        end within it; a part read whole for less is read while the sensor still settles)."""
         every = self.config.probe_every_s
         if self._probing:
             if self._read_s >= self.config.probe_s:
                 self._probing = False
+        elif every > 0 and self.lux is None:  # no light read yet: the whole sensor until one part is read
+            self._starting = not self._rates
         elif every > 0 and self._light_read_at is not None and t_last - self._light_read_at >= every * 1e6:
-            self._probing = True
+            self._starting, self._probing = False, True
             self._light_read_at = t_last  # (asked once per period, whether or not the source obliges)
             logger.debug("no light read for %g s: the whole sensor for %g s", every, self.config.probe_s)
 

@@ -147,7 +147,7 @@ class SensorConfig:
     bright_above_lux: float = 25.0  # ... back to factory above this one ...
     min_dwell_s: float = 10.0  # ... at most once per this much event time (a switch changes the noise it is read from)
     estimate_s: float = 1.0  # one estimate per this much event time
-    settle_s: float = 0.5  # events this soon after a bias write are not counted (the pixels settle)
+    settle_s: float = 0.5  # events this soon after a bias write, or after the stream starts, are not counted (the pixels settle)
     stride: int = 4  # every stride-th event is counted (the background is a rate: a sample suffices)
     # auto: through a sensor ROI the light cannot be read (edge/bias_control.py), so when none was read for
     # probe_every_s of event time the whole sensor is delivered for probe_s (0: never)

@@ -212,7 +212,7 @@ def test_tiles_read_out_for_part_of_a_slice_count_at_their_own_rate() -> None:
     # the whole sensor for 0.4 s (the gyroscope not yet trusted), then a ROI around the window: the
     # tiles outside it were read out 0.4 s of the 1-s slice and their rate is counts over that time
     source, rng = RoiReplayLike(), np.random.default_rng(5)
-    controller = BiasController(SensorConfig(stride=1), source, EdgeMetrics(), FACTORY)
+    controller = BiasController(SensorConfig(stride=1, settle_s=0.0), source, EdgeMetrics(), FACTORY)  # (no start-up burst)
     controller.begin()
     window, roi = (260, 200, 100, 80), (200, 140, 240, 200)
     rate = curve_rate(FACTORY, 8.0)
@@ -240,11 +240,12 @@ def test_a_roi_over_the_page_gives_no_estimate_rather_than_the_texts_edges() -> 
 
 
 def test_through_a_roi_the_whole_sensor_is_asked_for_now_and_then_to_read_the_light() -> None:
-    # the ROI on from the start (a still head, its gyroscope trusted): no light read, so after
-    # probe_every_s the controller asks for the whole sensor, gets probe_s of it, and reads the light
+    # the ROI on from the start (a still head, its gyroscope trusted): no light read, so at once (no
+    # start-up burst to settle here) the controller asks for the whole sensor until one part is read,
+    # then every probe_every_s for probe_s of it
     source, rng = RoiReplayLike(), np.random.default_rng(7)
     roi, window = (200, 140, 240, 200), (260, 200, 100, 80)
-    config = SensorConfig(stride=1, probe_every_s=2.0, probe_s=0.3)
+    config = SensorConfig(stride=1, probe_every_s=2.0, probe_s=0.3, settle_s=0.0)
     controller = BiasController(config, source, EdgeMetrics(), FACTORY)
     controller.begin()
     whole_s, asked = 0.0, []
@@ -254,9 +255,11 @@ def test_through_a_roi_the_whole_sensor_is_asked_for_now_and_then_to_read_the_li
         whole_s += 0.05 if source.roi == (0, 0, 640, 480) else 0.0
         controller.push(chunk if source.roi == (0, 0, 640, 480) else inside(chunk, roi), window)
         asked.append(controller.wants_whole())
-    assert controller.lux == pytest.approx(8.0, rel=0.2)  # read in the probe
-    assert not asked[0] and any(asked) and not asked[-1]  # asked after 2 s, given back once read
-    assert 0.3 <= whole_s <= 0.5  # about probe_s of the 5 s whole (the second probe is due at 4.3 s + 2)
+    assert controller.lux == pytest.approx(8.0, rel=0.2)  # read in the probes
+    starts = [k for k in range(1, 100) if asked[k] and not asked[k - 1]]
+    # before the first estimate (at 1 s) until one 250-ms part is read, then probe_every_s after the estimate
+    assert asked[0] and not asked[6] and starts == [60] and not asked[-1]
+    assert 0.5 <= whole_s <= 0.7  # 250-300 ms at the start (50-ms chunks), about probe_s in the probe
 
 
 def test_the_probe_settings_are_checked() -> None:
@@ -278,7 +281,7 @@ def test_a_page_filling_the_view_swept_by_the_head_reads_at_its_stillest_part() 
     rng = np.random.default_rng(8)
     wh = (640, 480)
     rate = curve_rate(FACTORY, 30.0)
-    controller = BiasController(SensorConfig(stride=1), ReplayLike640(), EdgeMetrics(), FACTORY)
+    controller = BiasController(SensorConfig(stride=1, settle_s=0.0), ReplayLike640(), EdgeMetrics(), FACTORY)
     controller.begin()
     chunks = []
     for k in range(21):  # 50-ms chunks; the head sweeps the page for 150 ms of every 250 but the last
@@ -295,3 +298,22 @@ def test_a_page_filling_the_view_swept_by_the_head_reads_at_its_stillest_part() 
 
 class ReplayLike640:
     width, height = 640, 480
+
+
+def test_the_streams_start_settles_and_the_first_reading_follows_at_once_through_a_roi() -> None:
+    """A sensor that starts streaming fires hard for a while (the simulated one read a 30-lux page as
+    1.6 lux in its first quarter second): those events are left out as after a bias write, and then,
+    with no light read yet, the controller asks for the whole sensor at once, not after probe_every_s."""
+    source, rng = RoiReplayLike(), np.random.default_rng(9)
+    roi, window = (200, 140, 240, 200), (260, 200, 100, 80)
+    controller = BiasController(SensorConfig(stride=1), source, EdgeMetrics(), FACTORY)  # settle_s 0.5, probe_s 0.3
+    controller.begin()
+    asked = []
+    for k in range(40):  # 50-ms chunks over 2 s at 30 lux; the first 0.4 s a start-up burst; a ROI unless asked
+        source.roi = (0, 0, 640, 480) if k < 4 or controller.wants_whole() else roi
+        rate = curve_rate(FACTORY, 1.5 if k < 8 else 30.0)  # (the burst's rate: a dark room's)
+        chunk = still_scene(rate, 0.05, (640, 480), rng, t0_us=k * 50_000, edge_rect=roi, edge_rate_hz=40.0)
+        controller.push(chunk if source.roi == (0, 0, 640, 480) else inside(chunk, roi), window)
+        asked.append(controller.wants_whole())
+    assert controller.lux is not None and controller.lux > 25.0 and controller.state.profile == FACTORY
+    assert not any(asked[:9]) and any(asked[10:12]) and not asked[-1]  # asked once settled (0.5 s), given back once read

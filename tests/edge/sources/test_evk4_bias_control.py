@@ -85,10 +85,11 @@ def test_the_events_of_a_bias_write_settle_before_they_count() -> None:
     controller = BiasController(SensorConfig(estimate_s=1.0, settle_s=0.5, stride=4), camera, EdgeMetrics(), FACTORY)
     controller.begin()
     rng = np.random.default_rng(1)
-    controller.push(background(FACTORY, 6.0, 0.0, 1.01, rng), None)
+    controller.push(uniform(10.0, 0.0, 0.4, rng), None)  # the stream's start-up burst: not counted either
+    controller.push(background(FACTORY, 6.0, 0.5, 1.01, rng), None)  # (counted from 0.5 s, the start settled)
     assert controller.active == DARK
-    burst = uniform(10.0, 1.02, 0.4, rng)  # a burst of events right after the write (4x the noise) ...
+    burst = uniform(10.0, 1.52, 0.4, rng)  # a burst of events right after the write (4x the noise) ...
     controller.push(burst, None)
-    controller.push(background(DARK, 6.0, 1.5, 1.05, rng), None)
+    controller.push(background(DARK, 6.0, 2.0, 1.05, rng), None)
     assert controller.lux == pytest.approx(6.0, rel=0.15)  # ... is not counted
     camera.close()
