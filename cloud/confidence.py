@@ -188,7 +188,12 @@ def page_reasons(judgements: Sequence[LineJudgement]) -> tuple[str, ...]:
 
 def spoken_answer(lines: Sequence[tuple[str, LineJudgement | None]]) -> str:
     """What is said: the lines read, each run of unclear lines as "one line unclear" / "N lines
-    unclear", and when half the page or more is unclear, what would help."""
+    unclear" (a page of several lines none of which was read: "the whole page is unclear", since
+    bands of a smeared page are no count worth saying), and when half the page or more is unclear,
+    what would help."""
+    unclear = [j for _, j in lines if j is not None and j.status == "unclear"]
+    if len(lines) > 1 and len(unclear) == len(lines):
+        return "\n".join(["The whole page is unclear.", *(REASONS[r] for r in page_reasons(unclear)[:2])])
     parts: list[str] = []
     run = 0
     for k, (text, judgement) in enumerate([*lines, ("", None)]):
@@ -200,7 +205,6 @@ def spoken_answer(lines: Sequence[tuple[str, LineJudgement | None]]) -> str:
             run = 0
         if k < len(lines) and text.strip():
             parts.append(text)
-    unclear = [j for _, j in lines if j is not None and j.status == "unclear"]
     if unclear and 2 * len(unclear) >= len(lines):
         parts.extend(REASONS[r] for r in page_reasons(unclear)[:2])
     return "\n".join(parts)

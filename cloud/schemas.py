@@ -55,7 +55,7 @@ class AskResponse(BaseModel):
     unclear_lines: int = Field(0, description="lines too unsure to say")
     reasons: list[str] = Field([], description="what would help the unclear lines, most common first")
     spoken: str = Field("", description="what the spoken answer says: the lines read, the unclear ones as such, and what would help "
-                        "(\"Three lines unclear. Please stop moving.\")")
+                        "(\"the quick fox / Two lines unclear. / Please stop moving.\")")
     question: str
     truncated: bool = Field(False, description="the engine stopped early (token limit); text is incomplete")
 

@@ -92,4 +92,4 @@ def test_a_band_of_ink_read_as_nothing_is_an_unclear_line() -> None:
                          conditions=PageConditions(frame_rate_hz=10.0, head_speed_px_s=900.0))
     assert judged[0] is not None and judged[0].status == "unclear" and judged[0].confidence == 0.0
     assert judged[0].reasons == ("too_much_motion",)
-    assert spoken_answer([("", judged[0])] * 3) == "Three lines unclear.\nPlease stop moving."
+    assert spoken_answer([("", judged[0])] * 3) == "The whole page is unclear.\nPlease stop moving."  # (no count of smeared bands)

@@ -163,7 +163,7 @@ def test_lines_the_model_is_unsure_of_are_unclear_in_the_answer_and_the_push(
     assert answer["lines"] and answer["unclear_lines"] == len(answer["lines"])
     assert all(line["status"] == "unclear" and "too_dark" in line["reasons"] for line in answer["lines"]), answer["lines"]
     assert answer["reasons"][0] == "too_dark" and answer["text"].split("\n") == LINES  # the guesses stay in the JSON
-    assert LINES[0] not in answer["spoken"] and "lines unclear." in answer["spoken"] and "Please add more light." in answer["spoken"]
+    assert LINES[0] not in answer["spoken"] and "The whole page is unclear." in answer["spoken"] and "Please add more light." in answer["spoken"]
     pushed = json.loads(data[6:])["lines"]
     assert pushed and all(line["status"] == "unclear" and line["reasons"] for line in pushed)
 
