@@ -20,6 +20,10 @@ class Metrics:
         self.bytes_received = Counter("darkread_ws_received_bytes", "Bytes of messages received", registry=r)
         self.frames_stored = Counter("darkread_ws_frames_stored", "Frames durably stored", registry=r)
         self.pages_stored = Counter("darkread_ws_pages_stored", "Pages durably stored", registry=r)
+        self.views_shed = Counter(
+            "darkread_ws_views_shed", "Views stored that the glasses made while shedding work to keep up (edge.load), by level",
+            ["level"], registry=r,
+        )
         self.duplicates = Counter("darkread_ws_duplicates", "Messages dropped as duplicates (re-acked)", registry=r)
         self.errors = Counter("darkread_ws_errors", "Stream errors, by close code", ["code"], registry=r)
         self.store_failures = Counter(

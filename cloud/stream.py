@@ -80,6 +80,7 @@ class _Pending:
     result: asyncio.Future[WriteResult]  # a task started on arrival, so writes queue in order
     kind: str
     session_id: str
+    shed_level: int = 0  # a view the glasses made while shedding work (counted once stored)
 
 
 @dataclass(frozen=True)
@@ -200,7 +201,8 @@ class StreamConnection:
             if self.hello.mode != "frames":
                 raise UnexpectedMessageError(f"{message.TYPE} received but hello.mode is 'pages'")
             check_view_shape(message, self.hello.fovea, self.hello.v)
-            return _Pending(asyncio.ensure_future(store.add_frame(session_id, stored_frame(message))), "frame", session_id)
+            record = stored_frame(message)
+            return _Pending(asyncio.ensure_future(store.add_frame(session_id, record)), "frame", session_id, record.shed_level)
         if isinstance(message, Page):
             if self.hello.mode != "pages":
                 raise UnexpectedMessageError("page received but hello.mode is 'frames'")
@@ -332,6 +334,8 @@ async def _send_loop(websocket: WebSocket, outbox: asyncio.Queue[_Outgoing | Non
                         context.pages.notify(item.session_id)  # the session's pages take it up
                     if item.kind == "frame":
                         metrics.frames_stored.inc()
+                        if item.shed_level:
+                            metrics.views_shed.labels(level=str(item.shed_level)).inc()
                     elif item.kind == "page":
                         metrics.pages_stored.inc()
                 else:

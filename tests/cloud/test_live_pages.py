@@ -184,3 +184,23 @@ def test_idle_sessions_leave_memory_and_expire(make_settings: Any, run_server: A
                 time.sleep(0.05)
             assert http.get("/v1/sessions/old").status_code == 404
             assert asyncio.run(expire_sessions(server.context)) == []  # nothing left to expire
+
+
+def test_views_of_glasses_that_shed_work_are_counted_and_their_lines_say_so(make_settings: Any, run_server: Any) -> None:
+    """Views made by a live edge falling behind (edge.load) carry the level; the cloud counts them
+    (Prometheus) and each line of their page has it as evidence, so the confidence can take it in."""
+    from dataclasses import replace
+
+    from darkread.proto.messages import View
+
+    views = []
+    for frame in reading_frames(lines=LINES):
+        record = frame.record()
+        views.append(View.of(replace(record, levels=record.mask, n_levels=2, shed_level=3), seq=frame.seq))
+    with run_server(make_settings(), ocr=RapidOcrBackend()) as server:
+        stream(server, "starved", views)
+        with httpx.Client(base_url=server.url, headers=AUTH, timeout=60) as http:
+            answer = http.post("/v1/sessions/starved/ask").json()
+            metrics = http.get("/metrics/").text  # (the test key is an admin key)
+    assert answer["lines"] and all(line["evidence"]["edge_shed"] == 3.0 for line in answer["lines"])
+    assert f'darkread_ws_views_shed_total{{level="3"}} {float(len(views))}' in metrics
