@@ -201,8 +201,8 @@ class StreamConnection:
             if self.hello.mode != "frames":
                 raise UnexpectedMessageError(f"{message.TYPE} received but hello.mode is 'pages'")
             check_view_shape(message, self.hello.fovea, self.hello.v)
-            record = stored_frame(message)
-            return _Pending(asyncio.ensure_future(store.add_frame(session_id, record)), "frame", session_id, record.shed_level)
+            stored = stored_frame(message)
+            return _Pending(asyncio.ensure_future(store.add_frame(session_id, stored)), "frame", session_id, stored.shed_level)
         if isinstance(message, Page):
             if self.hello.mode != "pages":
                 raise UnexpectedMessageError("page received but hello.mode is 'frames'")
