@@ -159,13 +159,14 @@ class BiasController:
         slice is read (``PART_S``: its whole length where the session's first whole-sensor moments
         end within it; a part read whole for less is read while the sensor still settles)."""
         every = self.config.probe_every_s
+        # no light read yet: the whole sensor until one part is read (from the state each time, so it
+        # ends with the first estimate however the part and the slice end)
+        self._starting = every > 0 and self.lux is None and not self._rates
         if self._probing:
             if self._read_s >= self.config.probe_s:
                 self._probing = False
-        elif every > 0 and self.lux is None:  # no light read yet: the whole sensor until one part is read
-            self._starting = not self._rates
-        elif every > 0 and self._light_read_at is not None and t_last - self._light_read_at >= every * 1e6:
-            self._starting, self._probing = False, True
+        elif not self._starting and every > 0 and self._light_read_at is not None and t_last - self._light_read_at >= every * 1e6:
+            self._probing = True
             self._light_read_at = t_last  # (asked once per period, whether or not the source obliges)
             logger.debug("no light read for %g s: the whole sensor for %g s", every, self.config.probe_s)
 

@@ -317,3 +317,21 @@ def test_the_streams_start_settles_and_the_first_reading_follows_at_once_through
         asked.append(controller.wants_whole())
     assert controller.lux is not None and controller.lux > 25.0 and controller.state.profile == FACTORY
     assert not any(asked[:9]) and any(asked[10:12]) and not asked[-1]  # asked once settled (0.5 s), given back once read
+
+
+def test_the_sensor_is_given_back_to_the_roi_once_the_first_estimate_is_made() -> None:
+    """However the first part and the slice end (here a slice of one part: its rate and the estimate
+    come in the same chunk), the start's wish for the whole sensor ends with the first estimate."""
+    source, rng = RoiReplayLike(), np.random.default_rng(10)
+    roi, window = (200, 140, 240, 200), (260, 200, 100, 80)
+    config = SensorConfig(stride=1, settle_s=0.0, estimate_s=0.25, probe_s=0.25, probe_every_s=60.0)
+    controller = BiasController(config, source, EdgeMetrics(), FACTORY)
+    controller.begin()
+    whole_s = 0.0
+    for k in range(40):  # 50-ms chunks over 2 s at 8 lux, the sensor following what the controller wants
+        source.roi = (0, 0, 640, 480) if controller.wants_whole() or k == 0 else roi
+        chunk = still_scene(curve_rate(FACTORY, 8.0), 0.05, (640, 480), rng, t0_us=k * 50_000, edge_rect=roi, edge_rate_hz=40.0)
+        whole_s += 0.05 if source.roi == (0, 0, 640, 480) else 0.0
+        controller.push(chunk if source.roi == (0, 0, 640, 480) else inside(chunk, roi), window)
+    assert controller.lux == pytest.approx(8.0, rel=0.2)
+    assert not controller.wants_whole() and whole_s <= 0.35  # one part (and the chunk that ended it), then the ROI
