@@ -39,6 +39,7 @@ FEATURES: tuple[str, ...] = (
     "ocr_mean", "ocr_min", "ocr_low_share", "log_chars", "height_px", "ink_solid", "log_views",
     "log_frame_rate", "log_head_speed", "known_share", "corrected_share", "edge_shed",
 )
+SHED_EVIDENCE = "edge_shed"  # the mean shedding level of the line's page (``edge.load``)
 MODEL_FILE = "line_confidence.json"
 _WORD = re.compile(r"[A-Za-z]+")
 LOW_CHAR_PROB = 0.6  # a character read with less than this probability counts as doubtful
@@ -84,7 +85,7 @@ class ConfidenceModel:
 
     def threshold_for(self, evidence: dict[str, float]) -> float:
         """The answer threshold for a line with this evidence: its shedding level's (never below the model's)."""
-        level = round(evidence.get("edge_shed", 0.0))
+        level = shed_level_of(evidence)
         return max([self.answer_threshold, *(t for at, t in self.shed_thresholds if at == level)])
 
     def probability(self, evidence: dict[str, float]) -> float:
@@ -137,7 +138,7 @@ def line_evidence(
     if conditions.head_speed_px_s is not None:
         evidence["log_head_speed"] = math.log1p(conditions.head_speed_px_s)
     if conditions.shed_level is not None:
-        evidence["edge_shed"] = conditions.shed_level
+        evidence[SHED_EVIDENCE] = conditions.shed_level
     return evidence
 
 
@@ -157,7 +158,13 @@ def judge(evidence: dict[str, float], model: ConfidenceModel) -> LineJudgement:
 
 def busy(evidence: dict[str, float]) -> bool:
     """Whether the line's page was made by glasses shedding at ``BUSY_SHED_LEVEL`` or deeper."""
-    return evidence.get("edge_shed", 0.0) >= BUSY_SHED_LEVEL
+    return evidence.get(SHED_EVIDENCE, 0.0) >= BUSY_SHED_LEVEL
+
+
+def shed_level_of(evidence: dict[str, float]) -> int:
+    """The shedding level a line's page is judged at: its mean, rounded (0 for glasses that kept up
+    or did not say); the fitter groups the lines it sets ``shed_thresholds`` by the same."""
+    return round(evidence.get(SHED_EVIDENCE, 0.0))
 
 
 def reasons_for(evidence: dict[str, float], model: ConfidenceModel) -> tuple[str, ...]:

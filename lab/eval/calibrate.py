@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from darkread.cloud.confidence import BUSY_SHED_LEVEL, FEATURES, ConfidenceModel, judge
+from darkread.cloud.confidence import BUSY_SHED_LEVEL, FEATURES, SHED_EVIDENCE, ConfidenceModel, judge, shed_level_of
 from darkread.lab.eval.plots import _pyplot
 from darkread.lab.eval.selective import LineOutcome, reliability, weighted_cer
 
@@ -33,7 +33,7 @@ RIDGES = (0.1, 0.3, 1.0, 3.0, 10.0)
 DIM_LUX = 10.0
 MIN_SHED_LINES = 50  # fewer lines of pages made at a shedding level (``--edge-shed-level`` runs): too few to set a threshold by
 SMALL_HEIGHT_PX = 9.0  # a line band lower than this holds glyphs of about 4 px x-height: below what the network resolves
-SHED = "edge_shed"  # fitted apart, on the lines of pages made while the glasses shed (see ``fit_model``)
+SHED = SHED_EVIDENCE  # fitted apart, on the lines of pages made while the glasses shed (see ``fit_model``)
 BASE_FEATURES = tuple(name for name in FEATURES if name != SHED)
 
 
@@ -128,9 +128,9 @@ def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceMod
     lines of glasses that shed with the rest held: a page made without shedding is judged as if the
     starved pages had never been seen, and a starved one pays for how much was shed."""
     starved = [ln for ln in lines if ln.evidence.get(SHED, 0.0) > 0]
-    lines = [ln for ln in lines if ln.evidence.get(SHED, 0.0) <= 0]
-    x, y, mean, scale = _standardised(lines)
-    weights, intercept = fit_logistic(x, y, choose_ridge(lines))
+    kept_up = [ln for ln in lines if ln.evidence.get(SHED, 0.0) <= 0]
+    x, y, mean, scale = _standardised(kept_up)
+    weights, intercept = fit_logistic(x, y, choose_ridge(kept_up))
     shed_weight = 0.0
     if starved:
         base_logit = ((_matrix(starved, mean) - mean) / scale) @ weights + intercept
@@ -141,14 +141,14 @@ def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceMod
     def full(values: np.ndarray, shed_value: float) -> tuple[float, ...]:  # every feature's, the shedding level's as given
         return tuple(float(values[i]) if i >= 0 else shed_value for i in order)
 
-    still = [ln for ln in lines if ln.motion != "walking" and "ink_solid" in ln.evidence]
+    still = [ln for ln in kept_up if ln.motion != "walking" and "ink_solid" in ln.evidence]
     solid_dim = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) <= DIM_LUX]
     solid_lit = [ln.evidence["ink_solid"] for ln in still if (ln.lux or 0) > DIM_LUX]
-    fast = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion == "walking"]
-    calm = [ln.evidence["log_head_speed"] for ln in lines if "log_head_speed" in ln.evidence and ln.motion != "walking"]
+    fast = [ln.evidence["log_head_speed"] for ln in kept_up if "log_head_speed" in ln.evidence and ln.motion == "walking"]
+    calm = [ln.evidence["log_head_speed"] for ln in kept_up if "log_head_speed" in ln.evidence and ln.motion != "walking"]
     model = ConfidenceModel(FEATURES, full(mean, 0.0), full(scale, 1.0), full(weights, shed_weight), intercept, 0.0,
                             _dark_limit(solid_dim, solid_lit), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX)
-    return replace(model, answer_threshold=lowest_threshold(model, lines, target_risk),
+    return replace(model, answer_threshold=lowest_threshold(model, kept_up, target_risk),
                    shed_thresholds=shed_thresholds(model, starved, target_risk))
 
 
@@ -158,7 +158,7 @@ def shed_thresholds(model: ConfidenceModel, starved: Sequence[LineOutcome], targ
     view for a covered fixation much more)."""
     by_level: dict[int, list[LineOutcome]] = {}
     for line in starved:
-        by_level.setdefault(round(line.evidence[SHED]), []).append(line)
+        by_level.setdefault(shed_level_of(line.evidence), []).append(line)
     return tuple((level, lowest_threshold(model, group, target_risk)) for level, group in sorted(by_level.items())
                  if level > 0 and len(group) >= MIN_SHED_LINES)
 
@@ -234,14 +234,14 @@ def _by_suite(held: Sequence[LineOutcome], p: np.ndarray, right: np.ndarray) -> 
 def _by_shedding(held: Sequence[LineOutcome], model: ConfidenceModel) -> list[str]:
     """Coverage and risk of the held-out lines at each shedding level the glasses reported (none when
     no line's page was made while shedding)."""
-    levels = sorted({round(line.evidence.get(SHED, 0.0)) for line in held})
+    levels = sorted({shed_level_of(line.evidence) for line in held})
     if levels == [0]:
         return []
     md = ["Pages made while the glasses shed work (`edge.load`; the suite read with `darkread eval run --edge-shed-level`), "
           "held-out lines, read or not:", "",
           "| shedding level | lines | CER, all lines | answered | CER of the answered |", "|---:|---:|---:|---:|---:|"]
     for level in levels:
-        group = [line for line in held if round(line.evidence.get(SHED, 0.0)) == level]
+        group = [line for line in held if shed_level_of(line.evidence) == level]
         answered = [line for line in group if line.read and judge(line.evidence, model).status == "read"]
         risk = weighted_cer(answered)
         md.append(f"| {level} | {len(group)} | {100 * (weighted_cer(group) or 0):.1f} % | {100 * len(answered) / len(group):.1f} % | "

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from darkread.cloud.confidence import ConfidenceModel, judge, reasons_for
+from darkread.cloud.confidence import SHED_EVIDENCE, ConfidenceModel, judge, reasons_for
 from darkread.core.text_metrics import error_rates, normalize_text
 from darkread.lab.eval.aggregate import sort_key
 from darkread.lab.eval.plots import _pyplot
@@ -76,7 +76,7 @@ def _with_shedding(evidence: Mapping[str, float]) -> dict[str, float]:
     replay, which never sheds: level 0."""
     out = dict(evidence)
     if "log_frame_rate" in out:
-        out.setdefault("edge_shed", 0.0)
+        out.setdefault(SHED_EVIDENCE, 0.0)
     return out
 
 
