@@ -9,8 +9,8 @@ stillest part's (the lowest rate): a head moving over a page that fills the view
 writes the new profile's biases through the source's own ``set_biases`` (the EVK4 driver), logs one
 line with the estimate, counts it (``bias_switches``) and leaves the next ``settle_s`` of events out
 of the count (the pixels settle after a bias write). The stream's first ``settle_s`` are left out
-too: a sensor that starts streaming settles as after a bias write (the simulated one's first
-quarter second reads a 30-lux page as 1.6 lux), and until the first estimate the controller wants
+too: a sensor that starts streaming settles as after a bias write (its first events read a lit page
+as dark: docs/sensor_model.md), and until the first estimate the controller wants
 the whole sensor until one part of the slice is read, rather than waiting
 ``probe_every_s``: the first estimate comes within the session's first seconds even when a ROI
 follows the gaze.
