@@ -154,6 +154,15 @@ def _serve(args: argparse.Namespace) -> int:
             datadir.release(held)
             print(f"darkread: error: {exc}", file=sys.stderr)
             return 1
+    from darkread.cloud.confidence import load_model
+    from darkread.cloud.errors import ConfidenceModelError
+
+    try:  # a broken line-confidence model: one line, before uvicorn starts
+        load_model(str(settings.line_confidence_model) if settings.line_confidence_model else None)
+    except ConfidenceModelError as exc:
+        datadir.release(held)
+        print(f"darkread: error: {exc}", file=sys.stderr)
+        return 1
     app = create_app(settings)
     # uvicorn refuses larger websocket messages itself (close 1009); leave room so that our own
     # check answers first with an error message naming the limit.

@@ -25,6 +25,8 @@ from typing import Literal
 
 import numpy as np
 
+from .errors import ConfidenceModelError
+
 Reason = Literal["glasses_busy", "too_dark", "too_much_motion", "too_small", "look_again"]
 # reason code -> what the spoken answer says: plain words that survive the synthetic voice (an
 # offline recogniser hears "please stop moving" word for word, "hold still" as "pulled deal")
@@ -96,9 +98,20 @@ class ConfidenceModel:
 
 @lru_cache(maxsize=4)
 def load_model(path: str | None = None) -> ConfidenceModel:
-    """The shipped model (``darkread/cloud/data/line_confidence.json``), or the one at ``path``."""
-    text = Path(path).read_text(encoding="utf-8") if path else (files("darkread.cloud") / "data" / MODEL_FILE).read_text(encoding="utf-8")
-    return ConfidenceModel.from_json(json.loads(text))
+    """The shipped model (``darkread/cloud/data/line_confidence.json``), or the one at ``path``;
+    ``ConfidenceModelError`` naming the file when it cannot be read or is not a model."""
+    where = path or f"the shipped {MODEL_FILE}"
+    try:
+        text = Path(path).read_text(encoding="utf-8") if path else (files("darkread.cloud") / "data" / MODEL_FILE).read_text(encoding="utf-8")
+        model = ConfidenceModel.from_json(json.loads(text))
+    except OSError as exc:
+        raise ConfidenceModelError(f"{where}: cannot read the line-confidence model ({exc.strerror or exc})") from None
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        detail = f"no {exc}" if isinstance(exc, KeyError) else str(exc)
+        raise ConfidenceModelError(f"{where}: not a line-confidence model ({detail}); `darkread eval calibrate` writes one") from None
+    if not len(model.features) == len(model.mean) == len(model.scale) == len(model.weights):
+        raise ConfidenceModelError(f"{where}: not a line-confidence model (features, mean, scale and weights differ in length)")
+    return model
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,10 @@ class DataDirError(CloudError):
     another service process."""
 
 
+class ConfidenceModelError(CloudError):
+    """The line-confidence model file cannot be read, or is not one (``darkread eval calibrate`` writes them)."""
+
+
 class ServiceStartError(CloudError):
     """The service did not come up (it exited during start-up, or did not listen in time)."""
 

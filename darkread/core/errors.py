@@ -44,6 +44,7 @@ Each component keeps its own errors in its own ``errors.py``::
           │    └── SessionShapeError   a hello with another mode or geometry than the session's
           ├── NoPageError              the session has nothing to read yet (or not the page asked for)
           ├── DataDirError             the data directory is unusable or held by another process
+          ├── ConfidenceModelError     the line-confidence model file is unreadable or not one
           ├── ServiceStartError        the service did not come up
           ├── OcrError                 an OCR engine failed (``retryable`` says whether to try again)
           │    └── OcrUnavailableError the engine is not installed or not configured

@@ -49,3 +49,21 @@ def test_serve_starts_and_is_ready(tmp_path: Path) -> None:
     # uvicorn shuts down gracefully on SIGTERM, then re-raises the signal.
     assert process.returncode in (0, -15), stderr.decode()[-2000:]
     assert b"Traceback" not in stderr
+
+
+def test_a_broken_line_confidence_model_is_one_line_before_the_server_starts(tmp_path: Path) -> None:
+    """A model file that is truncated or from elsewhere: one line naming it and exit 1, no traceback,
+    and the data directory left free for the next start."""
+    shipped = json.loads((Path(__file__).parents[2] / "cloud" / "data" / "line_confidence.json").read_text())
+    broken = {"truncated.json": json.dumps(shipped)[:200], "wrong.json": json.dumps({**shipped, "shed_thresholds": {"three": 0.5}}),
+              "short.json": json.dumps({**shipped, "weights": shipped["weights"][:3]})}
+    for name, text in broken.items():
+        (tmp_path / name).write_text(text)
+        done = subprocess.run(
+            [sys.executable, "-m", "darkread", "-q", "cloud", "serve", "--port", "1", "--data-dir", str(tmp_path / "d")],
+            env={**os.environ, "DARKREAD_API_KEY": "k", "DARKREAD_LINE_CONFIDENCE_MODEL": str(tmp_path / name)},
+            capture_output=True, text=True, timeout=60,
+        )
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 1 and len(lines) == 1 and "Traceback" not in done.stderr, done.stderr[-2000:]
+        assert str(tmp_path / name) in lines[0] and "not a line-confidence model" in lines[0]
