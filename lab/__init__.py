@@ -8,3 +8,4 @@ from pathlib import Path
 NETWORKS_DIR = Path(__file__).resolve().parent / "networks"
 PREVIOUS_NETWORK = NETWORKS_DIR / "binary_unet_previous.onnx"
 FULL_NETWORK = NETWORKS_DIR / "binary_unet_full.onnx"
+BAND_NETWORK = NETWORKS_DIR / "binary_unet_band.onnx"

@@ -160,8 +160,22 @@ def _cmd_rehearsal(args: argparse.Namespace) -> int:
     from darkread.lab.train.rehearsal import describe, make_rehearsal
 
     summary = make_rehearsal(args.out, count=args.recordings, seed=args.seed, every_ms=args.every_ms, seconds=args.seconds,
-                             jobs=args.jobs, progress=not args.quiet)
+                             jobs=args.jobs, progress=not args.quiet, regime=args.regime)
     print(f"{args.out}: {describe(summary)}")
+    return 0
+
+
+def _cmd_band(args: argparse.Namespace) -> int:
+    from darkread.lab.train.band import tune_across_band
+
+    if not args.base.is_file():
+        raise FileNotFoundError(f"--base {args.base}: no such model file")
+    info = tune_across_band(args.base, args.work, args.export, jobs=args.jobs, progress=not args.quiet)
+    tune = info["tune"]
+    print(f"{args.export}: tuned across the band in {tune['steps']} steps ({tune['seconds']:.0f} s) on "
+          f"{tune['annotated_windows']} grounded and {tune['synthetic_windows']} standard windows; "
+          f"ink F1 on the grounded windows {tune['monitor_f1_before']['annotated_training_windows']:.3f} -> "
+          f"{tune['monitor_f1_after']['annotated_training_windows']:.3f}")
     return 0
 
 
@@ -398,9 +412,29 @@ def _add_rehearsal(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=601, help="the first session's seed (default 601)")
     p.add_argument("--seconds", type=_positive_float, default=2.5, help="length of a session (default 2.5)")
     p.add_argument("--every-ms", type=_positive_float, default=10.0, help="one window per this interval (default 10)")
+    p.add_argument("--regime", choices=("standard", "grounded"), default="standard",
+                   help="standard (default): the shipped network's own sensor regime; grounded: the sensor and head motion "
+                        "of published measurements at 3-30 lux, K drawn over its band, half the sessions at the dark bias "
+                        "profile (36 sessions cover lux x motion x biases once)")
     p.add_argument("--jobs", type=_positive_int, default=1, help="sessions simulated at once (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_rehearsal)
+
+
+def _add_band(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("band", help="tune a network across the sensor's plausible band (grounded reading windows, both bias profiles)",
+                       description="Tune a network (default the shipped one) on what the glasses cut while someone reads "
+                                   "under the grounded sensor model: 36 simulated reading sessions at 3-30 lux, each with "
+                                   "its photoreceptor K drawn over 40-400 Hz per chip-lux, half at the dark bias profile, "
+                                   "with the standard regime's reading windows and page crops rehearsed in every batch "
+                                   "(lab/train/band.py BAND_RECIPE; what it reads: docs/finetune.md). The window sets "
+                                   "are made under --work when absent (about 25 min on one core) and kept.")
+    p.add_argument("--base", type=Path, default=MODELS_DIR / "binary_unet.onnx", help="the network to tune (default the shipped one)")
+    p.add_argument("--work", type=Path, default=Path("runs/band"), help="window sets and the tune's run (default runs/band)")
+    p.add_argument("--export", type=Path, default=Path("runs/band/binary_unet_band.onnx"), help="the tuned network (ONNX)")
+    p.add_argument("--jobs", type=_positive_int, default=1, help="reading sessions simulated at once (default 1)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_band)
 
 
 def _add_target(sub: argparse._SubParsersAction) -> None:
@@ -472,6 +506,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = train.add_subparsers(dest="train_command", metavar="STEP")
     train.set_defaults(func=lambda _args: (train.print_help(), 2)[1])
-    for add in (_add_fit, _add_export, _add_evaluate, _add_finetune, _add_compare, _add_placebo, _add_rehearsal, _add_target,
+    for add in (_add_fit, _add_export, _add_evaluate, _add_finetune, _add_band, _add_compare, _add_placebo, _add_rehearsal, _add_target,
                 _add_annotate, _add_calibrate, _add_all):
         add(sub)

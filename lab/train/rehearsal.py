@@ -19,6 +19,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+from darkread.edge.sources.evk4.bias_profiles import DARK, FACTORY
 from darkread.lab.jobs import run_jobs
 from darkread.lab.truth import annotate_from_truth
 from darkread.models.synth.recording import RecordingSpec, write_recording
@@ -28,16 +29,31 @@ from darkread.models.train.data import count_samples
 SUMMARY_NAME = "rehearsal.json"
 LUX_LEVELS: tuple[float, ...] = (5.0, 10.0, 10.0, 20.0, 30.0, 50.0)  # the dim end, where forgetting showed
 MOTIONS: tuple[str, ...] = ("still", "normal", "walking")
+REGIMES: tuple[str, ...] = ("standard", "grounded")
+# the grounded sensor's dim end (docs/sensor_model.md), where it differs from the standard one: each lux level
+# once at the factory biases and once at the dark profile the glasses switch to below 15 lux
+GROUNDED_LUX_LEVELS: tuple[float, ...] = (3.0, 5.0, 7.0, 10.0, 15.0, 30.0)
+GROUNDED_BIASES: tuple[str, ...] = (FACTORY, DARK)
 
 
-def rehearsal_specs(count: int, seed: int, seconds: float = 2.5) -> list[RecordingSpec]:
-    """``count`` standard-regime reading sessions over lux x motion (lux-major), seeds ``seed``,
-    ``seed`` + 1, ...: three lines of 30 characters of training text, as the tune recordings."""
+def rehearsal_specs(count: int, seed: int, seconds: float = 2.5, regime: str = "standard") -> list[RecordingSpec]:
+    """``count`` reading sessions over lux x motion (lux-major), seeds ``seed``, ``seed`` + 1, ...: three lines of
+    30 characters of training text, as the tune recordings. ``standard``: the shipped network's own regime.
+    ``grounded``: the sensor and head motion of published measurements, each session's photoreceptor K drawn
+    over its band (seeded), at both bias profiles (lux x motion x biases)."""
     if count < 1:
         raise ValueError(f"--recordings {count}: must be at least 1")
-    grid = [(lux, motion) for lux in LUX_LEVELS for motion in MOTIONS]
+    if regime not in REGIMES:
+        raise ValueError(f"--regime {regime}: use one of {', '.join(REGIMES)}")
+    if regime == "standard":
+        grid = [(lux, motion, FACTORY) for lux in LUX_LEVELS for motion in MOTIONS]
+        extra: dict[str, Any] = {"regime": "standard"}
+    else:
+        grid = [(lux, motion, biases) for lux in GROUNDED_LUX_LEVELS for motion in MOTIONS for biases in GROUNDED_BIASES]
+        extra = {"regime": "grounded", "motion_regime": "grounded"}
     return [RecordingSpec(lux=grid[i % len(grid)][0], motion=grid[i % len(grid)][1], kind="paragraph", seconds=seconds,
-                          seed=seed + i, n_lines=3, line_chars=30, split="train", regime="standard")
+                          seed=seed + i, n_lines=3, line_chars=30, split="train", bias_profile=grid[i % len(grid)][2],
+                          **extra)
             for i in range(count)]
 
 
@@ -52,11 +68,11 @@ def _one(indexed: tuple[int, RecordingSpec], work: Path, out: Path, every_ms: fl
     (labelled / SHARD_NAME).replace(out / f"shard-{index:05d}.npz")
     shutil.rmtree(recording)
     shutil.rmtree(labelled)
-    return {**{k: summary[k] for k in ("lux", "motion", "windows", "ink_share")}, "seed": spec.seed}
+    return {**{k: summary[k] for k in ("lux", "motion", "windows", "ink_share")}, "seed": spec.seed, "biases": spec.bias_profile}
 
 
 def make_rehearsal(out: str | Path, count: int = 18, seed: int = 601, every_ms: float = 10.0, seconds: float = 2.5,
-                   jobs: int = 1, progress: bool = True) -> dict[str, Any]:
+                   jobs: int = 1, progress: bool = True, regime: str = "standard") -> dict[str, Any]:
     """Write OUT/shard-NNNNN.npz (one per session, in seed order) and OUT/rehearsal.json; a shard
     already there is kept, so an interrupted run resumes."""
     from tqdm import tqdm
@@ -65,10 +81,10 @@ def make_rehearsal(out: str | Path, count: int = 18, seed: int = 601, every_ms: 
     if every_ms <= 0:
         raise ValueError(f"--every-ms {every_ms}: must be positive")
     out = Path(out)
-    specs = rehearsal_specs(count, seed, seconds)
+    specs = rehearsal_specs(count, seed, seconds, regime)
     previous = _previous(out)
     settings = {"count": count, "first_seed": seed, "every_ms": every_ms,
-                "spec": {k: v for k, v in asdict(specs[0]).items() if k not in ("lux", "motion", "seed")}}
+                "spec": {k: v for k, v in asdict(specs[0]).items() if k not in ("lux", "motion", "seed", "bias_profile")}}
     settings = json.loads(json.dumps(settings))  # as rehearsal.json reads back (tuples as lists)
     if previous and any(previous.get(k) != v for k, v in settings.items()):
         raise ValueError(f"{out} holds rehearsal windows made with other settings ({previous.get('count')} sessions from seed "

@@ -10,7 +10,7 @@ import pytest
 
 from darkread.edge.errors import ModelError
 from darkread.edge.reconstruct import Reconstructor, default_model_path
-from darkread.lab import FULL_NETWORK, PREVIOUS_NETWORK
+from darkread.lab import BAND_NETWORK, FULL_NETWORK, PREVIOUS_NETWORK
 
 
 @pytest.fixture(scope="module")
@@ -200,3 +200,4 @@ def test_the_shipped_networks_carry_the_temperatures_they_were_read_at() -> None
     assert Reconstructor(shipped_model.with_name("binary_unet_int8.onnx"), warmup=0).temperature == 1.5
     assert Reconstructor(PREVIOUS_NETWORK, warmup=0).temperature == 1.0
     assert Reconstructor(FULL_NETWORK, warmup=0).temperature == 1.5
+    assert Reconstructor(BAND_NETWORK, warmup=0).temperature == 1.5  # the tune carries its base's temperature

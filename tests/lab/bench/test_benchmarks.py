@@ -54,10 +54,10 @@ STITCH = {"stitch_ms_per_frame", "stitch_ink_f1", "stitch_ink_f1_tol1px", "stitc
 
 def inference_keys() -> set[str]:
     from darkread.edge.reconstruct import default_model_path
-    from darkread.lab import PREVIOUS_NETWORK
+    from darkread.lab import BAND_NETWORK, PREVIOUS_NETWORK
     from darkread.lab.bench.inference import INT8_FILENAME
 
-    keys = {"inference_ms_fp32", "inference_ms_reference"}
+    keys = {"inference_ms_fp32", "inference_ms_reference"} | ({"inference_cost_ratio_band_vs_shipped"} if BAND_NETWORK.is_file() else set())
     keys |= {"inference_ms_int8"} if default_model_path().with_name(INT8_FILENAME).is_file() else set()
     return keys | ({"inference_ms_previous_model", "inference_cost_ratio_vs_previous"}
                    if PREVIOUS_NETWORK.is_file() else set())

@@ -22,6 +22,16 @@ def test_sessions_cover_lux_and_motion_in_the_standard_regime() -> None:
         rehearsal_specs(0, seed=1)
 
 
+def test_grounded_sessions_cover_lux_motion_and_both_bias_profiles_with_k_drawn() -> None:
+    specs = rehearsal_specs(36, seed=700, regime="grounded")
+    assert {(s.lux, s.motion, s.bias_profile) for s in specs} == {
+        (lux, m, b) for lux in (3, 5, 7, 10, 15, 30) for m in ("still", "normal", "walking") for b in ("factory", "dark")}
+    assert all(s.regime == "grounded" and s.motion_regime == "grounded" and s.k_hz_per_chip_lux is None for s in specs)
+    assert [s.bias_profile for s in specs[:2]] == ["factory", "dark"]  # the same scene's neighbours differ in biases
+    with pytest.raises(ValueError, match="--regime shifted"):
+        rehearsal_specs(2, seed=1, regime="shifted")
+
+
 def test_a_rehearsal_set_is_a_shard_directory_that_resumes_and_guards_its_settings(tmp_path) -> None:
     out = tmp_path / "rehearsal"
     summary = make_rehearsal(out, count=1, seed=7, every_ms=40.0, seconds=0.5, progress=False)
