@@ -73,11 +73,37 @@ class CloudProcess:
                 time.sleep(0.1)
         raise RuntimeError(f"cloud did not come up within {timeout_s:g} s")
 
+    def wait_warm(self, timeout_s: float = 60) -> None:
+        """Until /readyz says every dependency is ready: the OCR models load in the background after
+        /healthz answers, and a test that reads the process's memory must not count them."""
+        assert self.process is not None  # launch() first
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            try:
+                with urllib.request.urlopen(f"{self.url}/readyz", timeout=5):
+                    return
+            except OSError:
+                time.sleep(0.2)
+        raise RuntimeError(f"cloud not ready (/readyz) within {timeout_s:g} s")
+
     def memory_mb(self) -> tuple[float, float]:
         """(resident set now, its peak so far) in MB, from /proc."""
         assert self.process is not None  # launch() first
         fields = dict(line.split(":", 1) for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines())
         return int(fields["VmRSS"].split()[0]) / 1024, int(fields["VmHWM"].split()[0]) / 1024
+
+    def settled_memory_mb(self, timeout_s: float = 30, within_mb: float = 2.0) -> float:
+        """The resident set once it holds still (two readings 1 s apart within ``within_mb``): after
+        /readyz the OCR engine still allocates for a few seconds, which no request should be blamed for."""
+        deadline = time.monotonic() + timeout_s
+        last = self.memory_mb()[0]
+        while time.monotonic() < deadline:
+            time.sleep(1.0)
+            now = self.memory_mb()[0]
+            if abs(now - last) <= within_mb:
+                return now
+            last = now
+        raise RuntimeError(f"cloud memory did not settle within {timeout_s:g} s (last {last:.0f} MB)")
 
     def kill(self) -> None:
         """SIGKILL: no shutdown, no flush, connections cut."""
