@@ -26,7 +26,7 @@ from darkread.models.train.finetune import TuneConfig, finetune
 
 @dataclass(frozen=True)
 class BandRecipe:
-    """The shipped network's tune across the band (models/MODEL_CARD.md)."""
+    """The tune across the band that made ``lab/networks/binary_unet_band.onnx`` (docs/finetune.md)."""
 
     grounded_sessions: int = 36  # rehearsal.GROUNDED_LUX_LEVELS x motions x both bias profiles, once
     session_s: float = 2.5  # each reading session's length; a window every 10 ms of it

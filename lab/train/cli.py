@@ -406,7 +406,9 @@ def _add_rehearsal(sub: argparse._SubParsersAction) -> None:
                                    "motion), cut every session's windows as the glasses do, label them from the simulator's "
                                    "own pose and ink (`train annotate --truth`), and write them as one shard directory for "
                                    "`darkread train finetune --synthetic-dir`. Mixed into a fine-tune they keep the network "
-                                   "reading the old regime as it did (docs/finetune.md). An interrupted run resumes.")
+                                   "reading the old regime as it did (docs/finetune.md). With --regime grounded the sessions "
+                                   "are the grounded sensor's, the windows `darkread train band` learns from. An interrupted "
+                                   "run resumes.")
     p.add_argument("out", type=Path, help="output shard directory")
     p.add_argument("--recordings", type=_positive_int, default=18, help="reading sessions (default 18: 6 lux levels x 3 motions)")
     p.add_argument("--seed", type=int, default=601, help="the first session's seed (default 601)")

@@ -8,6 +8,9 @@ dim light denoised windows): tuned with crops alone, six networks in a row read 
 10-lux pages worse than networks that learned nothing; with these windows in the mix, not
 (docs/finetune.md). ``make_rehearsal`` writes one shard directory of them for
 ``darkread train finetune --synthetic-dir``.
+
+With ``regime="grounded"`` the sessions are the grounded sensor's instead (K over its band, both bias
+profiles): not a regime to rehearse but the windows a tune across the band learns from (``lab/train/band.py``).
 """
 
 from __future__ import annotations
@@ -110,7 +113,7 @@ def make_rehearsal(out: str | Path, count: int = 18, seed: int = 601, every_ms: 
 def _found(shard: Path, spec: RecordingSpec) -> dict[str, Any]:
     """A session an interrupted run finished but did not get to record: counted from its shard."""
 
-    return {"lux": spec.lux, "motion": spec.motion, "windows": count_samples(shard), "seed": spec.seed}
+    return {"lux": spec.lux, "motion": spec.motion, "windows": count_samples(shard), "seed": spec.seed, "biases": spec.bias_profile}
 
 
 def _previous(out: Path) -> dict[str, Any]:
