@@ -134,7 +134,7 @@ def _serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from darkread.cloud import datadir
-    from darkread.cloud.app import create_app
+    from darkread.cloud.app import create_app, live_config
     from darkread.cloud.errors import DataDirError
     from darkread.cloud.server import WEBSOCKET_OPTIONS
 
@@ -144,22 +144,18 @@ def _serve(args: argparse.Namespace) -> int:
     except DataDirError as exc:
         print(f"darkread: error: {exc}", file=sys.stderr)
         return 1
-    if settings.database_url is not None:
-        from darkread.cloud.errors import StoreError
-        from darkread.cloud.store.postgres import migrate_database
-
-        try:  # a wrong URL or password: one line (without the password), before uvicorn starts
-            migrate_database(settings.database_url.get_secret_value())
-        except StoreError as exc:
-            datadir.release(held)
-            print(f"darkread: error: {exc}", file=sys.stderr)
-            return 1
     from darkread.cloud.confidence import load_model
-    from darkread.cloud.errors import ConfidenceModelError
+    from darkread.cloud.errors import ConfidenceModelError, StoreError
 
-    try:  # a broken line-confidence model: one line, before uvicorn starts
-        load_model(str(settings.line_confidence_model) if settings.line_confidence_model else None)
-    except ConfidenceModelError as exc:
+    # a wrong database URL or password (said without the password), a broken line-confidence model:
+    # one line, before uvicorn starts (the model loaded here is the one the sessions take from the cache)
+    try:
+        if settings.database_url is not None:
+            from darkread.cloud.store.postgres import migrate_database
+
+            migrate_database(settings.database_url.get_secret_value())
+        load_model(live_config(settings).confidence_model)
+    except (StoreError, ConfidenceModelError) as exc:
         datadir.release(held)
         print(f"darkread: error: {exc}", file=sys.stderr)
         return 1

@@ -61,30 +61,26 @@ class CloudProcess:
                 log.close()  # the child has its own copy
 
     def wait_ready(self, timeout_s: float = 30) -> None:
+        self._wait_for("/healthz", timeout_s, answer_s=0.5, pause_s=0.1, failure="did not come up")
+
+    def wait_warm(self, timeout_s: float = 60) -> None:
+        """Until /readyz says every dependency is ready: the OCR models load in the background after
+        /healthz answers, and a test that reads the process's memory must not count them."""
+        self._wait_for("/readyz", timeout_s, answer_s=5.0, pause_s=0.2, failure="not ready (/readyz)")
+
+    def _wait_for(self, path: str, timeout_s: float, *, answer_s: float, pause_s: float, failure: str) -> None:
+        """Until ``path`` answers 2xx, the process still running."""
         assert self.process is not None  # launch() first
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
                 raise RuntimeError(f"cloud exited with {self.process.returncode}")
             try:
-                with urllib.request.urlopen(f"{self.url}/healthz", timeout=0.5):
+                with urllib.request.urlopen(f"{self.url}{path}", timeout=answer_s):
                     return
             except OSError:
-                time.sleep(0.1)
-        raise RuntimeError(f"cloud did not come up within {timeout_s:g} s")
-
-    def wait_warm(self, timeout_s: float = 60) -> None:
-        """Until /readyz says every dependency is ready: the OCR models load in the background after
-        /healthz answers, and a test that reads the process's memory must not count them."""
-        assert self.process is not None  # launch() first
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            try:
-                with urllib.request.urlopen(f"{self.url}/readyz", timeout=5):
-                    return
-            except OSError:
-                time.sleep(0.2)
-        raise RuntimeError(f"cloud not ready (/readyz) within {timeout_s:g} s")
+                time.sleep(pause_s)
+        raise RuntimeError(f"cloud {failure} within {timeout_s:g} s")
 
     def memory_mb(self) -> tuple[float, float]:
         """(resident set now, its peak so far) in MB, from /proc."""

@@ -33,8 +33,8 @@ RIDGES = (0.1, 0.3, 1.0, 3.0, 10.0)
 DIM_LUX = 10.0
 MIN_SHED_LINES = 50  # fewer lines of pages made at a shedding level (``--edge-shed-level`` runs): too few to set a threshold by
 SMALL_HEIGHT_PX = 9.0  # a line band lower than this holds glyphs of about 4 px x-height: below what the network resolves
-SHED = SHED_EVIDENCE  # fitted apart, on the lines of pages made while the glasses shed (see ``fit_model``)
-BASE_FEATURES = tuple(name for name in FEATURES if name != SHED)
+# the shedding level is fitted apart, on the lines of pages made while the glasses shed (see ``fit_model``)
+BASE_FEATURES = tuple(name for name in FEATURES if name != SHED_EVIDENCE)
 
 
 def split(lines: Sequence[LineOutcome]) -> tuple[list[LineOutcome], list[LineOutcome]]:
@@ -127,16 +127,16 @@ def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceMod
     """The logistic model on the lines of glasses that kept up, then the shedding level's weight on the
     lines of glasses that shed with the rest held: a page made without shedding is judged as if the
     starved pages had never been seen, and a starved one pays for how much was shed."""
-    starved = [ln for ln in lines if ln.evidence.get(SHED, 0.0) > 0]
-    kept_up = [ln for ln in lines if ln.evidence.get(SHED, 0.0) <= 0]
+    starved = [ln for ln in lines if ln.evidence.get(SHED_EVIDENCE, 0.0) > 0]
+    kept_up = [ln for ln in lines if ln.evidence.get(SHED_EVIDENCE, 0.0) <= 0]
     x, y, mean, scale = _standardised(kept_up)
     weights, intercept = fit_logistic(x, y, choose_ridge(kept_up))
     shed_weight = 0.0
     if starved:
         base_logit = ((_matrix(starved, mean) - mean) / scale) @ weights + intercept
-        shed_weight = fit_shed_weight(base_logit, np.array([ln.evidence[SHED] for ln in starved]),
+        shed_weight = fit_shed_weight(base_logit, np.array([ln.evidence[SHED_EVIDENCE] for ln in starved]),
                                       np.array([ln.right for ln in starved], dtype=np.float64))
-    order = [BASE_FEATURES.index(name) if name != SHED else -1 for name in FEATURES]
+    order = [BASE_FEATURES.index(name) if name != SHED_EVIDENCE else -1 for name in FEATURES]
 
     def full(values: np.ndarray, shed_value: float) -> tuple[float, ...]:  # every feature's, the shedding level's as given
         return tuple(float(values[i]) if i >= 0 else shed_value for i in order)

@@ -53,32 +53,33 @@ def band_sets(work: str | Path) -> dict[str, Path]:
     return {"grounded": root / "rehearsal_grounded", "standard": root / "rehearsal_standard", "crops": root / "crops"}
 
 
-def make_band_sets(work: str | Path, recipe: BandRecipe = BAND_RECIPE, jobs: int = 1, progress: bool = True) -> dict[str, Path]:
-    """The grounded and standard reading windows and the crops (each resumes; a finished set is kept)."""
+def make_band_sets(work: str | Path, recipe: BandRecipe = BAND_RECIPE, jobs: int = 1, progress: bool = True) -> dict[str, str]:
+    """The grounded and standard reading windows and the crops (each resumes; a finished set is kept);
+    what each reading set holds, on one line."""
     sets = band_sets(work)
     grounded = make_rehearsal(sets["grounded"], count=recipe.grounded_sessions, seed=recipe.grounded_seed,
                               seconds=recipe.session_s, jobs=jobs, progress=progress, regime="grounded")
     standard = make_rehearsal(sets["standard"], count=recipe.standard_sessions, seed=recipe.standard_seed,
                               seconds=recipe.session_s, jobs=jobs, progress=progress, regime="standard")
-    print(f"{sets['grounded']}: {describe(grounded)}\n{sets['standard']}: {describe(standard)}")
     try:
         shard_paths(sets["crops"])
     except FileNotFoundError:
         build_dataset(sets["crops"], recipe.crops, workers=jobs, seed=recipe.crops_seed, split="train")
-    return sets
+    return {"grounded": describe(grounded), "standard": describe(standard)}
 
 
 def tune_across_band(base: str | Path, work: str | Path, export_to: str | Path, *, recipe: BandRecipe = BAND_RECIPE,
                      jobs: int = 1, progress: bool = True) -> dict[str, Any]:
     """``base`` (ONNX) tuned across the band with ``recipe``; the tuned network written to ``export_to``."""
     started = time.monotonic()
-    sets = make_band_sets(work, recipe, jobs, progress)
+    held = make_band_sets(work, recipe, jobs, progress)
     made = time.monotonic() - started
+    sets = band_sets(work)
     cfg = TuneConfig(lr=recipe.lr, steps=recipe.steps, minutes=recipe.minutes, synthetic_share=recipe.synthetic_share,
                      seed=recipe.seed, anchor_weight=recipe.anchor, train_only=recipe.train_only)
     summary = finetune([sets["grounded"]], base, Path(work) / "tune", export_to, cfg=cfg, synthetic=None,
                        synthetic_dirs=[sets["crops"], sets["standard"]], progress=progress)
-    info = {"recipe": asdict(recipe), "base": str(base), "exported": str(export_to), "sets_s": round(made, 1),
+    info = {"recipe": asdict(recipe), "base": str(base), "exported": str(export_to), "sets": held, "sets_s": round(made, 1),
             "tune": {k: summary[k] for k in ("annotated_windows", "synthetic_windows", "steps", "seconds",
                                               "monitor_f1_before", "monitor_f1_after")}}
     (Path(work) / "band.json").write_text(json.dumps(info, indent=1, default=float) + "\n", encoding="utf-8")

@@ -172,6 +172,7 @@ def _cmd_band(args: argparse.Namespace) -> int:
         raise FileNotFoundError(f"--base {args.base}: no such model file")
     info = tune_across_band(args.base, args.work, args.export, jobs=args.jobs, progress=not args.quiet)
     tune = info["tune"]
+    print("\n".join(f"{name} windows: {held}" for name, held in info["sets"].items()))
     print(f"{args.export}: tuned across the band in {tune['steps']} steps ({tune['seconds']:.0f} s) on "
           f"{tune['annotated_windows']} grounded and {tune['synthetic_windows']} standard windows; "
           f"ink F1 on the grounded windows {tune['monitor_f1_before']['annotated_training_windows']:.3f} -> "
