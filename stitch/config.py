@@ -55,6 +55,14 @@ class StitchConfig:
                             seen content: 40 px from the prediction a frame can sit on a sliver of
                             the page, where a few strokes correlate perfectly (score ~1) with
                             anything; such a frame goes to the anchor search instead.
+      doubtful_match_drop   a match this far below the recent median (but not weak) is searched
+                            wide too, and the wide peak taken only on the same line (fewer than
+                            ``ambiguity_rows`` rows from it) and ``anchor_gain`` better: with the
+                            scene's offset a few px off per frame, a word's letters matched one
+                            letter off at 0.75 where the right place scored 0.95, and each such
+                            frame moved the next prediction further off. A line's worth up or down
+                            stays the weak match's test (in dim light a wide peak a line away beat a
+                            right but noisy match by 0.1 and more); 0 turns it off.
       ambiguity_rows        ... where matches at least this many rows from the peak are the
                             neighbouring lines' (text lines look alike to a correlation) ...
       ambiguity_margin      ... which the peak must beat by this much; otherwise the frame is dropped
@@ -141,6 +149,7 @@ class StitchConfig:
     wide_search_px: int = 40
     weak_match_drop: float = 0.2
     wide_min_known: float = 0.3
+    doubtful_match_drop: float = 0.1
     anchor_search_px: int = 200
     anchor_trigger_score: float = 0.5
     anchor_min_score: float = 0.5

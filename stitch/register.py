@@ -17,8 +17,13 @@ import numpy as np
 # Tie-breaker towards the predicted place: text repeats itself (letters, lines), and among near-equal
 # peaks the one needing less head motion is the likelier.
 _CENTRE_PRIOR = 0.03
-# a page stretch whose ink varies less than this fraction of the frame's (std) is no place for it
+# a page stretch whose ink varies less than this fraction of the frame's (std) is no place for it:
+# anywhere on the page (the anchor search)...
 _MIN_SPREAD_RATIO = 0.5
+# ... and near the prediction, where only a blank stretch is refused: in dim light the page's ink is
+# faint where its frames disagreed (right places measured at 0.35-0.5 of the frame's std), while
+# paper under a trace of ink, which correlates perfectly with anything, below 0.03
+_MIN_SPREAD_RATIO_NEAR = 0.1
 
 
 @dataclass(frozen=True)
@@ -91,9 +96,26 @@ def _finite(scores: np.ndarray) -> np.ndarray:
     return np.nan_to_num(scores, copy=False, nan=-1.0, posinf=-1.0, neginf=-1.0)
 
 
-def _match(search: np.ndarray, sub: np.ndarray, radius: int) -> np.ndarray:
-    """Normalised correlation of ``sub`` at every offset in ``search``, minus the centre prior."""
-    scores = _finite(cv2.matchTemplate(search, sub, cv2.TM_CCOEFF_NORMED))
+def _window_mean(image: np.ndarray, shape: tuple[int, int], out: tuple[int, int]) -> np.ndarray:
+    """Mean of ``image`` over the ``shape``-sized window (h, w) at every offset (top-left anchored),
+    for the ``out`` offsets (rows, cols) a template of that shape has in it."""
+    h, w = shape
+    mean = cv2.boxFilter(image, -1, (w, h), anchor=(0, 0), normalize=True, borderType=cv2.BORDER_CONSTANT)
+    return mean[: out[0], : out[1]]
+
+
+def _varied_enough(search: np.ndarray, template: np.ndarray, out: tuple[int, int], ratio: float) -> np.ndarray:
+    """Where the stretch of ``search`` under ``template`` holds at least ``ratio`` of the template's
+    ink variation (std): a nearly blank stretch of page correlates with anything (a few strokes of
+    the frame against paper score ~1), so only these offsets may be its place."""
+    spread = _window_mean(search * search, template.shape, out) - _window_mean(search, template.shape, out) ** 2
+    return spread >= ratio**2 * float(template.var())
+
+
+def _match(search: np.ndarray, sub: np.ndarray, radius: int, usable: np.ndarray) -> np.ndarray:
+    """Normalised correlation of ``sub`` at every offset in ``search``, the worst score where not
+    ``usable``, minus the centre prior."""
+    scores = np.where(usable, _finite(cv2.matchTemplate(search, sub, cv2.TM_CCOEFF_NORMED)), np.float32(-1.0))
     return scores - _prior(scores.shape, radius) if radius > 0 else scores
 
 
@@ -143,7 +165,8 @@ def register_frame(
         rotated = cv2.warpAffine(blurred, frame_transform((h, w), angle), (w, h), flags=cv2.INTER_LINEAR)
         return np.ascontiguousarray(rotated[y0:y1, x0:x1])
 
-    matches = {i: _match(search, turned(angle), radius) for i, angle in enumerate(angles_deg)}
+    usable = _varied_enough(search, blurred[y0:y1, x0:x1], (2 * radius + 1, 2 * radius + 1), _MIN_SPREAD_RATIO_NEAR)
+    matches = {i: _match(search, turned(angle), radius, usable) for i, angle in enumerate(angles_deg)}
     peaks = {i: (float(scores.max()), scores) for i, scores in matches.items()}
     best = max(peaks, key=lambda i: peaks[i][0])
     scores = peaks[best][1]
@@ -197,18 +220,8 @@ def locate_frame(
         return None
     search = blur(reference, blur_sigma)
     scores = _finite(cv2.matchTemplate(search, np.ascontiguousarray(blurred), cv2.TM_CCOEFF_NORMED))
-    rows, cols = scores.shape
-
-    def window_mean(image: np.ndarray) -> np.ndarray:
-        """Mean of ``image`` over the frame-sized window at every offset (top-left anchored)."""
-        mean = cv2.boxFilter(image, -1, (w, h), anchor=(0, 0), normalize=True, borderType=cv2.BORDER_CONSTANT)
-        return mean[:rows, :cols]
-
-    share = window_mean(known.astype(np.float32))
-    # a nearly blank stretch of page correlates with anything: it must hold about as much ink
-    # variation as the frame
-    spread = window_mean(search * search) - window_mean(search) ** 2
-    usable = (share >= min_known_fraction) & (spread >= _MIN_SPREAD_RATIO**2 * float(blurred.var()))
+    share = _window_mean(known.astype(np.float32), (h, w), scores.shape)
+    usable = (share >= min_known_fraction) & _varied_enough(search, blurred, scores.shape, _MIN_SPREAD_RATIO)
     scores = np.where(usable, np.clip(scores, -1.0, 1.0), -1.0) - _prior(scores.shape, radius)
     by, bx = np.unravel_index(int(np.argmax(scores)), scores.shape)
     if not usable[by, bx]:

@@ -252,6 +252,11 @@ class PageStitcher:
         if reg is not None and cfg.wide_search_px > r and (reg.on_rim or self._weak(reg.score)):
             reg = self._search_wide(frame, px, py, roll)
             rejected = reg is None
+        elif reg is not None and cfg.wide_search_px > r and self._doubtful(reg.score):
+            wider = self._search_wide(frame, px, py, roll)
+            same_line = wider is not None and abs(wider.shift_xy[1] - reg.shift_xy[1]) < cfg.ambiguity_rows
+            if wider is not None and same_line and wider.score >= reg.score + cfg.anchor_gain:
+                reg = wider
         if (reg is None or reg.score < cfg.anchor_trigger_score or self._weak(reg.score)) and not self._page_empty():
             found = self._search_anchor(frame, px, py, roll, reg)
             if found is not None:
@@ -288,6 +293,11 @@ class PageStitcher:
         """A match well below the recent ones: likely the neighbouring line (one pitch off, a frame's
         lines meet other words), as when the head moved more than predicted."""
         return len(self._scores) >= 3 and score < _median(self._scores) - self.cfg.weak_match_drop
+
+    def _doubtful(self, score: float) -> bool:
+        """A match somewhat below the recent ones: as likely a letter or a word off as a worse view."""
+        drop = self.cfg.doubtful_match_drop
+        return drop > 0 and len(self._scores) >= 3 and score < _median(self._scores) - drop
 
     def _page_empty(self) -> bool:
         return self._page.canvas.empty and (self._strip is None or self._strip.empty)

@@ -127,3 +127,21 @@ def test_locate_frame_needs_known_content_with_ink(rendered_page) -> None:
     assert locate_frame(reference, np.zeros_like(reference, bool), frame, radius) is None  # nothing seen
     with pytest.raises(ValueError):
         locate_frame(reference[1:], np.ones_like(reference[1:], bool), frame, radius)
+
+
+
+def test_a_faint_trace_of_the_page_is_no_place_for_a_frame(rendered_page) -> None:
+    """Normalised correlation ignores contrast: a stretch of page where one frame left a faint trace
+    of ink (here at 1 %) correlates perfectly with a frame of the same words, nearer the prediction
+    than their true place. Registration takes only places whose ink varies about as much as the
+    frame's (as ``locate_frame`` does): a walking page once grew a second copy of its first lines so."""
+    r = 20
+    frame = _crop(rendered_page.mask, 200, 130).astype(np.float32)
+    trace = np.zeros((100 + 2 * r, 200 + 2 * r), np.float32)
+    trace[r + 2 : r + 102, r + 3 : r + 203] = 0.01 * frame  # 2 rows and 3 columns from the prediction
+    page = trace.copy()
+    page[r - 4 : r + 96, r - 16 : r + 184] = np.maximum(page[r - 4 : r + 96, r - 16 : r + 184], frame)  # the words
+    reg = register_frame(page, np.ones_like(page, bool), frame, r)
+    assert reg is not None and reg.shift_xy == (-16, -4) and reg.score > 0.9
+    alone = register_frame(trace, np.ones_like(trace, bool), frame, r)  # the trace alone: no match, not a perfect one
+    assert alone is not None and alone.score < 0

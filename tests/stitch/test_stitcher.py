@@ -384,3 +384,38 @@ def test_a_reading_whose_views_are_all_faint_still_gives_the_page(rendered_page,
     tolerant, _ = ink_f1_aligned(page.image, rendered_page.mask, tolerance_px=1)
     assert tolerant > 0.95
     assert (page.to_grey() < 64).sum() > 0.5 * page.image.sum()  # the grey page OCR reads shows it black
+
+
+@pytest.mark.parametrize("wide_shift, wide_score, taken", [
+    ((28, 5), 0.95, True),  # the same line, a letter on, as good as the recent matches: taken
+    ((28, 30), 0.95, False),  # a line below: the weak match's test decides that, not this one
+    ((28, 5), 0.80, False),  # barely better: the near match stands
+])  # fmt: skip
+def test_a_doubtful_match_is_searched_wide_on_its_own_line(rendered_page, monkeypatch, wide_shift: tuple[int, int],
+                                                           wide_score: float, taken: bool) -> None:
+    # measured on a 100-lux page: the scene's offset a few px off per frame, each word matched a
+    # letter off at 0.72-0.77 where the right place, 14 px on, scored 0.95; every such frame moved
+    # the next prediction further off and the page's left half was stitched twice, 40 px apart
+    from collections import deque
+
+    import darkread.stitch.stitcher as stitcher_module
+    from darkread.stitch.register import Registration
+
+    window = rendered_page.mask[130:230, 200:400]
+    near = Registration((14, 4), 0.75, 1.0, vertical_margin=0.5)
+    wide = Registration(wide_shift, wide_score, 1.0, vertical_margin=0.5)
+
+    def place(found_wide: Registration | None) -> tuple[float, float]:
+        stitcher = PageStitcher()
+        stitcher.add(FrameRecord(0, 0, window, (200, 130), (300.0, 180.0)))
+        stitcher.flush()
+        stitcher._scores = deque([0.95] * 6, maxlen=stitcher._scores.maxlen)
+        with monkeypatch.context() as patched:  # the usual search (16 px) finds ``near``, the wide one ``found_wide``
+            patched.setattr(stitcher_module, "register_frame", lambda *args, **kwargs: near if args[3] == 16 else found_wide)
+            stitcher._integrate(FrameRecord(1, 200_000, window, (240, 160), (340.0, 210.0)), False)
+        return stitcher._positions[1]
+
+    at_near, at = place(None), place(wide)
+    moved = (round(at[0] - at_near[0]), round(at[1] - at_near[1]))
+    assert moved == ((14, 1) if taken else (0, 0))
+    assert place(wide) == at  # and a fresh stitcher decides the same
