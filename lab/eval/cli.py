@@ -66,6 +66,14 @@ Seven forms:
       printed and written to --out (a .md file, or a folder: FOLDER/attribution.md) with the
       per-recording figures beside it (.json). --model: the network the suite was evaluated with.
 
+  darkread eval restitch SUITE_DIR [--work DIR] [--out FILE.md] [--before FILE.json] [--infer MODE]
+      an evaluated suite's stored frames stitched and read again by the cloud code of now, so a change
+      to the stitcher or the reading is measured on the very same frames (an end-to-end run draws its
+      frames again): CER as evaluated and re-read, and each frame's place on the page against the
+      simulator's truth (registration error, frames misplaced), by lux and motion; --before: the
+      .json an earlier run wrote beside its report, shown beside. Written to --out (a .md file, or
+      a folder: FOLDER/restitch.md) with the per-recording figures beside it (.json).
+
   darkread eval evidence SUITE_DIR [--out FILE.md] [--jobs N]
       how much of the ink the events themselves show, the bound on what any network can draw: for
       windows of each synthetic recording cut as the edge cuts them (1600 events, and 3200 and 6400:
@@ -260,6 +268,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _add_side_by_side(sub)
     _add_one_suite_form(sub, common, "attribute", "where an evaluated suite's errors come from (head motion, stitching, frames)",
                         _attribute)
+    restitch = _add_one_suite_form(sub, common, "restitch", "an evaluated suite's stored frames stitched and read again by "
+                                   "the cloud code of now (a stitcher change measured on the same frames)", _restitch)
+    restitch.add_argument("--before", metavar="FILE.json", help="an earlier run's figures (the .json beside its report), "
+                          "shown beside these")
     _add_one_suite_form(sub, common, "evidence", "how much of the ink the events themselves show", _evidence)
     calibrate = _add_one_suite_form(sub, common, "calibrate", "fit the cloud's line-confidence model on an evaluated suite",
                                     _calibrate)
@@ -397,6 +409,19 @@ def _attribute(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out = out / ATTRIBUTION_NAME if out.suffix != ".md" else out
     path = write_attribution(suite, work, out, backend=args.backend, notes=args.note, model=args.model)
+    print(path.read_text())
+    return 0
+
+
+def _restitch(args: argparse.Namespace) -> int:
+    from darkread.lab.eval.restitch import RESTITCH_NAME, write_restitch
+
+    suite = _one_suite(args, "give one evaluated suite: darkread eval restitch SUITE_DIR [--work DIR] [--out FILE.md]")
+    work = Path(args.work) if args.work else suite / "eval_runs" / _first_mode(args)
+    out = Path(args.out)
+    out = out / RESTITCH_NAME.replace(".json", ".md") if out.suffix != ".md" else out
+    path = write_restitch(suite, work, out, backend=args.backend, before=Path(args.before) if args.before else None,
+                          notes=args.note)
     print(path.read_text())
     return 0
 

@@ -127,6 +127,18 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     assert json.loads((tmp_path / "again.json").read_text()) == [row]
     assert json.loads((work / folder.name / "attribution.json").read_text())["name"] == folder.name
 
+    # the stored frames stitched and read again by the cloud code of now, placements against the truth
+    from darkread.lab.eval.restitch import write_restitch
+
+    restitched = write_restitch(tmp_path, work, tmp_path / "restitch.md", backend="rapidocr", progress=False)
+    (again_row,) = json.loads(restitched.with_suffix(".json").read_text())
+    assert again_row["frames"] == result["darkread"]["frames"] and again_row["cer_stored"] == row["cer_stitched"]
+    assert 0.0 <= again_row["cer"] <= 1.0
+    assert again_row["registration_px"] is not None and again_row["registration_px"] < 3.0 and again_row["misplaced"] == 0
+    beside = write_restitch(tmp_path, work, tmp_path / "beside.md", backend="rapidocr", before=restitched.with_suffix(".json"),
+                            progress=False)
+    assert "CER re-read before" in beside.read_text() and f"| {short.lux:g} | **all** | 1 |" in beside.read_text()
+
 
 def test_cli_make_suite_form(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from darkread.cli import main

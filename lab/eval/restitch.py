@@ -1,0 +1,184 @@
+"""The cloud's side again on frames already made: an evaluated suite's stored frames stitched and
+read by the cloud code of now, to measure a change to the stitcher or the reading on the very same
+frames (an end-to-end run draws its frames again, and its pages move by a point or more per light
+level from the timing alone).
+
+Each recording's stored frames (``<work>/<name>/read/cloud``) go through the cloud's paging in seq
+order, as a restarted cloud rebuilds its pages from the store; the last page is read line by line
+as ``ask`` reads it. Where the simulator's truth is there, the stitcher's placements are checked
+against it: each frame's centre on the stitched page against the same pixel's place on the true
+page, through the least-squares map between the two (scale and offset per axis); the registration
+error is the median distance left, and a frame more than ``MISPLACED_PX`` off is misplaced.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from darkread.cloud.live.paging import Paginator
+from darkread.cloud.live.reading import LineReader
+from darkread.core.text_metrics import error_rates
+from darkread.lab.eval.attribution import stored_frames
+from darkread.lab.eval.runner import RESULT_NAME, make_ocr_backend
+from darkread.lab.truth import PageTruth, load_truth
+from darkread.models.train.annotate import page_coordinates, window_rays
+
+MISPLACED_PX = 6.0  # a letter's width at the suite's smallest type: a frame this far off blurs or doubles its words
+RESTITCH_NAME = "restitch.json"
+
+
+@dataclass(frozen=True)
+class Restitched:
+    name: str
+    lux: float
+    motion: str
+    frames: int
+    cer_stored: float  # as the evaluation read it, end to end
+    cer: float  # the stored frames stitched and read again
+    registration_px: float | None  # median distance of the frames from their true places (None: no truth)
+    misplaced: int | None  # frames more than MISPLACED_PX from their true places
+
+
+def true_centres(truth: PageTruth, frames: Sequence[Any]) -> dict[int, np.ndarray]:
+    """Each frame's centre pixel on the true page (texels), by the simulator's pose at its time."""
+    out = {}
+    for frame in frames:
+        h, w = frame.mask.shape
+        origin = (int(frame.origin[0]), int(frame.origin[1]))
+        rays = window_rays(truth.calibration, origin, (h, w))
+        H = truth.pose_at(float(frame.t_us))
+        out[int(frame.frame_id)] = page_coordinates(H, rays[[(h // 2) * w + w // 2]])[0] * truth.px_per_mm
+    return out
+
+
+def placement_errors(placed: dict[int, tuple[float, float]], shapes: dict[int, tuple[int, int]],
+                     true: dict[int, np.ndarray]) -> np.ndarray:
+    """Distance (px) of each placed frame's centre from where the least-squares map (scale and offset
+    per axis) between the true page and the stitched one puts its true centre; empty with fewer than 3.
+    The map is fitted again without the frames it left more than ``MISPLACED_PX`` (and three times the
+    median) off, so that a stretch of misplaced frames does not pull it towards them."""
+    ids = [i for i in placed if i in true]
+    if len(ids) < 3:
+        return np.zeros(0)
+    stitched = np.array([[placed[i][0] + shapes[i][1] / 2, placed[i][1] + shapes[i][0] / 2] for i in ids])
+    design = np.c_[np.array([true[i] for i in ids]), np.ones(len(ids))]
+    errors = np.hypot(*(stitched - design @ np.linalg.lstsq(design, stitched, rcond=None)[0]).T)
+    kept = errors <= max(MISPLACED_PX, 3 * float(np.median(errors)))
+    if kept.sum() >= 3:
+        errors = np.hypot(*(stitched - design @ np.linalg.lstsq(design[kept], stitched[kept], rcond=None)[0]).T)
+    return errors
+
+
+def restitch_recording(recording: Path, run_dir: Path, reader: LineReader) -> Restitched | None:
+    """One evaluated recording's stored frames stitched and read again (None: no frames or no result)."""
+    result_path = run_dir / RESULT_NAME
+    frames = stored_frames(run_dir / "read" / "cloud") if (run_dir / "read" / "cloud").is_dir() else []
+    if not frames or not result_path.is_file():
+        return None
+    result = json.loads(result_path.read_text(encoding="utf-8"))
+    paginator = Paginator()
+    for frame in frames:
+        try:
+            paginator.add(frame)
+        except ValueError:
+            continue  # the cloud refuses such a frame too
+    page = paginator.current
+    rendered = paginator.render(page) if page is not None else None
+    text = reader.read(rendered).text if rendered is not None else ""
+    reference = (recording / "text.txt").read_text(encoding="utf-8")
+    errors = np.zeros(0)
+    truth = load_truth(recording)
+    if truth is not None and page is not None and page.stitcher is not None:
+        placed = page.stitcher.snapshot(positions=True).frame_positions
+        errors = placement_errors(placed, {int(f.frame_id): f.mask.shape for f in frames}, true_centres(truth, frames))
+    stored = result.get("darkread") if isinstance(result.get("darkread"), dict) else {}
+    return Restitched(
+        name=recording.name, lux=float(result["lux"]), motion=str(result["motion"]), frames=len(frames),
+        cer_stored=min(1.0, float(stored.get("cer", 1.0))), cer=min(1.0, error_rates(reference, text).cer),
+        registration_px=round(float(np.median(errors)), 2) if errors.size else None,
+        misplaced=int((errors > MISPLACED_PX).sum()) if errors.size else None,
+    )
+
+
+def _mean(values: Sequence[float]) -> str:
+    return f"{100 * float(np.mean(values)):.1f}%" if values else "-"
+
+
+def restitch_table(rows: Sequence[Restitched], before: dict[str, dict[str, Any]] | None = None) -> str:
+    """Mean CER (stored, and read again) and registration by lux and motion; with ``before`` (an
+    earlier run's per-recording figures by name) its CER and misplaced frames beside them."""
+    groups: dict[tuple[float, str], list[Restitched]] = defaultdict(list)
+    for row in rows:
+        groups[(row.lux, row.motion)].append(row)
+        groups[(row.lux, "**all**")].append(row)
+    head = ["lux", "motion", "n", "CER as evaluated", "CER re-read"]
+    if before is not None:
+        head += ["CER re-read before"]
+    head += ["registration error (median px)", "frames misplaced"]
+    if before is not None:
+        head += ["frames misplaced before"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---:|" * 2 + "---:|" * (len(head) - 2)]
+    for (lux, motion), group in sorted(groups.items(), key=lambda kv: (-kv[0][0], kv[0][1] == "**all**", kv[0][1])):
+        checked = [r for r in group if r.registration_px is not None]
+        cells = [f"{lux:g}", motion, str(len(group)), _mean([r.cer_stored for r in group]), _mean([r.cer for r in group])]
+        if before is not None:
+            cells.append(_mean([float(before[r.name]["cer"]) for r in group if r.name in before]))
+        cells.append(f"{np.median([r.registration_px for r in checked]):.1f}" if checked else "-")
+        cells.append(f"{sum(r.misplaced or 0 for r in checked)} of {sum(r.frames for r in checked)}" if checked else "-")
+        if before is not None:
+            cells.append(str(sum(int(before[r.name].get("misplaced") or 0) for r in checked if r.name in before)))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_restitch(suite: Path, work: Path, out: Path, *, backend: str = "local", before: Path | None = None,
+                   progress: bool = True, notes: Sequence[str] = ()) -> Path:
+    """Every evaluated recording of ``suite`` (results in ``work``) stitched and read again; a
+    Markdown table at ``out`` and the per-recording figures beside it (``.json``, what ``before``
+    takes from an earlier run)."""
+    from tqdm import tqdm
+
+    evaluated = sorted(p for p in work.iterdir() if (p / "read" / "cloud").is_dir()) if work.is_dir() else []
+    if not evaluated:
+        raise FileNotFoundError(f"{work}: no evaluated recordings; run `darkread eval run {suite} --work {work}` first")
+    earlier = None
+    if before is not None:
+        try:
+            earlier = {row["name"]: row for row in json.loads(before.read_text(encoding="utf-8"))}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{before}: not the .json of an earlier `darkread eval restitch` ({exc})") from None
+    reader_backend = make_ocr_backend(backend)
+    rows = []
+    for run_dir in tqdm(evaluated, desc="re-stitching", unit="rec", disable=not progress):
+        recording = suite / run_dir.name
+        if (recording / "text.txt").is_file():
+            row = restitch_recording(recording, run_dir, LineReader(reader_backend))
+            if row is not None:
+                rows.append(row)
+    if not rows:
+        raise FileNotFoundError(f"{work}: no evaluated recording holds stored frames and a result")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    text = "\n".join([
+        "# The stored frames stitched and read again",
+        "",
+        f"`darkread eval restitch {suite}`: {len(rows)} evaluated recordings (frames in `{work}`), OCR `{backend}`. "
+        "Each recording's stored frames go through the cloud's paging as a restarted cloud rebuilds its pages, and the "
+        "last page is read as `ask` reads it. Registration error: each frame's centre on the stitched page against its "
+        "true place (the simulator's pose), through the least-squares map between the two pages; misplaced: more than "
+        f"{MISPLACED_PX:g} px off."
+        + (f" Before: `{before}`." if before is not None else ""),
+        *([""] + [f"- {note}" for note in notes] if notes else []),
+        "",
+        restitch_table(rows, earlier),
+        "",
+    ])
+    out.write_text(text, encoding="utf-8")
+    out.with_suffix(".json").write_text(json.dumps([asdict(r) for r in rows], indent=1), encoding="utf-8")
+    return out
