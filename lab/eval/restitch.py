@@ -5,7 +5,8 @@ level from the timing alone).
 
 Each recording's stored frames (``<work>/<name>/read/cloud``) go through the cloud's paging in seq
 order, as a restarted cloud rebuilds its pages from the store; the last page is read line by line
-as ``ask`` reads it. Where the simulator's truth is there, the stitcher's placements are checked
+as ``ask`` reads it, each line judged by the shipped line-confidence model (answered or unclear)
+and matched to the reference line it reads closest to. Where the simulator's truth is there, the stitcher's placements are checked
 against it: each frame's centre on the stitched page against the same pixel's place on the true
 page, through the least-squares map between the two (scale and offset per axis); the registration
 error is the median distance left, and a frame more than ``MISPLACED_PX`` off is misplaced.
@@ -27,6 +28,7 @@ from darkread.cloud.live.reading import LineReader
 from darkread.core.text_metrics import error_rates
 from darkread.lab.eval.attribution import stored_frames
 from darkread.lab.eval.runner import RESULT_NAME, make_ocr_backend
+from darkread.lab.eval.selective import LineOutcome, match_lines, weighted_cer
 from darkread.lab.truth import PageTruth, load_truth
 from darkread.models.train.annotate import page_coordinates, window_rays
 
@@ -44,6 +46,8 @@ class Restitched:
     cer: float  # the stored frames stitched and read again
     registration_px: float | None  # median distance of the frames from their true places (None: no truth)
     misplaced: int | None  # frames more than MISPLACED_PX from their true places
+    # the answer's lines: [CER of the reference line it matched, that line's characters, answered]
+    lines: tuple[tuple[float, int, bool], ...] = ()
 
 
 def true_centres(truth: PageTruth, frames: Sequence[Any]) -> dict[int, np.ndarray]:
@@ -91,8 +95,12 @@ def restitch_recording(recording: Path, run_dir: Path, reader: LineReader) -> Re
             continue  # the cloud refuses such a frame too
     page = paginator.current
     rendered = paginator.render(page) if page is not None else None
-    text = reader.read(rendered).text if rendered is not None else ""
+    reading = reader.read(rendered) if rendered is not None else None
+    text = reading.text if reading is not None else ""
     reference = (recording / "text.txt").read_text(encoding="utf-8")
+    answered = [{"text": line.text, "read": bool(line.text.strip()) and line.judgement is not None
+                 and line.judgement.status == "read"} for line in (reading.lines if reading is not None else ())]
+    lines = tuple((float(m["line_cer"]), int(m["line_ref_chars"]), bool(m["read"])) for m in match_lines(reference, answered))
     errors = np.zeros(0)
     truth = load_truth(recording)
     if truth is not None and page is not None and page.stitcher is not None:
@@ -103,12 +111,23 @@ def restitch_recording(recording: Path, run_dir: Path, reader: LineReader) -> Re
         name=recording.name, lux=float(result["lux"]), motion=str(result["motion"]), frames=len(frames),
         cer_stored=min(1.0, float(stored.get("cer", 1.0))), cer=min(1.0, error_rates(reference, text).cer),
         registration_px=round(float(np.median(errors)), 2) if errors.size else None,
-        misplaced=int((errors > MISPLACED_PX).sum()) if errors.size else None,
+        misplaced=int((errors > MISPLACED_PX).sum()) if errors.size else None, lines=lines,
     )
 
 
 def _mean(values: Sequence[float]) -> str:
     return f"{100 * float(np.mean(values)):.1f}%" if values else "-"
+
+
+def _selective(rows: Sequence[Restitched]) -> tuple[str, str]:
+    """Coverage (share of lines answered) and the CER of the answered lines, over ``rows``' lines."""
+    lines = [LineOutcome(row.name, row.lux, row.motion, None, cer, chars, {}, read=answered)
+             for row in rows for cer, chars, answered in row.lines]
+    if not lines:
+        return "-", "-"
+    answered = [line for line in lines if line.read]
+    cer = weighted_cer(answered)
+    return f"{100 * len(answered) / len(lines):.1f}%", "-" if cer is None else f"{100 * cer:.1f}%"
 
 
 def restitch_table(rows: Sequence[Restitched], before: dict[str, dict[str, Any]] | None = None) -> str:
@@ -124,6 +143,7 @@ def restitch_table(rows: Sequence[Restitched], before: dict[str, dict[str, Any]]
     head += ["registration error (median px)", "frames misplaced"]
     if before is not None:
         head += ["frames misplaced before"]
+    head += ["lines answered", "CER, answered lines"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---:|" * 2 + "---:|" * (len(head) - 2)]
     for (lux, motion), group in sorted(groups.items(), key=lambda kv: (-kv[0][0], kv[0][1] == "**all**", kv[0][1])):
         checked = [r for r in group if r.registration_px is not None]
@@ -134,6 +154,7 @@ def restitch_table(rows: Sequence[Restitched], before: dict[str, dict[str, Any]]
         cells.append(f"{sum(r.misplaced or 0 for r in checked)} of {sum(r.frames for r in checked)}" if checked else "-")
         if before is not None:
             cells.append(str(sum(int(before[r.name].get("misplaced") or 0) for r in checked if r.name in before)))
+        cells.extend(_selective(group))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -170,8 +191,10 @@ def write_restitch(suite: Path, work: Path, out: Path, *, backend: str = "local"
         "",
         f"`darkread eval restitch {suite}`: {len(rows)} evaluated recordings (frames in `{work}`), OCR `{backend}`. "
         "Each recording's stored frames go through the cloud's paging as a restarted cloud rebuilds its pages, and the "
-        "last page is read as `ask` reads it. Registration error: each frame's centre on the stitched page against its "
-        "true place (the simulator's pose), through the least-squares map between the two pages; misplaced: more than "
+        "last page is read as `ask` reads it, its lines judged by the shipped line-confidence model (answered: read, not "
+        "unclear; their CER over the characters of the reference lines they matched). Registration error: each frame's "
+        "centre on the stitched page against its true place (the simulator's pose), through the least-squares map "
+        "between the two pages; misplaced: more than "
         f"{MISPLACED_PX:g} px off."
         + (f" Before: `{before}`." if before is not None else ""),
         *([""] + [f"- {note}" for note in notes] if notes else []),

@@ -26,11 +26,13 @@ def test_placement_errors_are_what_is_left_after_the_map_between_the_pages() -> 
 
 
 def test_the_table_groups_by_light_and_motion_with_the_run_before() -> None:
-    rows = [Restitched("a", 30.0, "still", 10, 0.1, 0.0, 1.0, 0), Restitched("b", 30.0, "walking", 8, 0.5, 0.25, 2.0, 3)]
+    rows = [Restitched("a", 30.0, "still", 10, 0.1, 0.0, 1.0, 0, lines=((0.0, 20, True), (0.1, 30, True))),
+            Restitched("b", 30.0, "walking", 8, 0.5, 0.25, 2.0, 3, lines=((0.5, 20, False), (0.2, 10, True)))]
     before = {"a": {"cer": 0.1, "misplaced": 0}, "b": {"cer": 0.5, "misplaced": 6}}
     table = restitch_table(rows, before)
-    assert "| 30 | **all** | 2 | 30.0% | 12.5% | 30.0% | 1.5 | 3 of 18 | 6 |" in table
-    assert "| 30 | walking | 1 | 50.0% | 25.0% | 50.0% | 2.0 | 3 of 8 | 6 |" in table
+    # answered: 3 of 4 lines, their CER (0 * 20 + 0.1 * 30 + 0.2 * 10) / 60
+    assert "| 30 | **all** | 2 | 30.0% | 12.5% | 30.0% | 1.5 | 3 of 18 | 6 | 75.0% | 8.3% |" in table
+    assert "| 30 | walking | 1 | 50.0% | 25.0% | 50.0% | 2.0 | 3 of 8 | 6 | 50.0% | 20.0% |" in table
     assert "before" not in restitch_table(rows)
 
 

@@ -135,6 +135,7 @@ def test_make_suite_then_evaluate_one_recording_end_to_end(tmp_path: Path, monke
     assert again_row["frames"] == result["darkread"]["frames"] and again_row["cer_stored"] == row["cer_stitched"]
     assert 0.0 <= again_row["cer"] <= 1.0
     assert again_row["registration_px"] is not None and again_row["registration_px"] < 3.0 and again_row["misplaced"] == 0
+    assert again_row["lines"] and all(0.0 <= cer <= 1.0 and chars > 0 for cer, chars, _ in again_row["lines"])
     beside = write_restitch(tmp_path, work, tmp_path / "beside.md", backend="rapidocr", before=restitched.with_suffix(".json"),
                             progress=False)
     assert "CER re-read before" in beside.read_text() and f"| {short.lux:g} | **all** | 1 |" in beside.read_text()
