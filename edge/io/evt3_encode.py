@@ -15,6 +15,8 @@ first time in the stream, i.e. exactly ``t`` when the recording starts below 2^2
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 import numpy.typing as npt
 
@@ -73,12 +75,15 @@ def _pixel_units(events: Events, min_vector_run: int) -> dict[str, np.ndarray]:
     }
 
 
-def _pixel_words(u: dict[str, np.ndarray]) -> np.ndarray:
-    """(units, 6) candidate words; 0xFFFF marks an absent word (no real word has that value)."""
+def _pixel_words(u: dict[str, np.ndarray], previous_y: int = -1) -> np.ndarray:
+    """(units, 6) candidate words; 0xFFFF marks an absent word (no real word has that value).
+    ``previous_y``: the row of the pixel unit before these (-1: none), whose ``EVT_ADDR_Y`` still holds."""
     n = len(u["t"])
     words = np.full((n, _WORDS_PER_UNIT), 0xFFFF, dtype=np.int64)
     new_row = np.ones(n, dtype=bool)
     new_row[1:] = u["y"][1:] != u["y"][:-1]
+    if n:
+        new_row[0] = u["y"][0] != previous_y
     words[new_row, 1] = (ADDR_Y << 12) | u["y"][new_row]
     single, vector = u["kind"] == 0, u["kind"] == 1
     words[single, 3] = (ADDR_X << 12) | (u["p"][single] << 11) | u["x"][single]
@@ -94,6 +99,79 @@ def _pixel_words(u: dict[str, np.ndarray]) -> np.ndarray:
     return words
 
 
+def _encode_part(events: Events, triggers: Triggers, period: int, min_vector_run: int, first_beat: int,
+                 previous_y: int) -> tuple[np.ndarray, int, int]:
+    """The words of one stretch of the stream (every unit at or after ``first_beat``'s time high
+    bits), the next beat not yet sent and the row of its last pixel unit (``previous_y`` if none)."""
+    units = _pixel_units(events, min_vector_run)
+    pixel = _pixel_words(units, previous_y)
+    trig = np.full((len(triggers), _WORDS_PER_UNIT), 0xFFFF, dtype=np.int64)
+    trig[:, 3] = (EXT_TRIGGER << 12) | (triggers["id"].astype(np.int64) << 8) | triggers["p"]
+    unit_t = np.concatenate((units["t"], triggers["t"].astype(np.int64)))
+    order = np.argsort(unit_t, kind="stable")
+    unit_t, words = unit_t[order], np.concatenate((pixel, trig))[order]
+    del pixel, trig, order
+    new_time = np.ones(len(unit_t), dtype=bool)
+    new_time[1:] = unit_t[1:] != unit_t[:-1]  # (the first unit's time always differs from the stretch before)
+    words[new_time, 0] = (TIME_LOW << 12) | (unit_t[new_time] & 0xFFF)
+
+    present = words != 0xFFFF
+    per_unit = present.sum(axis=1)
+    unit_start = np.cumsum(per_unit) - per_unit
+    stream = words[present]
+    del words, present
+    beats = np.arange(first_beat, unit_t[-1] + 1, period, dtype=np.int64)
+    before = np.searchsorted(unit_t, beats, side="left")
+    at = np.where(before < len(unit_t), unit_start[np.minimum(before, len(unit_t) - 1)], len(stream))
+    stream = np.insert(stream, at, (TIME_HIGH << 12) | ((beats >> 12) & 0xFFF))
+    last_y = int(units["y"][-1]) if len(units["y"]) else previous_y
+    return stream.astype("<u2"), int(beats[-1]) + period if len(beats) else first_beat, last_y
+
+
+def encode_evt3_parts(
+    events: Events,
+    triggers: Triggers | None = None,
+    *,
+    width: int = 1280,
+    time_high_period_us: int = 16,
+    min_vector_run: int = 2,
+    events_per_part: int = 1 << 18,
+) -> Iterator[bytes]:
+    """``encode_evt3``'s bytes in parts of about ``events_per_part`` events, for a writer that
+    streams them: the encoding's working arrays cost ~200 bytes an event, so a recording encoded
+    whole needed several times its events' memory (and, out of cache, took five times as long).
+    Parts end between two event times, and each carries on the stream's state (the row whose
+    ``EVT_ADDR_Y`` holds, the next ``TIME_HIGH``), so the parts joined are ``encode_evt3``'s
+    bytes exactly."""
+    triggers = np.zeros(0, TRIGGER_DTYPE) if triggers is None else triggers
+    period = time_high_period_us
+    _check(events, triggers, width, period)
+    if not len(events) and not len(triggers):
+        return
+    if events_per_part < 1:
+        raise ValueError(f"events_per_part must be positive, got {events_per_part}")
+    t0 = min(int(events["t"][0]) if len(events) else 1 << 62, int(triggers["t"][0]) if len(triggers) else 1 << 62)
+    # part boundaries: the first event of a new time after every events_per_part events
+    cuts = [0]
+    while cuts[-1] + events_per_part < len(events):
+        at = int(np.searchsorted(events["t"], events["t"][cuts[-1] + events_per_part], side="left"))
+        cuts.append(at if at > cuts[-1] else int(np.searchsorted(events["t"], events["t"][cuts[-1]], side="right")))
+    cuts = [c for c in cuts if c < len(events)] or [0]
+    bounds = [int(events["t"][c]) for c in cuts[1:]] if len(events) else []
+    ends = [*cuts[1:], len(events)]
+    trigger_cuts = np.searchsorted(triggers["t"], bounds, side="left") if len(triggers) else np.zeros(len(bounds), int)
+    trigger_ends = [*map(int, trigger_cuts), len(triggers)]
+    next_beat, row = t0 // period * period, -1
+    trigger_start = 0
+    for start, end, trigger_end in zip(cuts, ends, trigger_ends, strict=True):
+        part_events, part_triggers = events[start:end], triggers[trigger_start:trigger_end]
+        trigger_start = trigger_end
+        if not len(part_events) and not len(part_triggers):
+            continue
+        words, next_beat, row = _encode_part(part_events, part_triggers, period, max(1, min_vector_run), next_beat, row)
+        yield words.tobytes()
+
+
 def encode_evt3(
     events: Events,
     triggers: Triggers | None = None,
@@ -103,28 +181,5 @@ def encode_evt3(
     min_vector_run: int = 2,
 ) -> bytes:
     """EVT 3.0 data bytes (no header) for time-sorted ``events`` and ``triggers``."""
-    triggers = np.zeros(0, TRIGGER_DTYPE) if triggers is None else triggers
-    _check(events, triggers, width, time_high_period_us)
-    if not len(events) and not len(triggers):
-        return b""
-    units = _pixel_units(events, max(1, min_vector_run))
-    pixel = _pixel_words(units)
-    trig = np.full((len(triggers), _WORDS_PER_UNIT), 0xFFFF, dtype=np.int64)
-    trig[:, 3] = (EXT_TRIGGER << 12) | (triggers["id"].astype(np.int64) << 8) | triggers["p"]
-    unit_t = np.concatenate((units["t"], triggers["t"].astype(np.int64)))
-    order = np.argsort(unit_t, kind="stable")
-    unit_t, words = unit_t[order], np.concatenate((pixel, trig))[order]
-    new_time = np.ones(len(unit_t), dtype=bool)
-    new_time[1:] = unit_t[1:] != unit_t[:-1]
-    words[new_time, 0] = (TIME_LOW << 12) | (unit_t[new_time] & 0xFFF)
-
-    present = words != 0xFFFF
-    per_unit = present.sum(axis=1)
-    unit_start = np.cumsum(per_unit) - per_unit
-    stream = words[present]
-    period = time_high_period_us
-    beats = np.arange(unit_t[0] // period * period, unit_t[-1] + 1, period, dtype=np.int64)
-    before = np.searchsorted(unit_t, beats, side="left")
-    at = np.where(before < len(unit_t), unit_start[np.minimum(before, len(unit_t) - 1)], len(stream))
-    stream = np.insert(stream, at, (TIME_HIGH << 12) | ((beats >> 12) & 0xFFF))
-    return stream.astype("<u2").tobytes()
+    return b"".join(encode_evt3_parts(events, triggers, width=width, time_high_period_us=time_high_period_us,
+                                      min_vector_run=min_vector_run))

@@ -17,7 +17,8 @@ import numpy as np
 
 from darkread.edge.events import EVENT_CD_DTYPE, TRIGGER_DTYPE, Events
 from darkread.edge.io.evt2 import Evt2Decoder
-from darkread.edge.io.evt3 import DecodeStats, Evt3Decoder, Triggers, encode_evt3
+from darkread.edge.io.evt3 import DecodeStats, Evt3Decoder, Triggers
+from darkread.edge.io.evt3_encode import encode_evt3_parts
 from darkread.edge.io.raw_header import RawHeader, format_raw_header, parse_raw_header, read_raw_header
 
 __all__ = ["RawData", "RawReader", "make_decoder", "read_raw", "write_raw"]
@@ -137,11 +138,17 @@ def write_raw(
     triggers: Triggers | None = None,
     header_extra: dict[str, str] | None = None,
 ) -> int:
-    """Write an EVT 3.0 RAW file; returns the number of bytes written."""
+    """Write an EVT 3.0 RAW file; returns the number of bytes written. The events are encoded and
+    written a part at a time (``encode_evt3_parts``): a long recording's encoding held whole would
+    cost several times the events' own memory."""
     if events.dtype != EVENT_CD_DTYPE:
         raise ValueError(f"events must have EVENT_CD_DTYPE, got {events.dtype}")
     if len(events) and events["y"].max() >= height:
         raise ValueError(f"event y must be < height ({height})")
-    data = format_raw_header(width, height, "EVT3", header_extra) + encode_evt3(events, triggers, width=width)
-    Path(path).write_bytes(data)
-    return len(data)
+    parts = encode_evt3_parts(events, triggers, width=width)
+    first = next(parts, b"")  # (the events are checked here, before the file is opened)
+    with open(path, "wb") as f:
+        written = f.write(format_raw_header(width, height, "EVT3", header_extra)) + f.write(first)
+        for part in parts:
+            written += f.write(part)
+    return written
