@@ -66,6 +66,15 @@ class Attribution:
     cer_true_motion: float | None = None  # read again with the head's motion known exactly
 
 
+def evaluated_runs(suite: Path, work: Path) -> list[Path]:
+    """The run folders of ``work`` that hold a read's stored frames (``<name>/read/cloud``), by name;
+    FileNotFoundError, saying how to make them, when there are none."""
+    runs = sorted(p for p in work.iterdir() if (p / "read" / "cloud").is_dir()) if work.is_dir() else []
+    if not runs:
+        raise FileNotFoundError(f"{work}: no evaluated recordings; run `darkread eval run {suite} --work {work}` first")
+    return runs
+
+
 def stored_frames(cloud_dir: Path) -> list[Any]:
     """Every frame of the one session a ``darkread read`` stored in ``cloud_dir`` (SQLite), in order."""
 
@@ -247,9 +256,7 @@ def write_attribution(suite: Path, work: Path, out: Path, *, backend: str = "loc
 
 
     engine = make_ocr_backend(backend)
-    evaluated = sorted(p for p in work.iterdir() if (p / "read" / "cloud").is_dir()) if work.is_dir() else []
-    if not evaluated:
-        raise FileNotFoundError(f"{work}: no evaluated recordings; run `darkread eval run {suite} --work {work}` first")
+    evaluated = evaluated_runs(suite, work)
     rows = []
     for run_dir in tqdm(evaluated, desc="attributing", unit="rec", disable=not progress):
         recording = suite / run_dir.name

@@ -26,7 +26,7 @@ import numpy as np
 from darkread.cloud.live.paging import Paginator
 from darkread.cloud.live.reading import LineReader
 from darkread.core.text_metrics import error_rates
-from darkread.lab.eval.attribution import stored_frames
+from darkread.lab.eval.attribution import evaluated_runs, stored_frames
 from darkread.lab.eval.runner import RESULT_NAME, make_ocr_backend
 from darkread.lab.eval.selective import LineOutcome, match_lines, weighted_cer
 from darkread.lab.truth import PageTruth, load_truth
@@ -166,9 +166,7 @@ def write_restitch(suite: Path, work: Path, out: Path, *, backend: str = "local"
     takes from an earlier run)."""
     from tqdm import tqdm
 
-    evaluated = sorted(p for p in work.iterdir() if (p / "read" / "cloud").is_dir()) if work.is_dir() else []
-    if not evaluated:
-        raise FileNotFoundError(f"{work}: no evaluated recordings; run `darkread eval run {suite} --work {work}` first")
+    evaluated = evaluated_runs(suite, work)
     earlier = None
     if before is not None:
         try:

@@ -217,16 +217,19 @@ def random_triggers(seed: int, events: np.ndarray, n: int) -> np.ndarray:
     return triggers
 
 
+# a random stream of events and triggers (``random_stream``, ``random_triggers``)
+STREAMS = {
+    "seed": st.integers(0, 2**32 - 1),
+    "n": st.integers(0, 400),
+    "t0": st.one_of(st.integers(0, (1 << 24) - 1), st.integers((1 << 24) - 20_000, (1 << 24) - 1)),
+    "max_gap": st.sampled_from([0, 3, 50, 2000, 30_000]),
+    "run_share": st.floats(0, 0.95),
+    "n_triggers": st.integers(0, 5),
+}
+
+
 @settings(max_examples=60, deadline=None)
-@given(
-    seed=st.integers(0, 2**32 - 1),
-    n=st.integers(0, 400),
-    t0=st.one_of(st.integers(0, (1 << 24) - 1), st.integers((1 << 24) - 20_000, (1 << 24) - 1)),
-    max_gap=st.sampled_from([0, 3, 50, 2000, 30_000]),
-    run_share=st.floats(0, 0.95),
-    n_triggers=st.integers(0, 5),
-    cuts=st.lists(st.integers(0, 10_000), max_size=8),
-)
+@given(**STREAMS, cuts=st.lists(st.integers(0, 10_000), max_size=8))
 def test_encode_then_decode_round_trips_in_any_chunking(
     seed: int, n: int, t0: int, max_gap: int, run_share: float, n_triggers: int, cuts: list[int]
 ) -> None:
@@ -243,16 +246,7 @@ def test_encode_then_decode_round_trips_in_any_chunking(
 
 
 @settings(max_examples=80, deadline=None)
-@given(
-    seed=st.integers(0, 2**32 - 1),
-    n=st.integers(0, 400),
-    t0=st.one_of(st.integers(0, (1 << 24) - 1), st.integers((1 << 24) - 20_000, (1 << 24) - 1)),
-    max_gap=st.sampled_from([0, 3, 50, 2000, 30_000]),
-    run_share=st.floats(0, 0.95),
-    n_triggers=st.integers(0, 5),
-    per_part=st.integers(1, 60),
-    rows=st.sampled_from([1, 3, 720]),
-)
+@given(**STREAMS, per_part=st.integers(1, 60), rows=st.sampled_from([1, 3, 720]))
 def test_the_encoding_in_parts_joins_to_the_whole(
     seed: int, n: int, t0: int, max_gap: int, run_share: float, n_triggers: int, per_part: int, rows: int
 ) -> None:
