@@ -3,7 +3,10 @@ from __future__ import annotations
 import json
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from darkread.edge.events import EVENT_CD_DTYPE
 from darkread.edge.gaze import GazeMapper
 from darkread.edge.io.calibration import load_calibration
 from darkread.edge.io.gaze_csv import read_gaze_csv
@@ -117,3 +120,25 @@ def test_full_view_recording_simulates_the_page_its_edge_and_a_desk_over_the_who
     assert desk is not None and 0.02 <= desk.texture.min() < desk.texture.max() <= 0.95
     # without the option the scene is as it always was: no desk
     assert make_session(SessionSpec(lux=100.0, motion="normal"), 46).scene.surround is None
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), sizes=st.lists(st.integers(0, 600), min_size=1, max_size=3),
+       span_us=st.integers(1, 400), window=st.integers(1, 300), unsorted=st.booleans())
+def test_merging_a_stretch_of_time_at_a_time_gives_the_same_events(seed: int, sizes: list[int], span_us: int,
+                                                                   window: int, unsorted: bool) -> None:
+    """A minute of a busy page held every event several times over while the duplicates were sorted
+    out; a stretch at a time gives the very same array (same-microsecond events of one pixel
+    across the parts: the first part's is kept), and a part out of time order is sorted whole."""
+    from darkread.models.synth.recording import drop_same_time_duplicates, merged_events
+    from darkread.models.synth.sensor import concat_events
+
+    rng = np.random.default_rng(seed)
+    parts = []
+    for n in sizes:  # few pixels and microseconds: many duplicates, within and across the parts
+        ev = np.zeros(n, EVENT_CD_DTYPE)
+        ev["t"], ev["x"] = rng.integers(0, span_us, n), rng.integers(0, 6, n)
+        ev["y"], ev["p"] = rng.integers(0, 3, n), rng.integers(0, 2, n)
+        parts.append(ev if unsorted and n % 2 else ev[np.argsort(ev["t"], kind="stable")])
+    expected = drop_same_time_duplicates(concat_events(parts))
+    np.testing.assert_array_equal(merged_events(parts, events_per_window=window), expected)
