@@ -170,9 +170,12 @@ def write_restitch(suite: Path, work: Path, out: Path, *, backend: str = "local"
     earlier = None
     if before is not None:
         try:
-            earlier = {row["name"]: row for row in json.loads(before.read_text(encoding="utf-8"))}
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise ValueError(f"{before}: not the .json of an earlier `darkread eval restitch` ({exc})") from None
+            earlier = {str(row["name"]): {"cer": float(row["cer"]), "misplaced": row.get("misplaced")}
+                       for row in json.loads(before.read_text(encoding="utf-8"))}
+        except OSError as exc:
+            raise ValueError(f"{before}: cannot be read ({exc.strerror})") from None
+        except (ValueError, KeyError, TypeError):
+            raise ValueError(f"{before}: not the .json an earlier `darkread eval restitch` wrote beside its report") from None
     reader_backend = make_ocr_backend(backend)
     rows = []
     for run_dir in tqdm(evaluated, desc="re-stitching", unit="rec", disable=not progress):

@@ -42,5 +42,5 @@ def test_a_suite_without_stored_frames_or_a_wrong_before_file_says_so(tmp_path: 
     run = tmp_path / "work" / "rec"
     (run / "read" / "cloud").mkdir(parents=True)
     (tmp_path / "before.json").write_text(json.dumps({"not": "rows"}))
-    with pytest.raises(ValueError, match="earlier `darkread eval restitch`"):
+    with pytest.raises(ValueError, match="an earlier `darkread eval restitch` wrote"):
         write_restitch(tmp_path, tmp_path / "work", tmp_path / "out.md", before=tmp_path / "before.json", progress=False)
