@@ -23,6 +23,7 @@ from typing import Protocol
 
 import numpy as np
 
+from darkread.edge.events import EVENT_CD_DTYPE
 from darkread.edge.fovea import FoveaConfig
 from darkread.edge.io.calibration import save_calibration
 from darkread.edge.io.gaze_csv import write_gaze_csv
@@ -332,15 +333,18 @@ def merged_events(parts: list[np.ndarray], width: int = SENSOR_WH[0], events_per
         return drop_same_time_duplicates(concat_events(parts), width)
     step = max(1, events_per_window // max(1, len(parts)))
     bounds = np.unique(np.concatenate([p["t"][::step] for p in parts if p.size]))[1:]  # each stretch starts at one
-    out = []
+    out = np.empty(total, dtype=EVENT_CD_DTYPE)  # (filled in place: a list of stretches joined would be a third copy)
+    kept = 0
     starts = [0] * len(parts)
     for end_t in [*bounds.tolist(), None]:
         ends = [p.size if end_t is None else int(np.searchsorted(p["t"], end_t, side="left")) for p in parts]
         window = concat_events([p[a:b] for p, a, b in zip(parts, starts, ends, strict=True)])
         if window.size:
-            out.append(drop_same_time_duplicates(window, width))
+            merged = drop_same_time_duplicates(window, width)
+            out[kept : kept + merged.size] = merged
+            kept += merged.size
         starts = ends
-    return concat_events(out)
+    return out[:kept]
 
 
 def write_recording(out: str | Path, spec: RecordingSpec, *, progress: bool = True,
