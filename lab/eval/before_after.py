@@ -9,7 +9,7 @@ compared, so a partly evaluated suite still compares like with like.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from darkread.lab.eval.aggregate import group_by, mean, sort_key
@@ -22,6 +22,12 @@ def load_before(path: str | Path) -> list[RecordingResult]:
     if not isinstance(doc, list):
         raise ValueError(f"{path}: expected a results.json of an earlier report (a list of recordings)")
     return typed(doc)
+
+
+def _commits(results: Iterable[RecordingResult]) -> str:
+    """The commits the results were evaluated at, as the report names them."""
+    found = sorted({r.commit for r in results if r.commit})
+    return ", ".join(f"`{c}`" for c in found) if found else "not recorded"
 
 
 def before_after_section(results: Sequence[RecordingResult], before: Sequence[RecordingResult], source: str) -> list[str]:
@@ -45,7 +51,8 @@ def before_after_section(results: Sequence[RecordingResult], before: Sequence[Re
         "## Before and after",
         "",
         (f"darkread's page CER (mean per recording, clipped at 100 %) on the {len(pairs)} recordings this evaluation and "
-         f"the earlier one (`{source}`) both hold: the same recordings, read by the same network and edge."),
+         f"the earlier one (`{source}`) both hold: the same recordings, read by the code of the commits named "
+         f"(before {_commits(b for _, b in pairs)}, after {_commits(r for r, _ in pairs)})."),
         "",
         head.format("lux"),
         *rows("lux", lambda v: f"{v:g}"),

@@ -324,3 +324,16 @@ def test_a_stored_result_stands_only_for_the_same_mode_and_network() -> None:
     assert "on-change result" in why_evaluate_again(doc, "every-window", "19999b3b014b")
     assert "4be7499df172" in why_evaluate_again({"infer": "on-change", "model": "4be7499df172"}, "on-change", "19999b3b014b")
     assert "not recorded" in why_evaluate_again({"infer": "on-change"}, "on-change", "19999b3b014b")
+
+
+def test_before_and_after_names_the_commits_each_side_was_read_by() -> None:
+    """The same recordings read by two commits: what differs is the code between them, and the
+    section says which (an edge change shows up here as much as a cloud one)."""
+    from darkread.lab.eval.before_after import before_after_section
+
+    now = [{**r, "commit": "bbbbbbbbbb", "scanpath": "model"} for r in fake_results()]
+    then = [{**r, "commit": "aaaaaaaaaa", "scanpath": "model",
+             "darkread": {**r["darkread"], "cer": r["darkread"]["cer"] + 0.1}} for r in fake_results()]
+    text = "\n".join(before_after_section(typed(now), typed(then), "docs/eval/before/results.json"))
+    assert "(before `aaaaaaaaaa`, after `bbbbbbbbbb`)" in text
+    assert "| 5 | 1 | 16.0% | 6.0% |" in text and "| **all** | 2 | 14.0% | 4.0% |" in text
