@@ -27,9 +27,11 @@ import numpy as np
 from darkread.cloud.live.paging import Paginator
 from darkread.cloud.live.reading import LineReader
 from darkread.core.text_metrics import error_rates
+from darkread.lab.eval.aggregate import mean
 from darkread.lab.eval.attribution import evaluated_runs, stored_frames
 from darkread.lab.eval.runner import RESULT_NAME, make_ocr_backend
 from darkread.lab.eval.selective import LineOutcome, match_lines, weighted_cer
+from darkread.lab.eval.tables import pct
 from darkread.lab.truth import PageTruth, load_truth
 from darkread.models.train.annotate import page_coordinates, window_rays
 
@@ -116,19 +118,12 @@ def restitch_recording(recording: Path, run_dir: Path, reader: LineReader) -> Re
     )
 
 
-def _mean(values: Sequence[float]) -> str:
-    return f"{100 * float(np.mean(values)):.1f}%" if values else "-"
-
-
 def _selective(rows: Sequence[Restitched]) -> tuple[str, str]:
     """Coverage (share of lines answered) and the CER of the answered lines, over ``rows``' lines."""
     lines = [LineOutcome(row.name, row.lux, row.motion, None, cer, chars, {}, read=answered)
              for row in rows for cer, chars, answered in row.lines]
-    if not lines:
-        return "-", "-"
     answered = [line for line in lines if line.read]
-    cer = weighted_cer(answered)
-    return f"{100 * len(answered) / len(lines):.1f}%", "-" if cer is None else f"{100 * cer:.1f}%"
+    return pct(len(answered) / len(lines) if lines else None), pct(weighted_cer(answered))
 
 
 def restitch_table(rows: Sequence[Restitched], before: dict[str, dict[str, Any]] | None = None) -> str:
@@ -148,9 +143,9 @@ def restitch_table(rows: Sequence[Restitched], before: dict[str, dict[str, Any]]
     lines = ["| " + " | ".join(head) + " |", "|" + "---:|" * 2 + "---:|" * (len(head) - 2)]
     for (lux, motion), group in sorted(groups.items(), key=lambda kv: (-kv[0][0], kv[0][1] == "**all**", kv[0][1])):
         checked = [r for r in group if r.registration_px is not None]
-        cells = [f"{lux:g}", motion, str(len(group)), _mean([r.cer_stored for r in group]), _mean([r.cer for r in group])]
+        cells = [f"{lux:g}", motion, str(len(group)), pct(mean(r.cer_stored for r in group)), pct(mean(r.cer for r in group))]
         if before is not None:
-            cells.append(_mean([float(before[r.name]["cer"]) for r in group if r.name in before]))
+            cells.append(pct(mean(float(before[r.name]["cer"]) for r in group if r.name in before)))
         cells.append(f"{np.median([r.registration_px for r in checked]):.1f}" if checked else "-")
         cells.append(f"{sum(r.misplaced or 0 for r in checked)} of {sum(r.frames for r in checked)}" if checked else "-")
         if before is not None:

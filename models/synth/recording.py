@@ -326,10 +326,8 @@ def merged_events(parts: list[np.ndarray], width: int = SENSOR_WH[0], events_per
     over (~70 bytes an event beyond the events), and a minute of a busy page took gigabytes.
     Events of one microsecond always fall in one stretch, in the parts' order, so the result is
     the same array."""
-    if not all(p.size < 2 or bool(np.all(p["t"][1:] >= p["t"][:-1])) for p in parts):
-        return drop_same_time_duplicates(concat_events(parts), width)
     total = sum(p.size for p in parts)
-    if total <= events_per_window:
+    if total <= events_per_window or not all(p.size < 2 or bool(np.all(p["t"][1:] >= p["t"][:-1])) for p in parts):
         return drop_same_time_duplicates(concat_events(parts), width)
     step = max(1, events_per_window // max(1, len(parts)))
     bounds = np.unique(np.concatenate([p["t"][::step] for p in parts if p.size]))[1:]  # each stretch starts at one
