@@ -58,11 +58,11 @@ class StitchConfig:
       doubtful_match_drop   a match this far below the recent median (but not weak) is searched
                             wide too, and the wide peak taken only on the same line (fewer than
                             ``ambiguity_rows`` rows from it) and ``anchor_gain`` better: with the
-                            scene's offset a few px off per frame, a word's letters matched one
-                            letter off at 0.75 where the right place scored 0.95, and each such
-                            frame moved the next prediction further off. A line's worth up or down
-                            stays the weak match's test (in dim light a wide peak a line away beat a
-                            right but noisy match by 0.1 and more); 0 turns it off.
+                            scene's offset a few px off per frame, a word matched a letter off
+                            still scores above the weak match's drop, and each such frame moves the
+                            next prediction further off. A line's worth up or down stays the weak
+                            match's test (in dim light a wide peak a line away can beat a right but
+                            noisy match); stitch/README.md has the pages. 0 turns it off.
       ambiguity_rows        ... where matches at least this many rows from the peak are the
                             neighbouring lines' (text lines look alike to a correlation) ...
       ambiguity_margin      ... which the peak must beat by this much; otherwise the frame is dropped

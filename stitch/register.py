@@ -21,8 +21,8 @@ _CENTRE_PRIOR = 0.03
 # anywhere on the page (the anchor search)...
 _MIN_SPREAD_RATIO = 0.5
 # ... and near the prediction, where only a blank stretch is refused: in dim light the page's ink is
-# faint where its frames disagreed (right places measured at 0.35-0.5 of the frame's std), while
-# paper under a trace of ink, which correlates perfectly with anything, below 0.03
+# faint where its frames disagreed, so right places vary less than the frame, though far more than
+# paper under a trace of ink, which correlates perfectly with anything (stitch/README.md)
 _MIN_SPREAD_RATIO_NEAR = 0.1
 
 

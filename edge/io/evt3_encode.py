@@ -138,8 +138,8 @@ def encode_evt3_parts(
     events_per_part: int = 1 << 18,
 ) -> Iterator[bytes]:
     """``encode_evt3``'s bytes in parts of about ``events_per_part`` events, for a writer that
-    streams them: the encoding's working arrays cost ~200 bytes an event, so a recording encoded
-    whole needed several times its events' memory (and, out of cache, took five times as long).
+    streams them: the encoding's working arrays cost several times the events' own memory, and
+    a recording encoded whole fell out of cache (models/synth/STATUS.md, "Memory").
     Parts end between two event times, and each carries on the stream's state (the row whose
     ``EVT_ADDR_Y`` holds, the next ``TIME_HIGH``), so the parts joined are ``encode_evt3``'s
     bytes exactly."""

@@ -265,7 +265,7 @@ def simulate_region(
             ev = ev[ev["t"] < end_us]
         if ev.size:
             chunks.append(ev)
-    return concat_events(chunks)  # (the events once more, not twice: a minute of a busy page is gigabytes)
+    return concat_events(chunks)  # (the events once more, not twice: models/synth/STATUS.md, "Memory")
 
 
 def _clock_origins(rng: np.random.Generator) -> tuple[int, int]:
@@ -323,7 +323,7 @@ def drop_same_time_duplicates(events: np.ndarray, width: int = SENSOR_WH[0]) -> 
 def merged_events(parts: list[np.ndarray], width: int = SENSOR_WH[0], events_per_window: int = 1 << 20) -> np.ndarray:
     """``drop_same_time_duplicates(concat_events(parts))``, a stretch of time at a time when every part
     is time-sorted (a simulator's signal and noise are): the sort held every event several times
-    over (~70 bytes an event beyond the events), and a minute of a busy page took gigabytes.
+    over (models/synth/STATUS.md, "Memory").
     Events of one microsecond always fall in one stretch, in the parts' order, so the result is
     the same array."""
     total = sum(p.size for p in parts)
