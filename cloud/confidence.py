@@ -4,9 +4,10 @@ Each line's *evidence* is what the pipeline knows about it: the recogniser's per
 probabilities, how many frames covered its ink and how much they agreed (dark pixels where all
 frames saw ink, grey where they disagreed), its height, how often frames came while the page was
 read and how fast the head moved, how much the glasses were shedding (a live edge that cannot keep
-up makes fewer frames and views: ``edge.load``, said in each view), and whether its words are
-dictionary words. A small logistic model (``line_confidence.json``, fitted
-on the synthetic suite by ``darkread eval calibrate``) turns the evidence into the probability
+up makes fewer frames and views: ``edge.load``, said in each view), the light the glasses measured
+at the page (``light_lux`` in each frame and view), and whether its words are dictionary words. A
+small logistic model (``line_confidence.json``, fitted on the synthetic suite by ``darkread eval
+calibrate``) turns the evidence into the probability
 that the line was read right. A line below the model's ``answer_threshold`` is ``unclear``: the
 answer does not guess at it, and says what would help (``REASONS``) from the same evidence.
 """
@@ -39,9 +40,12 @@ REASONS: dict[str, str] = {
 }
 FEATURES: tuple[str, ...] = (
     "ocr_mean", "ocr_min", "ocr_low_share", "log_chars", "height_px", "ink_solid", "log_views",
-    "log_frame_rate", "log_head_speed", "known_share", "corrected_share", "edge_shed",
+    "log_frame_rate", "log_head_speed", "known_share", "corrected_share", "edge_shed", "log_lux",
 )
 SHED_EVIDENCE = "edge_shed"  # the mean shedding level of the line's page (``edge.load``)
+LIGHT_EVIDENCE = "log_lux"  # log of the light the glasses measured at the line's page, lux
+DIM_LIGHT_LUX = 15.0  # a page measured dimmer than this: more light is what helps (the light below which
+# the glasses run the sensor's dark bias profile, the edge's ``[sensor] dark_below_lux``; docs/sensor_model.md)
 MODEL_FILE = "line_confidence.json"
 _WORD = re.compile(r"[A-Za-z]+")
 LOW_CHAR_PROB = 0.6  # a character read with less than this probability counts as doubtful
@@ -121,6 +125,7 @@ class PageConditions:
     frame_rate_hz: float | None = None
     head_speed_px_s: float | None = None
     shed_level: float | None = None  # the mean shedding level of its frames and views (``edge.load``)
+    light_lux: float | None = None  # the light the glasses measured at the page (geometric mean over its frames)
 
 
 def line_evidence(
@@ -152,6 +157,8 @@ def line_evidence(
         evidence["log_head_speed"] = math.log1p(conditions.head_speed_px_s)
     if conditions.shed_level is not None:
         evidence[SHED_EVIDENCE] = conditions.shed_level
+    if conditions.light_lux is not None and conditions.light_lux > 0:
+        evidence[LIGHT_EVIDENCE] = math.log(conditions.light_lux)
     return evidence
 
 
@@ -174,6 +181,15 @@ def busy(evidence: dict[str, float]) -> bool:
     return evidence.get(SHED_EVIDENCE, 0.0) >= BUSY_SHED_LEVEL
 
 
+def dim(evidence: dict[str, float], model: ConfidenceModel) -> bool:
+    """Whether the line's page was too dim to read well: by the glasses' light measurement where
+    there is one, else by frames that agreed on little of the ink while the head was still."""
+    if LIGHT_EVIDENCE in evidence:
+        return evidence[LIGHT_EVIDENCE] < math.log(DIM_LIGHT_LUX)
+    moving = evidence.get("log_head_speed", -math.inf) > model.fast_head_speed
+    return evidence.get("ink_solid", math.inf) < model.dark_ink_solid and not moving
+
+
 def shed_level_of(evidence: dict[str, float]) -> int:
     """The shedding level a line's page is judged at: its mean, rounded (0 for glasses that kept up
     or did not say); the fitter groups the lines it sets ``shed_thresholds`` by the same."""
@@ -184,11 +200,13 @@ def reasons_for(evidence: dict[str, float], model: ConfidenceModel) -> tuple[str
     """What would help an unclear line, from its evidence: glasses that keep up, stillness, light,
     size; else a second look.
 
-    Frames disagree in dim light and when the head moves fast; only with a still head is the
+    Where the glasses measured the light, it decides: "more light" for a page dimmer than
+    ``DIM_LIGHT_LUX``, never for a lit one. Where they did not, the frames' agreement stands in:
+    frames disagree in dim light and when the head moves fast, so only with a still head is the
     disagreement put down to the light."""
     reasons = ["glasses_busy"] if busy(evidence) else []
     moving = evidence.get("log_head_speed", -math.inf) > model.fast_head_speed
-    if evidence.get("ink_solid", math.inf) < model.dark_ink_solid and not moving:
+    if dim(evidence, model):
         reasons.append("too_dark")
     if moving:
         reasons.append("too_much_motion")

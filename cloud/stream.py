@@ -236,7 +236,7 @@ def stored_frame(frame: Frame | View) -> StoredFrame:
         record.frame_id, record.t_us, record.mask, record.origin, record.gaze_px,
         seq=frame.seq, gaze_rad=frame.gaze_rad, events_used=frame.events_used,
         levels=record.levels, n_levels=record.n_levels, frames=record.frames, scene_px=record.scene_px,
-        shed_level=record.shed_level,
+        shed_level=record.shed_level, light_lux=record.light_lux,
     )  # fmt: skip
 
 

@@ -218,7 +218,7 @@ def build_edge(
             settings = dataclasses.replace(settings, lossless=True)  # no clock to keep up with: make every window
         light = open_bias_control(config.sensor, source, metrics, profile)
         pipeline = build_pipeline(source, gaze, reconstructor, on_frame, settings, voxel, metrics, watchdog=watchdog,
-                                  known_motion=known_motion, light=light)
+                                  known_motion=known_motion, light=light, configured_lux=config.sensor.lux)
         undo.pop_all()
     return Edge(config, source, pipeline, reconstructor, metrics, uplink=uplink, pages=pages, feeds=feeds)
 
@@ -239,14 +239,27 @@ def build_pipeline(
     watchdog: Callable[[], object] | None = None,
     known_motion: KnownHeadMotion | None = None,
     light: BiasController | None = None,
+    configured_lux: float = 0.0,
 ) -> Pipeline:
     """The pipeline ``settings`` describe: its windows on a fresh ring, and the step ``infer`` names,
     chosen here once. ``known_motion``: the head's motion from elsewhere (``edge.head_motion``);
-    ``light``: the controller of the sensor's bias profile (``edge.bias_control``)."""
+    ``light``: the controller of the sensor's bias profile (``edge.bias_control``), whose light
+    estimate each frame and view carries; without one, ``configured_lux`` (``[sensor] lux``, 0: none)."""
     windows = Windows(EventRing(settings.ring_capacity), source, gaze, infer, settings, voxel, metrics or EdgeMetrics(),
-                      known_motion, light_probe=light.wants_whole if light is not None else None)
+                      known_motion, light_probe=light.wants_whole if light is not None else None,
+                      light_level=light_reading(light, configured_lux))
     step: Step = STEPS[settings.infer](windows, settings, on_frame)
     return Pipeline(source, windows, step, settings, watchdog=watchdog, light=light)
+
+
+def light_reading(light: BiasController | None, configured_lux: float = 0.0) -> Callable[[], float | None] | None:
+    """What a frame or view says of the light at the page: the controller's latest estimate (None
+    until its first), else a configured light level; None when neither exists."""
+    if light is not None:
+        return lambda: light.lux
+    if configured_lux > 0:
+        return lambda: configured_lux
+    return None
 
 
 def _raise_failure(part: str, error: BaseException | None) -> None:

@@ -99,6 +99,7 @@ def make_frame(
     frame_id: int,
     scene_px: tuple[float, float] | None = None,
     probability: bool = False,
+    light_lux: float | None = None,
 ) -> FrameResult | None:
     """Bin the window's events and infer. None when the window holds no events.
 
@@ -106,6 +107,7 @@ def make_frame(
     ``origin``; ``t_us`` is the frame's timestamp, the time ``gaze`` was looked up; ``scene_px``
     the scene's motion by then (``edge.scene_motion``), if measured. ``probability``: keep the ink
     probability too, from an ``infer`` that has ``ink_probability`` (a ``Reconstructor``).
+    ``light_lux``: the light the glasses measure at the page now, if they do.
     """
     if window.shape[0] == 0:
         return None
@@ -128,5 +130,6 @@ def make_frame(
         inference_ms=inference_ms,
         scene_px=scene_px,
         probability=ink,
+        light_lux=light_lux,
     )
 

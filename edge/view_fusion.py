@@ -217,10 +217,11 @@ class ViewFuser:
         t = self._touched
         self._touched = (x0, y0, x1, y1) if t[2] <= t[0] else (min(t[0], x0), min(t[1], y0), max(t[2], x1), max(t[3], y1))
 
-    def view(self, view_id: int, shed_level: int = 0) -> ViewRecord:
+    def view(self, view_id: int, shed_level: int = 0, light_lux: float | None = None) -> ViewRecord:
         """The fused view so far: the union of its frames' windows (the fuser must hold a frame),
         placed where the newest frame's window is at its time; ``shed_level``: what a live edge
-        falling behind was giving up meanwhile (``edge.load``)."""
+        falling behind was giving up meanwhile (``edge.load``); ``light_lux``: the light measured
+        at the page now (None: not known)."""
         if self._first is None or self._last is None or self._sum is None or self._count is None:
             raise ValueError("no frame to fuse")
         lx, ly = int(round(self._last_xy[0])), int(round(self._last_xy[1]))
@@ -240,5 +241,5 @@ class ViewFuser:
             frame_id=int(view_id), t_us=self._last.t_us, mask=threshold(levels, self.n_levels),
             origin=origin, gaze_px=(float(gaze[0]), float(gaze[1])), levels=levels, n_levels=self.n_levels,
             t0_us=self._first.t_us, frames=self._frames, events_used=self._events, gaze_rad=self._gaze_rad,
-            scene_px=self._last.scene_px, shed_level=shed_level,
+            scene_px=self._last.scene_px, shed_level=shed_level, light_lux=light_lux,
         )

@@ -39,6 +39,10 @@ def _never() -> bool:
     return False
 
 
+def _unmeasured() -> float | None:
+    return None
+
+
 class Windows:
     """The ring, the gaze and the window's place; one frame's events and the frame itself.
 
@@ -58,6 +62,7 @@ class Windows:
         metrics: EdgeMetrics,
         known_motion: KnownHeadMotion | None = None,
         light_probe: Callable[[], bool] | None = None,
+        light_level: Callable[[], float | None] | None = None,
     ) -> None:
         self.ring = ring
         self.source = source  # (its ROI follows the window while ``roi_wanted``: ``place_roi``)
@@ -79,6 +84,8 @@ class Windows:
         # beside it as a check
         self.known_motion = known_motion
         self.light_probe = light_probe or _never  # the light is being read: the whole sensor (edge.bias_control)
+        # the light at the page now, lux (None: not measured yet, or not at all); each frame and view says it
+        self.light_level = light_level or _unmeasured
         self.imu = known_motion if isinstance(known_motion, SmearPrior) else None
         self._measure_scene = settings.scene_motion and settings.sensor_roi != "on"
         self.scene = SceneMotion(self.sensor_wh) if self._measure_scene else None
@@ -187,7 +194,7 @@ class Windows:
               probability: bool = False) -> FrameResult | None:
         """The frame of ``window`` (``make_frame``), counted; None when it holds no events."""
         frame = make_frame(window, origin, gaze, t_us, self.voxel, self.infer, self.frames_made, self.scene_at(t_us),
-                           probability=probability)
+                           probability=probability, light_lux=self.light_level())
         if frame is None:
             return None
         self.frames_made += 1

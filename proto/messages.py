@@ -84,6 +84,13 @@ def _float(value: Any, name: str) -> float:
     return result
 
 
+def _lux(value: Any, name: str) -> float:
+    result = _float(value, name)
+    if result <= 0:
+        raise InvalidFieldError(f"{name}: a light level must be positive lux, got {result}")
+    return result
+
+
 def _bool(value: Any, name: str) -> bool:
     if type(value) is not bool:
         raise InvalidFieldError(f"{name}: expected a boolean, got {type(value).__name__}")
@@ -310,6 +317,7 @@ class Frame(_Checked):
     bits: bytes = _spec(_bytes, repr=False)  # the ink mask, darkread.core.mask_bits.pack_bits (decoded form)
     enc: str = _spec(_choice(FRAME_ENCODINGS), "bits")  # v2: how ``bits`` go on the wire
     scene_px: tuple[float, float] | None = _spec(_optional(_pair_float), None)  # the scene's motion so far, sensor px
+    light_lux: float | None = _spec(_optional(_lux), None)  # the light the glasses measured at the page; absent: not known
 
     @classmethod
     def of(
@@ -321,6 +329,7 @@ class Frame(_Checked):
         return cls(
             seq=seq, frame_id=record.frame_id, t_us=record.t_us, origin=record.origin, gaze_px=record.gaze_px,
             gaze_rad=gaze_rad, events_used=events_used, shape=shape, bits=bits, enc=enc, scene_px=record.scene_px,
+            light_lux=record.light_lux,
         )
 
     def _to_wire(self, payload: dict[str, Any]) -> None:
@@ -335,7 +344,8 @@ class Frame(_Checked):
 
     def record(self) -> FrameRecord:
         """The frame record this message carries."""
-        return FrameRecord(self.frame_id, self.t_us, self.mask(), self.origin, self.gaze_px, scene_px=self.scene_px)
+        return FrameRecord(self.frame_id, self.t_us, self.mask(), self.origin, self.gaze_px, scene_px=self.scene_px,
+                           light_lux=self.light_lux)
 
 
 @dataclass(frozen=True)
@@ -384,6 +394,8 @@ class View(_Checked):
     scene_px: tuple[float, float] | None = _spec(_optional(_pair_float), None)  # the scene's motion so far, sensor px
     # a live edge that could not keep up: how much it was giving up (1-3, ``edge.load``); absent: nothing
     shed_level: int | None = _spec(_optional(lambda v, n: _int(v, n, 1, MAX_SHED_LEVEL)), None)
+    # the light the glasses measured at the page while the view was made (lux); absent: not known
+    light_lux: float | None = _spec(_optional(_lux), None)
 
     @classmethod
     def of(
@@ -399,7 +411,7 @@ class View(_Checked):
             seq=seq, view_id=record.frame_id, t0_us=record.t_us if t0_us is None else t0_us, t_us=record.t_us,
             origin=record.origin, gaze_px=record.gaze_px, gaze_rad=gaze_rad, frames=record.frames, events_used=events_used,
             shape=(int(levels.shape[0]), int(levels.shape[1])), n_levels=record.n_levels, levels=levels.tobytes(), enc=enc,
-            scene_px=record.scene_px, shed_level=record.shed_level or None,
+            scene_px=record.scene_px, shed_level=record.shed_level or None, light_lux=record.light_lux,
         )
 
     def ink(self) -> np.ndarray:
@@ -412,7 +424,7 @@ class View(_Checked):
         levels = self.ink()
         return FrameRecord(self.view_id, self.t_us, threshold_levels(levels, self.n_levels), self.origin, self.gaze_px,
                            levels=levels, n_levels=self.n_levels, frames=self.frames, scene_px=self.scene_px,
-                           shed_level=self.shed_level or 0)  # fmt: skip
+                           shed_level=self.shed_level or 0, light_lux=self.light_lux)  # fmt: skip
 
     def as_frame(self) -> Frame:
         """The thresholded view as a binary ``frame`` of the same seq (for a reader of binary frames)."""
@@ -420,6 +432,7 @@ class View(_Checked):
         return Frame(
             seq=self.seq, frame_id=self.view_id, t_us=self.t_us, origin=self.origin, gaze_px=self.gaze_px,
             gaze_rad=self.gaze_rad, events_used=self.events_used, shape=shape, bits=bits, scene_px=self.scene_px,
+            light_lux=self.light_lux,
         )
 
     def _to_wire(self, payload: dict[str, Any]) -> None:

@@ -22,6 +22,10 @@ def test_the_record_normalises_its_fields() -> None:
     assert record.gaze_px == (1.0, 2.5) and type(record.gaze_px[0]) is float
     with pytest.raises(ValueError, match="2-D"):
         FrameRecord(1, 0, np.zeros((0, 4), np.uint8), (0, 0), (0.0, 0.0))
+    assert FrameRecord(1, 0, np.ones((8, 9), np.uint8), (0, 0), (0.0, 0.0), light_lux=np.float32(6.5)).light_lux == 6.5
+    for dark in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="light_lux"):
+            FrameRecord(1, 0, np.ones((8, 9), np.uint8), (0, 0), (0.0, 0.0), light_lux=dark)
 
 
 def test_the_wire_carries_the_record_unchanged() -> None:

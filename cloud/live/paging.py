@@ -16,6 +16,7 @@ give the same pages, which is how pages are rebuilt after a restart. A new page 
 
 from __future__ import annotations
 
+import math
 import statistics
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -73,11 +74,16 @@ class PageMotion:
     last_scene: tuple[float, float] | None = None
     records: int = 0  # frames and views as they came
     shed_sum: int = 0  # their shedding levels summed (a live edge falling behind says how far: edge.load)
+    log_lux_sum: float = 0.0  # the light the glasses measured at them, log lux summed ...
+    lit_records: int = 0  # ... over the frames and views that said it
 
     def add(self, frame: FrameRecord) -> None:
         self.frames += frame.frames
         self.records += 1
         self.shed_sum += frame.shed_level
+        if frame.light_lux is not None:
+            self.log_lux_sum += math.log(frame.light_lux)
+            self.lit_records += 1
         self.first_us = frame.t_us if self.first_us is None else min(self.first_us, frame.t_us)
         self.last_us = frame.t_us if self.last_us is None else max(self.last_us, frame.t_us)
         if frame.scene_px is not None:
@@ -95,6 +101,11 @@ class PageMotion:
     def shed_level(self) -> float | None:
         """The mean shedding level of the page's frames and views (0: the glasses kept up)."""
         return self.shed_sum / self.records if self.records else None
+
+    def light_lux(self) -> float | None:
+        """The light at the page while it was read, as the glasses measured it: the geometric mean
+        over the frames and views that said it (None: none did)."""
+        return math.exp(self.log_lux_sum / self.lit_records) if self.lit_records else None
 
     def head_speed_px_s(self) -> float | None:
         span = self.span_s()

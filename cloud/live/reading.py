@@ -132,7 +132,7 @@ class LineReader:
 
     def _judged(self, page: RenderedPage, lines: list[ReadLine]) -> list[ReadLine]:
         motion = page.motion
-        conditions = (PageConditions(motion.frame_rate_hz(), motion.head_speed_px_s(), motion.shed_level())
+        conditions = (PageConditions(motion.frame_rate_hz(), motion.head_speed_px_s(), motion.shed_level(), motion.light_lux())
                       if motion is not None else PageConditions())
         read = [LineRead(ln.text, ln.raw_text or ln.text, ln.box, ln.char_scores) for ln in lines]
         judgements = judge_lines(read, page.grey, self.confidence, known=self.corrector.known if self.corrector else None,

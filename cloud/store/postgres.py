@@ -127,6 +127,9 @@ MIGRATIONS: tuple[str, ...] = (
     # 4 -> 5: how much a live edge falling behind was giving up when it made the view (edge.load);
     # 0 for everything stored before the glasses said so
     "ALTER TABLE frames ADD COLUMN shed_level integer NOT NULL DEFAULT 0",
+    # 5 -> 6: the light the glasses measured at the page (lux; the cloud weighs a dim page's lines by
+    # it); NULL for frames of glasses that did not say
+    "ALTER TABLE frames ADD COLUMN light_lux float8",
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -138,7 +141,7 @@ _COLUMNS: dict[str, tuple[tuple[str, str], ...]] = {
         ("yaw", "float8"), ("pitch", "float8"), ("events_used", "integer"),
         ("rows", "integer"), ("cols", "integer"), ("bits", "bytea"),
         ("levels", "bytea"), ("n_levels", "integer"), ("fused_frames", "integer"),
-        ("scene_x", "float8"), ("scene_y", "float8"), ("shed_level", "integer"),
+        ("scene_x", "float8"), ("scene_y", "float8"), ("shed_level", "integer"), ("light_lux", "float8"),
     ),
     "pages": (
         ("session_id", "text"), ("seq", "bigint"), ("page_id", "bigint"), ("t_us", "bigint"),
@@ -500,7 +503,7 @@ class PostgresStore:
         bits = pack_bits(frame.mask)
         levels = None if frame.levels is None else frame.levels.tobytes()
         row = (frame.frame_id, frame.t_us, *frame.origin, *frame.gaze_px, *frame.gaze_rad, frame.events_used, rows, cols, bits,
-               levels, frame.n_levels, frame.frames, *(frame.scene_px or (None, None)), frame.shed_level)  # fmt: skip
+               levels, frame.n_levels, frame.frames, *(frame.scene_px or (None, None)), frame.shed_level, frame.light_lux)  # fmt: skip
         return await self._sequenced("frames", session_id, frame.seq, row)
 
     async def add_page(self, session_id: str, page: PageRecord) -> WriteResult:
@@ -562,17 +565,18 @@ class PostgresStore:
     async def frames(self, session_id: str, *, after_seq: int = -1, limit: int = 1000) -> list[StoredFrame]:
         rows = await self._fetch(
             "SELECT seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used, rows, cols, bits,"
-            " levels, n_levels, fused_frames, scene_x, scene_y, shed_level FROM frames WHERE session_id = %s AND seq > %s"
+            " levels, n_levels, fused_frames, scene_x, scene_y, shed_level, light_lux FROM frames WHERE session_id = %s AND seq > %s"
             " ORDER BY seq LIMIT %s",
             (session_id, after_seq, limit),
         )
         frames = []
-        for seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, n_rows, cols, bits, levels, n_levels, fused, sx, sy, shed in rows:
+        for seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, n_rows, cols, bits, levels, n_levels, fused, sx, sy, shed, lux in rows:
             mask = unpack_bits((n_rows, cols), bits)
             grey = None if levels is None else np.frombuffer(bytes(levels), np.uint8).reshape(n_rows, cols)
             frames.append(StoredFrame(int(frame_id), int(t_us), mask, (x0, y0), (u, v), seq=int(seq), gaze_rad=(yaw, pitch),
                                       events_used=int(used), levels=grey, n_levels=int(n_levels),
-                                      frames=int(fused), scene_px=None if sx is None else (sx, sy), shed_level=int(shed)))  # fmt: skip
+                                      frames=int(fused), scene_px=None if sx is None else (sx, sy), shed_level=int(shed),
+                                      light_lux=None if lux is None else float(lux)))  # fmt: skip
         return frames
 
     async def page_breaks(self, session_id: str) -> list[PageBreak]:

@@ -115,6 +115,9 @@ MIGRATIONS: tuple[str | Callable[[sqlite3.Connection], object], ...] = (
     # 5 -> 6: how much a live edge falling behind was giving up when it made the view (edge.load);
     # 0 for everything stored before the glasses said so
     "ALTER TABLE frames ADD COLUMN shed_level INTEGER NOT NULL DEFAULT 0",
+    # 6 -> 7: the light the glasses measured at the page (lux; the cloud weighs a dim page's lines by
+    # it); NULL for frames of glasses that did not say
+    "ALTER TABLE frames ADD COLUMN light_lux REAL",
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 _SEQUENCED = ("frames", "pages", "gaze", "page_breaks")
@@ -268,13 +271,13 @@ class SqliteStore:
             session_id, frame.seq, frame.frame_id, frame.t_us, *frame.origin, *frame.gaze_px, *frame.gaze_rad,
             frame.events_used, rows, cols, pack_bits(frame.mask),
             None if frame.levels is None else frame.levels.tobytes(), frame.n_levels, frame.frames,
-            *(frame.scene_px or (None, None)), frame.shed_level,
+            *(frame.scene_px or (None, None)), frame.shed_level, frame.light_lux,
         )  # fmt: skip
 
         def insert(conn: sqlite3.Connection) -> int:
             sql = ("INSERT INTO frames (session_id, seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used,"
-                   " rows, cols, bits, levels, n_levels, fused_frames, scene_x, scene_y, shed_level)"
-                   " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT DO NOTHING")  # fmt: skip
+                   " rows, cols, bits, levels, n_levels, fused_frames, scene_x, scene_y, shed_level, light_lux)"
+                   " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT DO NOTHING")  # fmt: skip
             return conn.execute(sql, row).rowcount
 
         return await self._sequenced(session_id, frame.seq, insert)
@@ -343,18 +346,19 @@ class SqliteStore:
         def query(conn: sqlite3.Connection) -> list[tuple[Any, ...]]:
             return conn.execute(
                 "SELECT seq, frame_id, t_us, x0, y0, gaze_u, gaze_v, yaw, pitch, events_used, rows, cols, bits,"
-                " levels, n_levels, fused_frames, scene_x, scene_y, shed_level FROM frames WHERE session_id = ? AND seq > ?"
+                " levels, n_levels, fused_frames, scene_x, scene_y, shed_level, light_lux FROM frames WHERE session_id = ? AND seq > ?"
                 " ORDER BY seq LIMIT ?",
                 (session_id, after_seq, limit),
             ).fetchall()
 
         frames = []
-        for seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, rows, cols, bits, levels, n_levels, fused, sx, sy, shed in await self._read(query):
+        for row in await self._read(query):
+            seq, frame_id, t_us, x0, y0, u, v, yaw, pitch, used, rows, cols, bits, levels, n_levels, fused, sx, sy, shed, lux = row
             mask = unpack_bits((rows, cols), bits)
             grey = None if levels is None else np.frombuffer(levels, np.uint8).reshape(rows, cols)
             frames.append(StoredFrame(frame_id, t_us, mask, (x0, y0), (u, v), seq=seq, gaze_rad=(yaw, pitch), events_used=used,
                                       levels=grey, n_levels=n_levels, frames=fused,
-                                      scene_px=None if sx is None else (sx, sy), shed_level=shed))  # fmt: skip
+                                      scene_px=None if sx is None else (sx, sy), shed_level=shed, light_lux=lux))  # fmt: skip
         return frames
 
     async def page_breaks(self, session_id: str) -> list[PageBreak]:

@@ -11,6 +11,7 @@ many frames of that probability, which is what stitching the frames one by one w
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,6 +47,11 @@ class FrameRecord:
     # (``edge.load``: 0 none .. 3 one frame per view and fixations left without one): the cloud
     # trusts a starved page's lines less
     shed_level: int = field(default=0, kw_only=True)
+    # the light at the page when the record was made, lux, as the glasses measured it (their
+    # background-event estimate, ``edge.bias_control``, or a configured light level); None: not known.
+    # Dim light makes reading fail and is the one cause more light fixes: the cloud weighs the
+    # page's lines and chooses its advice by it
+    light_lux: float | None = field(default=None, kw_only=True)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mask", ink_mask(self.mask, f"frame {self.frame_id}"))
@@ -57,6 +63,11 @@ class FrameRecord:
         if not 0 <= int(self.shed_level) <= MAX_SHED_LEVEL:
             raise ValueError(f"frame {self.frame_id}: shed_level must be 0..{MAX_SHED_LEVEL}, got {self.shed_level}")
         object.__setattr__(self, "shed_level", int(self.shed_level))
+        if self.light_lux is not None:
+            lux = float(self.light_lux)
+            if not math.isfinite(lux) or lux <= 0:
+                raise ValueError(f"frame {self.frame_id}: light_lux must be a positive number of lux, got {self.light_lux}")
+            object.__setattr__(self, "light_lux", lux)
         if self.scene_px is not None:
             object.__setattr__(self, "scene_px", (float(self.scene_px[0]), float(self.scene_px[1])))
         if self.levels is not None:

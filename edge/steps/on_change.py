@@ -218,7 +218,8 @@ class OnChangeStep:
 
     def _send_view(self, arrival: float) -> None:
         # the view says how starved the edge was (the cloud trusts a starved page's lines less)
-        view = self.fuser.view(self.views_made, shed_level=max(self._view_shed, self.windows.shed_level))
+        view = self.fuser.view(self.views_made, shed_level=max(self._view_shed, self.windows.shed_level),
+                               light_lux=self.windows.light_level())
         self._view_shed = 0
         self.fuser = self.fuser.fresh()
         if self._view_origin is not None:

@@ -48,6 +48,23 @@ def test_evidence_describes_the_line_and_the_page() -> None:
     starved = line_evidence(page(), (0, 8, 100, 22), "the fox", "the fox", (0.9,), known_share=1.0,
                             conditions=PageConditions(frame_rate_hz=5.0, head_speed_px_s=50.0, shed_level=2.5))
     assert starved["edge_shed"] == 2.5 and "edge_shed" not in grey_line  # unknown (a glasses page): not evidence
+    dim = line_evidence(page(), (0, 8, 100, 22), "the fox", "the fox", (0.9,), known_share=1.0,
+                        conditions=PageConditions(light_lux=6.0))
+    assert dim["log_lux"] == math.log(6.0) and "log_lux" not in evidence  # the glasses did not say: not evidence
+
+
+def test_the_measured_light_decides_whether_more_light_would_help() -> None:
+    """Where the glasses measured the light, "more light" is said for a dim page only, and also while
+    the head moves (both would help); where they did not, the frames' agreement stands in for it."""
+    dim_and_still = judge({"ocr_min": 0.2, "ink_solid": 0.9, "log_lux": math.log(5.0), "log_head_speed": math.log1p(20.0)}, model())
+    assert dim_and_still.reasons == ("too_dark",)  # solid ink, yet measured dim
+    dim_and_moving = judge({"ocr_min": 0.2, "log_lux": math.log(5.0), "log_head_speed": math.log1p(400.0)}, model())
+    assert dim_and_moving.reasons == ("too_dark", "too_much_motion")
+    lit = judge({"ocr_min": 0.2, "ink_solid": 0.1, "log_lux": math.log(200.0), "log_head_speed": math.log1p(20.0)}, model())
+    assert lit.reasons == ("look_again",)  # grey ink on a lit page: light is not what is missing
+    assert judge({"ocr_min": 0.2, "log_lux": math.log(16.0)}, model()).reasons == ("look_again",)  # above the dim light
+    assert spoken_answer([("x", dim_and_moving), ("y", dim_and_moving)]) == (
+        "The whole page is unclear.\nPlease add more light.\nPlease stop moving.")
 
 
 def test_unsure_lines_are_unclear_with_what_would_help() -> None:

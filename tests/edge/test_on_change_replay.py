@@ -52,6 +52,23 @@ def replay(slice_us: int | None, shed_level: int = 0) -> tuple[list[ViewRecord],
     return views, dict(edge.metrics.totals)
 
 
+def test_views_say_the_configured_light_level() -> None:
+    """With ``[sensor] lux`` set (a lux meter's reading) every view says it; the sample states no
+    biases, so without it the glasses measure no light and the views say nothing of it."""
+    config = load_config(None, environ={}, overrides={
+        "source": {"kind": "replay", "path": str(SAMPLE_RECORDING), "speed": 0.0},
+        "pipeline": {"infer": "on-change"}, "sensor": {"lux": 80.0},
+    })
+    views: list[ViewRecord] = []
+    edge = build_edge(config, on_frame=lambda view, arrival: views.append(view))
+    edge.startup()
+    edge.source.wait()
+    edge.shutdown(5.0)
+    assert views and {view.light_lux for view in views} == {80.0} and views[0].to_message().light_lux == 80.0
+    unmeasured, _ = replay(None)
+    assert {view.light_lux for view in unmeasured} == {None}
+
+
 def fingerprint(views: list[ViewRecord]) -> str:
     digest = hashlib.sha256()
     for view in views:

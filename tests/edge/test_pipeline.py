@@ -467,6 +467,7 @@ class ReadingTheLight:
 
     def __init__(self) -> None:
         self.pushed = 0
+        self.lux: float | None = None  # (no estimate yet)
 
     def push(self, events: Events, gaze_window: object) -> None:
         self.pushed += 1
@@ -482,6 +483,28 @@ def test_while_the_light_is_read_the_roi_gives_way_to_the_whole_sensor() -> None
     frames, metrics, _ = run_pipeline(source, FixedGaze(), every_window(lossless=True, denoise=False),
                                       known_motion=ShiftRight(), light=light)
     assert frames and light.pushed and not source.rois and metrics.totals["roi_writes"] == 0
+
+
+class EstimatingTheLight(ReadingTheLight):
+    """A light controller whose first estimate, 6 lux, comes with its fifth chunk."""
+
+    def push(self, events: Events, gaze_window: object) -> None:
+        super().push(events, gaze_window)
+        if self.pushed == 5:
+            self.lux = 6.0
+
+    def wants_whole(self) -> bool:
+        return False
+
+
+def test_each_frame_says_the_light_the_glasses_measured_once_they_have() -> None:
+    ev = events_in_box(16_000, 540, 310, 200, 100)
+    settings = every_window(n_events=1600, period_ms=1000.0, lossless=True, denoise=False)
+    frames, _, _ = run_pipeline(ListSource(chunked(ev, 1000)), FixedGaze(), settings, light=EstimatingTheLight())
+    said = [f.light_lux for f, _ in frames]
+    assert said[0] is None and said[-1] == 6.0 and said == sorted(said, key=lambda lux: lux is not None)
+    assert frames[-1][0].to_message().light_lux == 6.0
+    assert {f.light_lux for f, _ in run_pipeline(ListSource(chunked(ev, 1000)), FixedGaze(), settings)[0]} == {None}
 
 
 def test_a_healthy_known_motion_leaves_the_event_tracker_idle() -> None:

@@ -10,13 +10,14 @@ starved live one does (``edge.load``): its views say so, and the answer blames t
 from __future__ import annotations
 
 import json
+import math
 from functools import partial
 from pathlib import Path
 
 import pytest
 from speech_measure import require_espeak, transcribe
 
-from darkread.cloud.confidence import REASONS
+from darkread.cloud.confidence import DIM_LIGHT_LUX, REASONS
 from darkread.core.paths import SAMPLE_RECORDING
 from darkread.lab.eval.runner import hold_shed_level
 from darkread.lab.eval.suite import make_suite, suite_entries
@@ -48,6 +49,11 @@ def test_a_dim_walking_page_says_what_is_unclear_and_what_would_help(tmp_path: P
     reasons = {r for line in unclear for r in line["reasons"]}
     if 2 * len(unclear) >= len(result.answer_lines):  # most of the page unclear: the answer says what would help
         assert any(REASONS[r] in result.spoken for r in reasons), result.spoken
+    # the recording states its biases: the glasses measured the light from its background events, found
+    # the page dim, and the answer asks for more light
+    measured = {round(math.exp(line["evidence"]["log_lux"]), 1) for line in result.answer_lines}
+    assert len(measured) == 1 and 0 < measured.pop() < DIM_LIGHT_LUX, result.answer_lines
+    assert all("too_dark" in line["reasons"] for line in unclear), unclear
 
     assert result.speech_wav is not None
     heard = set(transcribe(Path(result.speech_wav).read_bytes()).split())

@@ -181,13 +181,15 @@ def test_levels_round_trip_through_every_encoding(levels: np.ndarray, enc: str) 
 
 
 @settings(deadline=None)
-@given(masks, st.sampled_from(("zlib", "png", "g4")), st.sampled_from((None, 1, 2, 3)))
-def test_views_and_frames_round_trip_as_messages(mask: np.ndarray, enc: str, shed_level: int | None) -> None:
+@given(masks, st.sampled_from(("zlib", "png", "g4")), st.sampled_from((None, 1, 2, 3)),
+       st.none() | st.floats(min_value=1e-3, max_value=1e6))
+def test_views_and_frames_round_trip_as_messages(mask: np.ndarray, enc: str, shed_level: int | None, light_lux: float | None) -> None:
     shape, bits = pack_mask(mask)
-    frame = Frame(seq=1, frame_id=2, t_us=3, events_used=4, shape=shape, bits=bits, enc="zlib", **GAZE)
+    frame = Frame(seq=1, frame_id=2, t_us=3, events_used=4, shape=shape, bits=bits, enc="zlib", light_lux=light_lux, **GAZE)
     page = Page(seq=1, page_id=2, t_us=3, shape=shape, bits=bits, enc=enc)
     view = View(seq=1, view_id=2, t0_us=0, t_us=3, frames=1, events_used=4, shape=shape, n_levels=2,
-                levels=mask.tobytes(), enc="png" if enc == "png" else "zlib", shed_level=shed_level, **GAZE)
+                levels=mask.tobytes(), enc="png" if enc == "png" else "zlib", shed_level=shed_level, light_lux=light_lux,
+                **GAZE)
     for message in (frame, page, view):
         assert decode(encode(message), max_bytes=LIMIT) == message
     np.testing.assert_array_equal(decode(encode(view), max_bytes=LIMIT).as_frame().mask(), mask)

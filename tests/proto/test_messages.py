@@ -387,6 +387,24 @@ def test_the_scene_motion_is_an_optional_field_of_frames_and_views() -> None:
             decode(msgpack.packb(payload), max_bytes=LIMIT)
 
 
+def test_the_light_the_glasses_measured_is_an_optional_field_of_frames_and_views() -> None:
+    """Glasses that measured the light say it in each frame and view; ones that did not omit it (no
+    bytes, no version bump); the record carries it to the cloud, and a light that is no light is refused."""
+    levels = np.array([[0, 3, 7, 0, 1]] * 4, np.uint8)
+    unknown = View(seq=1, view_id=2, t0_us=0, t_us=3, origin=(1, 2), gaze_px=(0.5, 0.5), gaze_rad=(0.0, 0.0), frames=1,
+                   events_used=4, shape=(4, 5), n_levels=8, levels=levels.tobytes())  # fmt: skip
+    assert "light_lux" not in msgpack.unpackb(encode(unknown)) and decode(encode(unknown), max_bytes=LIMIT).record().light_lux is None
+    dim = View(**{**unknown.__dict__, "light_lux": 6.5})
+    back = decode(encode(dim), max_bytes=LIMIT)
+    assert back.light_lux == 6.5 and back.record().light_lux == 6.5 and View.of(back.record()).light_lux == 6.5
+    assert back.as_frame().light_lux == 6.5 and decode(encode(back.as_frame()), max_bytes=LIMIT).record().light_lux == 6.5
+    for bad in (0, -3.0, "6", True, [6.0], float("nan"), float("inf")):
+        payload = msgpack.unpackb(encode(dim))
+        payload["light_lux"] = bad
+        with pytest.raises(InvalidFieldError, match="light_lux"):
+            decode(msgpack.packb(payload), max_bytes=LIMIT)
+
+
 def test_a_starved_edge_says_how_much_it_shed_in_an_optional_field_of_views() -> None:
     """A view made while the live edge was shedding (edge.load) carries the level; one made by an edge
     that kept up omits it (no bytes, no version bump), and a peer that does not know it ignores it."""

@@ -169,6 +169,19 @@ def test_only_the_lines_whose_crop_read_nothing_take_the_in_place_text() -> None
     assert len(ocr.shapes) == 1 and ocr.lines_in_place == len(LINES)  # one reading in place, of all three lines
 
 
+def test_a_page_knows_the_light_the_glasses_measured_while_its_frames_came() -> None:
+    """The light is evidence for a page's lines: the geometric mean over the frames that said it
+    (a page read while the light went from 5 to 20 lux was read at about 10); None when none did."""
+    from dataclasses import replace
+
+    records = frames()
+    assert paginate(records).pages[0].motion.light_lux() is None
+    lit = [replace(r, light_lux=5.0 if k % 2 else 20.0) if k % 3 else r for k, r in enumerate(records)]
+    motion = paginate(lit).pages[0].motion
+    assert motion.lit_records == sum(1 for k in range(len(records)) if k % 3)
+    assert motion.light_lux() == pytest.approx(10.0, rel=0.1)
+
+
 def test_a_page_knows_how_much_the_glasses_shed_while_its_frames_came() -> None:
     """The mean shedding level of a page's frames and views (edge.load) is evidence for its lines."""
     from dataclasses import replace

@@ -111,6 +111,16 @@ async def test_a_view_keeps_the_shedding_level_the_glasses_made_it_at(store: Ses
     assert (starved.shed_level, kept_up.shed_level) == (3, 0)
 
 
+async def test_a_frame_keeps_the_light_the_glasses_measured(store: SessionStore) -> None:
+    import dataclasses
+
+    await store.open_session(spec("s"))
+    await store.add_frame("s", dataclasses.replace(frame(0), light_lux=6.25))
+    await store.add_frame("s", frame(1))
+    dim, unknown = await store.frames("s")
+    assert (dim.light_lux, unknown.light_lux) == (6.25, None)
+
+
 async def test_concurrent_streams_each_get_every_write(store: SessionStore) -> None:
     await asyncio.gather(*(store.open_session(spec(f"s{i}")) for i in range(10)))
     results = await asyncio.gather(*(store.add_frame(f"s{i}", frame(seq)) for seq in range(40) for i in range(10)))
