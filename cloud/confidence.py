@@ -44,8 +44,6 @@ FEATURES: tuple[str, ...] = (
 )
 SHED_EVIDENCE = "edge_shed"  # the mean shedding level of the line's page (``edge.load``)
 LIGHT_EVIDENCE = "log_lux"  # log of the light the glasses measured at the line's page, lux
-DIM_LIGHT_LUX = 15.0  # a page measured dimmer than this: more light is what helps (the light below which
-# the glasses run the sensor's dark bias profile, the edge's ``[sensor] dark_below_lux``; docs/sensor_model.md)
 MODEL_FILE = "line_confidence.json"
 _WORD = re.compile(r"[A-Za-z]+")
 LOW_CHAR_PROB = 0.6  # a character read with less than this probability counts as doubtful
@@ -79,6 +77,11 @@ class ConfidenceModel:
     # by the pages of glasses that kept up, and a starved page's lines fail in ways the rest of its
     # evidence sees less (a skipped fixation leaves a line fewer looks)
     shed_thresholds: tuple[tuple[int, float], ...] = ()
+    # pages the glasses measured dimmer than this (lux) were too dark to read well: more light is the
+    # advice. Fitted, not the glasses' own dark-profile level: their estimate assumes a typical sensor's
+    # background, and a noisier one reads a lit page as dim (docs/eval/measured_light.md). None: the
+    # model saw no measured light, and the frames' agreement stands in for it
+    dim_lux: float | None = None
 
     @classmethod
     def from_json(cls, data: dict) -> ConfidenceModel:
@@ -87,6 +90,7 @@ class ConfidenceModel:
             float(data["intercept"]), float(data["answer_threshold"]), float(data["dark_ink_solid"]),
             float(data["fast_head_speed"]), float(data["small_height_px"]),
             tuple((int(level), float(t)) for level, t in sorted(data.get("shed_thresholds", {}).items())),
+            None if data.get("dim_lux") is None else float(data["dim_lux"]),
         )
 
     def threshold_for(self, evidence: dict[str, float]) -> float:
@@ -183,9 +187,10 @@ def busy(evidence: dict[str, float]) -> bool:
 
 def dim(evidence: dict[str, float], model: ConfidenceModel) -> bool:
     """Whether the line's page was too dim to read well: by the glasses' light measurement where
-    there is one, else by frames that agreed on little of the ink while the head was still."""
-    if LIGHT_EVIDENCE in evidence:
-        return evidence[LIGHT_EVIDENCE] < math.log(DIM_LIGHT_LUX)
+    there is one (and the model a limit for it), else by frames that agreed on little of the ink
+    while the head was still."""
+    if LIGHT_EVIDENCE in evidence and model.dim_lux is not None:
+        return evidence[LIGHT_EVIDENCE] < math.log(model.dim_lux)
     moving = evidence.get("log_head_speed", -math.inf) > model.fast_head_speed
     return evidence.get("ink_solid", math.inf) < model.dark_ink_solid and not moving
 
@@ -200,8 +205,9 @@ def reasons_for(evidence: dict[str, float], model: ConfidenceModel) -> tuple[str
     """What would help an unclear line, from its evidence: glasses that keep up, stillness, light,
     size; else a second look.
 
-    Where the glasses measured the light, it decides: "more light" for a page dimmer than
-    ``DIM_LIGHT_LUX``, never for a lit one. Where they did not, the frames' agreement stands in:
+    Where the glasses measured the light and the model knows what dim measures as, the light
+    decides: "more light" for a page dimmer than ``dim_lux``, never for a lit one. Elsewhere the
+    frames' agreement stands in:
     frames disagree in dim light and when the head moves fast, so only with a still head is the
     disagreement put down to the light."""
     reasons = ["glasses_busy"] if busy(evidence) else []

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from darkread.cloud.confidence import BUSY_SHED_LEVEL, FEATURES, SHED_EVIDENCE, ConfidenceModel, judge, shed_level_of
+from darkread.cloud.confidence import BUSY_SHED_LEVEL, FEATURES, LIGHT_EVIDENCE, SHED_EVIDENCE, ConfidenceModel, judge, shed_level_of
 from darkread.lab.eval.plots import _pyplot
 from darkread.lab.eval.selective import LineOutcome, reliability, weighted_cer
 
@@ -82,6 +82,18 @@ def _dark_limit(dim: list[float], lit: list[float]) -> float:
     if not dim or not lit:
         return 0.0
     return min(_midpoint(dim, lit, 0.0), float(np.percentile(lit, 10)))
+
+
+def light_limit(lines: Sequence[LineOutcome]) -> float | None:
+    """The measured light (lux) below which a page is called too dark: halfway (in log lux) between
+    the dim pages' lines (10 lux and below) and the rest, but no higher than what the dimmest tenth
+    of the lit lines measured ("add more light" there would be wrong advice); None without lines of
+    both that carry the glasses' measurement."""
+    dim = [ln.evidence[LIGHT_EVIDENCE] for ln in lines if LIGHT_EVIDENCE in ln.evidence and (ln.lux or 0) <= DIM_LUX]
+    lit = [ln.evidence[LIGHT_EVIDENCE] for ln in lines if LIGHT_EVIDENCE in ln.evidence and (ln.lux or 0) > DIM_LUX]
+    if not dim or not lit:
+        return None
+    return round(math.exp(min(_midpoint(dim, lit, 0.0), float(np.percentile(lit, 10)))), 2)
 
 
 def _standardised(lines: Sequence[LineOutcome]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -149,7 +161,7 @@ def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceMod
     model = ConfidenceModel(FEATURES, full(mean, 0.0), full(scale, 1.0), full(weights, shed_weight), intercept, 0.0,
                             _dark_limit(solid_dim, solid_lit), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX)
     return replace(model, answer_threshold=lowest_threshold(model, kept_up, target_risk),
-                   shed_thresholds=shed_thresholds(model, starved, target_risk))
+                   shed_thresholds=shed_thresholds(model, starved, target_risk), dim_lux=light_limit(kept_up))
 
 
 def shed_thresholds(model: ConfidenceModel, starved: Sequence[LineOutcome], target_risk: float) -> tuple[tuple[int, float], ...]:
@@ -183,6 +195,7 @@ def model_json(model: ConfidenceModel, meta: dict[str, Any]) -> str:
         "answer_threshold": model.answer_threshold,
         **({"shed_thresholds": {str(level): t for level, t in model.shed_thresholds}} if model.shed_thresholds else {}),
         "dark_ink_solid": round(model.dark_ink_solid, 4),
+        **({"dim_lux": model.dim_lux} if model.dim_lux is not None else {}),
         "fast_head_speed": round(model.fast_head_speed, 4), "small_height_px": model.small_height_px,
     }
     return json.dumps(doc, indent=1) + "\n"
@@ -333,9 +346,10 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
         "",
         (f"Reasons: the glasses could not keep up when the page's frames came at a mean shedding level of "
          f"{BUSY_SHED_LEVEL:g} or more (first); too much motion above"
-         f" {math.expm1(model.fast_head_speed):.0f} px/s of head motion; else too dark when "
-         f"frames agree on less than {100 * model.dark_ink_solid:.0f} % of the ink (solid ink: all frames saw it), "
-         f"too small below {model.small_height_px:g} px line height."),
+         f" {math.expm1(model.fast_head_speed):.0f} px/s of head motion; too dark "
+         + (f"when the glasses measured less than {model.dim_lux:g} lux at the page, and where they did not, " if model.dim_lux else "")
+         + f"when frames agree on less than {100 * model.dark_ink_solid:.0f} % of the ink with a still head (solid ink: all frames "
+         f"saw it); too small below {model.small_height_px:g} px line height."),
         "",
     ]
     (report_dir / "calibration.md").write_text("\n".join(md))

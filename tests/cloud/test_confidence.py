@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 
 import numpy as np
@@ -25,6 +27,13 @@ def model(threshold: float = 0.5) -> ConfidenceModel:
     means = tuple(0.5 if name == "ocr_min" else 0.0 for name in FEATURES)
     return ConfidenceModel(FEATURES, means, (1.0,) * len(FEATURES), weights, 0.0, threshold,
                            dark_ink_solid=0.2, fast_head_speed=math.log1p(200.0), small_height_px=9.0)
+
+
+def model_json_text() -> str:
+    m = model()
+    return json.dumps({"features": list(m.features), "mean": list(m.mean), "scale": list(m.scale), "weights": list(m.weights),
+                       "intercept": m.intercept, "answer_threshold": m.answer_threshold, "dark_ink_solid": m.dark_ink_solid,
+                       "fast_head_speed": m.fast_head_speed, "small_height_px": m.small_height_px})
 
 
 def page() -> np.ndarray:
@@ -54,17 +63,22 @@ def test_evidence_describes_the_line_and_the_page() -> None:
 
 
 def test_the_measured_light_decides_whether_more_light_would_help() -> None:
-    """Where the glasses measured the light, "more light" is said for a dim page only, and also while
-    the head moves (both would help); where they did not, the frames' agreement stands in for it."""
-    dim_and_still = judge({"ocr_min": 0.2, "ink_solid": 0.9, "log_lux": math.log(5.0), "log_head_speed": math.log1p(20.0)}, model())
+    """Where the glasses measured the light and the model knows what dim measures as, "more light" is
+    said for a dim page only, and also while the head moves (both would help); where they did not,
+    or the model saw no measured light, the frames' agreement stands in for it."""
+    knows = dataclasses.replace(model(), dim_lux=8.0)
+    dim_and_still = judge({"ocr_min": 0.2, "ink_solid": 0.9, "log_lux": math.log(5.0), "log_head_speed": math.log1p(20.0)}, knows)
     assert dim_and_still.reasons == ("too_dark",)  # solid ink, yet measured dim
-    dim_and_moving = judge({"ocr_min": 0.2, "log_lux": math.log(5.0), "log_head_speed": math.log1p(400.0)}, model())
+    dim_and_moving = judge({"ocr_min": 0.2, "log_lux": math.log(5.0), "log_head_speed": math.log1p(400.0)}, knows)
     assert dim_and_moving.reasons == ("too_dark", "too_much_motion")
-    lit = judge({"ocr_min": 0.2, "ink_solid": 0.1, "log_lux": math.log(200.0), "log_head_speed": math.log1p(20.0)}, model())
+    lit = judge({"ocr_min": 0.2, "ink_solid": 0.1, "log_lux": math.log(200.0), "log_head_speed": math.log1p(20.0)}, knows)
     assert lit.reasons == ("look_again",)  # grey ink on a lit page: light is not what is missing
-    assert judge({"ocr_min": 0.2, "log_lux": math.log(16.0)}, model()).reasons == ("look_again",)  # above the dim light
+    assert judge({"ocr_min": 0.2, "log_lux": math.log(9.0)}, knows).reasons == ("look_again",)  # above the dim light
     assert spoken_answer([("x", dim_and_moving), ("y", dim_and_moving)]) == (
         "The whole page is unclear.\nPlease add more light.\nPlease stop moving.")
+    unknowing = judge({"ocr_min": 0.2, "ink_solid": 0.1, "log_lux": math.log(200.0), "log_head_speed": math.log1p(20.0)}, model())
+    assert unknowing.reasons == ("too_dark",)  # a model fitted on no measured light: the frames' agreement decides
+    assert ConfidenceModel.from_json({**json.loads(model_json_text()), "dim_lux": 8.0}).dim_lux == 8.0
 
 
 def test_unsure_lines_are_unclear_with_what_would_help() -> None:

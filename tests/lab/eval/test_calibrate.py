@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from darkread.cloud.confidence import ConfidenceModel
-from darkread.lab.eval.calibrate import calibrate, check, fit_logistic, split
+from darkread.lab.eval.calibrate import calibrate, check, fit_logistic, light_limit, split
 from darkread.lab.eval.selective import LineOutcome, match_lines, reliability, risk_coverage, selective
 
 
@@ -60,6 +61,23 @@ def test_calibrate_writes_a_model_that_is_calibrated_on_held_out_lines(tmp_path:
     assert answered.cer_answered < everything.cer_all and 0 < answered.coverage < 1 and everything.coverage == 1
     coverage, risk = risk_coverage(held, shipped)
     assert coverage[-1] == 1.0 and risk[0] <= risk[-1]
+
+
+def test_the_light_that_counts_as_dim_is_fitted_where_the_glasses_measured_it(tmp_path: Path) -> None:
+    """Halfway (log lux) between the dim pages' measured light and the lit ones', no higher than the
+    dimmest tenth of the lit lines; no limit (and none in the JSON) from lines without a measurement."""
+    lines = synthetic_lines()
+    assert light_limit(lines) is None
+    measured = [dataclasses.replace(ln, evidence={**ln.evidence, "log_lux": np.log(2.0 if ln.lux == 5 else 20.0)}) for ln in lines]
+    assert light_limit(measured) == pytest.approx(np.sqrt(2.0 * 20.0), rel=1e-3)
+    dim_lit = [dataclasses.replace(ln, evidence={**ln.evidence, "log_lux": np.log(2.0 if ln.lux == 5 else (3.0 if k % 5 == 0 else 20.0))})
+               for k, ln in enumerate(lines)]
+    assert light_limit(dim_lit) == pytest.approx(3.0, rel=1e-3)  # a fifth of the lit lines measure 3 lux: the limit goes below them
+    calibrate(measured, tmp_path / "model.json", tmp_path / "report", target_risk=0.05)
+    assert json.loads((tmp_path / "model.json").read_text())["dim_lux"] == pytest.approx(6.32, abs=0.01)
+    assert "measured less than 6.32 lux" in (tmp_path / "report" / "calibration.md").read_text()
+    calibrate(lines, tmp_path / "unlit.json", tmp_path / "report", target_risk=0.05)
+    assert "dim_lux" not in json.loads((tmp_path / "unlit.json").read_text())
 
 
 def test_answer_lines_are_matched_to_their_closest_reference_line() -> None:
