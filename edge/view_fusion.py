@@ -29,7 +29,9 @@ from darkread.stitch.register import register_frame
 N_LEVELS = 8  # the mean of up to ~7 frames to within half a step; few levels compress well in a PNG
 SEARCH_RADIUS_PX = 12  # head drift between two frames of a fixation (50-100 ms apart), beyond the sensor's offset
 MIN_SCORE = 0.8  # a weaker match: the frame starts a new view (the stitcher places it on its own) rather than blur this one
-# (0.6 let low-light frames that matched noise blur their views: docs/views.md)
+# (0.6 let low-light frames that matched noise blur their views: docs/views.md) ...
+DOUBTED_MIN_SCORE = 0.75  # ... but a frame the network doubted (dim light) cannot match even its right place
+DOUBTED = 1.2  # that well: from this doubt on, a weaker match still joins the view (docs/views.md, "Dim frames")
 MARGIN_PX = 32  # the fused canvas reaches this far beyond the first frame's window (head drift in a fixation)
 # a frame whose network doubts more than this (pixels of probability 0.2-0.8 per ink pixel) is
 # averaged in as its mask: measured 1.1-1.5 at 100 lux, ~1.55 at 30, ~2 at 10, 2-3 at 5 lux, where
@@ -133,10 +135,12 @@ class ViewFuser:
         ``probability``: the network's ink probability behind the frame's mask, averaged in instead
         of the mask (the frame is still registered by its mask): with only a few frames per view, a
         stroke the network was unsure of survives as grey instead of vanishing or turning solid.
-        Not for a frame the network doubted all over (``doubt`` above ``max_doubt``: dim light)."""
+        Not for a frame the network doubted all over (``doubt`` above ``max_doubt``: dim light). A
+        doubted frame (``DOUBTED``) joins on a weaker match (``DOUBTED_MIN_SCORE``)."""
         mask = frame.mask.astype(np.float32)
         if probability is not None and probability.shape != mask.shape:
             raise ValueError(f"frame {frame.frame_id}: probability {probability.shape} is not the mask's {mask.shape}")
+        unsure = doubt(probability) if probability is not None else None
         if self._first is None or self._sum is None or self._count is None:
             h, w = mask.shape
             m = self.margin
@@ -146,11 +150,11 @@ class ViewFuser:
             xy = (0.0, 0.0)
             self.last_score = None
         else:
-            found = self._place(frame, mask)
+            found = self._place(frame, mask, DOUBTED_MIN_SCORE if unsure is not None and unsure >= DOUBTED else MIN_SCORE)
             if found is None:
                 return None
             xy = found
-        self.last_doubt = doubt(probability) if probability is not None else None
+        self.last_doubt = unsure
         soft = self.last_doubt is not None and self.last_doubt <= self.max_doubt
         self._accumulate(np.asarray(probability, np.float32) if soft else mask, xy)
         self._last, self._last_xy = frame, xy
@@ -161,10 +165,10 @@ class ViewFuser:
         self._gaze_rad = gaze_rad
         return xy
 
-    def _place(self, frame: FrameRecord, mask: np.ndarray) -> tuple[float, float] | None:
+    def _place(self, frame: FrameRecord, mask: np.ndarray, min_score: float = MIN_SCORE) -> tuple[float, float] | None:
         """The frame's top-left in the first frame's coordinates: where the newest frame was plus
         the sensor offset between them, corrected by correlation against the view; None when no
-        trustworthy match is found."""
+        match of at least ``min_score`` is found."""
         assert self._first is not None and self._last is not None and self._sum is not None
         assert self._count is not None
         h, w = mask.shape
@@ -183,7 +187,7 @@ class ViewFuser:
         count = _crop(self._count, *box)
         probability = _crop(self._sum, *box) / np.maximum(count, 1e-6)  # only the search box
         found = register_frame(probability, (count > 0.5).astype(np.float32), mask, r)
-        if found is None or found.score < MIN_SCORE or found.on_rim:
+        if found is None or found.score < min_score or found.on_rim:
             return None
         self.last_score = float(found.score)
         return px + found.shift_xy[0] + found.subpixel_xy[0], py + found.shift_xy[1] + found.subpixel_xy[1]

@@ -68,6 +68,29 @@ def test_a_frame_that_does_not_register_is_left_out_for_the_next_view() -> None:
     assert len(fuser) == 1 and fuser.view(0).t_us == 0
 
 
+def test_a_frame_the_network_doubted_joins_on_a_weaker_match() -> None:
+    """Dim light: a frame that lost a quarter of its strokes and gained speckle matches its right
+    place at about 0.78, under MIN_SCORE. Given with the probability of a network that doubted it
+    (DOUBTED or more), it joins the view there; as a sure binary frame it starts the next view."""
+    from darkread.edge.view_fusion import DOUBTED, DOUBTED_MIN_SCORE, MIN_SCORE, doubt
+
+    page = page_of_text()
+    rng = np.random.default_rng(0)
+    lost = (rng.random((25, 50)) < 0.25).repeat(4, 0).repeat(4, 1)
+    dim = np.where(rng.random((100, 200)) < 0.25, 1, np.where(lost, 0, page[12:112, 23:223])).astype(np.uint8)
+    dim_frame = FrameRecord(1, 1000, dim, (500, 300), (600.0, 350.0))
+    doubted = np.where(dim > 0, 0.7, 0.35).astype(np.float32)
+    assert doubt(doubted) >= DOUBTED
+
+    sure = ViewFuser()
+    sure.add(frame(page, 20, 10, 0, (500, 300)))
+    assert sure.add(dim_frame) is None and sure.last_score is None  # (no match kept)
+    unsure = ViewFuser()
+    unsure.add(frame(page, 20, 10, 0, (500, 300)))
+    assert unsure.add(dim_frame, probability=doubted) == pytest.approx((3.0, 2.0), abs=0.5)
+    assert unsure.last_score is not None and DOUBTED_MIN_SCORE <= unsure.last_score < MIN_SCORE and len(unsure) == 2
+
+
 def test_a_pixel_seen_as_ink_in_one_of_three_frames_is_unlikely_ink() -> None:
     page = page_of_text()
     noisy = page.copy()
