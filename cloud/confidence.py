@@ -185,14 +185,18 @@ def busy(evidence: dict[str, float]) -> bool:
     return evidence.get(SHED_EVIDENCE, 0.0) >= BUSY_SHED_LEVEL
 
 
+def moving(evidence: dict[str, float], model: ConfidenceModel) -> bool:
+    """Whether the head moved fast enough while the line's page was read to blame the motion."""
+    return evidence.get("log_head_speed", -math.inf) > model.fast_head_speed
+
+
 def dim(evidence: dict[str, float], model: ConfidenceModel) -> bool:
     """Whether the line's page was too dim to read well: by the glasses' light measurement where
     there is one (and the model a limit for it), else by frames that agreed on little of the ink
     while the head was still."""
     if LIGHT_EVIDENCE in evidence and model.dim_lux is not None:
         return evidence[LIGHT_EVIDENCE] < math.log(model.dim_lux)
-    moving = evidence.get("log_head_speed", -math.inf) > model.fast_head_speed
-    return evidence.get("ink_solid", math.inf) < model.dark_ink_solid and not moving
+    return evidence.get("ink_solid", math.inf) < model.dark_ink_solid and not moving(evidence, model)
 
 
 def shed_level_of(evidence: dict[str, float]) -> int:
@@ -211,10 +215,9 @@ def reasons_for(evidence: dict[str, float], model: ConfidenceModel) -> tuple[str
     frames disagree in dim light and when the head moves fast, so only with a still head is the
     disagreement put down to the light."""
     reasons = ["glasses_busy"] if busy(evidence) else []
-    moving = evidence.get("log_head_speed", -math.inf) > model.fast_head_speed
     if dim(evidence, model):
         reasons.append("too_dark")
-    if moving:
+    if moving(evidence, model):
         reasons.append("too_much_motion")
     if evidence.get("height_px", math.inf) < model.small_height_px:
         reasons.append("too_small")

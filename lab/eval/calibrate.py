@@ -75,13 +75,16 @@ def _midpoint(a: list[float], b: list[float], default: float) -> float:
     return (float(np.median(a)) + float(np.median(b))) / 2 if a and b else default
 
 
-def _dark_limit(dim: list[float], lit: list[float]) -> float:
-    """Solid ink below which a still page is called too dark: halfway between dim and lit pages, but
-    no higher than what the greyest tenth of lit lines show (the two overlap: in good light a line
-    read by few frames is grey too, and "add more light" would be wrong advice there)."""
-    if not dim or not lit:
-        return 0.0
+def _below_lit(dim: list[float], lit: list[float]) -> float:
+    """Halfway between the dim lines' medians and the lit ones', but no higher than the lowest tenth
+    of the lit lines: the two overlap, and "add more light" for a lit page is wrong advice."""
     return min(_midpoint(dim, lit, 0.0), float(np.percentile(lit, 10)))
+
+
+def _dark_limit(dim: list[float], lit: list[float]) -> float:
+    """Solid ink below which a still page is called too dark (``_below_lit``: in good light a line
+    read by few frames is grey too)."""
+    return _below_lit(dim, lit) if dim and lit else 0.0
 
 
 def light_limit(lines: Sequence[LineOutcome]) -> float | None:
@@ -91,9 +94,7 @@ def light_limit(lines: Sequence[LineOutcome]) -> float | None:
     both that carry the glasses' measurement."""
     dim = [ln.evidence[LIGHT_EVIDENCE] for ln in lines if LIGHT_EVIDENCE in ln.evidence and (ln.lux or 0) <= DIM_LUX]
     lit = [ln.evidence[LIGHT_EVIDENCE] for ln in lines if LIGHT_EVIDENCE in ln.evidence and (ln.lux or 0) > DIM_LUX]
-    if not dim or not lit:
-        return None
-    return round(math.exp(min(_midpoint(dim, lit, 0.0), float(np.percentile(lit, 10)))), 2)
+    return round(math.exp(_below_lit(dim, lit)), 2) if dim and lit else None
 
 
 def _standardised(lines: Sequence[LineOutcome]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
