@@ -82,6 +82,11 @@ class ConfidenceModel:
     # background, and a noisier one reads a lit page as dim (docs/eval/measured_light.md). None: the
     # model saw no measured light, and the frames' agreement stands in for it
     dim_lux: float | None = None
+    # the answer threshold of pages measured dimmer than ``dim_lux``: in dim light the evidence the
+    # model weighs misjudges more lines (frames agree on a wrong letter), so the line one threshold
+    # for every page draws is set by lit pages and lets dim ones through at a higher risk. None: one
+    # threshold for every light
+    dim_threshold: float | None = None
 
     @classmethod
     def from_json(cls, data: dict) -> ConfidenceModel:
@@ -91,12 +96,15 @@ class ConfidenceModel:
             float(data["fast_head_speed"]), float(data["small_height_px"]),
             tuple((int(level), float(t)) for level, t in sorted(data.get("shed_thresholds", {}).items())),
             None if data.get("dim_lux") is None else float(data["dim_lux"]),
+            None if data.get("dim_threshold") is None else float(data["dim_threshold"]),
         )
 
     def threshold_for(self, evidence: dict[str, float]) -> float:
-        """The answer threshold for a line with this evidence: its shedding level's (never below the model's)."""
+        """The answer threshold for a line with this evidence: its shedding level's and, on a page measured
+        dim, the dim pages' (never below the model's)."""
         level = shed_level_of(evidence)
-        return max([self.answer_threshold, *(t for at, t in self.shed_thresholds if at == level)])
+        dim_page = [self.dim_threshold] if self.dim_threshold is not None and measured_dim(evidence, self) else []
+        return max([self.answer_threshold, *(t for at, t in self.shed_thresholds if at == level), *dim_page])
 
     def probability(self, evidence: dict[str, float]) -> float:
         x = np.array([evidence.get(name, mean) for name, mean in zip(self.features, self.mean)], dtype=np.float64)
@@ -195,8 +203,14 @@ def dim(evidence: dict[str, float], model: ConfidenceModel) -> bool:
     there is one (and the model a limit for it), else by frames that agreed on little of the ink
     while the head was still."""
     if LIGHT_EVIDENCE in evidence and model.dim_lux is not None:
-        return evidence[LIGHT_EVIDENCE] < math.log(model.dim_lux)
+        return measured_dim(evidence, model)
     return evidence.get("ink_solid", math.inf) < model.dark_ink_solid and not moving(evidence, model)
+
+
+def measured_dim(evidence: dict[str, float], model: ConfidenceModel) -> bool:
+    """Whether the glasses measured the line's page dimmer than the model's ``dim_lux`` (False where
+    either is missing)."""
+    return LIGHT_EVIDENCE in evidence and model.dim_lux is not None and evidence[LIGHT_EVIDENCE] < math.log(model.dim_lux)
 
 
 def shed_level_of(evidence: dict[str, float]) -> int:

@@ -24,7 +24,16 @@ from typing import Any
 
 import numpy as np
 
-from darkread.cloud.confidence import BUSY_SHED_LEVEL, FEATURES, LIGHT_EVIDENCE, SHED_EVIDENCE, ConfidenceModel, judge, shed_level_of
+from darkread.cloud.confidence import (
+    BUSY_SHED_LEVEL,
+    FEATURES,
+    LIGHT_EVIDENCE,
+    SHED_EVIDENCE,
+    ConfidenceModel,
+    judge,
+    measured_dim,
+    shed_level_of,
+)
 from darkread.lab.eval.plots import _pyplot
 from darkread.lab.eval.selective import LineOutcome, reliability, weighted_cer
 
@@ -161,8 +170,20 @@ def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceMod
     calm = [ln.evidence["log_head_speed"] for ln in kept_up if "log_head_speed" in ln.evidence and ln.motion != "walking"]
     model = ConfidenceModel(FEATURES, full(mean, 0.0), full(scale, 1.0), full(weights, shed_weight), intercept, 0.0,
                             _dark_limit(solid_dim, solid_lit), _midpoint(fast, calm, 100.0), SMALL_HEIGHT_PX)
-    return replace(model, answer_threshold=lowest_threshold(model, kept_up, target_risk),
-                   shed_thresholds=shed_thresholds(model, starved, target_risk), dim_lux=light_limit(kept_up))
+    model = replace(model, answer_threshold=lowest_threshold(model, kept_up, target_risk),
+                    shed_thresholds=shed_thresholds(model, starved, target_risk), dim_lux=light_limit(kept_up))
+    return replace(model, dim_threshold=dim_threshold(model, kept_up, target_risk))
+
+
+def dim_threshold(model: ConfidenceModel, kept_up: Sequence[LineOutcome], target_risk: float) -> float | None:
+    """The answer threshold of pages measured dimmer than the model's ``dim_lux``: the lowest at which
+    those lines read at ``target_risk``; None with fewer than ``MIN_SHED_LINES`` of them, or when the
+    model's own threshold already holds them there."""
+    dim_lines = [ln for ln in kept_up if measured_dim(ln.evidence, model)]
+    if len(dim_lines) < MIN_SHED_LINES:
+        return None
+    threshold = lowest_threshold(model, dim_lines, target_risk)
+    return threshold if threshold > model.answer_threshold else None
 
 
 def shed_thresholds(model: ConfidenceModel, starved: Sequence[LineOutcome], target_risk: float) -> tuple[tuple[int, float], ...]:
@@ -197,6 +218,7 @@ def model_json(model: ConfidenceModel, meta: dict[str, Any]) -> str:
         **({"shed_thresholds": {str(level): t for level, t in model.shed_thresholds}} if model.shed_thresholds else {}),
         "dark_ink_solid": round(model.dark_ink_solid, 4),
         **({"dim_lux": model.dim_lux} if model.dim_lux is not None else {}),
+        **({"dim_threshold": model.dim_threshold} if model.dim_threshold is not None else {}),
         "fast_head_speed": round(model.fast_head_speed, 4), "small_height_px": model.small_height_px,
     }
     return json.dumps(doc, indent=1) + "\n"
@@ -325,7 +347,9 @@ def calibrate(lines: Sequence[LineOutcome], model_out: Path, report_dir: Path, t
          f"answered lines on the fitting half read at {100 * target_risk:g} % CER or better)."
          + (" On a page the glasses made while shedding work (`edge.load`; the page's mean level rounded), the lowest "
             "whose answered lines on the fitting half's pages of that level read so: "
-            + ", ".join(f"level {level} {t:g}" for level, t in model.shed_thresholds) + "." if model.shed_thresholds else "")),
+            + ", ".join(f"level {level} {t:g}" for level, t in model.shed_thresholds) + "." if model.shed_thresholds else "")
+         + (f" On a page the glasses measured dimmer than {model.dim_lux:g} lux, the lowest whose answered lines on the "
+            f"fitting half's dim pages read so: {model.dim_threshold:g}." if model.dim_threshold is not None else "")),
         "",
         *([f"Lines from: {'; '.join(sources)}.", ""] if len(sources) > 1 else []),
         (f"**Held-out ECE: {ece:.3f}** (10 equal-width bins; {100 * right.mean():.0f} % of the {len(held)} held-out lines right; "

@@ -156,3 +156,30 @@ def test_pages_of_glasses_that_shed_get_a_weight_and_a_threshold_of_their_own(tm
     assert judge({**sure, "edge_shed": 0.0}, both).confidence == judge(sure, alone).confidence
     assert judge({**sure, "edge_shed": 3.0}, both).confidence < judge(sure, both).confidence
     assert ConfidenceModel.from_json(json.loads(model_json(both, {}))).shed_thresholds == both.shed_thresholds
+
+
+def test_pages_measured_dim_get_a_threshold_of_their_own_when_one_threshold_lets_them_through() -> None:
+    """Dim pages whose sure-looking lines are wrong twice as often: their own threshold holds them at the
+    target risk, lit pages keep the model's, and the threshold survives the JSON."""
+    from dataclasses import replace
+
+    from darkread.cloud.confidence import judge
+    from darkread.lab.eval.calibrate import fit_model, model_json
+    from darkread.lab.eval.selective import weighted_cer
+
+    rng = np.random.default_rng(8)
+    lines = []
+    for line in synthetic_lines(900, seed=6):
+        dim_page = line.lux == 5
+        wrong = line.cer > 0 or (dim_page and rng.random() < 0.12)
+        lines.append(replace(line, cer=0.3 if wrong else 0.0, evidence={**line.evidence, "ink_solid": 0.2,
+                                                                         "log_lux": np.log(2.0 if dim_page else 30.0)}))
+    model = fit_model(lines, target_risk=0.05)
+    assert model.dim_lux is not None and model.dim_threshold is not None and model.dim_threshold > model.answer_threshold
+    dim_lines = [ln for ln in lines if ln.lux == 5]
+    answered = [ln for ln in dim_lines if judge(ln.evidence, model).status == "read"]
+    assert 0 < len(answered) < len(dim_lines) and weighted_cer(answered) <= 0.05
+    lit = {"ocr_min": 0.6, "ink_solid": 0.2, "log_head_speed": 2.0, "log_lux": np.log(30.0)}
+    assert model.threshold_for(lit) == model.answer_threshold
+    assert model.threshold_for({**lit, "log_lux": np.log(2.0)}) == model.dim_threshold
+    assert ConfidenceModel.from_json(json.loads(model_json(model, {}))).dim_threshold == model.dim_threshold
