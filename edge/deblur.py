@@ -99,8 +99,10 @@ def smear_near(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, i
                prior: tuple[float, float], radius_px: float, cfg: DeblurConfig = DeblurConfig(),
                t_first_us: int | None = None) -> tuple[float, float]:
     """``smear_of`` searched only within ``radius_px`` of a predicted smear ``prior`` (the gyroscope's,
-    ``edge.imu_motion``): no coarse search and no test against a still page, the motion is known to be
-    near it; with too few events to sharpen, the prediction itself."""
+    ``edge.imu_motion``): no coarse search, the motion is known to be near it. A peak the events do
+    not prefer by ``min_gain`` over the prediction itself is noise (in dim light a peak a fraction
+    above it is always found), so the prediction stands, as a still page does for ``smear_of``; with
+    too few events to sharpen, the prediction too."""
     if span_us <= 0:
         return 0.0, 0.0
     t_first, t_last, n, earliest = _voting(x, y, t, region, t_ref_us, t_first_us)
@@ -111,8 +113,9 @@ def smear_near(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, i
     if not pairs:
         return prior
     dx, dy = _displacements(float(radius_px), cfg.step_px)
-    found, _ = _best(pairs, dx + np.float32(prior[0]), dy + np.float32(prior[1]), cv2.INTER_CUBIC)
-    return found
+    found, top = _best(pairs, dx + np.float32(prior[0]), dy + np.float32(prior[1]), cv2.INTER_CUBIC)
+    _, at_prior = _best(pairs, np.full((1, 1), prior[0], np.float32), np.full((1, 1), prior[1], np.float32), cv2.INTER_CUBIC)
+    return found if top >= cfg.min_gain * at_prior else prior
 
 
 def _voting(x: np.ndarray, y: np.ndarray, t: np.ndarray, region: tuple[int, int, int, int], t_ref_us: int,
