@@ -44,7 +44,8 @@ Seven forms:
       snapshot of the same scene, compare OCR engines on the stitched pages, measure bandwidth, and
       write the Markdown report with PNG plots to --out. Results are kept per recording under
       SUITE_DIR/eval_runs/<mode> (or --work), so an interrupted evaluation resumes (--force redoes
-      them). --report-only rebuilds the report from the stored results.
+      them). --report-only rebuilds the report from the stored results. --match PATTERN: only those
+      recordings (e.g. --match '*_lux10_*', with a --work folder of their own).
 
   darkread eval compare-simulators OURS_SUITE OTHER_SUITE [--out FILE.md] [--infer MODE]
       the same recordings made by two event simulators (make-suite --simulator), both evaluated:
@@ -150,6 +151,9 @@ def _add_run(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--before", metavar="RESULTS.json",
                    help="an earlier report's results.json of the same suite: the report compares darkread's CER by lux "
                         "and kind on the recordings both hold (e.g. docs/eval/before/results.json)")
+    p.add_argument("--match", metavar="PATTERN", action="append", default=[],
+                   help="only the recordings whose name matches (shell pattern or substring; repeatable), e.g. "
+                        "'*_lux10_*': read and reported (give them a --work folder of their own)")
     p.set_defaults(func=_evaluate)
 
 
@@ -492,13 +496,16 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _results(suite: Path, work: Path, mode: str, args: argparse.Namespace, *, evaluate: bool) -> list[RecordingResult]:
-    """One mode's results: evaluated (resuming from ``work``) or read from ``work``; all of ``mode``."""
+    """One mode's results: evaluated (resuming from ``work``) or read from ``work``; all of ``mode`` (those
+    ``--match`` names, when given)."""
     from darkread.lab.eval.runner import evaluate_suite, load_results
+    from darkread.lab.eval.suite import name_matches
 
     if evaluate:
         return evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model, rgb=not args.no_rgb,
-                              force=args.force, jobs=args.jobs, infer=mode, shed_level=args.edge_shed_level)
-    results = load_results(work)
+                              force=args.force, jobs=args.jobs, infer=mode, shed_level=args.edge_shed_level,
+                              match=args.match)
+    results = [r for r in load_results(work) if not args.match or name_matches(r.name, args.match)]
     if not results:
         raise FileNotFoundError(f"{work}: no stored results; run `darkread eval run {suite} --infer {mode} --work {work}` first")
     others = sorted({r.infer for r in results} - {mode})

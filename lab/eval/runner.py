@@ -28,7 +28,7 @@ from darkread.lab.eval.provenance import git_commit, model_digest
 from darkread.lab.eval.results import RecordingResult, why_evaluate_again
 from darkread.lab.eval.rgb_baseline import baseline_snapshot, read_snapshot
 from darkread.lab.eval.selective import match_lines
-from darkread.lab.eval.suite import HELD_OUT_FONTS, load_suite
+from darkread.lab.eval.suite import HELD_OUT_FONTS, load_suite, name_matches
 from darkread.lab.jobs import run_jobs
 from darkread.read import read_recording
 
@@ -218,9 +218,10 @@ def evaluate_suite(
     infer: str = "every-window",
     rgb: bool = True,
     shed_level: int = 0,
+    match: Sequence[str] = (),
 ) -> list[RecordingResult]:
-    """Evaluate every recording of a suite with ``jobs`` worker processes; stored results are reused
-    unless ``force``.
+    """Evaluate every recording of a suite (those whose names ``match``, when given) with ``jobs``
+    worker processes; stored results are reused unless ``force``.
 
     Per-recording outputs (page image, RGB crop, cloud data, ``result.json``) go to ``work_dir``
     (default: ``SUITE_DIR/eval_runs``), one folder per recording.
@@ -228,7 +229,9 @@ def evaluate_suite(
     from tqdm import tqdm
 
 
-    folders = load_suite(suite_dir)
+    folders = [f for f in load_suite(suite_dir) if not match or name_matches(f.name, match)]
+    if not folders:
+        raise ValueError(f"--match {' '.join(match)}: no recording of {suite_dir} has such a name")
     runs = Path(work_dir) if work_dir is not None else Path(suite_dir) / "eval_runs"
     engines = available_backends(compare)
     logger.info("%d recordings; OCR comparison on the stitched page with: %s", len(folders), ", ".join(engines) or "none")

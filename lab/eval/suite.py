@@ -186,15 +186,20 @@ def select_entries(*, small: bool = False, match: str | Sequence[str] | None = N
                        motion_regime=motion_regime, bias_profile=biases, k_hz_per_chip_lux=k,
                        standard_laws=tuple(standard_laws)) for e in entries]
     if match:
-
         patterns = [match] if isinstance(match, str) else list(match)
-        entries = [e for e in entries if any(fnmatch(e.name, m) or m in e.name for m in patterns)]
+        entries = [e for e in entries if name_matches(e.name, patterns)]
         if not entries:
             raise ValueError(f"--match {' '.join(patterns)}: no recording of the suite has such a name")
     if font is not None:
         entries = [in_font(e, font) for e in entries if e.font != font]
     return entries
 
+
+
+def name_matches(name: str, patterns: Sequence[str]) -> bool:
+    """Whether a recording's name matches any of ``patterns`` (a shell pattern, or a part of the name):
+    ``--match`` of make-suite and of run."""
+    return any(fnmatch(name, m) or m in name for m in patterns)
 
 def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,

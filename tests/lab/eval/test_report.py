@@ -126,6 +126,31 @@ def test_cli_rebuilds_the_report_from_stored_results(tmp_path: Path) -> None:
     assert "\n- a second run gave 3.0%\n" in md
 
 
+def test_cli_reports_only_the_recordings_match_names(tmp_path: Path) -> None:
+    from darkread.cli import main
+
+    suite = tmp_path / "suite"
+    for result in fake_results():
+        folder = suite / "eval_runs" / "every-window" / result["name"]
+        folder.mkdir(parents=True)
+        (folder / "result.json").write_text(json.dumps(result))
+    out = tmp_path / "report"
+    assert main(["eval", "run", str(suite), "--report-only", "--infer", "every-window", "--out", str(out),
+                 "--match", "*_dark"]) == 0
+    names = [r["name"] for r in json.loads((out / "results.json").read_text())]
+    assert names == ["001_dark"] and "1 synthetic recordings" in (out / "README.md").read_text()
+
+
+def test_a_match_no_recording_has_is_one_clear_error(tmp_path: Path) -> None:
+    from darkread.lab.eval.runner import evaluate_suite
+
+    suite = tmp_path / "suite"
+    (suite / "000_bright").mkdir(parents=True)
+    (suite / "000_bright" / "text.txt").write_text("x")
+    with pytest.raises(ValueError, match="no recording of .* has such a name"):
+        evaluate_suite(suite, match=["*_lux10_*"], progress=False)
+
+
 def test_cli_refuses_a_report_without_results(tmp_path: Path) -> None:
     from darkread.cli import main
 
