@@ -505,7 +505,7 @@ def _results(suite: Path, work: Path, mode: str, args: argparse.Namespace, *, ev
         return evaluate_suite(suite, work, backend=args.backend, compare=args.compare, model=args.model, rgb=not args.no_rgb,
                               force=args.force, jobs=args.jobs, infer=mode, shed_level=args.edge_shed_level,
                               match=args.match)
-    results = [r for r in load_results(work) if not args.match or name_matches(r.name, args.match)]
+    results = [r for r in load_results(work) if not args.match or name_matches(r.name or "", args.match)]
     if not results:
         raise FileNotFoundError(f"{work}: no stored results; run `darkread eval run {suite} --infer {mode} --work {work}` first")
     others = sorted({r.infer for r in results} - {mode})
