@@ -40,7 +40,7 @@ from darkread.lab.eval.selective import LineOutcome, reliability, weighted_cer
 # on standardised evidence; the one with the best Brier score in two-fold cross-validation on the fitting half is used
 RIDGES = (0.1, 0.3, 1.0, 3.0, 10.0)
 DIM_LUX = 10.0
-MIN_SHED_LINES = 50  # fewer lines of pages made at a shedding level (``--edge-shed-level`` runs): too few to set a threshold by
+MIN_GROUP_LINES = 50  # fewer lines of a group with a threshold of its own (a shedding level, dim pages): too few to set it by
 SMALL_HEIGHT_PX = 9.0  # a line band lower than this holds glyphs of about 4 px x-height: below what the network resolves
 # the shedding level is fitted apart, on the lines of pages made while the glasses shed (see ``fit_model``)
 BASE_FEATURES = tuple(name for name in FEATURES if name != SHED_EVIDENCE)
@@ -177,24 +177,24 @@ def fit_model(lines: Sequence[LineOutcome], target_risk: float) -> ConfidenceMod
 
 def dim_threshold(model: ConfidenceModel, kept_up: Sequence[LineOutcome], target_risk: float) -> float | None:
     """The answer threshold of pages measured dimmer than the model's ``dim_lux``: the lowest at which
-    those lines read at ``target_risk``; None with fewer than ``MIN_SHED_LINES`` of them, or when the
+    those lines read at ``target_risk``; None with fewer than ``MIN_GROUP_LINES`` of them, or when the
     model's own threshold already holds them there."""
     dim_lines = [ln for ln in kept_up if measured_dim(ln.evidence, model)]
-    if len(dim_lines) < MIN_SHED_LINES:
+    if len(dim_lines) < MIN_GROUP_LINES:
         return None
     threshold = lowest_threshold(model, dim_lines, target_risk)
     return threshold if threshold > model.answer_threshold else None
 
 
 def shed_thresholds(model: ConfidenceModel, starved: Sequence[LineOutcome], target_risk: float) -> tuple[tuple[int, float], ...]:
-    """The answer threshold of each shedding level (the page's mean, rounded) with ``MIN_SHED_LINES``
+    """The answer threshold of each shedding level (the page's mean, rounded) with ``MIN_GROUP_LINES``
     lines: the lowest at which its lines read at ``target_risk`` (one frame per view costs little, no
     view for a covered fixation much more)."""
     by_level: dict[int, list[LineOutcome]] = {}
     for line in starved:
         by_level.setdefault(shed_level_of(line.evidence), []).append(line)
     return tuple((level, lowest_threshold(model, group, target_risk)) for level, group in sorted(by_level.items())
-                 if level > 0 and len(group) >= MIN_SHED_LINES)
+                 if level > 0 and len(group) >= MIN_GROUP_LINES)
 
 
 def lowest_threshold(model: ConfidenceModel, lines: Sequence[LineOutcome], target_risk: float) -> float:

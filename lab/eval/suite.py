@@ -195,11 +195,11 @@ def select_entries(*, small: bool = False, match: str | Sequence[str] | None = N
     return entries
 
 
-
 def name_matches(name: str, patterns: Sequence[str]) -> bool:
     """Whether a recording's name matches any of ``patterns`` (a shell pattern, or a part of the name):
     ``--match`` of make-suite and of run."""
     return any(fnmatch(name, m) or m in name for m in patterns)
+
 
 def make_suite(
     out: str | Path, *, small: bool = False, progress: bool = True, only: int | None = None, jobs: int = 1,
