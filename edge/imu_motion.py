@@ -12,8 +12,10 @@ moves a fixed direction ``d`` (camera frame) to ``exp(-[theta]x) d``; projected 
 intrinsics (with distortion) that is the scene's shift at a pixel.
 
 The bias is estimated online: the mean angular velocity over ``bias_window_us`` of the samples
-where the head is still (the mean over ``still_span_us`` around them is under ``still_rad_s``; the
-head keeps facing the page, so slow motion flagged still averages out). Samples further apart
+where the head is still (the mean over ``still_span_us`` around them is under ``still_rad_s``),
+shrunk towards zero as if ``bias_prior_us`` more of still samples had read zero. A reading head's
+slow drift passes as still too, and over a few seconds it does not average out: taken whole, it
+was learnt as bias within 100 ms and the page's real motion erased (docs/head_motion.md). Samples further apart
 than ``gap_us`` are a gap: nothing is integrated across it, and for ``trust_us`` after it the
 motion is unknown (``healthy`` is False): the edge then falls back to the event tracker and the
 deblur's own search. So it does while the head walks: a walking head pitches at the step rate
@@ -44,7 +46,8 @@ class ImuMotionConfig:
     max_age_us: int = 50_000  # a live stream's newest sample answers for this long after it
     still_span_us: int = 100_000  # the head is still when its mean angular velocity over this span ...
     still_rad_s: float = 0.035  # ... is below this (2 deg/s: above a calibrated MEMS bias, below a turning head)
-    bias_window_us: int = 10_000_000  # the bias: the mean of the still samples over this long before
+    bias_window_us: int = 10_000_000  # the bias: the mean of the still samples over this long before ...
+    bias_prior_us: int = 5_000_000  # ... shrunk towards zero as if this long of still samples had read zero
     smear_radius_px: float = 2.0  # the deblur searches this far around the predicted smear
     keep_us: int = 30_000_000  # a live stream keeps this much history (a replayed file keeps all)
     # walking: the head pitches at the step rate, and a held page bobs against it, which no
@@ -111,13 +114,17 @@ def still_at(t_us: np.ndarray, cum_omega: np.ndarray, index: np.ndarray, cfg: Im
     return np.linalg.norm(mean, axis=1) < cfg.still_rad_s
 
 
-def bias_at(t_us: np.ndarray, cum_still: np.ndarray, cum_count: np.ndarray, index: np.ndarray, window_us: int) -> np.ndarray:
+def bias_at(t_us: np.ndarray, cum_still: np.ndarray, cum_count: np.ndarray, index: np.ndarray, window_us: int,
+            prior_us: int = 0) -> np.ndarray:
     """[len(index), 3]: the bias at those samples, the mean of the still samples over ``window_us`` up
-    to each (0 before any); ``cum_still`` and ``cum_count`` the ``cumulative`` of the still samples'
-    velocity (the others 0) and of how many were still."""
+    to each (0 before any), shrunk towards zero as if ``prior_us`` more of still samples (at the
+    stream's rate over the window) had read zero; ``cum_still`` and ``cum_count`` the ``cumulative``
+    of the still samples' velocity (the others 0) and of how many were still."""
     first = np.searchsorted(t_us, t_us[index] - window_us, side="right")
     count = cum_count[index + 1] - cum_count[first]
-    return np.where(count > 0, (cum_still[index + 1] - cum_still[first]) / np.maximum(count, 1), 0.0)
+    span = np.maximum(t_us[index] - t_us[first], 1).astype(np.float64)
+    prior = prior_us * (index + 1 - first) / span  # (in samples, at the stream's own rate)
+    return np.where(count > 0, (cum_still[index + 1] - cum_still[first]) / np.maximum(count + prior[:, None], 1), 0.0)
 
 
 def still_samples(t_us: np.ndarray, omega: np.ndarray, cfg: ImuMotionConfig = ImuMotionConfig()) -> np.ndarray:
@@ -320,7 +327,7 @@ class ImuHeadMotion:
             weight = still_at(all_t, cum_raw, index, self.cfg).astype(np.float64)[:, None]
             cum_still = self._append_cumulative(self._cum_still, omega * weight)
             cum_count = self._append_cumulative(self._cum_count, weight)
-            bias = bias_at(all_t, cum_still, cum_count, index, self.cfg.bias_window_us)
+            bias = bias_at(all_t, cum_still, cum_count, index, self.cfg.bias_window_us, self.cfg.bias_prior_us)
             corrected = (omega - bias) @ self._rotation.T
             # integrated onto the newest angle held (from the newest sample: its trapezoid)
             if n_old:
