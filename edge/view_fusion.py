@@ -17,6 +17,7 @@ numpy, OpenCV and the stitcher.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -37,6 +38,13 @@ MARGIN_PX = 32  # the fused canvas reaches this far beyond the first frame's win
 # averaged in as its mask: measured 1.1-1.5 at 100 lux, ~1.55 at 30, ~2 at 10, 2-3 at 5 lux, where
 # the doubt is noise and the page comes from many overlapping views whose masks' majority is sharper
 MAX_DOUBT = 1.8
+# Where the head's motion is known from a sensor that does not see the page (the gyroscope: a few
+# tenths of a pixel per 20 ms on a still head; the page's sway in the hand comes on top), a doubted
+# frame whose best match is weaker than DOUBTED_MIN_SCORE still joins when that best match lies
+# where the motion puts it: two cues that agree (docs/views.md, "Dim frames placed where the
+# gyroscope agrees")
+AGREE_PX = 2.0
+AGREE_MIN_SCORE = 0.5
 MIN_INK_FRACTION = 0.003  # frames (or views) with less ink hold nothing to register: the sensor's offset places them
 
 
@@ -122,12 +130,18 @@ class ViewFuser:
         """Event time of the first fused frame (0 while empty)."""
         return self._first.t_us if self._first is not None else 0
 
+    @property
+    def last_t_us(self) -> int | None:
+        """Event time of the newest fused frame (None while empty)."""
+        return self._last.t_us if self._last is not None else None
+
     def add(
         self,
         frame: FrameRecord,
         events_used: int = 0,
         gaze_rad: tuple[float, float] = (0.0, 0.0),
         probability: np.ndarray | None = None,
+        moved: tuple[float, float] | None = None,
     ) -> tuple[float, float] | None:
         """Fuse ``frame`` in; returns where it landed relative to the first frame's top-left, or
         None, leaving the view as it was, when it does not register onto the view.
@@ -136,7 +150,11 @@ class ViewFuser:
         of the mask (the frame is still registered by its mask): with only a few frames per view, a
         stroke the network was unsure of survives as grey instead of vanishing or turning solid.
         Not for a frame the network doubted all over (``doubt`` above ``max_doubt``: dim light). A
-        doubted frame (``DOUBTED``) joins on a weaker match (``DOUBTED_MIN_SCORE``)."""
+        doubted frame (``DOUBTED``) joins on a weaker match (``DOUBTED_MIN_SCORE``).
+
+        ``moved``: how far the scene moved in the sensor since the newest frame, by a sensor trusted
+        for it (the gyroscope), or None. A doubted frame whose best match is weaker still (down to
+        ``AGREE_MIN_SCORE``) joins when that match lies within ``AGREE_PX`` of where ``moved`` puts it."""
         mask = frame.mask.astype(np.float32)
         if probability is not None and probability.shape != mask.shape:
             raise ValueError(f"frame {frame.frame_id}: probability {probability.shape} is not the mask's {mask.shape}")
@@ -150,10 +168,17 @@ class ViewFuser:
             xy = (0.0, 0.0)
             self.last_score = None
         else:
-            found = self._place(frame, mask, DOUBTED_MIN_SCORE if unsure is not None and unsure >= DOUBTED else MIN_SCORE)
+            doubted = unsure is not None and unsure >= DOUBTED
+            found = self._match(frame, mask)
             if found is None:
                 return None
-            xy = found
+            xy, score = found
+            if score is not None and score < (DOUBTED_MIN_SCORE if doubted else MIN_SCORE):
+                agrees = (doubted and moved is not None and score >= AGREE_MIN_SCORE
+                          and self._off_prediction(frame, xy, moved) <= AGREE_PX)
+                if not agrees:
+                    return None
+            self.last_score = score
         self.last_doubt = unsure
         soft = self.last_doubt is not None and self.last_doubt <= self.max_doubt
         self._accumulate(np.asarray(probability, np.float32) if soft else mask, xy)
@@ -165,10 +190,19 @@ class ViewFuser:
         self._gaze_rad = gaze_rad
         return xy
 
-    def _place(self, frame: FrameRecord, mask: np.ndarray, min_score: float = MIN_SCORE) -> tuple[float, float] | None:
-        """The frame's top-left in the first frame's coordinates: where the newest frame was plus
-        the sensor offset between them, corrected by correlation against the view; None when no
-        match of at least ``min_score`` is found."""
+    def _off_prediction(self, frame: FrameRecord, xy: tuple[float, float], moved: tuple[float, float]) -> float:
+        """How far (px) ``xy`` lies from where the newest frame's place, the sensor offset and the
+        scene's motion ``moved`` since put ``frame``."""
+        assert self._last is not None
+        predicted_x = self._last_xy[0] + frame.origin[0] - self._last.origin[0] - moved[0]
+        predicted_y = self._last_xy[1] + frame.origin[1] - self._last.origin[1] - moved[1]
+        return math.hypot(xy[0] - predicted_x, xy[1] - predicted_y)
+
+    def _match(self, frame: FrameRecord, mask: np.ndarray) -> tuple[tuple[float, float], float | None] | None:
+        """The frame's top-left in the first frame's coordinates (where the newest frame was plus the
+        sensor offset between them, corrected by correlation against the view) and the match's
+        score (None on blank paper: placed by the offset alone); None when the correlation has no
+        peak it can trust (too little overlap, the peak on the search's rim)."""
         assert self._first is not None and self._last is not None and self._sum is not None
         assert self._count is not None
         h, w = mask.shape
@@ -180,17 +214,15 @@ class ViewFuser:
         touched_sum, touched_count = self._sum[ty0:ty1, tx0:tx1], self._count[ty0:ty1, tx0:tx1]
         view_ink = np.count_nonzero(touched_sum >= 0.5 * np.maximum(touched_count, 1e-6)) / self._sum.size
         if np.count_nonzero(frame.mask) / frame.mask.size < MIN_INK_FRACTION or view_ink < MIN_INK_FRACTION:
-            self.last_score = None
-            return float(px), float(py)  # blank paper: nothing to correlate, nothing to blur
+            return (float(px), float(py)), None  # blank paper: nothing to correlate, nothing to blur
         r, m = self.radius, self.margin
         box = (px + m - r, py + m - r, w + 2 * r, h + 2 * r)
         count = _crop(self._count, *box)
         probability = _crop(self._sum, *box) / np.maximum(count, 1e-6)  # only the search box
         found = register_frame(probability, (count > 0.5).astype(np.float32), mask, r)
-        if found is None or found.score < min_score or found.on_rim:
+        if found is None or found.on_rim:
             return None
-        self.last_score = float(found.score)
-        return px + found.shift_xy[0] + found.subpixel_xy[0], py + found.shift_xy[1] + found.subpixel_xy[1]
+        return (px + found.shift_xy[0] + found.subpixel_xy[0], py + found.shift_xy[1] + found.subpixel_xy[1]), float(found.score)
 
     def _grow_box(self, xy: tuple[float, float], shape: tuple[int, int]) -> None:
         """Take the frame's window (top-left ``xy``, nearest pixel) into the view's box, within the canvas."""

@@ -128,6 +128,16 @@ class Windows:
         with self._scene_lock:
             return self.scene.at(t_us)
 
+    def gyro_moved(self, t_from_us: int, t_to_us: int) -> tuple[float, float] | None:
+        """How far the scene moved in the sensor from ``t_from_us`` to ``t_to_us`` by the gyroscope,
+        where it is healthy at both (None without one, or where it is not)."""
+        if self.imu is None or self.known_motion is None or not (self.imu.healthy(t_from_us) and self.imu.healthy(t_to_us)):
+            return None
+        a, b = self.known_motion.scene_px(t_from_us), self.known_motion.scene_px(t_to_us)
+        if a is None or b is None:
+            return None
+        return b[0] - a[0], b[1] - a[1]
+
     def _imu_scene_at(self, t_us: int) -> tuple[float, float] | None:
         """The gyroscope's offset where healthy, else the tracker's, joined (``JoinedSceneMotion``); counted."""
         assert self.known_motion is not None and self.imu is not None

@@ -169,7 +169,9 @@ class OnChangeStep:
         frame = self.windows.frame(window, placed, gaze, t, probability=self.settings.fuse == "probability")
         if frame is None:
             return False
-        if self.fuser.add(frame, frame.events_used, frame.gaze_rad, frame.probability) is None:
+        last = self.fuser.last_t_us
+        moved = self.windows.gyro_moved(last, t) if last is not None else None
+        if self.fuser.add(frame, frame.events_used, frame.gaze_rad, frame.probability, moved) is None:
             self.windows.metrics.add("views_split")
             self._send_view(arrival)
             self.fuser.add(frame, frame.events_used, frame.gaze_rad, frame.probability)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import socket
 from pathlib import Path
 
@@ -160,6 +161,29 @@ def test_a_recording_with_an_imu_stream_gives_the_edge_the_gyroscopes_head_motio
         assert plain.pipeline.windows.known_motion is None
     finally:
         plain.shutdown(1.0)
+
+
+def test_the_edge_asks_the_gyroscope_how_far_the_scene_moved_between_two_frames(tmp_path: Path) -> None:
+    """``Windows.gyro_moved``: the scene's shift between two times by the gyroscope (what a view's dim
+    frames are placed by), None where it is not healthy at both (its first half second)."""
+    recording = synthetic_recording(tmp_path / "rec", n_events=8_000)
+    t = np.arange(0, 2_000_000, 1000, dtype=np.int64)
+    write_imu_csv(recording / IMU_NAME, t, np.tile([0.0, 0.01, 0.0], (t.shape[0], 1)),
+                  np.tile([0.0, 0.0, 0.0, 1.0], (t.shape[0], 1)), graph_uid="g", utc_offset_ns=0)
+    config = replay_config(recording, sum_bins_model(tmp_path / "m.onnx"), "ws://127.0.0.1:1/v1/stream", tmp_path / "spool")
+    edge = build_edge(config, on_frame=lambda frame, arrival: None)
+    try:
+        windows = edge.pipeline.windows
+        offset = windows.known_motion.clock_offset_us
+        a, b = 1_000_000 + offset, 1_500_000 + offset
+        moved = windows.gyro_moved(a, b)
+        before, after = windows.known_motion.scene_px(a), windows.known_motion.scene_px(b)
+        assert moved is not None and before is not None and after is not None
+        assert moved == pytest.approx((after[0] - before[0], after[1] - before[1]))
+        assert math.hypot(*moved) > 1.0  # 0.29 deg turned in half a second
+        assert windows.gyro_moved(100_000 + offset, b) is None  # its first half second: not trusted yet
+    finally:
+        edge.shutdown(1.0)
 
 
 @pytest.mark.slow  # a whole edge: decoder start-up, model load

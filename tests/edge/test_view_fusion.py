@@ -91,6 +91,35 @@ def test_a_frame_the_network_doubted_joins_on_a_weaker_match() -> None:
     assert unsure.last_score is not None and DOUBTED_MIN_SCORE <= unsure.last_score < MIN_SCORE and len(unsure) == 2
 
 
+def test_a_dimmer_frame_joins_where_the_gyroscope_agrees_and_only_there() -> None:
+    """A doubted frame that lost 40 % of its strokes and gained speckle matches its right place at
+    about 0.64, under DOUBTED_MIN_SCORE: it starts a new view, unless the head's motion since the
+    newest frame is known (``moved``: the scene moved 3 px left and 2 px up) and puts it within
+    AGREE_PX of that match. A motion that disagrees, or a frame the network was sure of, still
+    starts the next view."""
+    from darkread.edge.view_fusion import AGREE_MIN_SCORE, DOUBTED, DOUBTED_MIN_SCORE, doubt
+
+    page = page_of_text()
+    rng = np.random.default_rng(0)
+    lost = (rng.random((25, 50)) < 0.4).repeat(4, 0).repeat(4, 1)
+    dim = np.where(rng.random((100, 200)) < 0.35, 1, np.where(lost, 0, page[12:112, 23:223])).astype(np.uint8)
+    dim_frame = FrameRecord(1, 1000, dim, (500, 300), (600.0, 350.0))
+    doubted = np.where(dim > 0, 0.7, 0.35).astype(np.float32)
+    assert doubt(doubted) >= DOUBTED
+
+    def fuser() -> ViewFuser:
+        f = ViewFuser()
+        f.add(frame(page, 20, 10, 0, (500, 300)))
+        return f
+
+    assert fuser().add(dim_frame, probability=doubted) is None
+    known = fuser()
+    assert known.add(dim_frame, probability=doubted, moved=(-3.0, -2.0)) == pytest.approx((3.0, 2.0), abs=0.5)
+    assert known.last_score is not None and AGREE_MIN_SCORE <= known.last_score < DOUBTED_MIN_SCORE and len(known) == 2
+    assert fuser().add(dim_frame, probability=doubted, moved=(0.0, 0.0)) is None  # 3.6 px from its match
+    assert fuser().add(dim_frame, moved=(-3.0, -2.0)) is None  # sure of it: a sure frame needs MIN_SCORE
+
+
 def test_a_pixel_seen_as_ink_in_one_of_three_frames_is_unlikely_ink() -> None:
     page = page_of_text()
     noisy = page.copy()
