@@ -15,10 +15,11 @@ The bias is estimated online: the mean angular velocity over ``bias_window_us`` 
 where the head is still (the mean over ``still_span_us`` around them is under ``still_rad_s``),
 shrunk towards zero as if ``bias_prior_us`` more of still samples had read zero. A reading head's
 slow drift passes as still too, and over a few seconds it does not average out: taken whole, it
-was learnt as bias within 100 ms and the page's real motion erased (docs/head_motion.md). Samples further apart
-than ``gap_us`` are a gap: nothing is integrated across it, and for ``trust_us`` after it the
-motion is unknown (``healthy`` is False): the edge then falls back to the event tracker and the
-deblur's own search. So it does while the head walks: a walking head pitches at the step rate
+was learnt as bias within 100 ms and the page's real motion erased (docs/head_motion.md).
+
+Samples further apart than ``gap_us`` are a gap: nothing is integrated across it, and for
+``trust_us`` after it the motion is unknown (``healthy`` is False): the edge then falls back to
+the event tracker and the deblur's own search. So it does while the head walks: a walking head pitches at the step rate
 (``step_band_rms``), and the page in the hand bobs against it, which no gyroscope sees.
 
 Pure functions of arrays at the core; ``ImuHeadMotion`` holds the integrated track, extended by a

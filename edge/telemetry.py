@@ -33,6 +33,7 @@ COUNTERS = (
     "frames_imu_fallback",  # ... and those where its stream had a gap: the event tracker's (or unknown)
     "views",  # on-change mode: fused views of fixations
     "views_split",  # on-change mode: views ended early by a frame that did not register onto them
+    "frames_gyro_placed",  # on-change mode: dim frames joined to their view where the gyroscope agreed (edge.view_fusion)
     "event_us",  # event-clock time covered by the events read (reading time)
     "frames_skipped",  # windows never inferred because inference fell behind (live): what a busy edge loses
     "frames_no_gaze",

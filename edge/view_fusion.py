@@ -116,6 +116,7 @@ class ViewFuser:
         self._gaze_sum = np.zeros(2)
         self._gaze_rad = (0.0, 0.0)
         self.last_score: float | None = None  # the newest frame's match onto the view (None: placed unmatched)
+        self.last_agreed = False  # whether it joined because the gyroscope's motion agreed with a weak match
         self.last_doubt: float | None = None  # how much the network doubted the newest frame (None: no probability given)
 
     def __len__(self) -> int:
@@ -173,12 +174,13 @@ class ViewFuser:
             if found is None:
                 return None
             xy, score = found
+            agrees = False
             if score is not None and score < (DOUBTED_MIN_SCORE if doubted else MIN_SCORE):
                 agrees = (doubted and moved is not None and score >= AGREE_MIN_SCORE
                           and self._off_prediction(frame, xy, moved) <= AGREE_PX)
                 if not agrees:
                     return None
-            self.last_score = score
+            self.last_score, self.last_agreed = score, agrees
         self.last_doubt = unsure
         soft = self.last_doubt is not None and self.last_doubt <= self.max_doubt
         self._accumulate(np.asarray(probability, np.float32) if soft else mask, xy)

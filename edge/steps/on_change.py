@@ -175,6 +175,8 @@ class OnChangeStep:
             self.windows.metrics.add("views_split")
             self._send_view(arrival)
             self.fuser.add(frame, frame.events_used, frame.gaze_rad, frame.probability)
+        elif self.fuser.last_agreed:
+            self.windows.metrics.add("frames_gyro_placed")
         self.trigger.inferred(t, origin, self.fuser.last_score, self.fuser.last_doubt)
         self._since_infer = 0
         return True

@@ -116,6 +116,7 @@ def test_a_dimmer_frame_joins_where_the_gyroscope_agrees_and_only_there() -> Non
     known = fuser()
     assert known.add(dim_frame, probability=doubted, moved=(-3.0, -2.0)) == pytest.approx((3.0, 2.0), abs=0.5)
     assert known.last_score is not None and AGREE_MIN_SCORE <= known.last_score < DOUBTED_MIN_SCORE and len(known) == 2
+    assert known.last_agreed
     assert fuser().add(dim_frame, probability=doubted, moved=(0.0, 0.0)) is None  # 3.6 px from its match
     assert fuser().add(dim_frame, moved=(-3.0, -2.0)) is None  # sure of it: a sure frame needs MIN_SCORE
 
