@@ -38,11 +38,10 @@ MARGIN_PX = 32  # the fused canvas reaches this far beyond the first frame's win
 # averaged in as its mask: measured 1.1-1.5 at 100 lux, ~1.55 at 30, ~2 at 10, 2-3 at 5 lux, where
 # the doubt is noise and the page comes from many overlapping views whose masks' majority is sharper
 MAX_DOUBT = 1.8
-# Where the head's motion is known from a sensor that does not see the page (the gyroscope: a few
-# tenths of a pixel per 20 ms on a still head; the page's sway in the hand comes on top), a doubted
-# frame whose best match is weaker than DOUBTED_MIN_SCORE still joins when that best match lies
-# where the motion puts it: two cues that agree (docs/views.md, "Dim frames placed where the
-# gyroscope agrees")
+# Where the head's motion is known from a sensor that does not see the page (the gyroscope: the
+# head's rotation, not the page's sway in the hand), a doubted frame whose best match is weaker than
+# DOUBTED_MIN_SCORE still joins when that best match lies where the motion puts it: two cues that
+# agree (docs/views.md, "Dim frames placed where the gyroscope agrees")
 AGREE_PX = 2.0
 AGREE_MIN_SCORE = 0.5
 MIN_INK_FRACTION = 0.003  # frames (or views) with less ink hold nothing to register: the sensor's offset places them

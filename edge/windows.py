@@ -130,8 +130,8 @@ class Windows:
 
     def gyro_moved(self, t_from_us: int, t_to_us: int) -> tuple[float, float] | None:
         """How far the scene moved in the sensor from ``t_from_us`` to ``t_to_us`` by the gyroscope,
-        where it is healthy at both (None without one, or where it is not)."""
-        if self.imu is None or self.known_motion is None or not (self.imu.healthy(t_from_us) and self.imu.healthy(t_to_us)):
+        where it is healthy at both (None without one, or where it is not: its ``scene_px`` says so)."""
+        if self.imu is None or self.known_motion is None:
             return None
         a, b = self.known_motion.scene_px(t_from_us), self.known_motion.scene_px(t_to_us)
         if a is None or b is None:

@@ -27,6 +27,16 @@ def frame(page: np.ndarray, x: int, y: int, i: int, origin: tuple[int, int]) -> 
     return FrameRecord(i, 1000 * i, page[y : y + 100, x : x + 200], origin, (origin[0] + 100.0, origin[1] + 50.0))
 
 
+def dim_frame_of(page: np.ndarray, lost_share: float, speckle_share: float) -> tuple[FrameRecord, np.ndarray]:
+    """The window 3 px right and 2 px down of ``frame(page, 20, 10, ...)``'s as dim light shows it:
+    ``lost_share`` of its 4x4 cells of strokes lost, ``speckle_share`` of its pixels noise; with the
+    probability of a network that doubted it."""
+    rng = np.random.default_rng(0)
+    lost = (rng.random((25, 50)) < lost_share).repeat(4, 0).repeat(4, 1)
+    dim = np.where(rng.random((100, 200)) < speckle_share, 1, np.where(lost, 0, page[12:112, 23:223])).astype(np.uint8)
+    return FrameRecord(1, 1000, dim, (500, 300), (600.0, 350.0)), np.where(dim > 0, 0.7, 0.35).astype(np.float32)
+
+
 def test_frames_moved_on_the_sensor_are_registered_and_the_view_is_the_union_of_their_windows() -> None:
     page = page_of_text()
     fuser = ViewFuser()
@@ -75,11 +85,7 @@ def test_a_frame_the_network_doubted_joins_on_a_weaker_match() -> None:
     from darkread.edge.view_fusion import DOUBTED, DOUBTED_MIN_SCORE, MIN_SCORE, doubt
 
     page = page_of_text()
-    rng = np.random.default_rng(0)
-    lost = (rng.random((25, 50)) < 0.25).repeat(4, 0).repeat(4, 1)
-    dim = np.where(rng.random((100, 200)) < 0.25, 1, np.where(lost, 0, page[12:112, 23:223])).astype(np.uint8)
-    dim_frame = FrameRecord(1, 1000, dim, (500, 300), (600.0, 350.0))
-    doubted = np.where(dim > 0, 0.7, 0.35).astype(np.float32)
+    dim_frame, doubted = dim_frame_of(page, lost_share=0.25, speckle_share=0.25)
     assert doubt(doubted) >= DOUBTED
 
     sure = ViewFuser()
@@ -100,11 +106,7 @@ def test_a_dimmer_frame_joins_where_the_gyroscope_agrees_and_only_there() -> Non
     from darkread.edge.view_fusion import AGREE_MIN_SCORE, DOUBTED, DOUBTED_MIN_SCORE, doubt
 
     page = page_of_text()
-    rng = np.random.default_rng(0)
-    lost = (rng.random((25, 50)) < 0.4).repeat(4, 0).repeat(4, 1)
-    dim = np.where(rng.random((100, 200)) < 0.35, 1, np.where(lost, 0, page[12:112, 23:223])).astype(np.uint8)
-    dim_frame = FrameRecord(1, 1000, dim, (500, 300), (600.0, 350.0))
-    doubted = np.where(dim > 0, 0.7, 0.35).astype(np.float32)
+    dim_frame, doubted = dim_frame_of(page, lost_share=0.4, speckle_share=0.35)
     assert doubt(doubted) >= DOUBTED
 
     def fuser() -> ViewFuser:
