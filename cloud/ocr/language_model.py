@@ -2,7 +2,8 @@
 lookalike of it, and a trigram language model picks the likeliest sequence (Viterbi over the line).
 
 The channel: keeping a word costs nothing; replacing a non-word (not in the word list) by a
-dictionary word costs ``fix_log_prob`` per lookalike glyph; replacing a real word by another
+dictionary word costs ``fix_log_prob`` per lookalike glyph, or ``edit_log_prob`` for a long
+non-word one letter from the word beyond the lookalikes; replacing a real word by another
 costs ``swap_log_prob`` per glyph, far more, so a read word is only swapped when the words
 around it make the other much likelier ("will toll us" -> "will tell us"). Capitalised words
 (names, sentence starts) and words with digits are never replaced; they still count as context.

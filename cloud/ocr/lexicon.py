@@ -1,6 +1,6 @@
 """Dictionary correction of an offline engine's text: the language prior an LLM reader has built in.
 
-Reconstructed strokes at 6-10 px x-height confuse a few glyph pairs (e/o, i/l, a/o, c/e, s/e); an
+Reconstructed strokes at 6-10 px x-height confuse a few glyph pairs (e/o, i/l, a/o, c/e, s/e/o/a); an
 engine without a language model reports them as read ("aro then buslest"), where GPT-4o would
 read "are then busiest". The correction is deliberately conservative, because a general spelling
 corrector "fixes" rare words that were read right (tardiest -> hardiest):
@@ -18,12 +18,17 @@ corrector "fixes" rare words that were read right (tardiest -> hardiest):
 * a misreading can also be a real word ("will toll us", "unless tho printer's"): a lower-case word
   is swapped for a lookalike one only when it forms no known word pair with its neighbours, the
   lookalike does, and that pair outweighs the odds of a glyph swap (``swap_probability``);
+* in coherent text the trigram model chooses each lower-case word among its lookalikes
+  (``language_model``); a non-word of ``min_edit_length`` letters or more may also be a word one
+  letter away (a glyph lost, invented or misread beyond the lookalikes: "knowlecge", "acceptnnce"),
+  at a cost the model's context must outweigh (``edit_log_prob``);
 * capitalisation (lower, Capitalised, UPPER) and surrounding punctuation are kept.
 
 The word and word-pair lists are SymSpell's English frequency dictionaries (82,765 words, 242,342
 pairs; MIT licence), shipped inside the ``symspellpy`` package; no network is needed. On clean
-prose from the corpus 1 % of 28-character lines gain a one-letter change (archaic words: ere ->
-are, lest -> lost), while it removes a third to a half of the errors on reconstructed pages.
+prose from the corpus 1.4 % of 28-character lines gain a change (archaic and rare words: ere ->
+are, confuting -> confusing; ``lab/eval/clean_text.py``), while it removes a third to a half of the
+errors on reconstructed pages.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from __future__ import annotations
 import logging
 import math
 import re
+import string
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -53,9 +59,10 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 _TOKEN = re.compile(r"^(?P<lead>[^A-Za-z]*)(?P<word>[A-Za-z]+)(?P<trail>(?:'[A-Za-z]{1,2})?[^A-Za-z]*)$")  # author's
-# (s and e: small closed glyphs a dim reconstruction fills in alike, "foundere of our true",
-# "formal and slavieh"; what the group gains and costs: cloud/README.md, OCR engines)
-_CONFUSABLE_GROUPS = ("eoac", "ilt", "nu", "hb", "rt", "vy", "se")
+# (s with e, o and a: a small s whose spine the reconstruction fills in reads as a closed glyph,
+# "foundere of our true", "eateem he atoneo"; s and c are kept apart: what each gains and costs,
+# cloud/README.md, OCR engines)
+_CONFUSABLE_GROUPS = ("eoac", "ilt", "nu", "hb", "rt", "vy", "se", "so", "sa")
 CONFUSABLE: frozenset[tuple[str, str]] = frozenset(
     (a, b) for group in _CONFUSABLE_GROUPS for a in group for b in group if a != b
 )
@@ -66,6 +73,18 @@ DROPPED_STEMS = "ilt"  # thin strokes a reconstruction can lose entirely
 _SENTENCE_END = (".", "!", "?", ":", ";")
 TextKind = Literal["letters", "words", "text"]
 RECENT_PAGES = 64  # corrected texts remembered
+
+
+def one_edit(read: str) -> set[str]:
+    """Every string one letter away from ``read`` (a letter deleted, inserted, replaced, or two
+    neighbours swapped): a glyph the engine lost, invented or misread beyond the lookalikes."""
+    splits = [(read[:k], read[k:]) for k in range(len(read) + 1)]
+    edits = {head + tail[1:] for head, tail in splits if tail}
+    edits |= {head + tail[1] + tail[0] + tail[2:] for head, tail in splits if len(tail) > 1}
+    edits |= {head + letter + tail[1:] for head, tail in splits if tail for letter in string.ascii_lowercase}
+    edits |= {head + letter + tail for head, tail in splits for letter in string.ascii_lowercase}
+    edits.discard(read)
+    return edits
 
 
 def misreadings(read: str, substitutions: int) -> Iterator[str]:
@@ -127,6 +146,9 @@ class LexiconCorrector:
     swap_log_prob: float = math.log(1e-4)  # channel: one real word read as a lookalike real word
     fix_log_prob: float = math.log(0.1)  # channel: per lookalike glyph of a non-word's fix
     keep_nonword_log_prob: float = math.log(1e-4)  # channel: a word the dictionary does not know was printed so
+    edit_log_prob: float = math.log(1e-5)  # channel: a non-word of ``min_edit_length`` letters or more read one edit
+    # from a word beyond the lookalikes ("knowlecge", "acceptnnce"); shorter words have too many such neighbours
+    min_edit_length: int = 6
     max_candidates: int = 6  # lookalikes per word the language model weighs (the most frequent)
     language: str = "en"  # the language model of coherent text (``language_model.MODELS``); another: non-word fixes only
     _speller: SymSpell | None = field(default=None, init=False, repr=False)
@@ -272,6 +294,10 @@ class LexiconCorrector:
                     found[w] = cost
             if len(found) >= self.max_candidates:
                 break
+        if len(read) >= self.min_edit_length:
+            for w in one_edit(read):
+                if w in counts and w not in found:
+                    found[w] = self.edit_log_prob
         ranked = sorted(found, key=lambda w: (-found[w], -counts[w]))[: self.max_candidates]
         # a word the dictionary does not know is itself a sign of a misreading: kept, it costs a glyph's fix
         return [Candidate(read, self.keep_nonword_log_prob), *(Candidate(w, found[w]) for w in ranked)]

@@ -121,6 +121,44 @@ def test_the_kind_of_text_decides_how_much_is_corrected(corrector: LexiconCorrec
     assert corrector.correct("tamed lantern orchard\nvelvet margln quarry") == "tamed lantern orchard\nvelvet margin quarry"
 
 
+def test_a_filled_in_s_is_read_back_from_o_and_a(corrector: LexiconCorrector) -> None:
+    # a small s whose spine the reconstruction filled in reads as o or a (a word list: non-words fixed alone)
+    assert corrector.correct("come meaneat Brook cowardice\nshow would indifferent") == (
+        "come meanest Brook cowardice\nshow would indifferent")
+    assert corrector.correct("deoorveo errors under\nreasons battle compelled may") == (
+        "deserves errors under\nreasons battle compelled may")
+    assert {"cats", "cast"} <= misreadings_of("cato", 1) | misreadings_of("caot", 1)
+
+
+def misreadings_of(read: str, substitutions: int) -> set[str]:
+    from darkread.cloud.ocr.lexicon import misreadings
+
+    return set(misreadings(read, substitutions))
+
+
+def test_s_and_c_stay_apart() -> None:
+    assert "prose" not in misreadings_of("proce", 1) and "prose" in misreadings_of("proee", 1)
+
+
+def test_one_edit_reaches_every_single_letter_change() -> None:
+    from string import ascii_lowercase
+
+    from darkread.cloud.ocr.lexicon import one_edit
+
+    assert {"acceptance", "accptnnce", "acecptnnce", "acceptnnces"} <= one_edit("acceptnnce")
+    expected = {"a", "b", "ba"} | {x + "b" for x in ascii_lowercase} | {"a" + x for x in ascii_lowercase}
+    expected |= {x + "ab" for x in ascii_lowercase} | {"a" + x + "b" for x in ascii_lowercase} | {"ab" + x for x in ascii_lowercase}
+    assert one_edit("ab") == expected - {"ab"}
+
+
+def test_coherent_text_fixes_long_non_words_one_letter_off(corrector: LexiconCorrector) -> None:
+    # a glyph misread beyond the lookalikes (c for d, n for a, r for a): the language model picks the word
+    assert corrector.correct("do so much abound and true\nknowlecge is kept at") == "do so much abound and true\nknowledge is kept at"
+    assert corrector.correct("to his last testrment who") == "to his last testament who"
+    # short non-words have too many neighbours one letter away: left to the lookalikes
+    assert corrector.correct("where and out of what prace") == "where and out of what prace"
+
+
 def test_clean_prose_is_left_almost_untouched() -> None:
     from darkread.lab.eval.clean_text import clean_text_check
 
