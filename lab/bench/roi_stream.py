@@ -58,13 +58,20 @@ class Deliveries:
 
 class _AsDelivered(ReplaySource):
     """A replay of what a first pass delivered: its ROI writes are not applied, and each takes effect
-    where it did in the first pass (``roi_since_us``)."""
+    where it did in the first pass (``roi_since_us``). It still says which ROI the edge programmed
+    (``roi``), as the first pass did: whoever asks what the sensor delivers (the light estimate counts
+    the background only while it is whole) must hear the same in both passes."""
 
     delivered_since: int | None = None
+    programmed: Rect | None = None
 
     @property
     def roi_since_us(self) -> int | None:
         return self.delivered_since
+
+    @property
+    def roi(self) -> tuple[int, int, int, int]:
+        return self.programmed or (0, 0, self.width, self.height)
 
 
 def _wrap(source: ReplaySource, apply_roi: bool, keep_events: bool, effective: dict[int, int] | None = None) -> Deliveries:
@@ -92,6 +99,7 @@ def _wrap(source: ReplaySource, apply_roi: bool, keep_events: bool, effective: d
         if apply_roi:
             set_roi(x0, y0, width, height)
         elif isinstance(source, _AsDelivered):
+            source.programmed = (int(x0), int(y0), int(width), int(height))
             k = len(log.roi_writes) - 1
             # (a write the first pass never saw take effect stays out of effect here too)
             source.delivered_since = (effective or {}).get(k, NOT_YET)

@@ -56,3 +56,16 @@ def test_the_second_pass_replays_what_the_first_delivered_and_makes_the_same_fra
     # end decides (the gyroscope's file ends before the events: the whole sensor comes back at a chunk)
     in_effect = [roi for k, (_, roi) in enumerate(deliveries.roi_writes) if k in deliveries.effective]
     assert in_effect and [roi for _, roi in second_log[0].roi_writes][: len(in_effect)] == in_effect
+
+
+def test_the_second_pass_says_which_roi_the_edge_programmed(recording: Path) -> None:
+    # the light estimate counts the background only while the sensor is whole: asked in the second
+    # pass, the replay must answer as the first did (it answered "whole" throughout, and the 30-lux
+    # full view measured 200 lux there against 11.6 in the first pass)
+    source = ReplaySource(recording / "events.raw", speed=None)
+    replay_as_delivered(source, Deliveries())
+    assert source.roi == (0, 0, source.width, source.height)
+    source.set_roi(100, 50, 300, 200)
+    assert source.roi == (100, 50, 300, 200)
+    source.set_roi(0, 0, source.width, source.height)
+    assert source.roi == (0, 0, source.width, source.height)
