@@ -70,7 +70,7 @@ class _AsDelivered(ReplaySource):
         return self.delivered_since
 
     @property
-    def roi(self) -> tuple[int, int, int, int]:
+    def roi(self) -> Rect:
         return self.programmed or (0, 0, self.width, self.height)
 
 

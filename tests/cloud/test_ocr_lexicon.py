@@ -121,6 +121,12 @@ def test_the_kind_of_text_decides_how_much_is_corrected(corrector: LexiconCorrec
     assert corrector.correct("tamed lantern orchard\nvelvet margln quarry") == "tamed lantern orchard\nvelvet margin quarry"
 
 
+def misreadings_of(read: str, substitutions: int) -> set[str]:
+    from darkread.cloud.ocr.lexicon import misreadings
+
+    return set(misreadings(read, substitutions))
+
+
 def test_a_filled_in_s_is_read_back_from_o_and_a(corrector: LexiconCorrector) -> None:
     # a small s whose spine the reconstruction filled in reads as o or a (a word list: non-words fixed alone)
     assert corrector.correct("come meaneat Brook cowardice\nshow would indifferent") == (
@@ -128,12 +134,6 @@ def test_a_filled_in_s_is_read_back_from_o_and_a(corrector: LexiconCorrector) ->
     assert corrector.correct("deoorveo errors under\nreasons battle compelled may") == (
         "deserves errors under\nreasons battle compelled may")
     assert {"cats", "cast"} <= misreadings_of("cato", 1) | misreadings_of("caot", 1)
-
-
-def misreadings_of(read: str, substitutions: int) -> set[str]:
-    from darkread.cloud.ocr.lexicon import misreadings
-
-    return set(misreadings(read, substitutions))
 
 
 def test_s_and_c_stay_apart() -> None:
@@ -152,7 +152,7 @@ def test_one_edit_reaches_every_single_letter_change() -> None:
 
 
 def test_coherent_text_fixes_long_non_words_one_letter_off(corrector: LexiconCorrector) -> None:
-    # a glyph misread beyond the lookalikes (c for d, n for a, r for a): the language model picks the word
+    # a glyph misread beyond the lookalikes (c for d, r for a): the language model picks the word
     assert corrector.correct("do so much abound and true\nknowlecge is kept at") == "do so much abound and true\nknowledge is kept at"
     assert corrector.correct("to his last testrment who") == "to his last testament who"
     # short non-words have too many neighbours one letter away: left to the lookalikes
