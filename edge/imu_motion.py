@@ -19,8 +19,9 @@ was learnt as bias within 100 ms and the page's real motion erased (docs/head_mo
 
 Samples further apart than ``gap_us`` are a gap: nothing is integrated across it, and for
 ``trust_us`` after it the motion is unknown (``healthy`` is False): the edge then falls back to
-the event tracker and the deblur's own search. So it does while the head walks: a walking head pitches at the step rate
-(``step_band_rms``), and the page in the hand bobs against it, which no gyroscope sees.
+the event tracker and the deblur's own search. So it does while the head walks: a walking head
+pitches at the step rate (``step_band_rms``), and the page in the hand bobs against it, which no
+gyroscope sees.
 
 Pure functions of arrays at the core; ``ImuHeadMotion`` holds the integrated track, extended by a
 whole file (replay) or by the live feed's batches (``edge.sources.imu_feed``), under a lock.

@@ -95,11 +95,12 @@ def _wrap(source: ReplaySource, apply_roi: bool, keep_events: bool, effective: d
         start(deliver)
 
     def set_roi_logged(x0: int, y0: int, width: int, height: int) -> None:
-        log.roi_writes.append((log.newest_t(), (int(x0), int(y0), int(width), int(height))))
+        rect = (int(x0), int(y0), int(width), int(height))
+        log.roi_writes.append((log.newest_t(), rect))
         if apply_roi:
             set_roi(x0, y0, width, height)
         elif isinstance(source, _AsDelivered):
-            source.programmed = (int(x0), int(y0), int(width), int(height))
+            source.programmed = rect
             k = len(log.roi_writes) - 1
             # (a write the first pass never saw take effect stays out of effect here too)
             source.delivered_since = (effective or {}).get(k, NOT_YET)
