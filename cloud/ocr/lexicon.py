@@ -153,6 +153,7 @@ class LexiconCorrector:
     language: str = "en"  # the language model of coherent text (``language_model.MODELS``); another: non-word fixes only
     _speller: SymSpell | None = field(default=None, init=False, repr=False)
     _trigrams: TrigramScorer | None = field(default=None, init=False, repr=False)
+    _longest: int | None = field(default=None, init=False, repr=False)  # letters of the dictionary's longest word
     _recent: dict[str, str] = field(default_factory=dict, init=False, repr=False)
     _recent_lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
@@ -170,6 +171,14 @@ class LexiconCorrector:
     def known(self, word: str) -> bool:
         return word.lower() in self._words().words
 
+    def _beyond_words(self, read: str) -> bool:
+        """Whether ``read`` is too long to be any dictionary word misread (every fix keeps its length
+        or changes it by one letter): a band of noise read as one long token gets no search, whose
+        cost grows with the cube of its length."""
+        if self._longest is None:
+            self._longest = max(map(len, self._words().words))
+        return len(read) > self._longest + 1
+
     def correct_word(self, word: str, *, in_sentence: bool = False) -> str:
         """The most frequent dictionary word ``word`` may be a misreading of, in its case; else ``word``."""
         i_read_as_capital = in_sentence and len(word) > 1 and word[0] == "I" and word[1:].islower()
@@ -185,7 +194,7 @@ class LexiconCorrector:
 
     def _one_glyph_from_known(self, word: str) -> bool:
         """Whether swapping one lookalike glyph of ``word`` (alphabetic, at least ``min_length``) makes a dictionary word."""
-        if len(word) < self.min_length or not word.isalpha():
+        if len(word) < self.min_length or not word.isalpha() or self._beyond_words(word):
             return False
         counts = self._words().words
         return any(w in counts for w in misreadings(word.lower(), 1))
@@ -193,6 +202,8 @@ class LexiconCorrector:
     def _closest(self, word: str) -> str:
         """The most frequent dictionary word the unknown ``word`` may be a misreading of, or ``word``."""
         read = word.lower()
+        if self._beyond_words(read):
+            return word
         counts = self._words().words
         most = 1 if len(read) <= 4 else (2 if len(read) <= 7 else self.max_substitutions)
         for level in [1, 0, *range(2, most + 1)]:  # one swap, one lost stem, then more swaps
@@ -285,6 +296,8 @@ class LexiconCorrector:
             return [Candidate(read, 0.0), *(Candidate(w, self.swap_log_prob) for w in others[: self.max_candidates - 1])]
         if len(read) < self.min_length:
             return [Candidate(read, 0.0)]
+        if self._beyond_words(read):
+            return [Candidate(read, self.keep_nonword_log_prob)]
         most = 1 if len(read) <= 4 else (2 if len(read) <= 7 else self.max_substitutions)
         found: dict[str, float] = {}
         for level in [1, 0, *range(2, most + 1)]:

@@ -165,3 +165,11 @@ def test_clean_prose_is_left_almost_untouched() -> None:
     check = clean_text_check()
     assert check.lines > 400
     assert check.changed_share < 0.02 and check.cer_added < 0.001
+
+
+def test_a_token_longer_than_any_word_is_left_as_read_without_a_search(corrector: LexiconCorrector) -> None:
+    # a band of noise read as one long token: no fix can reach a word, and the search would take minutes
+    noise = "knowlecge" * 200
+    page = f"and the rest of it is {noise} and the end of it\nsome more words about {noise} in it"
+    assert corrector.correct(page) == page
+    assert corrector.correct(f"tamed lantern {noise}\nvelvet margln quarry") == f"tamed lantern {noise}\nvelvet margin quarry"
