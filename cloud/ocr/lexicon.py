@@ -21,7 +21,10 @@ corrector "fixes" rare words that were read right (tardiest -> hardiest):
 * in coherent text the trigram model chooses each lower-case word among its lookalikes
   (``language_model``); a non-word of ``min_edit_length`` letters or more may also be a word one
   letter away (a glyph lost, invented or misread beyond the lookalikes: "knowlecge", "acceptnnce"),
-  at a cost the model's context must outweigh (``edit_log_prob``);
+  at a cost the model's context must outweigh (``edit_log_prob``); there a non-word of two letters
+  is weighed against its lookalikes too ("Truth bo in the" -> "be");
+* in coherent text a period followed by a word in lower case is a comma whose tail was lost
+  ("opinion of theirs. that none"), unless the word before it is an abbreviation;
 * capitalisation (lower, Capitalised, UPPER) and surrounding punctuation are kept.
 
 The word and word-pair lists are SymSpell's English frequency dictionaries (82,765 words, 242,342
@@ -73,6 +76,26 @@ DROPPED_STEMS = "ilt"  # thin strokes a reconstruction can lose entirely
 _SENTENCE_END = (".", "!", "?", ":", ";")
 TextKind = Literal["letters", "words", "text"]
 RECENT_PAGES = 64  # corrected texts remembered
+
+
+# words written with a period that a lower-case word may follow ("etc. and", "cf. the")
+_ABBREVIATIONS = frozenset(
+    "al approx ca cf ch co dr ed eds eg esp etc fig ibid ie inc jr ltd mr mrs ms no op pp resp sr st viz vol vs".split()
+)
+_PERIOD_WORD = re.compile(r"^[^A-Za-z]*(?P<word>[A-Za-z]{2,})\.$")
+
+
+def comma_before_lowercase(text: str) -> str:
+    """A period read where the print has a comma: in prose a word and a period followed by a word in
+    lower case (on the same line or the next) is a comma whose tail the reconstruction lost
+    ("opinion of theirs. that none"), unless the word is an abbreviation."""
+    lines = [line.split(" ") for line in text.split("\n")]
+    flat = [(k, j) for k, tokens in enumerate(lines) for j, token in enumerate(tokens) if token]
+    for (k, j), (k2, j2) in zip(flat, flat[1:]):
+        match = _PERIOD_WORD.match(lines[k][j])
+        if match and lines[k2][j2][0].islower() and match.group("word").lower() not in _ABBREVIATIONS:
+            lines[k][j] = lines[k][j][:-1] + ","
+    return "\n".join(" ".join(tokens) for tokens in lines)
 
 
 def one_edit(read: str) -> set[str]:
@@ -141,6 +164,7 @@ class LexiconCorrector:
 
     max_substitutions: int = 3
     min_length: int = 3
+    min_lm_length: int = 2  # in coherent text the trigram model weighs the lookalikes of shorter non-words too ("bo" -> "be")
     min_known_fraction: float = 0.3
     min_pair_rate: float = 0.1  # share of adjacent words that are known pairs from which a page is coherent text
     swap_log_prob: float = math.log(1e-4)  # channel: one real word read as a lookalike real word
@@ -283,7 +307,7 @@ class LexiconCorrector:
             return text
         if kind == "words" or self.language not in LANGUAGE_MODELS:  # no language model: non-word fixes only
             return "\n".join(self._correct_line(line, True, sentences=False)[0] for line in text.split("\n"))
-        return self._by_language_model(text)
+        return comma_before_lowercase(self._by_language_model(text))
 
     # -- coherent text: the noisy channel, scored by the trigram model --
 
@@ -294,13 +318,14 @@ class LexiconCorrector:
         if read in counts:
             others = sorted((w for w in set(misreadings(read, 1)) if w in counts), key=counts.__getitem__, reverse=True)
             return [Candidate(read, 0.0), *(Candidate(w, self.swap_log_prob) for w in others[: self.max_candidates - 1])]
-        if len(read) < self.min_length:
+        if len(read) < self.min_lm_length:
             return [Candidate(read, 0.0)]
         if self._beyond_words(read):
             return [Candidate(read, self.keep_nonword_log_prob)]
         most = 1 if len(read) <= 4 else (2 if len(read) <= 7 else self.max_substitutions)
         found: dict[str, float] = {}
-        for level in [1, 0, *range(2, most + 1)]:
+        # (a lost stem is not looked for in a word of two letters: "ye" is not a misread "yet")
+        for level in [1, *([0] if len(read) >= self.min_length else []), *range(2, most + 1)]:
             cost = self.fix_log_prob * max(level, 1)
             for w in misreadings(read, level):
                 if w in counts and w not in found:

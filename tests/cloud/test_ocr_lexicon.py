@@ -173,3 +173,29 @@ def test_a_token_longer_than_any_word_is_left_as_read_without_a_search(corrector
     page = f"and the rest of it is {noise} and the end of it\nsome more words about {noise} in it"
     assert corrector.correct(page) == page
     assert corrector.correct(f"tamed lantern {noise}\nvelvet margln quarry") == f"tamed lantern {noise}\nvelvet margin quarry"
+
+
+def test_two_letter_non_words_in_prose_are_weighed_by_the_language_model(corrector: LexiconCorrector) -> None:
+    # "be" whose e closed into an o; a word of two letters gets lookalikes only, never a lost stem
+    assert corrector.correct("earth, so Truth bo in the\nwinds of doctrine") == "earth, so Truth be in the\nwinds of doctrine"
+    assert corrector.correct("What would ye do then?\nshould ye suppress all this") == (
+        "What would ye do then?\nshould ye suppress all this")
+    # a word list has no context to choose by: left as read
+    assert corrector.correct("tares soon bo kingdom\nhidden stratagems manage") == "tares soon bo kingdom\nhidden stratagems manage"
+
+
+def test_a_period_before_a_lower_case_word_is_read_as_a_comma() -> None:
+    from darkread.cloud.ocr.lexicon import comma_before_lowercase
+
+    assert comma_before_lowercase("opinion of theirs. that none\nlike. is the worst and") == (
+        "opinion of theirs, that none\nlike, is the worst and")
+    assert comma_before_lowercase("hath puffed up.\nthe rest") == "hath puffed up,\nthe rest"
+    # a sentence's end, an abbreviation, a number or an initial stay
+    kept = "the end. The next\nsay etc. and so on\nsee p. 12 and J. doe\nat 3. then"
+    assert comma_before_lowercase(kept) == kept
+
+
+def test_only_prose_gets_its_periods_read_as_commas(corrector: LexiconCorrector) -> None:
+    assert corrector.correct("opinion of theirs. that none\nmust be thought") == "opinion of theirs, that none\nmust be thought"
+    letters = "Xq7. abT kL9 zz. qr\nWv3. mnP q"
+    assert corrector.correct(letters) == letters
