@@ -61,6 +61,8 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
+# a capital I read as a one or an l (a bare stroke in a sans-serif face: "Not that 1 can think")
+_LONE_I = re.compile(r"^(?P<lead>)(?P<word>[1l])(?P<trail>[,;:!?.]?)$")
 _TOKEN = re.compile(r"^(?P<lead>[^A-Za-z]*)(?P<word>[A-Za-z]+)(?P<trail>(?:'[A-Za-z]{1,2})?[^A-Za-z]*)$")  # author's
 # (s with e, o and a: a small s whose spine the reconstruction fills in reads as a closed glyph,
 # "foundere of our true", "eateem he atoneo"; s and c are kept apart: what each gains and costs,
@@ -352,6 +354,12 @@ class LexiconCorrector:
             tokens = line.split(" ")
             out_lines.append(tokens)
             for j, token in enumerate(tokens):
+                lone = _LONE_I.match(token)
+                if lone is not None:  # the digit weighed as the number it names
+                    slots.append([Candidate("one" if lone.group("word") == "1" else "l", 0.0), Candidate("i", self.fix_log_prob)])
+                    places.append((k, j, lone))
+                    ended = token.endswith(_SENTENCE_END)
+                    continue
                 match = _TOKEN.match(token)
                 if match is None:
                     if token:
@@ -371,7 +379,8 @@ class LexiconCorrector:
         chosen = viterbi(slots, scorer.log_prob)
         for (k, j, match), slot, word in zip(places, slots, chosen):
             if len(slot) > 1 and word != slot[0].word:
-                out_lines[k][j] = match.group("lead") + _with_case_of(match.group("word"), word) + match.group("trail")
+                fixed = "I" if word == "i" else _with_case_of(match.group("word"), word)
+                out_lines[k][j] = match.group("lead") + fixed + match.group("trail")
         return "\n".join(" ".join(tokens) for tokens in out_lines)
 
     def _scorer(self) -> TrigramScorer:

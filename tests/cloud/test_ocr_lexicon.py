@@ -199,3 +199,14 @@ def test_only_prose_gets_its_periods_read_as_commas(corrector: LexiconCorrector)
     assert corrector.correct("opinion of theirs. that none\nmust be thought") == "opinion of theirs, that none\nmust be thought"
     letters = "Xq7. abT kL9 zz. qr\nWv3. mnP q"
     assert corrector.correct(letters) == letters
+
+
+def test_a_capital_i_read_as_a_one_or_an_l_is_weighed_by_the_language_model(corrector: LexiconCorrector) -> None:
+    # a sans-serif I is a bare stroke: the engine reads it as 1 or l
+    assert corrector.correct("petty schisms. Not that 1\ncan think well of every") == (
+        "petty schisms. Not that I\ncan think well of every")
+    assert corrector.correct("so l think that we should\ngo home now and rest") == "so I think that we should\ngo home now and rest"
+    # a number in prose stays one
+    for numbers in ("see page 1 of the report\nand the rest of it here", "there were 1 or 2 of them\nin the house that day",
+                    "add 1 cup of sugar to the\nbowl and stir it well"):
+        assert corrector.correct(numbers) == numbers
