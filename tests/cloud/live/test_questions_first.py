@@ -72,7 +72,11 @@ async def test_a_question_during_a_backlog_answers_from_the_page_so_far(tmp_path
     ocr = CountingOcr()
     pages = LivePages(store, ocr, LiveConfig(catch_up_s=0.05, batch_frames=64))
     try:
-        await asyncio.sleep(0.3)  # the pages start rebuilding from the store ...
+        session = pages.get("s")  # the pages start rebuilding from the store ...
+        deadline = asyncio.get_running_loop().time() + 60
+        while not session.paginator.pages:  # (a loaded host may take more than a moment for the first batch)
+            assert asyncio.get_running_loop().time() < deadline, "no frame stitched within 60 s"
+            await asyncio.sleep(0.01)
         answer = await pages.ask("s", upto_seq=records[-1].seq)  # ... and are asked long before they are done
         assert answer.frames_pending and 0 < answer.reading.version < len(records)
         assert answer.page.last_seq < records[-1].seq
